@@ -1,0 +1,39 @@
+# hair_tracking — every target installs what it needs into .venv/ first.
+SHELL := /bin/bash
+PYTHON ?= python3
+VENV := .venv
+PY := $(VENV)/bin/python
+PIP := $(VENV)/bin/pip
+# ROS 2 Jazzy from PyPI wheels (the [fastrtps] extra brings the RMW library); kept out of setup.py.
+ROS_WHEELS := ros-jazzy-rclpy[fastrtps] ros-jazzy-common-interfaces
+PY_DEPS := numpy numba pyyaml rosbags matplotlib pytest flake8
+STAMP := $(VENV)/.complete
+TEST_ENV := ROS_PYTHON_CHECK_FIELDS=1 ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST PYTHONUNBUFFERED=1
+
+.PHONY: install test demo bench lint clean
+
+install: $(STAMP)
+
+$(STAMP): setup.py Makefile package.xml
+	test -x $(PY) || $(PYTHON) -m venv $(VENV)
+	$(PIP) install -q --upgrade pip
+	$(PIP) install -q '$(firstword $(ROS_WHEELS))' $(wordlist 2,99,$(ROS_WHEELS)) $(PY_DEPS)
+	$(PIP) install -q --no-deps --no-build-isolation -e .
+	$(PY) -c "import rclpy, numba, rosbags, yaml, matplotlib"
+	touch $(STAMP)
+
+test: $(STAMP)
+	$(TEST_ENV) $(PY) -m pytest -q test
+
+lint: $(STAMP)
+	$(PY) -m flake8 hair_tracking msg_adapters test scripts setup.py
+
+demo: $(STAMP)
+	$(TEST_ENV) $(PY) -m hair_tracking.demo --out out/demo
+
+bench: $(STAMP)
+	$(PY) -m pip install -q pypbd
+	$(PY) scripts/bench.py --json out/bench.json
+
+clean:
+	rm -rf $(VENV) out build *.egg-info

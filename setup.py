@@ -1,0 +1,34 @@
+"""ament_python package set-up for hair_tracking.
+
+The ROS wheels (rclpy, message packages) are deliberately not in install_requires: on a ROS
+installation they come from the distribution, here they are installed by the Makefile.
+"""
+from glob import glob
+
+from setuptools import setup
+
+package_name = 'hair_tracking'
+
+setup(
+    name=package_name,
+    version='0.1.0',
+    packages=[package_name, 'msg_adapters'],
+    data_files=[
+        ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
+        ('share/' + package_name, ['package.xml']),
+        ('share/' + package_name + '/config', glob('config/*.yaml')),
+    ],
+    package_data={package_name: ['data/*']},
+    install_requires=['setuptools', 'numpy', 'numba', 'pyyaml', 'rosbags'],
+    zip_safe=True,
+    maintainer='hair_tracking developers',
+    maintainer_email='hair-tracking@example.invalid',
+    description='Real-time hair that follows a head pose: PBD guide strands and ghost strands.',
+    license='MIT',
+    tests_require=['pytest'],
+    entry_points={
+        'console_scripts': [
+            'hair_sim_demo = hair_tracking.demo:main',
+        ],
+    },
+)
