@@ -48,7 +48,7 @@ class GroomSpec:
     ghost_nodes: int = 16             # nodes per ghost strand (may differ from guide_nodes)
     length: float = 0.25              # mean strand length [m]
     length_variation: float = 0.1     # relative spread of lengths: uniform in length*(1 +- this)
-    droop: float = 0.6                # 0: rest shape straight along the scalp normal, 1: hangs down
+    droop: float = 0.6                # 0: straight along the scalp normal, 1: hangs down
     seed: int = 1                     # random seed of the groom
     scalp: ScalpSpec = field(default_factory=ScalpSpec)
 

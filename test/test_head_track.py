@@ -1,0 +1,75 @@
+"""Head-pose hygiene: normalisation, sign continuity, rejection, resets, interpolation."""
+import math
+
+import numpy as np
+import pytest
+
+from hair_tracking.head_track import HeadTrack, PoseResult
+from hair_tracking.scene import HeadTrackSpec
+from hair_tracking.transforms import quat_angle, quat_from_axis_angle, quat_to_matrix
+
+MS = 1_000_000
+
+
+def test_normalises_and_keeps_sign_continuity():
+    tr = HeadTrack()
+    q = quat_from_axis_angle([0, 0, 1], 0.3)
+    assert tr.push(0, [0, 0, 0], 3.0 * q) is PoseResult.ACCEPTED
+    assert np.isclose(np.linalg.norm(tr.latest().quaternion), 1.0)
+    assert tr.push(10 * MS, [0, 0, 0], -q) is PoseResult.ACCEPTED
+    assert tr.latest().quaternion @ q > 0.999          # stored as +q again
+
+
+@pytest.mark.parametrize('p, q', [
+    ([np.nan, 0, 0], [0, 0, 0, 1]),
+    ([0, 0, 0], [0, 0, 0, 0]),
+    ([0, 0, 0], [np.inf, 0, 0, 1]),
+    ([0, 0], [0, 0, 0, 1]),
+    ('abc', [0, 0, 0, 1]),
+])
+def test_rejects_bad_poses_with_count(p, q):
+    tr = HeadTrack()
+    tr.push(0, [0, 0, 0], [0, 0, 0, 1])
+    assert tr.push(MS, p, q) is PoseResult.REJECTED
+    assert tr.counters['rejected'] == 1
+    assert tr.last_rejection
+    assert tr.last_time == 0                         # nothing else changed
+
+
+def test_slerp_interpolation_between_samples():
+    tr = HeadTrack()
+    q0 = quat_from_axis_angle([0, 0, 1], 0.0)
+    q1 = quat_from_axis_angle([0, 0, 1], 1.0)
+    tr.push(0, [0, 0, 0], q0)
+    tr.push(100 * MS, [0.4, 0, 0], q1)
+    mid = tr.sample(25 * MS)
+    assert np.allclose(mid.position, [0.1, 0, 0])
+    assert math.isclose(quat_angle(mid.quaternion, q0), 0.25, rel_tol=1e-9)
+    assert np.allclose(mid.rotation, quat_to_matrix(mid.quaternion))
+    # outside the samples the pose is held
+    assert np.allclose(tr.sample(10_000 * MS).position, [0.4, 0, 0])
+    assert np.allclose(tr.sample(-5).position, [0, 0, 0])
+
+
+def test_time_backwards_and_teleports_reset():
+    tr = HeadTrack(HeadTrackSpec(teleport_distance=0.5, teleport_angle_deg=90.0, max_gap=0.5))
+    q = [0, 0, 0, 1]
+    tr.push(100 * MS, [0, 0, 0], q)
+    assert tr.push(50 * MS, [0, 0, 0], q) is PoseResult.RESET_BACKWARDS
+    assert tr.push(60 * MS, [1.0, 0, 0], q) is PoseResult.RESET_TELEPORT
+    assert tr.push(70 * MS, [1.0, 0, 0], quat_from_axis_angle([1, 0, 0], 2.0)) \
+        is PoseResult.RESET_TELEPORT
+    assert tr.push(2000 * MS, [1.0, 0, 0], quat_from_axis_angle([1, 0, 0], 2.0)) \
+        is PoseResult.RESET_TELEPORT
+    assert tr.push(2010 * MS, [1.01, 0, 0], quat_from_axis_angle([1, 0, 0], 2.01)) \
+        is PoseResult.ACCEPTED
+    assert tr.counters == {'accepted': 2, 'rejected': 0, 'reset_backwards': 1,
+                           'reset_teleport': 3}
+    assert tr.first_time == 2000 * MS                # history before the reset was dropped
+
+
+def test_repeated_stamp_updates_sample():
+    tr = HeadTrack()
+    tr.push(0, [0, 0, 0], [0, 0, 0, 1])
+    tr.push(0, [0.1, 0, 0], [0, 0, 0, 1])
+    assert np.allclose(tr.latest().position, [0.1, 0, 0])
