@@ -1,0 +1,46 @@
+"""Quaternion helpers against independent constructions."""
+import numpy as np
+
+from hair_tracking.transforms import (matrix_to_quat, quat_angle, quat_from_axis_angle,
+                                      quat_multiply, quat_to_matrix, rotation_between, slerp)
+
+
+def _rodrigues(axis, angle):
+    axis = np.asarray(axis, float) / np.linalg.norm(axis)
+    k = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
+    return np.eye(3) + np.sin(angle) * k + (1 - np.cos(angle)) * k @ k
+
+
+def test_matrix_matches_rodrigues_and_round_trips():
+    rng = np.random.default_rng(0)
+    for _ in range(50):
+        axis, angle = rng.normal(size=3), rng.uniform(-3, 3)
+        q = quat_from_axis_angle(axis, angle)
+        m = quat_to_matrix(q)
+        assert np.allclose(m, _rodrigues(axis, angle))
+        q2 = matrix_to_quat(m)
+        assert np.allclose(quat_to_matrix(q2), m)
+
+
+def test_multiply_composes_rotations():
+    a = quat_from_axis_angle([1, 2, 3], 0.7)
+    b = quat_from_axis_angle([-1, 0, 2], 1.9)
+    assert np.allclose(quat_to_matrix(quat_multiply(a, b)), quat_to_matrix(a) @ quat_to_matrix(b))
+
+
+def test_slerp_constant_speed_shortest_arc():
+    a = quat_from_axis_angle([0, 0, 1], 0.2)
+    b = -quat_from_axis_angle([0, 0, 1], 1.4)      # same rotation as +, other sign
+    for u in (0.0, 0.3, 0.5, 1.0):
+        assert np.isclose(quat_angle(slerp(a, b, u), a), 1.2 * u, atol=1e-9)
+
+
+def test_rotation_between():
+    rng = np.random.default_rng(1)
+    for _ in range(20):
+        a, b = rng.normal(size=3), rng.normal(size=3)
+        a, b = a / np.linalg.norm(a), b / np.linalg.norm(b)
+        r = rotation_between(a, b)
+        assert np.allclose(r @ a, b) and np.allclose(r @ r.T, np.eye(3))
+    r = rotation_between(np.array([1.0, 0, 0]), np.array([-1.0, 0, 0]))
+    assert np.allclose(r @ [1, 0, 0], [-1, 0, 0]) and np.isclose(np.linalg.det(r), 1.0)
