@@ -1,0 +1,417 @@
+"""Recorded head motion: BVH forward kinematics, pose tables, the bundled walk clip.
+
+Reference statistics come from /work/shared/data/head_motion/README.md (measured independently of
+this code).  Tests that need the raw recordings skip when the directory is absent (set
+HEAD_MOTION_DATA to point elsewhere); the bundled-CSV tests always run.
+"""
+import os
+
+import numpy as np
+import pytest
+
+from hair_tracking import head_motion as hm
+from hair_tracking.transforms import (matrix_to_quat, quat_angle, quat_from_axis_angle,
+                                      quat_to_matrix)
+
+DATA = os.environ.get('HEAD_MOTION_DATA', '/work/shared/data/head_motion')
+WALK_BVH = os.path.join(DATA, 'cmu_131_01_walk.bvh')
+VR_TXT = os.path.join(DATA, 'vr360_user1_quaternion.txt')
+need_walk = pytest.mark.skipif(not os.path.isfile(WALK_BVH), reason=f'{WALK_BVH} not present')
+need_vr = pytest.mark.skipif(not os.path.isfile(VR_TXT), reason=f'{VR_TXT} not present')
+
+# README.md of the data set: head angular speed, deg/s (median, p95, p99, max)
+WALK_STATS = (27.7, 207.8, 321.2, 379.2)
+VR_STATS = (18.6, 136.8, 194.3, 780.5)
+
+
+def _stats_deg(motion):
+    w = np.degrees(hm.angular_speed(motion))
+    return (np.median(w), np.percentile(w, 95), np.percentile(w, 99), w.max())
+
+
+def _assert_stats(motion, ref, rel=0.03):
+    got = _stats_deg(motion)
+    for name, g, r in zip(('median', 'p95', 'p99', 'max'), got, ref):
+        assert abs(g - r) <= rel * r, f'{name} angular speed {g:.2f} deg/s, README says {r}'
+
+
+@pytest.fixture(scope='module')
+def walk_bvh():
+    return hm.read_bvh(WALK_BVH)
+
+
+@pytest.fixture(scope='module')
+def walk():
+    return hm.load_bvh_head_motion(WALK_BVH)
+
+
+@pytest.fixture(scope='module')
+def vr():
+    return hm.read_vr360(VR_TXT)
+
+
+# ------------------------------------------------------------------ BVH: the CMU walk
+@need_walk
+def test_walk_frames_and_rate(walk_bvh, walk):
+    assert walk_bvh.frame_count == 994 and len(walk) == 994
+    assert walk_bvh.motion.shape == (994, 96)
+    assert abs(walk.rate_hz - 120.0) < 0.01
+    assert abs(walk.duration_s - 993 / 120.0) < 1e-4
+    assert walk.t_ns[0] == 0 and walk.t_ns.dtype == np.int64
+    # per-joint channel orders as written: root 6 channels, arms ZXY, spine ZYX
+    by = {j.name: j for j in walk_bvh.joints}
+    assert by['Hips'].channels == ('Xposition', 'Yposition', 'Zposition',
+                                   'Zrotation', 'Yrotation', 'Xrotation')
+    assert by['LeftElbow'].channels == ('Zrotation', 'Xrotation', 'Yrotation')
+    assert by['Head'].channels == ('Zrotation', 'Yrotation', 'Xrotation')
+    assert [walk_bvh.joints[i].name for i in walk_bvh.chain('Head')] == [
+        'Hips', 'lowerback', 'Chest', 'Chest2', 'lowerneck', 'Neck', 'Head']
+
+
+@need_walk
+def test_walk_quaternions_unit_and_continuous(walk):
+    assert np.allclose(np.linalg.norm(walk.quaternion, axis=1), 1.0, atol=1e-12)
+    assert np.all(np.sum(walk.quaternion[1:] * walk.quaternion[:-1], axis=1) >= 0.0)
+
+
+@need_walk
+def test_walk_head_height_plausible(walk_bvh, walk):
+    allp = walk_bvh.all_positions() @ hm.BVH_TO_WORLD.T * hm.CMU_SCALE_M
+    floor = allp[..., 2].min()                       # lowest point of the body (toes)
+    standing = walk.t_s < 1.0                        # the clip starts standing still
+    centre = np.median(walk.position[standing, 2]) - floor
+    top = allp[:, walk_bvh.index('Head_End'), 2].max() - floor
+    assert 1.4 <= centre <= 1.9, f'standing head-centre height {centre:.3f} m'
+    assert 1.4 <= top <= 1.9, f'head-top height {top:.3f} m'
+    # the head centre lies above the Head joint along head z, by half the head bone
+    joint = hm.load_bvh_head_motion(WALK_BVH, origin='joint')
+    up = walk.rotation()[:, :, 2]
+    d = walk.position - joint.position
+    assert np.allclose(d, up * np.linalg.norm(d, axis=1, keepdims=True), atol=1e-3)
+    assert np.allclose(np.linalg.norm(d, axis=1), 0.5 * 1.63304 * hm.CMU_SCALE_M, atol=1e-3)
+
+
+@need_walk
+def test_walk_moves_forward_a_few_metres(walk):
+    disp = walk.position[-1] - walk.position[0]
+    assert 2.0 < np.linalg.norm(disp[:2]) < 4.0
+    assert abs(disp[2]) < 0.2
+    fwd0 = walk.rotation()[0][:, 0]                  # facing at the start
+    assert np.dot(disp[:2], fwd0[:2]) > 2.0          # walked forward, not backward
+
+
+@need_walk
+def test_walk_head_axes_follow_walking_and_up(walk):
+    direction, walking = hm.walking_direction(walk.position, walk.t_ns)
+    assert walking.sum() > 120                       # more than a second of walking
+    r = walk.rotation()
+    x = r[walking, :2, 0]
+    x /= np.linalg.norm(x, axis=1, keepdims=True)
+    cos_fwd = np.mean(np.sum(x * direction[walking], axis=1))
+    assert cos_fwd > 0.9, f'head x vs walking direction: mean cos {cos_fwd:.3f}'
+    assert np.mean(r[:, 2, 2]) > 0.9                 # head z up over the whole clip
+    assert np.mean(r[walking, 2, 2]) > 0.95
+    assert np.all(np.abs(np.linalg.det(r) - 1.0) < 1e-9)
+
+
+@need_walk
+def test_head_axes_inferred_from_data_match_constant(walk_bvh):
+    axes = hm.infer_head_axes(walk_bvh)
+    assert np.array_equal(axes, hm.CMU_HEAD_AXES)
+    # a wrong mapping makes the walking check fail (the check can fail)
+    wrong = hm.load_bvh_head_motion(WALK_BVH, head_axes=np.eye(3))
+    direction, walking = hm.walking_direction(wrong.position, wrong.t_ns)
+    x = wrong.rotation()[walking, :2, 0]
+    x /= np.linalg.norm(x, axis=1, keepdims=True)
+    assert np.mean(np.sum(x * direction[walking], axis=1)) < 0.5
+
+
+@need_walk
+def test_walk_angular_speed_matches_readme(walk):
+    _assert_stats(walk, WALK_STATS)
+    w = np.degrees(hm.angular_speed(walk))
+    assert abs((np.argmax(w) + 0.5) / 120.0 - 3.3) < 0.1     # the head snap near t = 3.3 s
+
+
+def _reference_fk(bvh, frame):
+    """Plain per-frame FK with 4x4 matrices and axis-angle quaternions (independent path)."""
+    world = {}
+    out = np.empty((len(bvh.joints), 3))
+    for i, j in enumerate(bvh.joints):
+        local = np.eye(4)
+        local[:3, 3] = j.offset
+        rot = np.eye(3)
+        for k, ch in enumerate(j.channels):
+            v = bvh.motion[frame, j.first_channel + k]
+            axis = {'X': [1, 0, 0], 'Y': [0, 1, 0], 'Z': [0, 0, 1]}[ch[0]]
+            if ch.endswith('position'):
+                local[:3, 3] += v * np.array(axis)
+            else:
+                q = quat_from_axis_angle(axis, np.radians(v))
+                x, y, z, w = q
+                m = np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+                              [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+                              [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
+                rot = rot @ m
+        local[:3, :3] = rot
+        world[i] = local if j.parent < 0 else world[j.parent] @ local
+        out[i] = world[i][:3, 3]
+    return out, world
+
+
+@need_walk
+def test_fk_matches_reference_for_all_joints(walk_bvh):
+    allp = walk_bvh.all_positions()
+    _, head_rot = walk_bvh.forward_kinematics('Head')
+    hi = walk_bvh.index('Head')
+    for frame in (0, 397, 993):
+        ref, world = _reference_fk(walk_bvh, frame)
+        assert np.allclose(allp[frame], ref, atol=1e-9)     # incl. the ZXY-ordered arm joints
+        assert np.allclose(head_rot[frame], world[hi][:3, :3], atol=1e-12)
+    # swapping an arm joint's channel order moves the wrist: the order is really used
+    pos, _ = walk_bvh.forward_kinematics('LeftWrist')
+    j = walk_bvh.joints[walk_bvh.index('LeftShoulder')]
+    saved = j.channels
+    try:
+        j.channels = ('Zrotation', 'Yrotation', 'Xrotation')
+        swapped, _ = walk_bvh.forward_kinematics('LeftWrist')
+    finally:
+        j.channels = saved
+    assert np.max(np.linalg.norm(swapped - pos, axis=1)) > 0.1
+
+
+# ------------------------------------------------------------------ bundled data
+def test_bundled_walk_loads_without_raw_data():
+    m = hm.load_bundled_walk()
+    assert len(m) == 994 and abs(m.rate_hz - 120.0) < 0.01
+    assert np.all(np.sum(m.quaternion[1:] * m.quaternion[:-1], axis=1) >= 0.0)
+    assert 'CMU' in m.source
+    pose = m.pose(500)
+    assert np.allclose(pose.to_world(np.array([[0.1, 0.0, 0.0]]))[0],
+                       m.position[500] + 0.1 * m.rotation()[500][:, 0])
+    _assert_stats(m, WALK_STATS)
+    assert os.path.isfile(os.path.join(hm.DATA_DIR, 'ATTRIBUTION.md'))
+    assert os.path.isfile(os.path.join(hm.DATA_DIR, 'LICENSE_cmu_bvh11_repo_MIT.txt'))
+
+
+@need_walk
+def test_bundled_csv_equals_bvh_import(walk):
+    b = hm.load_bundled_walk()
+    assert np.max(np.abs(b.t_ns - walk.t_ns)) <= 500            # written to 1 us
+    assert np.allclose(b.position, walk.position, rtol=0, atol=5e-6)
+    assert np.allclose(b.quaternion, walk.quaternion, rtol=0, atol=1e-6)
+
+
+# ------------------------------------------------------------------ VR trace
+@need_vr
+def test_vr_trace_imports(vr):
+    assert abs(vr.duration_s - 272.056) < 0.01
+    assert 58.0 < vr.rate_hz < 60.0
+    assert len(vr) == 16053 and sum(vr.dropped.values()) == 0
+    assert np.all(vr.position == 0.0)
+    assert np.allclose(np.linalg.norm(vr.quaternion, axis=1), 1.0, atol=1e-12)
+    _assert_stats(vr, VR_STATS)
+    # head z mostly up: the trace needs no axis remapping
+    assert np.mean(vr.rotation()[:, 2, 2]) > 0.9
+
+
+@need_vr
+def test_vr_sign_flips_removed(vr):
+    raw = np.loadtxt(VR_TXT, skiprows=1)[:, [3, 4, 5, 2]]
+    assert np.sum(np.sum(raw[1:] * raw[:-1], axis=1) < 0) > 10   # the file does flip
+    assert np.all(np.sum(vr.quaternion[1:] * vr.quaternion[:-1], axis=1) >= 0.0)
+    assert np.allclose(np.abs(np.sum(vr.quaternion * raw, axis=1)), 1.0, atol=1e-9)
+
+
+@need_vr
+def test_vr_neck_offset(vr):
+    off = np.array([0.02, 0.0, 0.1])
+    m = hm.read_vr360(VR_TXT, neck_offset=off, pivot=[0.0, 0.0, 1.5])
+    expect = np.array([0.0, 0.0, 1.5]) + vr.rotation() @ off
+    assert np.allclose(m.position, expect, atol=1e-12)
+    assert np.allclose(np.linalg.norm(m.position - [0, 0, 1.5], axis=1), np.linalg.norm(off))
+
+
+# ------------------------------------------------------------------ pose tables
+def _write(path, text):
+    path.write_text(text)
+    return str(path)
+
+
+def test_pose_table_drops_bad_rows_and_fixes_signs(tmp_path):
+    q1 = quat_from_axis_angle([0, 0, 1], 0.1)
+    q2 = -quat_from_axis_angle([0, 0, 1], 0.2)                 # sign flipped
+    rows = ['time_ms,X,Y,Z,QW,QX,QY,QZ',
+            f'0,1,2,3,{q1[3]},{q1[0]},{q1[1]},{q1[2]}',
+            '# a comment',
+            '10,1,2,3,nan,0,0,1',                               # NaN quaternion
+            '20,1,2,3,0,0,0,0',                                 # zero quaternion
+            '30,nan,2,3,1,0,0,0',                               # NaN position
+            f'40,1,2,3,{2 * q2[3]},{2 * q2[0]},{2 * q2[1]},{2 * q2[2]}',   # unnormalised
+            '40,1,2,3,1,0,0,0',                                 # repeated time
+            '35,1,2,3,1,0,0,0',                                 # time going back
+            'nan,1,2,3,1,0,0,0',                                # no time
+            '50.5,4,5,6,1,0,0,0']
+    m = hm.read_pose_table(_write(tmp_path / 'poses.csv', '\n'.join(rows) + '\n'),
+                           time_column='time_ms', time_unit='ms',
+                           quat_columns=('QW', 'QX', 'QY', 'QZ'), quat_order='wxyz',
+                           position_columns=('X', 'Y', 'Z'))
+    assert list(m.t_ns) == [0, 40_000_000, 50_500_000]
+    assert m.dropped == {'bad_quaternion': 2, 'bad_position': 1, 'bad_time': 3}
+    assert np.allclose(m.position, [[1, 2, 3], [1, 2, 3], [4, 5, 6]])
+    assert np.allclose(np.linalg.norm(m.quaternion, axis=1), 1.0)
+    assert np.all(np.sum(m.quaternion[1:] * m.quaternion[:-1], axis=1) >= 0.0)
+    assert quat_angle(m.quaternion[1], q2) < 1e-9
+    assert np.allclose(np.degrees(hm.angular_speed(m))[0], np.degrees(0.1) / 0.04)
+
+
+def test_pose_table_whitespace_xyzw_and_exact_times(tmp_path):
+    text = ('stamp qx qy qz qw\n'
+            '1700000000123456789 0 0 0 1\n'
+            '1700000000123456790 0 0 0.0 -1\n')
+    m = hm.read_pose_table(_write(tmp_path / 'p.txt', text), time_column='stamp',
+                           time_unit='ns', position_columns=None)
+    assert m.t_ns.tolist() == [1700000000123456789, 1700000000123456790]
+    assert np.all(m.quaternion[:, 3] > 0)                      # -1 flipped to +1
+    s = hm.read_pose_table(_write(tmp_path / 's.txt', 't qx qy qz qw\n1700000000.000000001 '
+                                  '0 0 0 1\n'), time_column='t', position_columns=None)
+    assert s.t_ns[0] == 1700000000000000001
+    u = hm.read_pose_table(_write(tmp_path / 'u.txt', 't qx qy qz qw\n2.5 0 0 0 1\n'),
+                           time_column='t', time_unit='us', position_columns=None)
+    assert u.t_ns[0] == 2500
+
+
+def test_pose_csv_round_trip(tmp_path):
+    rng = np.random.default_rng(3)
+    q = rng.normal(size=(50, 4))
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    q = hm.make_sign_continuous(q)
+    t = 1_700_000_000_000_000_000 + np.cumsum(rng.integers(1_000_000, 30_000_000, 50))
+    t = (t // 1000) * 1000                                     # the format keeps 1 us
+    m = hm.HeadMotion(t, rng.normal(size=(50, 3)), q, source='random')
+    path = str(tmp_path / 'rt.csv')
+    hm.write_pose_csv(path, m, comments=['made by a test', 'second line'])
+    with open(path) as fh:
+        assert fh.readline() == '# made by a test\n'
+    r = hm.read_pose_csv(path)
+    assert np.array_equal(r.t_ns, m.t_ns)
+    assert np.allclose(r.position, m.position, rtol=1e-6, atol=1e-7)
+    assert np.allclose(r.quaternion, m.quaternion, atol=1e-6)
+
+
+# ------------------------------------------------------------------ helpers vs references
+def test_matrices_to_quats_agrees_with_reference():
+    rng = np.random.default_rng(7)
+    q = rng.normal(size=(400, 4))
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    q[:4] = [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]   # each branch
+    m = quat_to_matrix(q)
+    got = hm.matrices_to_quats(m)
+    for g, mm, qq in zip(got, m, q):
+        ref = matrix_to_quat(mm)
+        assert abs(abs(np.dot(g, ref)) - 1.0) < 1e-12
+        assert abs(abs(np.dot(g, qq)) - 1.0) < 1e-12
+
+
+def test_angular_speed_agrees_with_reference():
+    rng = np.random.default_rng(11)
+    q = rng.normal(size=(200, 4))
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    q = hm.make_sign_continuous(q)
+    t = np.cumsum(rng.integers(1_000_000, 50_000_000, 200))
+    m = hm.HeadMotion(t, np.zeros((200, 3)), q)
+    ref = [quat_angle(q[i], q[i + 1]) / ((t[i + 1] - t[i]) * 1e-9) for i in range(199)]
+    assert np.allclose(hm.angular_speed(m), ref, rtol=1e-9, atol=1e-9)
+    flipped = q.copy()
+    flipped[::2] *= -1                                          # sign-insensitive
+    assert np.allclose(hm.angular_speed(hm.HeadMotion(t, np.zeros((200, 3)), flipped)), ref,
+                       rtol=1e-9, atol=1e-9)
+
+
+# ------------------------------------------------------------------ errors
+@need_walk
+def test_truncated_bvh_raises_with_line(tmp_path):
+    lines = open(WALK_BVH).read().splitlines()
+    cut_motion = _write(tmp_path / 'cut.bvh', '\n'.join(lines[:500]) + '\n')
+    with pytest.raises(hm.HeadMotionError, match=r'cut\.bvh:\d+: .*Frames: 994.*truncated'):
+        hm.read_bvh(cut_motion)
+    cut_line = _write(tmp_path / 'half.bvh', '\n'.join(lines[:300]) + '\n'
+                      + lines[300][:len(lines[300]) // 2] + '\n')
+    with pytest.raises(hm.HeadMotionError, match=r'half\.bvh:301: .*values'):
+        hm.read_bvh(cut_line)
+    cut_hier = _write(tmp_path / 'hier.bvh', '\n'.join(lines[:90]) + '\n')
+    with pytest.raises(hm.HeadMotionError, match='no MOTION'):
+        hm.read_bvh(cut_hier)
+    no_close = _write(tmp_path / 'brace.bvh', '\n'.join(lines[:92] + lines[184:]) + '\n')
+    with pytest.raises(hm.HeadMotionError, match='unbalanced'):
+        hm.read_bvh(no_close)
+
+
+@need_walk
+def test_bad_bvh_header_and_channels(tmp_path):
+    lines = open(WALK_BVH).read().splitlines()
+    bad = _write(tmp_path / 'b.bvh', '\n'.join(['HIERARCY'] + lines[1:]))
+    with pytest.raises(hm.HeadMotionError, match=r'b\.bvh:1: .*HIERARCHY'):
+        hm.read_bvh(bad)
+    chan = list(lines)
+    chan[8] = '\t\tCHANNELS 3 Zrotation Yrotation Wrotation'
+    with pytest.raises(hm.HeadMotionError, match=r'c\.bvh:9: .*Wrotation'):
+        hm.read_bvh(_write(tmp_path / 'c.bvh', '\n'.join(chan)))
+    ft = list(lines)
+    ft[186] = 'Frame Time: fast'
+    with pytest.raises(hm.HeadMotionError, match=r'f\.bvh:187: .*frame time'):
+        hm.read_bvh(_write(tmp_path / 'f.bvh', '\n'.join(ft)))
+    num = list(lines)
+    num[200] = num[200].replace('0.0000', 'abc', 1)
+    with pytest.raises(hm.HeadMotionError, match=r'n\.bvh:201: .*not a number'):
+        hm.read_bvh(_write(tmp_path / 'n.bvh', '\n'.join(num)))
+
+
+@need_walk
+def test_unknown_joint_lists_available(walk_bvh):
+    with pytest.raises(hm.HeadMotionError, match=r"no joint named 'Skull'.*Head.*LeftWrist"):
+        hm.load_bvh_head_motion(WALK_BVH, joint='Skull')
+    with pytest.raises(hm.HeadMotionError, match='Neck2'):
+        walk_bvh.forward_kinematics('Neck2')
+
+
+def test_missing_files_raise(tmp_path):
+    with pytest.raises(hm.HeadMotionError, match='not found'):
+        hm.read_bvh(str(tmp_path / 'none.bvh'))
+    with pytest.raises(hm.HeadMotionError, match='not found'):
+        hm.read_pose_csv(str(tmp_path / 'none.csv'))
+
+
+def test_pose_table_errors(tmp_path):
+    ok = 't_s,px,py,pz,qx,qy,qz,qw\n0,0,0,0,0,0,0,1\n'
+    with pytest.raises(hm.HeadMotionError, match=r"m\.csv:1: missing column\(s\) \['qw'\]"):
+        hm.read_pose_csv(_write(tmp_path / 'm.csv', ok.replace(',qw', ',w')))
+    with pytest.raises(hm.HeadMotionError, match=r'h\.csv:1: bad header'):
+        hm.read_pose_csv(_write(tmp_path / 'h.csv', '0,0,0,0,0,0,0,1\n1,0,0,0,0,0,0,1\n'))
+    with pytest.raises(hm.HeadMotionError, match=r'r\.csv:3: 7 fields'):
+        hm.read_pose_csv(_write(tmp_path / 'r.csv', ok + '1,0,0,0,0,0,1\n'))
+    with pytest.raises(hm.HeadMotionError, match=r"v\.csv:2: column 'py' value 'x'"):
+        hm.read_pose_csv(_write(tmp_path / 'v.csv', ok.replace('0,0,0,0,0,0,0,1',
+                                                               '0,0,x,0,0,0,0,1')))
+    with pytest.raises(hm.HeadMotionError, match=r"t\.csv:2: time 'soon'"):
+        hm.read_pose_csv(_write(tmp_path / 't.csv', ok.replace('\n0,', '\nsoon,')))
+    with pytest.raises(hm.HeadMotionError, match='no usable rows'):
+        hm.read_pose_csv(_write(tmp_path / 'z.csv', ok.replace(',0,0,0,1', ',0,0,0,0')))
+    with pytest.raises(hm.HeadMotionError, match='time_unit'):
+        hm.read_pose_table(_write(tmp_path / 'o.csv', ok), time_unit='min')
+    with pytest.raises(hm.HeadMotionError, match='empty'):
+        hm.read_pose_csv(_write(tmp_path / 'e.csv', '# only a comment\n'))
+
+
+def test_head_motion_validates():
+    with pytest.raises(hm.HeadMotionError, match='strictly increasing'):
+        hm.HeadMotion(np.array([0, 5, 5]), np.zeros((3, 3)), np.tile([0, 0, 0, 1.0], (3, 1)))
+    with pytest.raises(hm.HeadMotionError, match=r'\(2, 3\)'):
+        hm.HeadMotion(np.array([0, 5]), np.zeros((3, 3)), np.tile([0, 0, 0, 1.0], (2, 1)))
+    with pytest.raises(hm.HeadMotionError, match='unit'):
+        hm.HeadMotion(np.array([0, 5]), np.zeros((2, 3)), np.tile([0, 0, 0, 2.0], (2, 1)))
+    m = hm.HeadMotion(np.array([0, 5]), np.zeros((2, 3)), np.array([[0, 0, 0, 1.0],
+                                                                   [0, 0, 0, -1.0]]))
+    assert np.array_equal(m.quaternion[1], [0, 0, 0, 1.0])
+    with pytest.raises(hm.HeadMotionError, match='integer'):
+        hm.HeadMotion(np.array([0.0, 5.0]), np.zeros((2, 3)), np.tile([0, 0, 0, 1.0], (2, 1)))
