@@ -1,0 +1,188 @@
+"""Strands ``(S, N, 3)`` <-> organized sensor_msgs/PointCloud2.
+
+Layout: ``height = S`` rows (one per strand), ``width = N`` points, little-endian, fields
+``x, y, z`` float32 [m] (offsets 0, 4, 8), ``strand`` uint32 (offset 12, the strand index or
+the ids given), and, when colours are given, ``rgb`` float32 (offset 16) holding the packed
+``0x00RRGGBB`` bits as rviz/PCL expect. ``point_step`` 16 or 20, ``row_step = N * point_step``,
+``is_dense`` true when every coordinate is finite (NaN points are allowed in clouds).
+Built through a numpy structured array and one buffer copy, no per-point Python.
+"""
+import array
+
+import numpy as np
+from sensor_msgs.msg import PointCloud2, PointField
+from std_msgs.msg import Header
+
+from msg_adapters.arrays import as_colors, as_strands
+from msg_adapters.cdr import CdrWriter, MessageBuffer, put_pieces
+from msg_adapters.marker_spec import check_frame_id
+from msg_adapters.stamps import split_ns, time_msg
+
+_NP_OF_DATATYPE = {PointField.INT8: 'i1', PointField.UINT8: 'u1', PointField.INT16: 'i2',
+                   PointField.UINT16: 'u2', PointField.INT32: 'i4', PointField.UINT32: 'u4',
+                   PointField.FLOAT32: 'f4', PointField.FLOAT64: 'f8'}
+
+
+def cloud_dtype(with_rgb):
+    """numpy structured dtype of one point (little-endian, packed)."""
+    names = ['x', 'y', 'z', 'strand'] + (['rgb'] if with_rgb else [])
+    formats = ['<f4', '<f4', '<f4', '<u4'] + (['<f4'] if with_rgb else [])
+    return np.dtype({'names': names, 'formats': formats})
+
+
+def cloud_fields(with_rgb):
+    """The PointField list matching :func:`cloud_dtype`."""
+    dt = cloud_dtype(with_rgb)
+    types = {'f4': PointField.FLOAT32, 'u4': PointField.UINT32}
+    return [PointField(name=name, offset=int(dt.fields[name][1]),
+                       datatype=types[dt.fields[name][0].str[1:]], count=1)
+            for name in dt.names]
+
+
+def pack_rgb(colors):
+    """RGB(A) in [0, 1], shape (..., 3|4) -> float32 (...) carrying 0x00RRGGBB (alpha dropped)."""
+    c = np.asarray(colors, dtype=np.float64)
+    c8 = np.rint(np.clip(c[..., :3], 0.0, 1.0) * 255.0).astype(np.uint32)
+    packed = (c8[..., 0] << 16) | (c8[..., 1] << 8) | c8[..., 2]
+    return packed.astype('<u4').view('<f4')
+
+
+def _check_inputs(strands, colors, strand_ids):
+    """-> (strands (S, N, 3) float64, packed rgb (S, 1|N) float32 or None, ids (S,) uint32)."""
+    x = as_strands(strands, finite=False)
+    n_strands, n_points = x.shape[:2]
+    cols = as_colors(colors, n_strands, n_points)
+    if strand_ids is None:
+        ids = np.arange(n_strands, dtype='<u4')
+    else:
+        ids = np.asarray(strand_ids)
+        if ids.shape != (n_strands,) or ids.dtype.kind not in 'iu':
+            raise ValueError(f'strand_ids must be {n_strands} integers, got {ids.dtype} '
+                             f'{ids.shape}')
+        if n_strands and (ids.min() < 0 or ids.max() > 2 ** 32 - 1):
+            raise ValueError('strand_ids must fit uint32')
+        ids = ids.astype('<u4')
+    return x, None if cols is None else pack_rgb(cols), ids
+
+
+def _fill(words, x, rgb, ids):
+    """Write points into ``words``, the (S, N, 4|5) little-endian float32 view of the data
+    (possibly unaligned); returns is_dense."""
+    words[..., :3] = x
+    words[..., 3:4].view('<u4')[..., 0] = ids[:, None]
+    if rgb is not None:
+        words[..., 4] = rgb
+    return bool(np.isfinite(x).all())
+
+
+def strands_to_points(strands, colors=None, strand_ids=None):
+    """Structured point array (S, N) of :func:`cloud_dtype` and ``is_dense``.
+
+    ``strands`` (S, N >= 1, 3) [m], NaN allowed; ``colors`` per strand (S, 3|4) or per point
+    (S, N, 3|4) in [0, 1]; ``strand_ids`` (S,) uint32 values for the ``strand`` field
+    (default 0..S-1).
+    """
+    x, rgb, ids = _check_inputs(strands, colors, strand_ids)
+    pts = np.empty(x.shape[:2], dtype=cloud_dtype(rgb is not None))
+    words = pts.view('<f4').reshape(x.shape[:2] + (pts.dtype.itemsize // 4,))
+    return pts, _fill(words, x, rgb, ids)
+
+
+def strands_to_pointcloud2(strands, *, frame_id, stamp_ns=0, colors=None, strand_ids=None):
+    """Organized PointCloud2 (height S, width N) of ``strands`` (S, N, 3) [m] in ``frame_id``.
+
+    See :func:`strands_to_points` for ``colors`` and ``strand_ids``; ``stamp_ns`` [ns].
+    """
+    pts, dense = strands_to_points(strands, colors, strand_ids)
+    n_strands, n_points = pts.shape
+    step = pts.dtype.itemsize
+    data = array.array('B')
+    data.frombytes(pts.reshape(-1).view(np.uint8))
+    header = Header(stamp=time_msg(stamp_ns), frame_id=check_frame_id(frame_id))
+    return PointCloud2(header=header, height=n_strands, width=n_points,
+                       fields=cloud_fields('rgb' in pts.dtype.names), is_bigendian=False,
+                       point_step=step, row_step=step * n_points, data=data, is_dense=dense)
+
+
+def strands_to_pointcloud2_cdr(strands, *, frame_id, stamp_ns=0, colors=None, strand_ids=None):
+    """The serialized CDR bytes of :func:`strands_to_pointcloud2` (same arguments).
+
+    Skips the intermediate ``array.array`` and rclpy's serializer: one copy of the points into
+    the message buffer. Padding zeroed (see :mod:`msg_adapters.cdr`).
+    """
+    x, rgb, ids = _check_inputs(strands, colors, strand_ids)
+    n_strands, n_points = x.shape[:2]
+    dtype = cloud_dtype(rgb is not None)
+    step, nbytes = dtype.itemsize, dtype.itemsize * n_strands * n_points
+    w = CdrWriter()
+    w.time(*split_ns(stamp_ns, 'stamp_ns'))
+    w.string(check_frame_id(frame_id))
+    w.uint32(n_strands)
+    w.uint32(n_points)
+    fields = cloud_fields(rgb is not None)
+    w.uint32(len(fields))
+    for f in fields:
+        w.string(f.name)
+        w.uint32(f.offset)
+        w.uint8(f.datatype)
+        w.uint32(f.count)
+    w.boolean(False)                            # is_bigendian
+    w.uint32(step)
+    w.uint32(step * n_points)
+    w.uint32(nbytes)
+    at_data = w.hole(nbytes)
+    at_dense = w.boolean(False)                 # is_dense, set below
+    buf = MessageBuffer(w.offset)
+    put_pieces(buf.body, w.pieces())
+    words = buf.body[at_data:at_data + nbytes].view('<f4').reshape(n_strands, n_points, step // 4)
+    buf.body[at_dense] = _fill(words, x, rgb, ids)
+    return buf.finish()
+
+
+def _field_dtype(msg, names):
+    by_name = {f.name: f for f in msg.fields}
+    missing = [n for n in names if n not in by_name]
+    if missing:
+        raise ValueError(f'PointCloud2 has no field(s) {missing}; it has {list(by_name)}')
+    formats, offsets = [], []
+    for n in names:
+        f = by_name[n]
+        if f.datatype not in _NP_OF_DATATYPE or f.count != 1:
+            raise ValueError(f'PointCloud2 field {n!r}: unsupported datatype {f.datatype} or '
+                             f'count {f.count}')
+        formats.append(('>' if msg.is_bigendian else '<') + _NP_OF_DATATYPE[f.datatype])
+        offsets.append(f.offset)
+    return np.dtype({'names': list(names), 'formats': formats, 'offsets': offsets,
+                     'itemsize': msg.point_step})
+
+
+def pointcloud2_to_strands(msg, dtype=np.float64):
+    """PointCloud2 -> ``(points (height, width, 3) dtype, strand_ids (height,) uint32)``.
+
+    Reads fields by name and offset (any order, padding, ``row_step`` > ``width * point_step``,
+    either byte order). ``strand_ids`` come from the ``strand`` field (which must be constant
+    along each row) or are 0..height-1 when the cloud has none. An unorganized cloud comes back
+    as one row.
+    """
+    h, w, step = int(msg.height), int(msg.width), int(msg.point_step)
+    if w and step * w > msg.row_step:
+        raise ValueError(f'row_step {msg.row_step} < width * point_step = {w * step}')
+    raw = np.frombuffer(memoryview(msg.data), dtype=np.uint8)
+    if raw.size < h * msg.row_step:
+        raise ValueError(f'PointCloud2 data has {raw.size} bytes, expected height * row_step = '
+                         f'{h * msg.row_step}')
+    names = ['x', 'y', 'z']
+    has_strand = any(f.name == 'strand' for f in msg.fields)
+    dt = _field_dtype(msg, names + (['strand'] if has_strand else []))
+    rows = raw[:h * msg.row_step].reshape(h, msg.row_step)[:, :w * step]
+    pts = np.ascontiguousarray(rows).view(dt).reshape(h, w)
+    out = np.empty((h, w, 3), dtype=dtype)
+    for k, n in enumerate(names):
+        out[..., k] = pts[n]
+    if not has_strand or not w:
+        return out, np.arange(h, dtype=np.uint32)
+    ids = pts['strand']
+    if (ids != ids[:, :1]).any():
+        raise ValueError('PointCloud2 field strand is not constant along rows: not a cloud of '
+                         'strands')
+    return out, ids[:, 0].astype(np.uint32)

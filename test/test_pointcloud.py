@@ -1,0 +1,190 @@
+"""Strands <-> organized PointCloud2: layout, round trip, CDR fast path, DDS."""
+import struct
+import time
+
+import numpy as np
+import pytest
+import rclpy
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.serialization import deserialize_message, serialize_message
+from rosbags.typesys import get_typestore, Stores
+from sensor_msgs.msg import PointCloud2, PointField
+
+from msg_adapters.pointcloud import (pack_rgb, pointcloud2_to_strands, strands_to_pointcloud2,
+                                     strands_to_pointcloud2_cdr)
+
+TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
+CLOUD = 'sensor_msgs/msg/PointCloud2'
+
+
+def reference_rgb(c):
+    """Plain reference of the PCL packed colour of one RGB(A) triple in [0, 1]."""
+    r, g, b = (int(round(v * 255.0)) for v in c[:3])
+    return struct.unpack('<f', struct.pack('<I', (r << 16) | (g << 8) | b))[0]
+
+
+def reference_data(x, cols, ids):
+    out = bytearray()
+    for s in range(x.shape[0]):
+        for i in range(x.shape[1]):
+            out += struct.pack('<fffI', *x[s, i], ids[s])
+            if cols is not None:
+                c = cols[s] if cols.ndim == 2 else cols[s, i]
+                out += struct.pack('<f', reference_rgb(c))
+    return bytes(out)
+
+
+@pytest.mark.parametrize('color_mode', [None, 'strand', 'point'])
+def test_layout_and_data(color_mode):
+    rng = np.random.default_rng(2)
+    x = rng.normal(size=(3, 5, 3))
+    cols = {None: None, 'strand': rng.random((3, 4)), 'point': rng.random((3, 5, 3))}[color_mode]
+    msg = strands_to_pointcloud2(x, frame_id='head', stamp_ns=3_000_000_007, colors=cols)
+    step = 16 if cols is None else 20
+    assert (msg.height, msg.width, msg.point_step, msg.row_step) == (3, 5, step, 5 * step)
+    assert (msg.is_bigendian, msg.is_dense) == (False, True)
+    assert (msg.header.frame_id, msg.header.stamp.sec, msg.header.stamp.nanosec) == ('head', 3, 7)
+    names = [(f.name, f.offset, f.datatype, f.count) for f in msg.fields]
+    expected = [('x', 0, PointField.FLOAT32, 1), ('y', 4, PointField.FLOAT32, 1),
+                ('z', 8, PointField.FLOAT32, 1), ('strand', 12, PointField.UINT32, 1)]
+    if cols is not None:
+        expected.append(('rgb', 16, PointField.FLOAT32, 1))
+    assert names == expected
+    assert bytes(msg.data) == reference_data(x, cols, [0, 1, 2])
+
+
+def test_pack_rgb_matches_reference():
+    rng = np.random.default_rng(4)
+    c = np.vstack([rng.random((50, 4)), [[0, 0, 0, 0], [1, 1, 1, 1], [1, 0, 0, 1]]])
+    packed = pack_rgb(c)
+    assert packed.dtype == np.float32
+    np.testing.assert_array_equal(packed.view(np.uint32),
+                                  np.float32([reference_rgb(v) for v in c]).view(np.uint32))
+    assert pack_rgb([1.0, 0.0, 0.0]).view(np.uint32) == 0xFF0000
+
+
+def test_round_trip_with_ids_and_nan():
+    rng = np.random.default_rng(6)
+    x = rng.normal(size=(4, 7, 3))
+    x[2, 3, 1] = np.nan
+    msg = strands_to_pointcloud2(x, frame_id='w', strand_ids=np.array([5, 9, 2**32 - 1, 0]))
+    assert msg.is_dense is False
+    y32, ids = pointcloud2_to_strands(msg, dtype=np.float32)
+    np.testing.assert_array_equal(y32, x.astype(np.float32))          # NaN == NaN here
+    np.testing.assert_array_equal(ids, [5, 9, 2**32 - 1, 0])
+    y64, _ = pointcloud2_to_strands(msg)
+    assert y64.dtype == np.float64 and y64.shape == (4, 7, 3)
+    np.testing.assert_array_equal(y64, x.astype(np.float32).astype(np.float64))
+
+
+def test_reader_handles_foreign_layouts():
+    """Reordered fields, padding, row padding, big-endian, no strand field, one row."""
+    rng = np.random.default_rng(8)
+    pts = rng.normal(size=(2, 3, 3))
+    dt = np.dtype({'names': ['z', 'x', 'y', 'strand'], 'formats': ['>f8', '>f8', '>f8', '>u2'],
+                   'offsets': [0, 8, 24, 32], 'itemsize': 40})
+    rows = np.zeros((2, 3 * 40 + 8), dtype=np.uint8)
+    arr = rows[:, :120].view(dt)
+    arr['x'], arr['y'], arr['z'] = pts[..., 0], pts[..., 1], pts[..., 2]
+    arr['strand'] = [[7], [3]]
+    msg = PointCloud2(height=2, width=3, is_bigendian=True, point_step=40, row_step=128,
+                      fields=[PointField(name='z', offset=0, datatype=PointField.FLOAT64, count=1),
+                              PointField(name='x', offset=8, datatype=PointField.FLOAT64, count=1),
+                              PointField(name='y', offset=24, datatype=PointField.FLOAT64,
+                                         count=1),
+                              PointField(name='strand', offset=32, datatype=PointField.UINT16,
+                                         count=1)])
+    msg.data = rows.tobytes()
+    y, ids = pointcloud2_to_strands(msg)
+    np.testing.assert_array_equal(y, pts)
+    np.testing.assert_array_equal(ids, [7, 3])
+    msg.fields = msg.fields[:3]
+    np.testing.assert_array_equal(pointcloud2_to_strands(msg)[1], [0, 1])
+
+
+def test_reader_errors():
+    msg = strands_to_pointcloud2(np.zeros((2, 3, 3)), frame_id='w')
+    bad = PointCloud2(height=msg.height, width=msg.width, point_step=msg.point_step,
+                      row_step=msg.row_step, fields=msg.fields[1:], data=msg.data)
+    with pytest.raises(ValueError, match=r"no field\(s\) \['x'\]"):
+        pointcloud2_to_strands(bad)
+    bad = PointCloud2(height=msg.height, width=msg.width, point_step=msg.point_step,
+                      row_step=msg.row_step, fields=msg.fields, data=msg.data[:-1])
+    with pytest.raises(ValueError, match='data has'):
+        pointcloud2_to_strands(bad)
+    mixed = strands_to_pointcloud2(np.zeros((1, 4, 3)), frame_id='w')
+    mixed.data[12] = 1                      # strand id of point 0 differs from the rest
+    with pytest.raises(ValueError, match='not constant'):
+        pointcloud2_to_strands(mixed)
+
+
+def test_builder_errors():
+    with pytest.raises(ValueError, match=r'\(S, N, 3\)'):
+        strands_to_pointcloud2(np.zeros((3, 3)), frame_id='w')
+    with pytest.raises(ValueError, match='frame_id'):
+        strands_to_pointcloud2(np.zeros((1, 2, 3)), frame_id='')
+    with pytest.raises(ValueError, match='colors'):
+        strands_to_pointcloud2(np.zeros((1, 2, 3)), frame_id='w', colors=np.zeros((2, 3)))
+    with pytest.raises(ValueError, match='strand_ids'):
+        strands_to_pointcloud2(np.zeros((2, 2, 3)), frame_id='w', strand_ids=[1])
+    with pytest.raises(ValueError, match='uint32'):
+        strands_to_pointcloud2(np.zeros((1, 2, 3)), frame_id='w', strand_ids=[-1])
+
+
+def reference_cdr(msg):
+    """rclpy's bytes with Fast-CDR's uninitialised padding rewritten as zeros (by rosbags)."""
+    raw = serialize_message(msg)
+    return raw, bytes(TYPESTORE.serialize_cdr(TYPESTORE.deserialize_cdr(raw, CLOUD), CLOUD))
+
+
+@pytest.mark.parametrize('shape', [(0, 1), (0, 16), (1, 1), (3, 5), (17, 16)])
+@pytest.mark.parametrize('with_colors', [False, True])
+@pytest.mark.parametrize('frame_id', ['h', 'head', 'hé', 'frame_odd'])
+def test_cdr_fast_path_byte_identical(shape, with_colors, frame_id):
+    rng = np.random.default_rng(sum(shape) + len(frame_id))
+    x = rng.normal(size=shape + (3,))
+    if x.size:
+        x.flat[0] = np.nan
+    kw = dict(frame_id=frame_id, stamp_ns=99_000_000_001,
+              colors=rng.random(shape[:1] + (3,)) if with_colors else None)
+    msg = strands_to_pointcloud2(x, **kw)
+    fast = strands_to_pointcloud2_cdr(x, **kw)
+    raw, ref = reference_cdr(msg)
+    assert len(fast) == len(raw)
+    a, r, z = (np.frombuffer(b, np.uint8) for b in (fast, raw, ref))
+    assert (a[r != z] == 0).all()
+    assert fast == ref
+    assert deserialize_message(fast, PointCloud2) == msg
+
+
+def test_publish_cloud_bytes_over_dds():
+    rng = np.random.default_rng(12)
+    x = rng.normal(size=(1000, 16, 3))                 # 320 kB
+    kw = dict(frame_id='head', stamp_ns=5, colors=rng.random((1000, 3)))
+    expected = strands_to_pointcloud2(x, **kw)
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx, domain_id=72)
+    executor = SingleThreadedExecutor(context=ctx)
+    try:
+        node = rclpy.create_node('cloud_cdr_test', context=ctx)
+        executor.add_node(node)
+        got = []
+        node.create_subscription(PointCloud2, 'strands', got.append, 10)
+        pub = node.create_publisher(PointCloud2, 'strands', 10)
+        deadline = time.monotonic() + 10.0
+        while pub.get_subscription_count() < 1 and time.monotonic() < deadline:
+            executor.spin_once(timeout_sec=0.05)
+        assert pub.get_subscription_count() >= 1, 'subscription never matched'
+        pub.publish(strands_to_pointcloud2_cdr(x, **kw))
+        deadline = time.monotonic() + 10.0
+        while not got and time.monotonic() < deadline:
+            executor.spin_once(timeout_sec=0.05)
+        assert got, 'nothing received'
+        assert got[0] == expected
+        y, ids = pointcloud2_to_strands(got[0])
+        np.testing.assert_array_equal(y, x.astype(np.float32))
+        np.testing.assert_array_equal(ids, np.arange(1000))
+        node.destroy_node()
+    finally:
+        executor.shutdown()
+        rclpy.try_shutdown(context=ctx)
