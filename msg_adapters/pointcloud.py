@@ -93,12 +93,12 @@ def strands_to_pointcloud2(strands, *, frame_id, stamp_ns=0, colors=None, strand
 
     See :func:`strands_to_points` for ``colors`` and ``strand_ids``; ``stamp_ns`` [ns].
     """
+    header = Header(stamp=time_msg(stamp_ns), frame_id=check_frame_id(frame_id))
     pts, dense = strands_to_points(strands, colors, strand_ids)
     n_strands, n_points = pts.shape
     step = pts.dtype.itemsize
     data = array.array('B')
     data.frombytes(pts.reshape(-1).view(np.uint8))
-    header = Header(stamp=time_msg(stamp_ns), frame_id=check_frame_id(frame_id))
     return PointCloud2(header=header, height=n_strands, width=n_points,
                        fields=cloud_fields('rgb' in pts.dtype.names), is_bigendian=False,
                        point_step=step, row_step=step * n_points, data=data, is_dense=dense)
@@ -107,16 +107,17 @@ def strands_to_pointcloud2(strands, *, frame_id, stamp_ns=0, colors=None, strand
 def strands_to_pointcloud2_cdr(strands, *, frame_id, stamp_ns=0, colors=None, strand_ids=None):
     """The serialized CDR bytes of :func:`strands_to_pointcloud2` (same arguments).
 
-    Skips the intermediate ``array.array`` and rclpy's serializer: one copy of the points into
-    the message buffer. Padding zeroed (see :mod:`msg_adapters.cdr`).
+    Skips the structured array, the ``array.array`` and rclpy's serializer: the points are
+    written straight into the message bytes. Padding zeroed (see :mod:`msg_adapters.cdr`).
     """
+    stamp, frame_id = split_ns(stamp_ns, 'stamp_ns'), check_frame_id(frame_id)
     x, rgb, ids = _check_inputs(strands, colors, strand_ids)
     n_strands, n_points = x.shape[:2]
     dtype = cloud_dtype(rgb is not None)
     step, nbytes = dtype.itemsize, dtype.itemsize * n_strands * n_points
     w = CdrWriter()
-    w.time(*split_ns(stamp_ns, 'stamp_ns'))
-    w.string(check_frame_id(frame_id))
+    w.time(*stamp)
+    w.string(frame_id)
     w.uint32(n_strands)
     w.uint32(n_points)
     fields = cloud_fields(rgb is not None)

@@ -27,7 +27,7 @@ class PoseError(ValueError):
     """A pose message that cannot be used: NaN/Inf value, zero quaternion, bad stamp."""
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class PoseSample:
     """One pose read from a message.
 
@@ -35,7 +35,7 @@ class PoseSample:
     position: (3,) float64 [m], in ``frame_id``.
     quaternion: (4,) float64 (x, y, z, w), as received (finite, norm >= QUAT_MIN_NORM).
     frame_id: parent frame ('' if none); child_frame_id: child frame ('' if the type has none).
-    The arrays are read-only.
+    The arrays are read-only; compare samples field by field (no ``==``).
     """
 
     t_ns: int

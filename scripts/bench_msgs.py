@@ -99,7 +99,8 @@ def main(argv=None):
 
     env = dict(python=platform.python_version(), numpy=np.__version__,
                machine=platform.machine(), cpus=os.cpu_count(),
-               ROS_PYTHON_CHECK_FIELDS=os.environ.get('ROS_PYTHON_CHECK_FIELDS', ''))
+               ROS_PYTHON_CHECK_FIELDS=os.environ.get('ROS_PYTHON_CHECK_FIELDS', ''),
+               loadavg_1min=round(os.getloadavg()[0], 2))
     print(f'# {env}')
     print(f'{"message":<28}{"strands":>8}{"pts":>5}{"MB":>7}{"build":>10}{"serial.":>10}'
           f'{"object":>10}{"fast":>9}{"ratio":>8}   (medians, ms)')

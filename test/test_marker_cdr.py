@@ -138,6 +138,10 @@ def test_delete_all_first_marker():
                                     stamp_ns=7), MarkerArray)
     assert msg.markers[0] == delete_all_marker('odom', 7, 'h')
     assert [m.action for m in msg.markers] == [Marker.DELETEALL, Marker.ADD]
+    only = strands_to_marker_array_cdr(np.empty((0, 2, 3)), frame_id='odom', ns='h',
+                                       style='line_strips', delete_all_first=True, stamp_ns=7)
+    assert deserialize_message(only, MarkerArray) == MarkerArray(
+        markers=[delete_all_marker('odom', 7, 'h')])
 
 
 def test_write_marker_matches_default_marker():
@@ -150,6 +154,18 @@ def test_write_marker_matches_default_marker():
     m.header.stamp.sec, m.header.stamp.nanosec = 3, 4
     _, ref = reference_cdr(MarkerArray(markers=[m]))
     assert ENCAPSULATION_LE + body == ref
+
+
+def test_copying_fallback_gives_the_same_bytes(monkeypatch):
+    """Where CPython's in-place bytes construction is unavailable, the copy path is used."""
+    from msg_adapters import cdr
+    x = random_strands(np.random.default_rng(9), 5, 4)
+    for style in ('line_list', 'line_strips'):
+        fast = strands_to_marker_array_cdr(x, frame_id='m', style=style)
+        with monkeypatch.context() as m:
+            m.setattr(cdr, '_ALLOC', None)
+            copied = strands_to_marker_array_cdr(x, frame_id='m', style=style)
+        assert type(copied) is bytes and copied == fast
 
 
 def test_same_validation_as_object_path():
