@@ -1,0 +1,310 @@
+"""The guide-strand numba kernels agree with plain-numpy references on random inputs.
+
+The references below are written independently of the kernels' loop structure: vectorised over
+strands, Gauss–Seidel along the strand, masses used directly (not through ``pair_weights``).
+Kernels use fused multiply-add (``integrate.FASTMATH``), so agreement is to ~1e-12, not bitwise.
+"""
+import numba
+import numpy as np
+import pytest
+
+from hair_tracking import ftl, integrate, pbd_constraints
+from hair_tracking.transforms import quat_normalize, quat_to_matrix
+
+ATOL = 1e-12
+
+
+# ------------------------------------------------------------------------- numpy references
+def ref_predict(x, v, rest, inv_mass, rot, pos, rot_prev, pos_prev, gravity, damping, dt, shock):
+    """Returns (p, x_carried, v_integrated) of the predict stage."""
+    rot_rel = rot @ rot_prev.T
+    moved = (x - pos_prev) @ rot_rel.T + pos
+    xc = x + shock * (moved - x)
+    vc = v + shock * (v @ rot_rel.T - v)
+    free = (inv_mass > 0)[..., None]
+    vn = np.where(free, vc * np.exp(-damping * dt) + np.asarray(gravity) * dt, 0.0)
+    p = np.where(free, xc + vn * dt, xc)
+    p[:, :2] = rest[:, :2] @ rot.T + pos
+    vn[:, :2] = v[:, :2]
+    return p, xc, vn
+
+
+def ref_pbd_sweep(p, rest_dist, inv_mass, gap, k):
+    for i in range(p.shape[1] - gap):
+        j = i + gap
+        wi, wj = inv_mass[:, i], inv_mass[:, j]
+        ws = wi + wj
+        d = p[:, j] - p[:, i]
+        length = np.linalg.norm(d, axis=1)
+        c = length - rest_dist[:, i]
+        nrm = d / np.maximum(length, 1e-15)[:, None]
+        safe = np.where(ws > 0, ws, 1.0)
+        p[:, i] += (k * wi / safe * c)[:, None] * nrm
+        p[:, j] -= (k * wj / safe * c)[:, None] * nrm
+
+
+def ref_xpbd_sweep(p, rest_dist, inv_mass, lam, gap, alpha_tilde):
+    for i in range(p.shape[1] - gap):
+        j = i + gap
+        wi, wj = inv_mass[:, i], inv_mass[:, j]
+        ws = wi + wj
+        d = p[:, j] - p[:, i]
+        length = np.linalg.norm(d, axis=1)
+        c = length - rest_dist[:, i]
+        nrm = d / np.maximum(length, 1e-15)[:, None]
+        dlam = np.where(ws > 0, (-c - alpha_tilde * lam[:, i]) / (ws + alpha_tilde), 0.0)
+        lam[:, i] += dlam
+        p[:, i] -= (wi * dlam)[:, None] * nrm
+        p[:, j] += (wj * dlam)[:, None] * nrm
+
+
+def ref_ftl_pass(p, rest, rest_length, rot):
+    corr = np.zeros_like(p)
+    for i in range(2, p.shape[1]):
+        d = p[:, i] - p[:, i - 1]
+        length = np.linalg.norm(d, axis=1)
+        fallback = (rest[:, i] - rest[:, i - 1]) @ rot.T
+        fb_len = np.linalg.norm(fallback, axis=1)
+        fallback = np.where((fb_len > 1e-12)[:, None],
+                            fallback / np.maximum(fb_len, 1e-300)[:, None], [0.0, 0.0, -1.0])
+        u = np.where((length > 1e-12)[:, None], d / np.maximum(length, 1e-300)[:, None], fallback)
+        new = p[:, i - 1] + rest_length[:, i - 1][:, None] * u
+        corr[:, i] = new - p[:, i]
+        p[:, i] = new
+    return corr
+
+
+def ref_finalize(p, x_old, inv_mass, corr, dt, max_disp, s_damp):
+    p = p.copy()
+    free = inv_mass > 0
+    disp = p - x_old
+    clamped = np.zeros(inv_mass.shape, bool)
+    if max_disp > 0:
+        mag = np.linalg.norm(disp, axis=2)
+        hit = free & (mag > max_disp)
+        disp[hit] *= (max_disp / mag[hit])[:, None]
+        p[hit] = x_old[hit] + disp[hit]
+        clamped |= hit
+    if s_damp > 0:
+        shifted = np.zeros_like(corr)
+        shifted[:, :-1] = corr[:, 1:]
+        disp = np.where(free[..., None], disp - s_damp * shifted, disp)
+        if max_disp > 0:
+            mag = np.linalg.norm(disp, axis=2)
+            hit = free & (mag > max_disp)
+            disp[hit] *= (max_disp / mag[hit])[:, None]
+            clamped |= hit
+    return p, disp / dt, int(clamped.sum())
+
+
+# ------------------------------------------------------------------------------ fixtures
+def random_case(seed, s=13, n=7, all_free=False):
+    """Random strands (S not a multiple of BLOCK), head motion, state, masses."""
+    rng = np.random.default_rng(seed)
+    rest = np.cumsum(rng.normal(size=(s, n, 3)) * 0.02, axis=1) + rng.normal(size=(s, 1, 3)) * 0.1
+    rest[0, 4] = rest[0, 3]                      # one zero-length rest segment
+    rest_length = np.linalg.norm(np.diff(rest, axis=1), axis=2)
+    inv_mass = rng.uniform(0.5, 2.0, size=(s, n))
+    if not all_free:
+        inv_mass[rng.random((s, n)) < 0.15] = 0.0
+    inv_mass[:, :2] = 0.0
+    q_prev = quat_normalize(rng.normal(size=4))
+    q = quat_normalize(q_prev + rng.normal(size=4) * 0.1)
+    rot_prev, rot = quat_to_matrix(q_prev), quat_to_matrix(q)
+    pos_prev, pos = rng.normal(size=3) * 0.1, rng.normal(size=3) * 0.1
+    x = (rest @ rot_prev.T + pos_prev) + rng.normal(size=(s, n, 3)) * 0.01
+    v = rng.normal(size=(s, n, 3)) * 0.5
+    return dict(rest=rest, rest_length=rest_length, inv_mass=inv_mass, rot=rot, pos=pos,
+                rot_prev=rot_prev, pos_prev=pos_prev, x=x, v=v,
+                gravity=np.array([0.3, -1.0, -9.81]),
+                damping=2.0, dt=1.0 / 240.0, shock=0.6)
+
+
+def kernel_common(c):
+    rot_rel = integrate.relative_rotation(c['rot_prev'], c['rot'])
+    return (c['rot'], c['pos'], rot_rel, c['pos_prev'], c['gravity'],
+            float(np.exp(-c['damping'] * c['dt'])), c['dt'], c['shock'])
+
+
+def reference_predict(c):
+    return ref_predict(c['x'], c['v'], c['rest'], c['inv_mass'], c['rot'], c['pos'],
+                       c['rot_prev'], c['pos_prev'], c['gravity'], c['damping'], c['dt'],
+                       c['shock'])
+
+
+# --------------------------------------------------------------------------------- tests
+def test_relative_rotation_moves_head_points_rigidly():
+    c = random_case(0)
+    rot_rel = integrate.relative_rotation(c['rot_prev'], c['rot'])
+    p_head = np.array([0.03, -0.02, 0.1])
+    before = c['rot_prev'] @ p_head + c['pos_prev']
+    after = c['rot'] @ p_head + c['pos']
+    assert np.allclose(rot_rel @ (before - c['pos_prev']) + c['pos'], after, atol=1e-14)
+
+
+@pytest.mark.parametrize('finalize', [True, False])
+@pytest.mark.parametrize('seed', [1, 2])
+def test_pbd_step_matches_reference(seed, finalize):
+    c = random_case(seed)
+    bend_rest = pbd_constraints.second_neighbour_rest(c['rest'])
+    iterations, k, kb, max_disp = 3, 0.9, 0.4, 0.02
+    p, xc, vn = reference_predict(c)
+    for _ in range(iterations):
+        ref_pbd_sweep(p, c['rest_length'], c['inv_mass'], 1, k)
+        ref_pbd_sweep(p, bend_rest, c['inv_mass'], 2, kb)
+    x, v, x_old = c['x'].copy(), c['v'].copy(), np.zeros_like(c['x'])
+    clamped = pbd_constraints.pbd_step(
+        x, v, x_old, c['rest'], c['inv_mass'], c['rest_length'], bend_rest,
+        pbd_constraints.pair_weights(c['inv_mass'], 1),
+        pbd_constraints.pair_weights(c['inv_mass'], 2), *kernel_common(c),
+        iterations, k, kb, max_disp, finalize)
+    assert np.allclose(x_old, xc, rtol=0, atol=ATOL)
+    if finalize:
+        p_ref, v_ref, clamped_ref = ref_finalize(p, xc, c['inv_mass'], None, c['dt'], max_disp,
+                                                 0.0)
+        assert clamped_ref > 0 and clamped == clamped_ref
+        assert np.allclose(x, p_ref, rtol=0, atol=ATOL)
+        assert np.allclose(v, v_ref, rtol=0, atol=1e-9)
+    else:
+        assert clamped == 0
+        assert np.allclose(x, p, rtol=0, atol=ATOL)
+        assert np.allclose(v[:, 2:], vn[:, 2:], rtol=0, atol=ATOL)
+
+
+@pytest.mark.parametrize('finalize', [True, False])
+def test_xpbd_step_matches_reference(finalize):
+    c = random_case(3)
+    bend_rest = pbd_constraints.second_neighbour_rest(c['rest'])
+    iterations, max_disp = 4, 0.0
+    a_s, a_b = 1e-6 / c['dt'] ** 2, 1e-3 / c['dt'] ** 2
+    p, xc, vn = reference_predict(c)
+    lam_s = np.zeros(c['rest_length'].shape)
+    lam_b = np.zeros(bend_rest.shape)
+    for _ in range(iterations):
+        ref_xpbd_sweep(p, c['rest_length'], c['inv_mass'], lam_s, 1, a_s)
+        ref_xpbd_sweep(p, bend_rest, c['inv_mass'], lam_b, 2, a_b)
+    x, v, x_old = c['x'].copy(), c['v'].copy(), np.zeros_like(c['x'])
+    k_lam_s = np.full(lam_s.shape, 123.0)        # the kernel must reset the multipliers
+    k_lam_b = np.full(lam_b.shape, -7.0)
+    clamped = pbd_constraints.xpbd_step(
+        x, v, x_old, c['rest'], c['inv_mass'], c['rest_length'], bend_rest,
+        pbd_constraints.xpbd_gain(c['inv_mass'], 1, a_s),
+        pbd_constraints.xpbd_gain(c['inv_mass'], 2, a_b), k_lam_s, k_lam_b,
+        *kernel_common(c), iterations, a_s, a_b, max_disp, finalize)
+    assert clamped == 0
+    assert np.allclose(k_lam_s, lam_s, rtol=1e-9, atol=1e-9)
+    assert np.allclose(k_lam_b, lam_b, rtol=1e-9, atol=1e-9)
+    if finalize:
+        p_ref, v_ref, _ = ref_finalize(p, xc, c['inv_mass'], None, c['dt'], max_disp, 0.0)
+        assert np.allclose(x, p_ref, rtol=0, atol=ATOL)
+        assert np.allclose(v, v_ref, rtol=0, atol=1e-9)
+    else:
+        assert np.allclose(x, p, rtol=0, atol=ATOL)
+
+
+@pytest.mark.parametrize('finalize', [True, False])
+def test_ftl_step_matches_reference(finalize):
+    c = random_case(4, all_free=True)
+    bend_rest = pbd_constraints.second_neighbour_rest(c['rest'])
+    kb, s_damp, max_disp = 0.5, 0.85, 0.01
+    p, xc, vn = reference_predict(c)
+    ref_pbd_sweep(p, bend_rest, c['inv_mass'], 2, kb)
+    corr = ref_ftl_pass(p, c['rest'], c['rest_length'], c['rot'])
+    x, v, x_old = c['x'].copy(), c['v'].copy(), np.zeros_like(c['x'])
+    k_corr = np.full_like(x, np.nan)
+    clamped = ftl.ftl_step(
+        x, v, x_old, k_corr, c['rest'], c['inv_mass'], c['rest_length'], bend_rest,
+        pbd_constraints.pair_weights(c['inv_mass'], 2), *kernel_common(c),
+        1, kb, s_damp, max_disp, finalize)
+    assert np.allclose(k_corr, corr, rtol=0, atol=ATOL)
+    if finalize:
+        p_ref, v_ref, clamped_ref = ref_finalize(p, xc, c['inv_mass'], corr, c['dt'], max_disp,
+                                                 s_damp)
+        assert clamped_ref > 0 and clamped == clamped_ref
+        assert np.allclose(x, p_ref, rtol=0, atol=ATOL)
+        assert np.allclose(v, v_ref, rtol=0, atol=1e-9)
+    else:
+        assert np.allclose(x, p, rtol=0, atol=ATOL)
+        seg = np.linalg.norm(np.diff(x, axis=1), axis=2)
+        assert np.allclose(seg[:, 1:], c['rest_length'][:, 1:], rtol=1e-12, atol=1e-15)
+
+
+def test_ftl_pass_fallback_on_collapsed_segment():
+    c = random_case(5, s=3, n=6, all_free=True)
+    p = c['rest'] @ c['rot'].T + c['pos']
+    p[1, 3] = p[1, 2]                         # collapsed: direction from the rest shape
+    expected = p.copy()
+    ref_ftl_pass(expected, c['rest'], c['rest_length'], c['rot'])
+    corr = np.zeros_like(p)
+    ftl.ftl_pass_block(p, c['rest'], c['rest_length'], c['rot'], corr, 0, 3)
+    assert np.all(np.isfinite(p))
+    assert np.allclose(p, expected, atol=ATOL)
+    # the collapsed node went back to its rest-shape place relative to its predecessor
+    assert np.allclose(p[1, 3] - p[1, 2], c['rot'] @ (c['rest'][1, 3] - c['rest'][1, 2]),
+                       atol=1e-12)
+
+
+def test_finalize_kernel_matches_reference():
+    c = random_case(6)
+    rng = np.random.default_rng(6)
+    x_old = c['x'].copy()
+    p = x_old + rng.normal(size=x_old.shape) * 0.02
+    corr = rng.normal(size=x_old.shape) * 0.01
+    for s_damp, max_disp in ((0.0, 0.0), (0.0, 0.02), (0.8, 0.0), (0.8, 0.02)):
+        x, v = p.copy(), np.zeros_like(p)
+        clamped = integrate.finalize(x, v, x_old, c['inv_mass'], corr, c['dt'], max_disp,
+                                     s_damp)
+        p_ref, v_ref, clamped_ref = ref_finalize(p, x_old, c['inv_mass'], corr, c['dt'],
+                                                 max_disp, s_damp)
+        assert clamped == clamped_ref
+        assert (clamped > 0) == (max_disp > 0)
+        assert np.allclose(x, p_ref, rtol=0, atol=ATOL)
+        assert np.allclose(v, v_ref, rtol=0, atol=1e-9)
+
+
+def test_carry_rigid_matches_reference():
+    c = random_case(7)
+    rot_rel = integrate.relative_rotation(c['rot_prev'], c['rot'])
+    out = np.empty_like(c['x'])
+    integrate.carry_rigid(c['x'], rot_rel, c['pos_prev'], c['pos'], out)
+    expected = (c['x'] - c['pos_prev']) @ rot_rel.T + c['pos']
+    assert np.allclose(out, expected, rtol=0, atol=1e-14)
+
+
+def test_pair_weights_and_gain():
+    im = np.array([[0.0, 0.0, 1.0, 3.0]])
+    w1 = pbd_constraints.pair_weights(im, 1)
+    assert np.array_equal(w1[0, 0], [0.0, 0.0])              # both pinned: skipped
+    assert np.allclose(w1[0, 1], [0.0, 1.0])
+    assert np.allclose(w1[0, 2], [0.25, 0.75])
+    g = pbd_constraints.xpbd_gain(im, 2, 0.5)
+    assert np.allclose(g[0], [1.0 / 1.5, 1.0 / 3.5])
+    rest = np.array([[[0, 0, 0], [0, 0, 1], [0, 1, 1], [0, 1, 1]]], float)
+    assert np.allclose(pbd_constraints.second_neighbour_rest(rest), [[np.sqrt(2), 1.0]])
+
+
+def test_kernels_deterministic_across_threads_and_blocks():
+    c = random_case(8, s=21, n=9)
+    bend_rest = pbd_constraints.second_neighbour_rest(c['rest'])
+    sw = pbd_constraints.pair_weights(c['inv_mass'], 1)
+    bw = pbd_constraints.pair_weights(c['inv_mass'], 2)
+
+    def run(sl, threads):
+        old = numba.get_num_threads()
+        numba.set_num_threads(threads)
+        try:
+            x, v = c['x'][sl].copy(), c['v'][sl].copy()
+            pbd_constraints.pbd_step(x, v, np.zeros_like(x), c['rest'][sl].copy(),
+                                     c['inv_mass'][sl].copy(), c['rest_length'][sl].copy(),
+                                     bend_rest[sl].copy(), sw[sl].copy(), bw[sl].copy(),
+                                     *kernel_common(c), 4, 1.0, 0.3, 0.05, True)
+        finally:
+            numba.set_num_threads(old)
+        return x, v
+
+    a = run(slice(None), 1)
+    b = run(slice(None), numba.config.NUMBA_NUM_THREADS)
+    assert np.array_equal(a[0], b[0]) and np.array_equal(a[1], b[1])
+    # a strand's result does not depend on the block it is processed in
+    sub = run(slice(3, 6), 1)
+    assert np.array_equal(sub[0], a[0][3:6]) and np.array_equal(sub[1], a[1][3:6])
