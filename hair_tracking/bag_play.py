@@ -7,8 +7,10 @@ publish the message's raw serialized bytes on its topic (possibly remapped).  A 
 clock already at its log time.  ROS 1 bags are converted to CDR on the fly (rosbags).
 
 Publishers use the QoS recorded in the bag (``offered_qos_profiles``: reliability, durability,
-depth) when present, else reliable / volatile / depth 100; ``/clock`` is best effort, depth 1
-(what rclpy's time source subscribes with).  Types that the installed rclpy message packages
+depth) when present, else reliable / volatile / depth 100.  ``/clock`` is published reliable,
+keep-last 10: rclpy's time source subscribes best effort (which a reliable publisher serves),
+and a recorder, which matches the publisher's reliability, then loses no clock message.  Types
+that the installed rclpy message packages
 lack (e.g. ``tf2_msgs`` here) cannot be published: those topics are skipped with a warning.
 
 :class:`BagPlayer` works on any rclpy node (publishing needs no spinning), so tests and the
@@ -166,8 +168,8 @@ class BagPlayer:
         self.clock_pub = None
         if clock:
             self.clock_pub = node.create_publisher(
-                Clock, CLOCK_TOPIC, QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
-                                               reliability=ReliabilityPolicy.BEST_EFFORT))
+                Clock, CLOCK_TOPIC, QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10,
+                                               reliability=ReliabilityPolicy.RELIABLE))
 
     # ------------------------------------------------------------------ control
     def stop(self) -> None:
