@@ -26,12 +26,10 @@ def as_strands(strands, *, name='strands', min_points=1, finite=True):
         raise ValueError(f'{name} needs at least {min_points} points per strand, '
                          f'got shape {a.shape}')
     a = np.ascontiguousarray(a, dtype='<f8')
-    if finite:
-        bad = ~np.isfinite(a)
-        if bad.any():
-            idx = _first_bad(bad)
-            raise ValueError(f'{name}{list(idx)} is {a[idx]}: points must be finite '
-                             f'(NaN/Inf points are a caller bug)')
+    if finite and not np.isfinite(a).all():
+        idx = _first_bad(~np.isfinite(a))
+        raise ValueError(f'{name}{list(idx)} is {a[idx]}: points must be finite '
+                         f'(NaN/Inf points are a caller bug)')
     return a
 
 
@@ -63,12 +61,13 @@ def as_colors(colors, n_strands, n_points, *, name='colors'):
             and c.shape[2] in (3, 4)):
         raise ValueError(f'{name} must be shaped (S, 3|4) or (S, N, 3|4) with S={n_strands}, '
                          f'N={n_points}; got {c.shape}')
-    bad = ~((c >= 0.0) & (c <= 1.0))            # NaN compares False: caught too
-    if bad.any():
-        idx = _first_bad(bad)
-        raise ValueError(f'{name}{list(idx)} is {c[idx]}: colour components must be in [0, 1]')
     if per_strand:
         c = c[:, None, :]
     out = np.ones(c.shape[:2] + (4,), dtype='<f4')
     out[..., :c.shape[2]] = c
+    if out.size and not (out.min() >= 0.0 and out.max() <= 1.0):     # NaN fails both
+        bad = ~((c >= 0.0) & (c <= 1.0))
+        idx = _first_bad(bad[:, 0] if per_strand else bad)
+        value = c[(idx[0], 0, idx[1]) if per_strand else idx]
+        raise ValueError(f'{name}{list(idx)} is {value}: colour components must be in [0, 1]')
     return out

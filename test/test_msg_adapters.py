@@ -195,6 +195,13 @@ def test_as_colors():
         as_colors(np.zeros((3, 4)), 2, 3)
     with pytest.raises(ValueError, match=r'colors\[1, 2\] is 1.5'):
         as_colors(np.array([[0, 0, 0], [0, 0, 1.5]]), 2, 3)
+    c = np.zeros((2, 3, 4))
+    c[1, 1, 3] = np.nan
+    with pytest.raises(ValueError, match=r'colors\[1, 1, 3\] is nan'):
+        as_colors(c, 2, 3)
+    c[1, 1, 3] = -0.1
+    with pytest.raises(ValueError, match=r'colors\[1, 1, 3\] is -0.1'):
+        as_colors(c, 2, 3)
 
 
 # --- MarkerArray, object path -----------------------------------------------------------------
