@@ -211,6 +211,12 @@ def cmd_run(args) -> int:
     bag_io.output_storage(args.output, args.storage)
     bag_io.bag_kind(src)
     settings = load_settings(args.scene, args.params, parse_overrides(args.set or []))
+    if args.threads is not None:
+        import numba
+        most = numba.config.NUMBA_NUM_THREADS
+        if not 1 <= args.threads <= most:
+            raise BagError(f'--threads must be in [1, {most}], got {args.threads}', EXIT_USAGE)
+        numba.set_num_threads(args.threads)
     opts = RunOptions(topic=args.topic, head_frame=args.head_frame, fixed_frame=args.fixed_frame,
                       start_offset_s=args.start_offset, duration_s=args.duration,
                       storage=args.storage, overwrite=args.overwrite, compress=args.compress,
@@ -344,6 +350,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--duration', type=float, help='use this many seconds of the bag')
     p.add_argument('--storage', choices=STORAGES, help='mcap (default) or sqlite3')
     p.add_argument('--compress', action='store_true', help='zstd-compress (MCAP chunks)')
+    p.add_argument('--threads', type=int,
+                   help='numba threads for the simulation (default: all cores; 1 is often '
+                        'faster for small scenes or on a busy machine)')
     p.add_argument('--every-pose', action='store_true',
                    help='write a hair frame after every pose (default: publish_rate_hz)')
     p.add_argument('--no-points', action='store_true', help='do not write /hair/points')

@@ -177,9 +177,13 @@ def open_bag(path):
             shutil.rmtree(tmp, ignore_errors=True)
 
 
-def messages(reader, connections=(), start: Optional[int] = None, stop: Optional[int] = None):
-    """``reader.messages(...)`` in log-time order, with parser errors turned into BagError."""
-    it = reader.messages(connections=connections, start=start, stop=stop)
+def messages(reader, connections=None, start: Optional[int] = None,
+             stop: Optional[int] = None):
+    """Messages of ``connections`` (None: all; an empty list: none) as ``(connection, log
+    time [ns], raw bytes)`` in log-time order, with parser errors turned into BagError."""
+    if connections is not None and len(connections) == 0:
+        return
+    it = reader.messages(connections=connections or (), start=start, stop=stop)
     while True:
         try:
             item = next(it)
