@@ -59,8 +59,9 @@ def predict_block(x, v, x_old, rest, inv_mass, s0, s1, rot, pos, rot_rel, pos_pr
                   damp, dt, shock):
     """Predict positions of strands ``s0..s1-1`` in place (step 1 of the module docstring).
 
-    On return ``x_old`` holds the (carried) start-of-substep positions, ``x`` the predicted
-    positions (roots at ``rot @ rest + pos``), ``v`` the integrated velocities.
+    On return ``x_old`` holds the (carried) start-of-substep positions and ``x`` the predicted
+    positions (roots at ``rot @ rest + pos``). ``v`` is read, not written: the velocity of the
+    substep is set by :func:`finalize_block` from the displacement (saves a pass over memory).
 
     Parameters: ``rot``/``pos`` head pose at the end of the substep; ``rot_rel``/``pos_prev`` the
     head motion (see :func:`relative_rotation`); ``gravity`` (3,) [m/s^2] world frame; ``damp`` the
@@ -109,16 +110,10 @@ def predict_block(x, v, x_old, rest, inv_mass, s0, s1, rot, pos, rot_rel, pos_pr
                 vx = vx * damp + gx
                 vy = vy * damp + gy
                 vz = vz * damp + gz
-                v[s, i, 0] = vx
-                v[s, i, 1] = vy
-                v[s, i, 2] = vz
                 x[s, i, 0] = px + vx * dt
                 x[s, i, 1] = py + vy * dt
                 x[s, i, 2] = pz + vz * dt
             else:
-                v[s, i, 0] = 0.0
-                v[s, i, 1] = 0.0
-                v[s, i, 2] = 0.0
                 x[s, i, 0] = px
                 x[s, i, 1] = py
                 x[s, i, 2] = pz
