@@ -1,0 +1,233 @@
+"""The fused ghost-tracking kernel and its helpers against plain-numpy references."""
+import numpy as np
+import pytest
+
+from hair_tracking.ghosts import GhostTracker
+from hair_tracking.model import HeadPose, StrandSet
+from hair_tracking.scene import Scene
+from hair_tracking.tracking_kernels import guide_frames
+from hair_tracking.transforms import quat_normalize, quat_to_matrix, rotation_between
+from hair_tracking.weights import (arc_fractions, clamp_weight, com_weight, ELASTIC_CHANGED,
+                                   elastic_code, ELASTIC_KEPT, ELASTIC_OFF, elastic_weight,
+                                   tip_weights)
+
+
+# ------------------------------------------------------------------ helpers
+def random_strands(rng, count, nodes, seg=0.02, spread=0.1):
+    """Random-walk strands (count, nodes, 3) [m] hanging roughly along -z."""
+    roots = rng.normal(scale=spread, size=(count, 1, 3))
+    steps = rng.normal(scale=0.3, size=(count, nodes - 1, 3)) + np.array([0.0, 0.0, -1.0])
+    steps *= seg / np.linalg.norm(steps, axis=2, keepdims=True)
+    steps *= rng.uniform(0.7, 1.3, size=(count, nodes - 1, 1))
+    return np.concatenate([roots, roots + np.cumsum(steps, axis=1)], axis=1)
+
+
+def head_pose(rng, angle_scale=0.3, shift=0.05):
+    q = quat_normalize(np.concatenate([rng.normal(scale=angle_scale, size=3), [1.0]]))
+    return HeadPose(rng.normal(scale=shift, size=3), q, quat_to_matrix(q))
+
+
+def scene_with(**tracking):
+    return Scene().with_changes(**{f'tracking__{k}': v for k, v in tracking.items()})
+
+
+def reference_step(x, v, ghost_rest, ghost_len, guide_of, seg, t, guide_rest, gx, gx_old,
+                   head, dt, tr):
+    """Plain-numpy tracking substep written from docs/ghosts.md (stages a-g, no collision)."""
+    x = x.copy()
+    v = v.copy()
+    R, pos = head.rotation, head.position
+    n_nodes = x.shape[1]
+    frac = arc_fractions(ghost_len)
+    tipw = tr.tip_weight * frac
+    length = ghost_len.sum(axis=1)
+    rows = np.arange(x.shape[0])[:, None]
+    gr = guide_rest[guide_of][rows, seg]
+    gr1 = guide_rest[guide_of][rows, seg + 1]
+    r_point = (1 - t)[..., None] * gr + t[..., None] * gr1
+    target_rest = ghost_rest.copy()
+    var_target = {}
+    for g in np.unique(guide_of):
+        m = np.flatnonzero(guide_of == g)
+        com = ghost_rest[m].mean(axis=0)
+        dev = ghost_rest[m] - com
+        var_target[g] = tr.spread_target * np.einsum('snk,snk->n', dev, dev)
+        if tr.spread > 0 and tr.spread_target != 1.0:
+            target_rest[m, 2:] = com[2:] + np.sqrt(tr.spread_target) * dev[:, 2:]
+    off = target_rest - r_point
+    # guide segment frames from the project's own rotation_between
+    G, M = gx.shape[:2]
+    frames = np.empty((G, M - 1, 3, 3))
+    for g in range(G):
+        for s in range(M - 1):
+            a = guide_rest[g, s + 1] - guide_rest[g, s]
+            b = gx[g, s + 1] - gx[g, s]
+            if np.linalg.norm(a) < 1e-12 or np.linalg.norm(b) < 1e-300:
+                frames[g, s] = R
+            else:
+                frames[g, s] = rotation_between(R @ (a / np.linalg.norm(a)),
+                                                b / np.linalg.norm(b)) @ R
+    elastic = elastic_code(tr)
+    group_level = tr.com_strength > 0 or tr.spread > 0
+    for g in np.unique(guide_of):
+        m = np.flatnonzero(guide_of == g)
+        n = m.size
+        new = pos + ghost_rest[m, :2] @ R.T
+        v[m, :2] = (new - x[m, :2]) / dt
+        x[m, :2] = new
+        for j in range(2, n_nodes):
+            sg, tt = seg[m, j], t[m, j][:, None]
+            p = (1 - tt) * gx[g, sg] + tt * gx[g, sg + 1]
+            d = p - ((1 - tt) * gx_old[g, sg] + tt * gx_old[g, sg + 1])
+            xo = x[m, j].copy()
+            v0 = v[m, j]
+            w = np.zeros(n)
+            if elastic != ELASTIC_OFF:
+                nn = np.linalg.norm(d, axis=1) * np.linalg.norm(v0, axis=1)
+                cos = np.where(nn > 1e-300, np.sum(d * v0, axis=1) / np.where(nn > 1e-300, nn, 1),
+                               0.0)
+                cos = np.clip(cos, -1, 1)
+                w += 0.5 * cos + 0.5 if elastic == ELASTIC_KEPT else 0.5 - 0.5 * cos
+            if tr.tip_weight > 0:
+                w += tipw[m, j]
+            if tr.com_weight > 0 and n > 1:
+                w += tr.com_weight * np.linalg.norm(xo - xo.mean(axis=0), axis=1) / length[m]
+            w = np.clip(w, 0.0, tr.max_weight)
+            xp = xo + d * (1 + w)[:, None]
+            q = p + np.einsum('sab,sb->sa', frames[g, sg], off[m, j])
+            if tr.offset_strength > 0:
+                xp = xp + tr.offset_strength * (q - xp)
+            if group_level:
+                delta = tr.com_strength * (q.mean(axis=0) - xp.mean(axis=0))
+                f = 1.0
+                if tr.spread > 0 and n > 1:
+                    var = np.sum((xp - xp.mean(axis=0)) ** 2)
+                    if var > 1e-30:
+                        ratio = np.clip(np.sqrt(var_target[g][j] / var), 0.5, 2.0)
+                        f = 1.0 + tr.spread * (ratio - 1.0)
+                c = xp.mean(axis=0) + delta
+                xp = xp + delta
+                xp = c + f * (xp - c)
+            if tr.length_restore:
+                prev = x[m, j - 1]
+                dv = xp - prev
+                nd = np.linalg.norm(dv, axis=1, keepdims=True)
+                fallback = (ghost_rest[m, j] - ghost_rest[m, j - 1]) @ R.T
+                xp = np.where(nd > 1e-300, prev + dv * ghost_len[m, j - 1][:, None] /
+                              np.where(nd > 1e-300, nd, 1.0), prev + fallback)
+            v[m, j] = (xp - xo) / dt
+            x[m, j] = xp
+    return x, v
+
+
+OPTION_SETS = [
+    {},                                                           # defaults
+    dict(elastic_mode='changed', spread=0.7, spread_target=2.0, com_weight=8.0, tip_weight=1.0,
+         max_weight=1.2),
+    dict(elastic_weight=False, tip_weight=0.0, com_weight=0.0, length_restore=False,
+         com_strength=0.0, offset_strength=0.0),
+    dict(length_restore=False, offset_strength=0.0, spread=0.5, spread_target=0.5),
+    dict(com_strength=0.0, spread=0.0, offset_strength=0.3),      # no group-level stage
+    dict(com_strength=1.0, offset_strength=1.0, max_weight=0.0),
+]
+
+
+@pytest.mark.parametrize('options', OPTION_SETS)
+@pytest.mark.parametrize('regroup', [True, False])
+def test_kernel_matches_numpy_reference(options, regroup):
+    rng = np.random.default_rng(7)
+    guides = StrandSet.from_rest(random_strands(rng, 4, 6))
+    ghost_rest = random_strands(rng, 17, 9, seg=0.013)
+    ghosts = StrandSet.from_rest(ghost_rest)
+    scene = scene_with(**options)
+    tracker = GhostTracker(ghosts, guides, scene, regroup=regroup)
+    dt = 1.0 / 240.0
+    head = head_pose(rng)
+    guides.place_at(head)
+    ghosts.place_at(head)
+    ghosts.v[...] = rng.normal(scale=0.2, size=ghosts.v.shape)
+    ghosts.x[...] += rng.normal(scale=0.003, size=ghosts.x.shape)
+    for _ in range(4):
+        old = guides.x.copy()
+        head = head_pose(rng)
+        guides.x[...] = head.to_world(guides.rest) + rng.normal(scale=0.004, size=old.shape)
+        want_x, want_v = reference_step(
+            ghosts.x, ghosts.v, ghosts.rest, ghosts.rest_length, tracker.guide_of,
+            tracker.seg, tracker.t, guides.rest, guides.x, old, head, dt, scene.tracking)
+        tracker.step(dt, old, head)
+        np.testing.assert_allclose(ghosts.x, want_x, rtol=0, atol=1e-11)
+        np.testing.assert_allclose(ghosts.v, want_v, rtol=1e-9, atol=1e-8)
+    assert tracker.stats['steps'] == 4
+
+
+def test_guide_frames_match_rotation_between():
+    rng = np.random.default_rng(3)
+    rest = random_strands(rng, 5, 7)
+    gx = random_strands(rng, 5, 7)
+    gx[2, 3] = gx[2, 2]                           # degenerate current segment -> head rotation
+    head = head_pose(rng, angle_scale=1.0)
+    tan = np.diff(rest, axis=1)
+    tan /= np.linalg.norm(tan, axis=2, keepdims=True)
+    frames = guide_frames(gx, tan, head.rotation)
+    for g in range(5):
+        for s in range(6):
+            b = gx[g, s + 1] - gx[g, s]
+            if np.linalg.norm(b) == 0:
+                want = head.rotation
+            else:
+                want = rotation_between(head.rotation @ tan[g, s], b / np.linalg.norm(b)) @ \
+                    head.rotation
+            np.testing.assert_allclose(frames[g, s], want, atol=1e-12)
+            np.testing.assert_allclose(frames[g, s] @ frames[g, s].T, np.eye(3), atol=1e-12)
+            if np.linalg.norm(b) > 0:     # the frame carries the rest tangent onto the tangent
+                np.testing.assert_allclose(frames[g, s] @ tan[g, s], b / np.linalg.norm(b),
+                                           atol=1e-12)
+
+
+def test_guide_frame_half_turn_is_a_rotation():
+    gx = np.array([[[0.0, 0, 0], [0, 0, 0.1]]])            # tangent reversed exactly
+    tan = np.array([[[0.0, 0.0, -1.0]]])
+    q = guide_frames(gx, tan, np.eye(3))[0, 0]
+    np.testing.assert_allclose(q @ q.T, np.eye(3), atol=1e-12)
+    assert np.linalg.det(q) == pytest.approx(1.0)
+    np.testing.assert_allclose(q @ tan[0, 0], [0, 0, 1], atol=1e-12)
+    assert np.all(np.isfinite(q))
+
+
+# ------------------------------------------------------------------ weights
+def test_elastic_weight_both_readings():
+    v = (1.0, 0.0, 0.0)
+    cases = {(1.0, 0.0, 0.0): 1.0, (-2.0, 0.0, 0.0): 0.0, (0.0, 3.0, 0.0): 0.5,
+             (0.0, 0.0, 0.0): 0.5}
+    for v0, kept in cases.items():
+        assert elastic_weight(*v, *v0, ELASTIC_KEPT) == pytest.approx(kept)
+        assert elastic_weight(*v, *v0, ELASTIC_CHANGED) == pytest.approx(1.0 - kept)
+        assert elastic_weight(*v, *v0, ELASTIC_OFF) == 0.0
+    # equation (4) on random directions: 0.5 cos + 0.5, whatever the magnitudes
+    rng = np.random.default_rng(0)
+    for _ in range(20):
+        a, b = rng.normal(size=3), rng.normal(size=3)
+        cos = a @ b / np.linalg.norm(a) / np.linalg.norm(b)
+        assert elastic_weight(*(a * 7.0), *b, ELASTIC_KEPT) == pytest.approx(0.5 * cos + 0.5)
+    assert elastic_weight(np.nan, 0.0, 0.0, 1.0, 0.0, 0.0, ELASTIC_KEPT) == 0.5
+
+
+def test_elastic_code_and_small_weights():
+    assert elastic_code(scene_with(elastic_weight=False).tracking) == ELASTIC_OFF
+    assert elastic_code(scene_with(elastic_mode='kept').tracking) == ELASTIC_KEPT
+    assert elastic_code(scene_with(elastic_mode='changed').tracking) == ELASTIC_CHANGED
+    assert clamp_weight(2.5, 1.5) == 1.5
+    assert clamp_weight(-1.0, 1.5) == 0.0
+    assert clamp_weight(0.7, 1.5) == 0.7
+    assert com_weight(0.01, 4.0, 0.3) == pytest.approx(0.012)
+
+
+def test_tip_weights_follow_arc_length():
+    lengths = np.array([[1.0, 1.0, 2.0], [0.0, 0.0, 0.0]])
+    w = tip_weights(lengths, 0.8)
+    np.testing.assert_allclose(w[0], [0.0, 0.2, 0.4, 0.8])
+    np.testing.assert_allclose(w[1], [0.0, 0.8 / 3, 1.6 / 3, 0.8])   # zero length: even spacing
+    with pytest.raises(ValueError, match='tip_weight'):
+        tip_weights(lengths, -1.0)
+    with pytest.raises(ValueError, match='rest_length'):
+        arc_fractions(np.zeros(3))
