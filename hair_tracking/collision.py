@@ -219,6 +219,11 @@ class Collider:
             raise ValueError(f'x_prev {x_prev.shape} and inv_mass {inv_mass.shape} must match '
                              f'x {x.shape}')
         rot, pos = _pose(head)
+        return self.project(x, x_prev, inv_mass, rot, pos)
+
+    def project(self, x, x_prev, inv_mass, rot, pos) -> int:
+        """:meth:`apply` without input checks, the head pose given as ``rot`` (3, 3) and ``pos``
+        (3,) C-contiguous float64 arrays: for callers that validated their arrays once."""
         return int(project_ellipsoid(x, x_prev, inv_mass, rot, pos, self.center, self.radii,
                                      self.margin, self.friction, self.refine))
 

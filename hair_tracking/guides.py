@@ -68,6 +68,7 @@ class GuideSolver:
         self._iterations = int(sv.iterations)
         im = strands.inv_mass
         self._x_old = np.empty_like(strands.x)
+        self._rot_rel = np.empty((3, 3))
         self._bend_rest = pbd_constraints.second_neighbour_rest(strands.rest)
         if self.kind == 'pbd':
             self._stretch_w = pbd_constraints.pair_weights(im, 1)
@@ -99,7 +100,12 @@ class GuideSolver:
             raise ValueError(f'dt: must be a positive finite number of seconds, got {dt!r}')
         rot_prev, pos_prev = _pose('head_prev', head_prev)
         rot, pos = _pose('head', head)
-        rot_rel = integrate.relative_rotation(rot_prev, rot)
+        rot_rel = self._rot_rel
+        if not integrate.head_motion(rot_prev, pos_prev, rot, pos, rot_rel):
+            bad = 'head_prev' if not (np.all(np.isfinite(rot_prev))
+                                      and np.all(np.isfinite(pos_prev))) else 'head'
+            raise ValueError(f'{bad}: pose must be finite, got position '
+                             f'{pos_prev if bad == "head_prev" else pos}')
         st = self.strands
         damp = math.exp(-self._damping * dt)
         fused = self.collider is None
@@ -129,7 +135,7 @@ class GuideSolver:
         contacts = 0
         if not fused:
             ref = self._x_ref if self._x_ref is not None else self._x_old
-            contacts = self.collider.apply(st.x, ref, st.inv_mass, head)
+            contacts = self.collider.project(st.x, ref, st.inv_mass, rot, pos)
             corr, s_damp = self._x_old, 0.0
             if self.kind == 'ftl':
                 corr, s_damp = self._corr, float(self.scene.solver.ftl_damping)
@@ -180,13 +186,15 @@ def max_stretch(x: np.ndarray, rest_length: np.ndarray) -> float:
 
 
 def _pose(name, head):
-    rot = np.ascontiguousarray(head.rotation, dtype=np.float64)
-    pos = np.ascontiguousarray(head.position, dtype=np.float64)
+    """(rotation, position) of a head pose as C-contiguous float64 arrays (no copy if already)."""
+    rot, pos = head.rotation, head.position
+    if not (type(rot) is np.ndarray and rot.dtype == np.float64 and rot.flags.c_contiguous):
+        rot = np.ascontiguousarray(rot, dtype=np.float64)
+    if not (type(pos) is np.ndarray and pos.dtype == np.float64 and pos.flags.c_contiguous):
+        pos = np.ascontiguousarray(pos, dtype=np.float64)
     if rot.shape != (3, 3) or pos.shape != (3,):
         raise ValueError(f'{name}: rotation must be (3, 3) and position (3,), got {rot.shape} '
                          f'and {pos.shape}')
-    if not (np.all(np.isfinite(rot)) and np.all(np.isfinite(pos))):
-        raise ValueError(f'{name}: pose must be finite, got position {pos}, rotation {rot}')
     return rot, pos
 
 

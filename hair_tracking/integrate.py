@@ -51,7 +51,27 @@ def relative_rotation(rot_prev, rot):
     """``R_rel = R R_prev^T`` (3, 3): the head's rigid motion over a substep is
     ``M(p) = R_rel (p - t_prev) + t`` for head rotations ``R_prev`` -> ``R`` and positions
     ``t_prev`` -> ``t``."""
-    return np.ascontiguousarray(rot @ rot_prev.T)
+    out = np.empty((3, 3))
+    head_motion(np.ascontiguousarray(rot_prev, dtype=np.float64), np.zeros(3),
+                np.ascontiguousarray(rot, dtype=np.float64), np.zeros(3), out)
+    return out
+
+
+@njit(cache=True)
+def head_motion(rot_prev, pos_prev, rot, pos, rot_rel):
+    """Write ``R_rel = R R_prev^T`` into ``rot_rel`` (3, 3); True if all four inputs are finite.
+
+    One small compiled call instead of several numpy calls: the per-substep Python overhead of
+    the solver matters at real-time rates.
+    """
+    ok = True
+    for i in range(3):
+        ok = ok and math.isfinite(pos[i]) and math.isfinite(pos_prev[i])
+        for j in range(3):
+            ok = ok and math.isfinite(rot[i, j]) and math.isfinite(rot_prev[i, j])
+            rot_rel[i, j] = (rot[i, 0] * rot_prev[j, 0] + rot[i, 1] * rot_prev[j, 1]
+                             + rot[i, 2] * rot_prev[j, 2])
+    return ok
 
 
 @njit(cache=True, fastmath=FASTMATH, error_model='numpy')

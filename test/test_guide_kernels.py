@@ -143,6 +143,18 @@ def test_relative_rotation_moves_head_points_rigidly():
     assert np.allclose(rot_rel @ (before - c['pos_prev']) + c['pos'], after, atol=1e-14)
 
 
+def test_head_motion_kernel_matches_numpy_and_flags_non_finite():
+    c = random_case(9)
+    out = np.empty((3, 3))
+    args = [c['rot_prev'], c['pos_prev'], c['rot'], c['pos']]
+    assert integrate.head_motion(*args, out)
+    assert np.allclose(out, c['rot'] @ c['rot_prev'].T, rtol=0, atol=1e-15)
+    for k, idx in ((0, (1, 2)), (1, (0,)), (2, (2, 0)), (3, (2,))):
+        bad = [a.copy() for a in args]
+        bad[k][idx] = np.inf if k % 2 else np.nan
+        assert not integrate.head_motion(*bad, out)
+
+
 @pytest.mark.parametrize('finalize', [True, False])
 @pytest.mark.parametrize('seed', [1, 2])
 def test_pbd_step_matches_reference(seed, finalize):
