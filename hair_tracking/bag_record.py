@@ -76,7 +76,10 @@ class BagRecorder:
         self.first_ns: Optional[int] = None
         self.last_arrival = None          # time.monotonic() of the last message
         self.on_message: Optional[Callable[[str, int, bytes], None]] = None
-        self._timer = node.create_timer(discover_period_s, self.discover)
+        from rclpy.clock import Clock, ClockType
+        # steady clock: with use_sim_time a ROS-time timer would not run before /clock does
+        self._timer = node.create_timer(discover_period_s, self.discover,
+                                        clock=Clock(clock_type=ClockType.STEADY_TIME))
         self.discover()
 
     @property

@@ -118,15 +118,16 @@ def load_hair(path, topic: Optional[str] = None, max_frames: Optional[int] = Non
 
 
 def _thin(log_ns: np.ndarray, max_frames: Optional[int], fps: Optional[float]) -> set:
+    """Indices of the frames nearest to a grid of ``fps`` per second (then at most
+    ``max_frames`` of them, evenly spread)."""
     idx = np.arange(len(log_ns))
-    if fps:
-        step_ns = int(round(1e9 / fps))
-        chosen, next_t = [], None
-        for i, t in enumerate(log_ns):
-            if next_t is None or t >= next_t:
-                chosen.append(i)
-                next_t = t + step_ns
-        idx = np.array(chosen)
+    if fps and len(log_ns) > 1:
+        step_ns = 1e9 / fps
+        grid = log_ns[0] + np.arange(int((log_ns[-1] - log_ns[0]) / step_ns) + 1) * step_ns
+        right = np.clip(np.searchsorted(log_ns, grid), 1, len(log_ns) - 1)
+        left = right - 1
+        nearest = np.where(grid - log_ns[left] <= log_ns[right] - grid, left, right)
+        idx = np.unique(nearest)
     if max_frames and len(idx) > max_frames:
         idx = idx[np.round(np.linspace(0, len(idx) - 1, max_frames)).astype(int)]
     return set(int(i) for i in idx)
@@ -314,8 +315,8 @@ def render(path, output, *, gif: bool = True, png: bool = False, fps: float = 10
     half = None
     if in_head:
         pts = np.concatenate([d[2].reshape(-1, 3) for d in drawn])
-        lo = np.minimum(np.percentile(pts, 0.5, axis=0), -np.asarray(head_radii)) - 0.03
-        hi = np.maximum(np.percentile(pts, 99.5, axis=0), np.asarray(head_radii)) + 0.03
+        lo = np.minimum(np.percentile(pts, 0.1, axis=0), -np.asarray(head_radii)) - 0.03
+        hi = np.maximum(np.percentile(pts, 99.9, axis=0), np.asarray(head_radii)) + 0.03
         limits = {v: ((lo[VIEWS[v][0]], hi[VIEWS[v][0]]), (lo[VIEWS[v][1]], hi[VIEWS[v][1]]))
                   for v in VIEWS}
     else:

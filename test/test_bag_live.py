@@ -132,3 +132,28 @@ def test_play_into_node_record_compare_with_offline(tmp_path):
     assert max(diffs) <= TOLERANCE_M                         # ... and every frame on the way
     last = off_frames[max(off_frames)]
     assert np.ptp(last[:, :, 2]) > 0.05                      # a real head of hair, not zeros
+
+
+def test_live_demo_runs_end_to_end_and_ends_by_itself(tmp_path):
+    """``make demo`` in small: node process + play + record + render + summary, exit 0."""
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+    root = Path(__file__).resolve().parents[1]
+    env = dict(os.environ, PYTHONPATH=str(root), ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')
+    out = tmp_path / 'demo'
+    proc = subprocess.run(
+        [sys.executable, '-m', 'hair_tracking.live_demo', '--out', str(out), '--domain-id',
+         '57', '--duration', '1.0', '--max-frames', '6', '--param', 'groom.guides:=6',
+         '--param', 'groom.ghosts_per_guide:=2', '--param', 'solver.settle_time:=0.05'],
+        capture_output=True, text=True, timeout=300, cwd=root, env=env)
+    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
+    assert 'hair frames' in proc.stdout and '12 strands' in proc.stdout
+    assert (out / 'hair_output.mcap').is_file()
+    assert (out / 'pictures' / 'hair.gif').is_file()
+    assert (out / 'pictures' / 'diagnostics.png').is_file()
+    info = bag_io.bag_info(out / 'hair_output.mcap')
+    counts = {i.topic: i.count for i in info['topics']}
+    played = len(bag_io.read_head_poses(bag_io.bundled_bag(), duration_s=1.0))
+    assert counts['/head_pose'] == played and 25 <= counts['/hair/points'] <= 40
