@@ -1,0 +1,600 @@
+"""``hair_sim``: the ROS 2 node that makes hair follow a head pose stream.
+
+    ros2 run hair_tracking hair_sim_node --ros-args --params-file config/hair_sim.yaml
+    python -m hair_tracking.node --ros-args -p groom.guides:=32 -r head_pose:=/face/pose
+
+Inputs (all remappable, subscribed with the sensor-data QoS, so reliable and best-effort
+publishers both connect):
+
+* ``head_pose`` (geometry_msgs/PoseStamped) and ``head_transform`` (geometry_msgs/
+  TransformStamped): the head in a fixed frame, ``p_fixed = position + R(q) @ p_head``.
+* ``/tf`` (tf2_msgs/TFMessage) with ``use_tf``, when tf2_msgs is importable: the transform whose
+  child frame is ``head_frame`` or, with ``head_frame_prefix``, the first child frame starting
+  with it (REP-155 face trackers publish ``face_<id>``), kept until it goes stale.
+
+The header stamp drives the simulation (``advance_to(stamp)``); a stamp of 0 means "now" on the
+node clock (so ``use_sim_time`` is honoured); a stamp older than the last one resets the hair
+(a looping bag); NaN/Inf or zero-quaternion poses are dropped, counted and warned about
+(throttled).  Without poses for ``stale_timeout`` the last pose is held and the hair keeps
+settling, stepped from the node clock.
+
+Outputs, built only when somebody subscribes: ``hair/points`` (organized PointCloud2, one row per
+strand, x y z float32, ``strand`` index, packed ``rgb``), ``hair/markers`` (MarkerArray,
+``line_list`` or ``line_strips``, a DELETEALL first whenever the strand count or style changes,
+lifetime of a few publishing periods), optionally ``hair/guides/points`` and
+``hair/guides/markers``, and ``/diagnostics``.  Both hair outputs are serialized straight to CDR
+bytes with numpy (:mod:`msg_adapters.pointcloud`, :mod:`msg_adapters.marker_cdr`).  Publishing
+runs on its own timer (``publish_rate_hz``); ``publish_on_pose`` additionally publishes right
+after a simulated pose when a period has passed, for the lowest latency.
+
+Service ``~/reset`` (std_srvs/Trigger): hair back to its rest shape at the current head pose.
+
+Parameters: one per entry of the table in :mod:`hair_tracking.params` (every scene field plus
+the node's settings), declared with descriptions and ranges; changes are validated in the on-set
+callback (a rejection names the parameter and the allowed values and changes nothing) and
+stored by the post-set callback as a frozen :class:`~hair_tracking.params.Settings` snapshot that
+the next step applies (a groom change rebuilds the hair at the current head pose).
+
+Everything runs in one thread (a SingleThreadedExecutor), so callbacks never race.
+"""
+import collections
+import math
+import sys
+import time
+from typing import Dict, List, Optional
+
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from geometry_msgs.msg import PoseStamped, TransformStamped
+import numpy as np
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, \
+    SetParametersResult
+import rclpy
+from rclpy.exceptions import ParameterException
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.qos import qos_profile_sensor_data
+from sensor_msgs.msg import PointCloud2
+from std_srvs.srv import Trigger
+from visualization_msgs.msg import MarkerArray
+
+from msg_adapters.marker_cdr import strands_to_marker_array_cdr
+from msg_adapters.pointcloud import strands_to_pointcloud2_cdr
+from msg_adapters.pose import pose_from_msg, PoseError
+
+from . import params as P
+from .head_track import PoseResult
+from .resources import config_path
+from .scene import Scene, SceneError
+from .simulator import HairSimulator
+
+try:                                    # optional: /tf input
+    from tf2_msgs.msg import TFMessage
+except ImportError:                     # pragma: no cover - depends on the installation
+    TFMessage = None
+
+_PARAM_TYPES = {
+    'bool': Parameter.Type.BOOL,
+    'int': Parameter.Type.INTEGER,
+    'double': Parameter.Type.DOUBLE,
+    'string': Parameter.Type.STRING,
+    'double_array': Parameter.Type.DOUBLE_ARRAY,
+}
+WARN_THROTTLE_S = 5.0
+OUTPUT_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=2,
+                        reliability=ReliabilityPolicy.RELIABLE,
+                        durability=DurabilityPolicy.VOLATILE)
+
+
+def descriptor(p: P.Param) -> ParameterDescriptor:
+    """The ROS ParameterDescriptor of a table entry (description, range, read-only)."""
+    d = ParameterDescriptor(name=p.name, type=_PARAM_TYPES[p.kind].value,
+                            description=p.full_description(),
+                            additional_constraints=p.range_text(), read_only=p.read_only)
+    if p.kind == 'int' and p.lo is not None and p.hi is not None:
+        d.integer_range = [IntegerRange(from_value=int(p.lo), to_value=int(p.hi), step=1)]
+    elif p.kind == 'double' and p.lo is not None and p.hi is not None:
+        d.floating_point_range = [FloatingPointRange(from_value=float(p.lo),
+                                                     to_value=float(p.hi), step=0.0)]
+    return d
+
+
+def load_base_scene(scene_file: str) -> Scene:
+    """The scene named by ``scene_file`` (a path or a preset name); ``Scene()`` if empty."""
+    if not scene_file:
+        return Scene()
+    try:
+        path = config_path(scene_file)
+    except FileNotFoundError as e:
+        raise SceneError('scene_file', str(e)) from None
+    return Scene.from_yaml(path)
+
+
+def warm_up(scene: Scene) -> float:
+    """Compile (or load from numba's on-disk cache) the kernels and encoders ``scene`` uses.
+
+    Runs a tiny copy of the scene (same solver, collider, tracking and output options, few
+    strands) through every call the node makes, so the first real frames are not late.
+    Returns the seconds it took.
+    """
+    start = time.perf_counter()
+    g = scene.groom
+    small = scene.with_changes(groom__guides=min(g.guides, 2),
+                               groom__ghosts_per_guide=min(g.ghosts_per_guide, 2),
+                               solver__settle_time=0.0)
+    sim = HairSimulator(small)
+    dt_ns = max(1, int(round(small.solver.dt * 1e9)))
+    sim.push_pose(1, [0.0, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0])
+    sim.push_pose(1 + 4 * dt_ns, [0.01, 0.0, 0.0], [0.0, 0.0, 0.0871557, 0.9961947])
+    sim.advance_to(1 + 4 * dt_ns)
+    for head_frame in (False, True):
+        f = sim.frame(head_frame=head_frame, copy=False)
+        for strands in (f.strands, f.guides):
+            strands_to_pointcloud2_cdr(strands, frame_id='warmup', stamp_ns=1,
+                                       colors=np.ones((strands.shape[0], 4)))
+            for style in P.MARKER_STYLES:
+                strands_to_marker_array_cdr(strands, frame_id='warmup', style=style,
+                                            delete_all_first=True)
+    sim.max_stretch()
+    sim.penetration()
+    return time.perf_counter() - start
+
+
+def strand_colors(n: int, rgba) -> np.ndarray:
+    """(n, 4) per-strand colours: ``rgba`` with a fixed +-15 % brightness variation per strand.
+
+    The variation (a hash of the strand index, so stable across frames and rebuilds) lets rviz
+    tell strands apart when colouring the cloud by ``rgb``.
+    """
+    idx = np.arange(n, dtype=np.uint64)
+    h = (idx * np.uint64(2654435761)) % np.uint64(1000)
+    shade = 0.85 + 0.3 * (h.astype(np.float64) / 999.0)
+    out = np.empty((n, 4))
+    out[:, :3] = np.clip(np.asarray(rgba[:3], dtype=np.float64)[None, :] * shade[:, None],
+                         0.0, 1.0)
+    out[:, 3] = rgba[3]
+    return out
+
+
+class _Output:
+    """One published strand topic: its two publishers' state and a cache of the last bytes."""
+
+    def __init__(self, node: Node, topic: str, msg_type):
+        self.pub = node.create_publisher(msg_type, topic, OUTPUT_QOS)
+        self.cached: Optional[bytes] = None
+        self.encoded = 0             # messages built (encoded) so far
+        self.published = 0
+        self.shape = None            # (strands, style) of the last marker array sent
+
+    def wanted(self) -> bool:
+        return self.pub.get_subscription_count() > 0
+
+
+class HairSimNode(Node):
+    """The ``hair_sim`` node (see the module docstring).
+
+    ``context``, ``parameter_overrides`` and ``cli_args`` are passed to :class:`rclpy.node.Node`
+    so tests and benchmarks can run it in-process.  Construction declares the parameters, builds
+    the simulator, warms up the kernels (``warmup``) and only then subscribes.  Invalid start
+    parameters raise :class:`~hair_tracking.params.ParamError` naming the parameter.
+    """
+
+    def __init__(self, node_name: str = P.NODE_NAME, *, context=None,
+                 parameter_overrides: Optional[List[Parameter]] = None,
+                 cli_args: Optional[List[str]] = None, namespace: Optional[str] = None):
+        super().__init__(node_name, context=context, cli_args=cli_args, namespace=namespace,
+                         parameter_overrides=parameter_overrides)
+        self._declare_all()
+        settings = self._settings
+        self.sim = HairSimulator(settings.scene)
+        if settings.warmup:
+            secs = warm_up(settings.scene)
+            self.get_logger().info(f'kernels and encoders ready in {secs:.2f} s')
+
+        # state read by the step and publish paths
+        self._pose_frame = ''            # header.frame_id of the last pose
+        self._pose_child = ''            # child_frame_id of the last pose ('' for PoseStamped)
+        self._last_arrival_ns: Optional[int] = None   # node clock at the last accepted pose
+        self._last_stamp_ns: Optional[int] = None     # its stamp (the stream's time base)
+        self._offset_ns = 0              # simulator time = stream stamp + this (see _on_pose)
+        self._has_pose = False
+        self._dirty = False              # the hair changed since the last encoding
+        self._last_publish = -math.inf   # time.monotonic() of the last publication
+        self._tf_child: Optional[str] = None
+        self._tf_seen_ns = 0
+        self._color_cache: Dict[str, tuple] = {}
+        self.rejected = 0                # poses dropped (malformed, NaN, zero quaternion ...)
+        self.rebuilds = 0
+        self.frames_built = 0            # sim.frame() calls made for publishing
+        self.step_ms = collections.deque(maxlen=1000)
+        self.publish_ms = collections.deque(maxlen=1000)
+        self._diag_marks = (0, 0)        # (dropped substeps, rejected) at the last report
+
+        self.outputs: Dict[str, _Output] = {
+            'points': _Output(self, 'hair/points', PointCloud2),
+            'markers': _Output(self, 'hair/markers', MarkerArray),
+            'guide_points': _Output(self, 'hair/guides/points', PointCloud2),
+            'guide_markers': _Output(self, 'hair/guides/markers', MarkerArray),
+        }
+        self._diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
+        self.create_service(Trigger, '~/reset', self._on_reset)
+        period = settings.publish_period
+        self._publish_timer = self.create_timer(period, self._on_publish_timer)
+        self._idle_timer = self.create_timer(period, self._on_idle_timer)
+        self._diag_timer = self.create_timer(1.0 / settings.diagnostics_rate_hz,
+                                             self._on_diag_timer)
+        self.create_subscription(PoseStamped, 'head_pose', self._on_pose,
+                                 qos_profile_sensor_data)
+        self.create_subscription(TransformStamped, 'head_transform', self._on_pose,
+                                 qos_profile_sensor_data)
+        if settings.use_tf:
+            if TFMessage is None:
+                self.get_logger().warn('use_tf is true but tf2_msgs is not installed: /tf is '
+                                       'not subscribed (head_pose and head_transform still are)')
+            else:
+                self.create_subscription(TFMessage, '/tf', self._on_tf, qos_profile_sensor_data)
+        scene = settings.scene
+        ghosts = self.sim.ghosts.count if self.sim.ghosts is not None else 0
+        self.get_logger().info(
+            f'ready: {self.sim.guides.count} guides ({scene.groom.guide_nodes} nodes), '
+            f'{ghosts} ghosts ({scene.groom.ghost_nodes} nodes), solver {scene.solver.type}, '
+            f'publishing at {settings.publish_rate_hz:g} Hz')
+
+    # ================================================================ parameters
+    def _declare_all(self) -> None:
+        sf = P.by_name()['scene_file']
+        self.declare_parameter(sf.name, sf.default, descriptor(sf))
+        scene_file = self.get_parameter('scene_file').value
+        self._base = load_base_scene(scene_file)
+        table = P.table(self._base)
+        overrides = getattr(self, '_parameter_overrides', None)
+        for p in table:
+            if p.name == 'scene_file':
+                continue
+            if isinstance(overrides, dict) and p.name in overrides:
+                fixed = _coerce_parameter(p, overrides[p.name])
+                if fixed is not None:            # `-p damping:=2` means 2.0
+                    overrides[p.name] = fixed
+            self.declare_parameter(p.name, p.default, descriptor(p))
+        values = {p.name: _plain(self.get_parameter(p.name).value) for p in table}
+        self._settings = P.make_settings(values, self._base)    # ParamError if invalid
+        self._pending = self._settings
+        self._table = {p.name: p for p in table}
+        self.add_pre_set_parameters_callback(self._pre_set)
+        self.add_on_set_parameters_callback(self._on_set)
+        self.add_post_set_parameters_callback(self._post_set)
+
+    def _pre_set(self, parameters: List[Parameter]) -> List[Parameter]:
+        """Integers given for doubles become doubles (``ros2 param set ... damping 2``)."""
+        out = []
+        for prm in parameters:
+            p = self._table.get(prm.name)
+            fixed = _coerce_parameter(p, prm) if p is not None else None
+            out.append(fixed if fixed is not None else prm)
+        return out
+
+    def _changes(self, parameters: List[Parameter]) -> Dict[str, object]:
+        return {prm.name: _plain(prm.value) for prm in parameters if prm.name in self._table}
+
+    def _on_set(self, parameters: List[Parameter]) -> SetParametersResult:
+        """Validate a candidate change against the pending snapshot; change nothing."""
+        changes = self._changes(parameters)
+        if not changes:
+            return SetParametersResult(successful=True)
+        try:
+            P.apply_changes(self._pending, changes, self._base)
+        except P.ParamError as e:
+            return SetParametersResult(successful=False, reason=str(e))
+        return SetParametersResult(successful=True)
+
+    def _post_set(self, parameters: List[Parameter]) -> None:
+        """Store the accepted change as the snapshot the next step applies."""
+        changes = self._changes(parameters)
+        if not changes:
+            return
+        self._pending, _ = P.apply_changes(self._pending, changes, self._base)
+        rate = self._pending.publish_rate_hz
+        if rate != self._settings.publish_rate_hz:
+            period_ns = int(round(1e9 / rate))
+            self._publish_timer.timer_period_ns = period_ns
+            self._idle_timer.timer_period_ns = period_ns
+        if self._pending.diagnostics_rate_hz != self._settings.diagnostics_rate_hz:
+            self._diag_timer.timer_period_ns = int(round(1e9 / self._pending.diagnostics_rate_hz))
+
+    def _apply_pending(self) -> None:
+        """Adopt the pending snapshot (start of every step/publication); rebuild if needed."""
+        new = self._pending
+        if new is self._settings:
+            return
+        old, self._settings = self._settings, new
+        if new.scene != old.scene:
+            if self.sim.update_scene(new.scene):
+                self.rebuilds += 1
+                self.get_logger().info(
+                    f'groom changed: hair rebuilt ({self.sim.guides.count} guides, '
+                    f'{self.sim.ghosts.count if self.sim.ghosts is not None else 0} ghosts)')
+        self._invalidate()
+
+    # ================================================================ inputs
+    def _reject(self, reason: str) -> None:
+        self.rejected += 1
+        self.get_logger().warn(f'head pose dropped ({self.rejected} so far): {reason}',
+                               throttle_duration_sec=WARN_THROTTLE_S)
+
+    def _on_pose(self, msg) -> None:
+        """A head pose (PoseStamped, TransformStamped or a /tf entry): feed and step."""
+        self._apply_pending()
+        try:
+            sample = pose_from_msg(msg)
+        except (PoseError, TypeError, ValueError) as e:
+            self._reject(str(e))
+            return
+        now_ns = self.get_clock().now().nanoseconds
+        t_ns = sample.t_ns if sample.t_ns > 0 else now_ns
+        if t_ns <= 0:
+            self._reject('stamp is 0 and the node clock has not started '
+                         '(use_sim_time without /clock?)')
+            return
+        offset = self._offset_ns
+        if self._last_stamp_ns is not None and t_ns < self._last_stamp_ns:
+            offset = 0                   # backwards: the simulator resets to this stamp
+        elif self.sim.time_ns is not None and t_ns + offset < self.sim.time_ns:
+            # The stream resumes behind the time the hair settled to while it was stale
+            # (stamps slower than the node clock): continue from there, do not freeze.
+            offset = self.sim.time_ns - t_ns
+        result = self.sim.push_pose(t_ns + offset, sample.position, sample.quaternion)
+        if result is PoseResult.REJECTED:
+            self._reject(self.sim.track.last_rejection)
+            return
+        if result is PoseResult.RESET_BACKWARDS:
+            self.get_logger().info('head pose time went backwards: hair reset',
+                                   throttle_duration_sec=WARN_THROTTLE_S)
+        self._offset_ns = offset
+        self._pose_frame = sample.frame_id
+        self._pose_child = sample.child_frame_id
+        self._last_arrival_ns = now_ns
+        self._last_stamp_ns = t_ns
+        self._step(t_ns + offset)
+        if self._settings.publish_on_pose and \
+                time.monotonic() - self._last_publish >= 0.9 * self._settings.publish_period:
+            self._publish()
+
+    def _on_tf(self, msg) -> None:
+        """Pick the head transform out of a TFMessage (``head_frame`` or the prefix)."""
+        self._apply_pending()
+        prefix = self._settings.head_frame_prefix
+        now_ns = self.get_clock().now().nanoseconds
+        for tr in msg.transforms:
+            child = str(tr.child_frame_id).lstrip('/')
+            if prefix:
+                if not child.startswith(prefix):
+                    continue
+                stale = (now_ns - self._tf_seen_ns) * 1e-9 > self._settings.stale_timeout
+                if self._tf_child is None or (child != self._tf_child and stale):
+                    if self._tf_child != child:
+                        self.get_logger().info(f'head frame from /tf: {child}')
+                    self._tf_child = child
+                if child != self._tf_child:
+                    continue
+                self._tf_seen_ns = now_ns
+            elif child != self._settings.head_frame.lstrip('/'):
+                continue
+            self._on_pose(tr)
+
+    def _step(self, t_ns: int) -> None:
+        start = time.perf_counter()
+        self.sim.advance_to(t_ns)
+        self.step_ms.append((time.perf_counter() - start) * 1e3)
+        self._has_pose = True
+        self._dirty = True
+
+    def _on_idle_timer(self) -> None:
+        """A stale stream: hold the last pose and let the hair settle on the node clock."""
+        self._apply_pending()
+        if self._last_arrival_ns is None:
+            return
+        now_ns = self.get_clock().now().nanoseconds
+        since = now_ns - self._last_arrival_ns
+        if since * 1e-9 < self._settings.stale_timeout:
+            return
+        target = self._last_stamp_ns + self._offset_ns + since
+        if self.sim.time_ns is not None and target > self.sim.time_ns:
+            self._step(target)
+
+    def _on_reset(self, request, response):
+        self._apply_pending()
+        self.sim.reset()
+        self._invalidate()
+        response.success = True
+        response.message = 'hair reset to its rest shape at the current head pose'
+        self.get_logger().info(response.message)
+        return response
+
+    # ================================================================ outputs
+    def _invalidate(self) -> None:
+        self._dirty = True
+        for out in self.outputs.values():
+            out.cached = None
+
+    def _on_publish_timer(self) -> None:
+        self._apply_pending()
+        if time.monotonic() - self._last_publish < 0.5 * self._settings.publish_period:
+            return                       # just published from a pose callback
+        self._publish()
+
+    def output_frame_id(self) -> str:
+        """frame_id of the published hair (see ``output_frame``)."""
+        s = self._settings
+        if s.output_frame == 'head':
+            return self._pose_child or s.head_frame or 'head'
+        return self._pose_frame or s.fixed_frame or 'world'
+
+    def _publish(self) -> None:
+        """Encode and publish the outputs somebody subscribes to (nothing else is built)."""
+        if not self._has_pose:
+            return
+        outs = self.outputs
+        s = self._settings
+        wanted = {k: o.wanted() for k, o in outs.items()}
+        if not s.publish_guides:
+            wanted['guide_points'] = wanted['guide_markers'] = False
+        self._last_publish = time.monotonic()
+        if not any(wanted.values()):
+            return
+        start = time.perf_counter()
+        if not self._dirty:              # same hair: resend the bytes (keeps markers alive)
+            for k, o in outs.items():
+                if wanted[k] and o.cached is not None:
+                    o.pub.publish(o.cached)
+                    o.published += 1
+                    wanted[k] = False
+            if not any(wanted.values()):
+                return
+        frame = self.sim.frame(head_frame=s.output_frame == 'head', copy=False)
+        self.frames_built += 1
+        frame_id = self.output_frame_id()
+        stamp = max(0, frame.t_ns - self._offset_ns)      # in the stream's time base
+        lifetime_ns = int(round(s.marker_lifetime * 1e9))
+        for key, strands, ns, color in (
+                ('points', frame.strands, 'hair', s.marker_color),
+                ('markers', frame.strands, 'hair', s.marker_color),
+                ('guide_points', frame.guides, 'guides', s.guide_color),
+                ('guide_markers', frame.guides, 'guides', s.guide_color)):
+            if not wanted[key]:
+                continue
+            o = outs[key]
+            if key.endswith('points'):
+                data = strands_to_pointcloud2_cdr(
+                    strands, frame_id=frame_id, stamp_ns=stamp,
+                    colors=self._colors(ns, strands.shape[0], color))
+                o.cached = data
+            else:
+                shape = (strands.shape[0], s.marker_style)
+                fresh = o.shape != shape
+                data = strands_to_marker_array_cdr(
+                    strands, frame_id=frame_id, stamp_ns=stamp, ns=ns, style=s.marker_style,
+                    width=s.marker_width, color=color, lifetime_ns=lifetime_ns,
+                    delete_all_first=fresh)
+                o.shape = shape
+                o.cached = None if fresh else data     # never resend a DELETEALL
+            o.encoded += 1
+            o.pub.publish(data)
+            o.published += 1
+        self._dirty = False
+        self.publish_ms.append((time.perf_counter() - start) * 1e3)
+
+    def _colors(self, ns: str, n: int, rgba) -> np.ndarray:
+        key = (n, tuple(rgba))
+        c = self._color_cache.get(ns)
+        if c is None or c[0] != key:
+            c = self._color_cache[ns] = (key, strand_colors(n, rgba))
+        return c[1]
+
+    # ================================================================ diagnostics
+    def diagnostics(self) -> DiagnosticStatus:
+        """The node's health: timings, substeps, stretch, rejected poses (one status)."""
+        sim = self.sim
+        c = sim.counters
+        level, problems = DiagnosticStatus.OK, []
+        now_ns = self.get_clock().now().nanoseconds
+        if self._last_arrival_ns is None:
+            level, problems = DiagnosticStatus.WARN, ['waiting for a head pose']
+        else:
+            age = (now_ns - self._last_arrival_ns) * 1e-9
+            if age > self._settings.stale_timeout:
+                level = DiagnosticStatus.WARN
+                problems.append(f'head pose stale for {age:.1f} s (holding the last pose)')
+        dropped_before, rejected_before = self._diag_marks
+        if c.substeps_dropped > dropped_before:
+            level = DiagnosticStatus.WARN
+            problems.append(f'{c.substeps_dropped - dropped_before} substeps dropped')
+        if self.rejected > rejected_before:
+            level = DiagnosticStatus.WARN
+            problems.append(f'{self.rejected - rejected_before} head poses rejected')
+        self._diag_marks = (c.substeps_dropped, self.rejected)
+        step = list(self.step_ms)[-100:]
+        pub = list(self.publish_ms)[-100:]
+
+        def kv(key, value):
+            return KeyValue(key=key, value=str(value))
+        values = [
+            kv('step_ms_last', f'{step[-1]:.3f}' if step else 'n/a'),
+            kv('step_ms_max_recent', f'{max(step):.3f}' if step else 'n/a'),
+            kv('publish_ms_last', f'{pub[-1]:.3f}' if pub else 'n/a'),
+            kv('publish_ms_max_recent', f'{max(pub):.3f}' if pub else 'n/a'),
+            kv('substeps', c.substeps),
+            kv('substeps_last', c.last_substeps),
+            kv('substeps_dropped', c.substeps_dropped),
+            kv('max_stretch', f'{sim.max_stretch():.6f}'),
+            kv('penetration_m', f'{sim.penetration():.6f}'),
+            kv('poses_rejected', self.rejected),
+            kv('hair_resets', c.resets),
+            kv('hair_rebuilds', self.rebuilds),
+            kv('guides', sim.guides.count),
+            kv('ghosts', sim.ghosts.count if sim.ghosts is not None else 0),
+            kv('sim_time_ns', sim.time_ns if sim.time_ns is not None else 'n/a'),
+            kv('stream_offset_ms', f'{self._offset_ns * 1e-6:.3f}'),
+            kv('output_frame', self.output_frame_id()),
+        ]
+        return DiagnosticStatus(level=level, name=f'{self.get_name()}: hair simulation',
+                                message='; '.join(problems) if problems else 'ok',
+                                hardware_id='hair_tracking', values=values)
+
+    def _on_diag_timer(self) -> None:
+        if self._diag_pub.get_subscription_count() == 0:
+            return
+        msg = DiagnosticArray(status=[self.diagnostics()])
+        msg.header.stamp = self.get_clock().now().to_msg()
+        self._diag_pub.publish(msg)
+
+
+# ==================================================================== helpers
+def _plain(value):
+    """A parameter value as plain Python (arrays as lists)."""
+    if isinstance(value, (list, tuple)) or hasattr(value, 'tolist'):
+        return list(value)
+    return value
+
+
+def _coerce_parameter(p: Optional[P.Param], prm: Parameter) -> Optional[Parameter]:
+    """``prm`` with integers turned into doubles where ``p`` is a double (else None)."""
+    if p is None:
+        return None
+    if p.kind == 'double' and prm.type_ == Parameter.Type.INTEGER:
+        return Parameter(prm.name, Parameter.Type.DOUBLE, float(prm.value))
+    if p.kind == 'double_array' and prm.type_ == Parameter.Type.INTEGER_ARRAY:
+        return Parameter(prm.name, Parameter.Type.DOUBLE_ARRAY, [float(v) for v in prm.value])
+    return None
+
+
+def main(args=None) -> int:
+    """Console entry point ``hair_sim_node``: init, spin, clean exit on Ctrl-C.
+
+    Returns 0 on Ctrl-C or an external shutdown, 2 when the start parameters are invalid (the
+    message names the parameter and the allowed values).
+    """
+    node = executor = None
+    code = 0
+    try:
+        rclpy.init(args=args)
+        executor = SingleThreadedExecutor()   # before the node: Ctrl-C may come at any time
+        node = HairSimNode()
+        executor.add_node(node)
+        executor.spin()
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except (P.ParamError, SceneError, ParameterException) as e:
+        print(f'[hair_sim] invalid parameters: {e}', file=sys.stderr)
+        code = 2
+    finally:
+        if executor is not None:
+            executor.shutdown(timeout_sec=1.0)
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return code
+
+
+if __name__ == '__main__':
+    sys.exit(main())
