@@ -26,7 +26,7 @@ from typing import List, Optional
 import numpy as np
 
 from .bag_io import (BagError, EXIT_CONTENT, EXIT_FAILURE, EXIT_INPUT, EXIT_INTERRUPTED, EXIT_OK,
-                     EXIT_USAGE, POSE_KINDS, STORAGES)
+                     EXIT_OUTPUT, EXIT_USAGE, POSE_KINDS, STORAGES)
 
 #: seconds since the epoch given to the first sample of an import (reproducible, non-zero:
 #: a stamp of 0 means "now" to the node); 1e9 s is 2001-09-09T01:46:40Z.
@@ -435,6 +435,18 @@ def main(argv: Optional[List[str]] = None) -> int:
         return EXIT_INTERRUPTED
     except BrokenPipeError:
         return EXIT_OK
+    except OSError as exc:
+        where = f' ({exc.filename})' if getattr(exc, 'filename', None) else ''
+        print(f'hair_sim_bag {args.command}: error: {exc.strerror or exc}{where}',
+              file=sys.stderr)
+        return EXIT_OUTPUT if isinstance(exc, (PermissionError, IsADirectoryError)) \
+            or getattr(exc, 'errno', None) == 28 else EXIT_FAILURE
+    except Exception as exc:       # noqa: B902 - a user sees one line, never a traceback
+        if os.environ.get('HAIR_SIM_BAG_DEBUG'):
+            raise
+        print(f'hair_sim_bag {args.command}: error: {type(exc).__name__}: {exc} '
+              f'(set HAIR_SIM_BAG_DEBUG=1 for the traceback)', file=sys.stderr)
+        return EXIT_FAILURE
 
 
 if __name__ == '__main__':

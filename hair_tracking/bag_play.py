@@ -43,16 +43,28 @@ def message_class(msgtype: str):
         return None
 
 
+def check_topic_name(name: str, what: str) -> str:
+    """``name`` made absolute, or BagError (EXIT_USAGE) saying why it is not a topic name."""
+    from rclpy.exceptions import InvalidTopicNameException
+    from rclpy.validate_full_topic_name import validate_full_topic_name
+    full = '/' + name.strip().lstrip('/')
+    try:
+        validate_full_topic_name(full)
+    except InvalidTopicNameException as exc:
+        reason = str(exc).splitlines()[0].split(': ', 1)[-1].rstrip(':')
+        raise BagError(f'{what}: {name!r} is not a valid topic name ({reason})',
+                       EXIT_USAGE) from None
+    return full
+
+
 def parse_remaps(items: Sequence[str]) -> Dict[str, str]:
-    """``['/a:=/b', ...]`` -> {'/a': '/b'} (names made absolute)."""
+    """``['/a:=/b', ...]`` -> {'/a': '/b'} (names made absolute and validated)."""
     out = {}
     for item in items or ():
         if ':=' not in item:
             raise BagError(f'--remap {item!r}: expected FROM:=TO', EXIT_USAGE)
-        a, b = (s.strip() for s in item.split(':=', 1))
-        if not a or not b:
-            raise BagError(f'--remap {item!r}: empty topic name', EXIT_USAGE)
-        out['/' + a.lstrip('/')] = '/' + b.lstrip('/')
+        a, b = item.split(':=', 1)
+        out[check_topic_name(a, '--remap')] = check_topic_name(b, '--remap')
     return out
 
 

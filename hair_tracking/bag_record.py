@@ -20,7 +20,7 @@ from typing import Callable, Dict, List, Optional, Sequence
 
 from . import bag_io
 from .bag_io import BagError, EXIT_OK, EXIT_USAGE
-from .bag_play import message_class
+from .bag_play import check_topic_name, message_class
 
 #: never recorded with --all (rosout is noise; parameter events are per node)
 _SKIP_ALL = ('/rosout', '/parameter_events')
@@ -63,7 +63,7 @@ class BagRecorder:
         if not topics and not all_topics:
             raise BagError('name the topics to record, or pass --all', EXIT_USAGE)
         self.node = node
-        self.wanted = ['/' + t.lstrip('/') for t in topics]
+        self.wanted = [check_topic_name(t, 'record') for t in topics]
         self.all_topics = all_topics
         self.log = log or (lambda text: print(text, file=sys.stderr))
         self.writer = bag_io.BagWriter(output, storage=storage, overwrite=overwrite,
@@ -180,6 +180,8 @@ def main_record(args) -> int:
         raise BagError('--max-messages must be >= 1', EXIT_USAGE)
     if not args.topics and not args.all:
         raise BagError('name the topics to record, or pass --all', EXIT_USAGE)
+    for t in args.topics:
+        check_topic_name(t, 'record')
     bag_io.check_output_path(args.output, args.overwrite)
     bag_io.output_storage(args.output, args.storage)
 
