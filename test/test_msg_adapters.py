@@ -4,7 +4,6 @@ import math
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import (Pose, PoseStamped, PoseWithCovarianceStamped, Transform,
                                TransformStamped)
-from nav_msgs.msg import Odometry
 import numpy as np
 import pytest
 from rosbags.typesys import get_typestore, Stores
@@ -103,13 +102,13 @@ def test_other_pose_types_and_unnormalised_quaternion():
     cov = PoseWithCovarianceStamped()
     cov.header.frame_id = 'map'
     cov.pose.pose = pose
-    odom = Odometry(child_frame_id='base')
-    odom.header.stamp.sec = 3
-    odom.pose.pose = pose
+    cov_stamped = PoseWithCovarianceStamped()
+    cov_stamped.header.stamp.sec = 3
+    cov_stamped.pose.pose = pose
     tf = Transform()
     tf.translation.x, tf.rotation.w = 1.0, 1.0
     for msg, t, frame, child in ((pose, 0, '', ''), (cov, 0, 'map', ''),
-                                 (odom, 3 * 10 ** 9, '', 'base')):
+                                 (cov_stamped, 3 * 10 ** 9, '', '')):
         s = pose_from_msg(msg)
         assert (s.t_ns, s.frame_id, s.child_frame_id) == (t, frame, child)
         np.testing.assert_array_equal(s.quaternion, q)
