@@ -233,6 +233,12 @@ def run_demo(args) -> int:
               f'penetration {float(diag.get("penetration_m", "nan")) * 1e3:.2f} mm, '
               f'poses rejected {diag.get("poses_rejected", "?")}, '
               f'resets {diag.get("hair_resets", "?")}; status: {diag.get("_message", "?")}')
+        dropped = int(float(diag.get('substeps_dropped', '0') or 0))
+        if dropped:
+            print(f'note         the node fell behind real time ({dropped} substeps dropped, '
+                  f'hair kept up by sweeping each interval in at most solver.max_substeps); '
+                  f'on a busy machine try --rate 0.5 or a smaller groom '
+                  f'(--param groom.ghosts_per_guide:=4)')
     else:
         print('node         (no diagnostics recorded)')
     print(f'pictures     {pics.get("gif")}, {pics.get("png")}'
