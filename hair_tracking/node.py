@@ -45,6 +45,7 @@ from typing import Dict, List, Optional
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PoseStamped, TransformStamped
+import numba
 import numpy as np
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, \
     SetParametersResult
@@ -187,6 +188,7 @@ class HairSimNode(Node):
                          parameter_overrides=parameter_overrides)
         self._declare_all()
         settings = self._settings
+        self._apply_threads(settings.numba_threads)
         self.sim = HairSimulator(settings.scene)
         if settings.warmup:
             secs = warm_up(settings.scene)
@@ -293,14 +295,27 @@ class HairSimNode(Node):
         changes = self._changes(parameters)
         if not changes:
             return
-        self._pending, _ = P.apply_changes(self._pending, changes, self._base)
-        rate = self._pending.publish_rate_hz
-        if rate != self._settings.publish_rate_hz:
-            period_ns = int(round(1e9 / rate))
+        old = self._pending
+        new = self._pending = P.apply_changes(old, changes, self._base)[0]
+        # timers and threads are not part of a step: they follow at once
+        if new.publish_rate_hz != old.publish_rate_hz:
+            period_ns = int(round(1e9 / new.publish_rate_hz))
             self._publish_timer.timer_period_ns = period_ns
             self._idle_timer.timer_period_ns = period_ns
-        if self._pending.diagnostics_rate_hz != self._settings.diagnostics_rate_hz:
-            self._diag_timer.timer_period_ns = int(round(1e9 / self._pending.diagnostics_rate_hz))
+        if new.diagnostics_rate_hz != old.diagnostics_rate_hz:
+            self._diag_timer.timer_period_ns = int(round(1e9 / new.diagnostics_rate_hz))
+        if new.numba_threads != old.numba_threads:
+            self._apply_threads(new.numba_threads)
+
+    def _apply_threads(self, wanted: int) -> None:
+        """Threads of numba's parallel kernels (0 = all it was started with)."""
+        most = numba.config.NUMBA_NUM_THREADS
+        n = most if wanted <= 0 else min(wanted, most)
+        if wanted > most:
+            self.get_logger().warn(f'numba_threads {wanted} > NUMBA_NUM_THREADS {most}: '
+                                   f'using {most}')
+        numba.set_num_threads(n)
+        self.numba_threads = n
 
     def _apply_pending(self) -> None:
         """Adopt the pending snapshot (start of every step/publication); rebuild if needed."""
@@ -535,6 +550,7 @@ class HairSimNode(Node):
             kv('ghosts', sim.ghosts.count if sim.ghosts is not None else 0),
             kv('sim_time_ns', sim.time_ns if sim.time_ns is not None else 'n/a'),
             kv('stream_offset_ms', f'{self._offset_ns * 1e-6:.3f}'),
+            kv('numba_threads', self.numba_threads),
             kv('output_frame', self.output_frame_id()),
         ]
         return DiagnosticStatus(level=level, name=f'{self.get_name()}: hair simulation',

@@ -348,6 +348,9 @@ NODE_PARAMS: Tuple[Param, ...] = (
           'settling at publish_rate_hz', unit='s', lo=0.01, hi=3600.0),
     Param('diagnostics_rate_hz', 'double', 1.0, 'rate of the diagnostics output', unit='Hz',
           lo=0.1, hi=100.0),
+    Param('numba_threads', 'int', 0,
+          'threads of the parallel numba kernels; 0 = all cores (NUMBA_NUM_THREADS). On a '
+          'busy machine fewer threads than cores are often faster', lo=0, hi=1024),
 )
 
 

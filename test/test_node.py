@@ -430,7 +430,8 @@ def test_diagnostics_are_published_with_the_step_numbers(harness):
 
 # ====================================================================== executable
 def _run_node(args, domain_id):
-    env = dict(os.environ, ROS_DOMAIN_ID=str(domain_id), PYTHONUNBUFFERED='1')
+    path = os.pathsep.join(filter(None, [ROOT, os.environ.get('PYTHONPATH')]))
+    env = dict(os.environ, ROS_DOMAIN_ID=str(domain_id), PYTHONUNBUFFERED='1', PYTHONPATH=path)
     return subprocess.Popen([sys.executable, '-m', 'hair_tracking.node', '--ros-args'] + args,
                             env=env, stdout=subprocess.PIPE,
                             stderr=subprocess.STDOUT, text=True)

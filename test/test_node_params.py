@@ -6,6 +6,7 @@ over DDS (rclpy's AsyncParameterClient, the same services the ros2 CLI calls).  
 """
 import itertools
 
+import numba
 import numpy as np
 import pytest
 from rcl_interfaces.msg import ParameterType
@@ -193,8 +194,17 @@ def test_load_sets_what_a_params_file_holds(rig, tmp_path):
     assert rig.node.sim.scene.solver.type == 'pbd'
 
 
-def test_rate_change_retimes_the_publisher(rig):
+def test_rates_and_threads_change_live(rig):
     assert set_(rig, publish_rate_hz=10.0)[0].successful
     assert rig.node._publish_timer.timer_period_ns == 100_000_000
+    assert set_(rig, publish_rate_hz=25.0)[0].successful       # twice before any step
+    assert rig.node._publish_timer.timer_period_ns == 40_000_000
     assert set_(rig, diagnostics_rate_hz=4.0)[0].successful
     assert rig.node._diag_timer.timer_period_ns == 250_000_000
+    try:
+        assert set_(rig, numba_threads=1)[0].successful
+        assert numba.get_num_threads() == 1 == rig.node.numba_threads
+        assert set_(rig, numba_threads=0)[0].successful
+        assert numba.get_num_threads() == numba.config.NUMBA_NUM_THREADS
+    finally:
+        numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)

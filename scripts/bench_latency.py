@@ -1,0 +1,217 @@
+#!/usr/bin/env python3
+"""Latency from a head-pose message to the published hair cloud, through DDS, in one process.
+
+    python scripts/bench_latency.py [--ghosts 1000 10000] [--seconds 8] [--json out/lat.json]
+
+For each ghost count and publishing mode a ``hair_sim`` node (:class:`HairSimNode`) and a probe
+node share one rclpy context.  The probe publishes ``head_pose`` (PoseStamped, a moving and
+turning head) at ``--pose-rate`` Hz from a thread of its own and subscribes to ``hair/points``
+(raw CDR, so the probe does not pay for deserialising); the node spins in the main thread.
+Latency = arrival time of the first cloud carrying a pose's stamp - the time that pose was
+published.  Pose stamps sit on the simulator's substep grid, so each cloud's stamp is exactly
+the stamp of the pose it answers.
+
+Modes: ``timer`` publishes on the node's own timer at ``--publish-rate`` Hz (the latency then
+includes waiting for the next tick, up to one period); ``on_pose`` sets ``publish_on_pose`` so
+a frame goes out right after its pose was simulated (rate still capped).  Also reported: the
+node's own step time (simulation of one pose) and publish time (encoding + handing the bytes to
+DDS), median and p99.  Goal: median and p99 latency under one 60 Hz frame (16.7 ms) at 10 k
+ghosts.  Numbers depend on the machine; the JSON records its CPU count.
+"""
+import argparse
+import json
+import os
+import platform
+import sys
+import threading
+import time
+
+import numpy as np
+import rclpy
+from rclpy.context import Context
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.parameter import Parameter
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+
+from geometry_msgs.msg import PoseStamped
+from sensor_msgs.msg import PointCloud2
+from visualization_msgs.msg import MarkerArray
+
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+
+from hair_tracking.node import HairSimNode  # noqa: E402
+from msg_adapters.pose import pose_stamped_msg  # noqa: E402
+
+FRAME_MS = 1000.0 / 60.0
+
+
+def groom_for(ghosts):
+    """(guides, ghosts_per_guide) giving about ``ghosts`` ghost strands."""
+    guides = 64 if ghosts <= 2048 else 128
+    return guides, max(1, int(round(ghosts / guides)))
+
+
+def stats(values):
+    a = np.asarray(values, dtype=float)
+    if a.size == 0:
+        return {'n': 0, 'median_ms': None, 'p99_ms': None, 'max_ms': None}
+    return {'n': int(a.size), 'median_ms': float(np.median(a)),
+            'p99_ms': float(np.percentile(a, 99)), 'max_ms': float(a.max())}
+
+
+def stamp_of(raw):
+    """Header stamp [ns] of a serialized PointCloud2 (CDR: 4-byte header, int32 sec, uint32)."""
+    sec = int.from_bytes(raw[4:8], 'little', signed=True)
+    nsec = int.from_bytes(raw[8:12], 'little')
+    return sec * 1_000_000_000 + nsec
+
+
+def run_case(ghosts, mode, args, domain_id):
+    guides, per_guide = groom_for(ghosts)
+    ctx = Context()
+    rclpy.init(context=ctx, domain_id=domain_id)
+    overrides = {
+        'groom.guides': guides, 'groom.ghosts_per_guide': per_guide,
+        'publish_rate_hz': float(args.publish_rate), 'publish_on_pose': mode == 'on_pose',
+        'stale_timeout': 10.0, 'solver.type': args.solver,
+    }
+    node = HairSimNode(context=ctx, parameter_overrides=[
+        Parameter(k, value=v) for k, v in overrides.items()])
+    probe = rclpy.create_node('bench_probe', context=ctx)
+    sent, received = {}, {}
+    lock = threading.Lock()
+
+    def on_cloud(raw):
+        now = time.perf_counter()
+        t = stamp_of(raw)
+        with lock:
+            received.setdefault(t, now)
+    qos = QoSProfile(depth=5, reliability=ReliabilityPolicy.RELIABLE)
+    probe.create_subscription(PointCloud2, 'hair/points', on_cloud, qos, raw=True)
+    if args.markers:
+        probe.create_subscription(MarkerArray, 'hair/markers', lambda raw: None, qos, raw=True)
+    pub = probe.create_publisher(PoseStamped, 'head_pose', qos)
+    node_ex = SingleThreadedExecutor(context=ctx)
+    node_ex.add_node(node)
+    probe_ex = SingleThreadedExecutor(context=ctx)
+    probe_ex.add_node(probe)
+    stop = threading.Event()
+
+    def spin_probe():
+        while not stop.is_set() and ctx.ok():
+            probe_ex.spin_once(timeout_sec=0.05)
+    probe_thread = threading.Thread(target=spin_probe, daemon=True)
+    probe_thread.start()
+    deadline = time.monotonic() + 20.0
+    while time.monotonic() < deadline and not (
+            pub.get_subscription_count() > 0 and node.outputs['points'].wanted()):
+        node_ex.spin_once(timeout_sec=0.01)
+
+    dt_ns = node.sim.dt_ns
+    period = 1.0 / args.pose_rate
+    step = max(1, int(round(period * 1e9 / dt_ns)))
+    n_poses = int(args.seconds * args.pose_rate)
+
+    def publish_poses():
+        t0 = 1_000_000_000
+        start = time.perf_counter()
+        for k in range(n_poses):
+            target = start + k * period
+            while True:
+                left = target - time.perf_counter()
+                if left <= 0:
+                    break
+                time.sleep(min(left, 0.002))
+            s = k / args.pose_rate
+            p = [0.1 * np.sin(2.0 * s), 0.05 * np.sin(3.1 * s), 0.02 * np.cos(1.7 * s)]
+            yaw = 0.6 * np.sin(1.3 * s)
+            q = [0.0, 0.0, float(np.sin(yaw / 2)), float(np.cos(yaw / 2))]
+            t = t0 + k * step * dt_ns
+            msg = pose_stamped_msg(t, p, q, 'world')
+            with lock:
+                sent[t] = time.perf_counter()
+            pub.publish(msg)
+    pose_thread = threading.Thread(target=publish_poses, daemon=True)
+    pose_thread.start()
+    while pose_thread.is_alive():
+        node_ex.spin_once(timeout_sec=0.005)
+    end = time.monotonic() + 0.5
+    while time.monotonic() < end:
+        node_ex.spin_once(timeout_sec=0.005)
+    stop.set()
+    probe_thread.join(2.0)
+
+    skip = int(args.warmup_s * args.pose_rate)
+    with lock:
+        stamps = sorted(sent)[skip:]
+        lat = [(received[t] - sent[t]) * 1e3 for t in stamps if t in received]
+        missing = sum(1 for t in stamps if t not in received)
+    step_ms = list(node.step_ms)[skip:]
+    pub_ms = list(node.publish_ms)[skip:]
+    c = node.sim.counters
+    result = {
+        'ghosts': int(node.sim.ghosts.count), 'guides': int(node.sim.guides.count),
+        'nodes_per_strand': int(node.sim.ghosts.nodes), 'mode': mode,
+        'solver': args.solver, 'pose_rate_hz': args.pose_rate,
+        'publish_rate_hz': args.publish_rate, 'markers_subscribed': bool(args.markers),
+        'latency': stats(lat), 'poses_without_cloud': missing,
+        'step': stats(step_ms), 'publish': stats(pub_ms),
+        'substeps_dropped': int(c.substeps_dropped), 'poses_rejected': int(node.rejected),
+    }
+    node_ex.shutdown(timeout_sec=1.0)
+    probe_ex.shutdown(timeout_sec=1.0)
+    node.destroy_node()
+    probe.destroy_node()
+    rclpy.shutdown(context=ctx)
+    return result
+
+
+def fmt(s):
+    if s['median_ms'] is None:
+        return '      n/a        n/a'
+    return f"{s['median_ms']:8.2f} {s['p99_ms']:8.2f}"
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split('\n')[0])
+    ap.add_argument('--ghosts', type=int, nargs='+', default=[1000, 10000])
+    ap.add_argument('--modes', nargs='+', default=['timer', 'on_pose'],
+                    choices=['timer', 'on_pose'])
+    ap.add_argument('--seconds', type=float, default=8.0, help='pose stream length per case')
+    ap.add_argument('--warmup-s', type=float, default=1.0, help='first seconds not counted')
+    ap.add_argument('--pose-rate', type=float, default=60.0)
+    ap.add_argument('--publish-rate', type=float, default=60.0)
+    ap.add_argument('--solver', default='ftl', choices=['ftl', 'pbd', 'xpbd'])
+    ap.add_argument('--markers', action='store_true',
+                    help='also subscribe to hair/markers (the node then encodes both)')
+    ap.add_argument('--domain-id', type=int, default=48)
+    ap.add_argument('--json', metavar='PATH', help='write the results as JSON')
+    args = ap.parse_args(argv)
+    os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+
+    results = []
+    print(f'pose -> hair/points latency through DDS, one process ({os.cpu_count()} CPUs); '
+          f'poses at {args.pose_rate:g} Hz, publish_rate_hz {args.publish_rate:g}, '
+          f'goal {FRAME_MS:.1f} ms')
+    print(f"{'ghosts':>7} {'mode':>8} | {'latency med':>11} {'p99':>8} | "
+          f"{'step med':>8} {'p99':>8} | {'publish med':>11} {'p99':>8} | dropped")
+    for ghosts in args.ghosts:
+        for mode in args.modes:
+            r = run_case(ghosts, mode, args, args.domain_id)
+            results.append(r)
+            print(f"{r['ghosts']:>7} {mode:>8} | {fmt(r['latency']):>20} | "
+                  f"{fmt(r['step']):>17} | {fmt(r['publish']):>20} | "
+                  f"{r['substeps_dropped']} substeps, {r['poses_without_cloud']} frames",
+                  flush=True)
+    if args.json:
+        os.makedirs(os.path.dirname(os.path.abspath(args.json)), exist_ok=True)
+        with open(args.json, 'w', encoding='utf-8') as f:
+            json.dump({'machine': {'cpus': os.cpu_count(), 'python': platform.python_version(),
+                                   'platform': platform.platform()},
+                       'goal_ms': FRAME_MS, 'results': results}, f, indent=2)
+        print(f'wrote {args.json}')
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
