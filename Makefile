@@ -10,7 +10,7 @@ PY_DEPS := numpy numba pyyaml rosbags matplotlib pytest flake8
 STAMP := $(VENV)/.complete
 TEST_ENV := ROS_PYTHON_CHECK_FIELDS=1 ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST PYTHONUNBUFFERED=1
 
-.PHONY: install test demo bench lint clean
+.PHONY: install test demo demo-core bench stability eval lint clean
 
 install: $(STAMP)
 
@@ -28,8 +28,14 @@ test: $(STAMP)
 lint: $(STAMP)
 	$(PY) -m flake8 hair_tracking msg_adapters test scripts setup.py
 
+# The main job: the node, the bundled head-pose bag played into it with /clock, its output
+# recorded to a bag and rendered (see docs/bags.md).
 demo: $(STAMP)
-	$(TEST_ENV) $(PY) -m hair_tracking.demo --out out/demo
+	$(TEST_ENV) $(PY) -m hair_tracking.live_demo --out out/demo
+
+# The offline core demo: simulator only, numbers and a picture (no DDS).
+demo-core: $(STAMP)
+	$(TEST_ENV) $(PY) -m hair_tracking.demo --out out/demo-core
 
 bench: $(STAMP)
 	$(PY) -m pip install -q pypbd

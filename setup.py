@@ -28,6 +28,9 @@ setup(
     tests_require=['pytest'],
     entry_points={
         'console_scripts': [
+            'hair_sim_node = hair_tracking.node:main',
+            'hair_sim_bag = hair_tracking.bag_cli:main',
+            'hair_sim_eval = hair_tracking.eval_cli:main',
             'hair_sim_demo = hair_tracking.demo:main',
         ],
     },
