@@ -379,6 +379,8 @@ class HairSimNode(Node):
         """Pick the head transform out of a TFMessage (``head_frame`` or the prefix)."""
         self._apply_pending()
         prefix = self._settings.head_frame_prefix
+        if self._tf_child is not None and not (prefix and self._tf_child.startswith(prefix)):
+            self._tf_child = None        # the prefix changed: choose again
         now_ns = self.get_clock().now().nanoseconds
         for tr in msg.transforms:
             child = str(tr.child_frame_id).lstrip('/')

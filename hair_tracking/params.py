@@ -517,8 +517,23 @@ def _yaml_value(value: Any) -> str:
     return yaml.safe_dump(value, default_style=None).strip().splitlines()[0]
 
 
-def main() -> None:  # pragma: no cover - tiny CLI
-    print(render_yaml(), end='')
+def render_markdown(base: Optional[Scene] = None) -> str:
+    """The parameter table as a Markdown table (docs/node.md carries it)."""
+    rows = ['| parameter | type | default | allowed | change | description |',
+            '| --- | --- | --- | --- | --- | --- |']
+    for p in table(base):
+        change = 'read-only' if p.read_only else ('rebuilds the hair' if p.rebuild else 'live')
+        desc = p.description + (f' [{p.unit}]' if p.unit else '')
+        rows.append(f'| `{p.name}` | {p.kind} | `{_yaml_value(p.default)}` | '
+                    f'{p.range_text().replace("|", "/")} | {change} | {desc} |')
+    return '\n'.join(rows) + '\n'
+
+
+def main(argv=None) -> None:  # pragma: no cover - tiny CLI
+    """``python -m hair_tracking.params [--markdown]``: the params file (or the docs table)."""
+    import sys
+    args = sys.argv[1:] if argv is None else argv
+    print(render_markdown() if '--markdown' in args else render_yaml(), end='')
 
 
 if __name__ == '__main__':  # pragma: no cover

@@ -73,7 +73,7 @@ def run_case(ghosts, mode, args, domain_id):
     overrides = {
         'groom.guides': guides, 'groom.ghosts_per_guide': per_guide,
         'publish_rate_hz': float(args.publish_rate), 'publish_on_pose': mode == 'on_pose',
-        'stale_timeout': 10.0, 'solver.type': args.solver,
+        'stale_timeout': 10.0, 'solver.type': args.solver, 'numba_threads': args.threads,
     }
     node = HairSimNode(context=ctx, parameter_overrides=[
         Parameter(k, value=v) for k, v in overrides.items()])
@@ -152,7 +152,8 @@ def run_case(ghosts, mode, args, domain_id):
     result = {
         'ghosts': int(node.sim.ghosts.count), 'guides': int(node.sim.guides.count),
         'nodes_per_strand': int(node.sim.ghosts.nodes), 'mode': mode,
-        'solver': args.solver, 'pose_rate_hz': args.pose_rate,
+        'solver': args.solver, 'numba_threads': int(node.numba_threads),
+        'pose_rate_hz': args.pose_rate,
         'publish_rate_hz': args.publish_rate, 'markers_subscribed': bool(args.markers),
         'latency': stats(lat), 'poses_without_cloud': missing,
         'step': stats(step_ms), 'publish': stats(pub_ms),
@@ -182,6 +183,8 @@ def main(argv=None):
     ap.add_argument('--pose-rate', type=float, default=60.0)
     ap.add_argument('--publish-rate', type=float, default=60.0)
     ap.add_argument('--solver', default='ftl', choices=['ftl', 'pbd', 'xpbd'])
+    ap.add_argument('--threads', type=int, default=0,
+                    help='numba_threads of the node (0 = all cores)')
     ap.add_argument('--markers', action='store_true',
                     help='also subscribe to hair/markers (the node then encodes both)')
     ap.add_argument('--domain-id', type=int, default=48)
@@ -192,7 +195,7 @@ def main(argv=None):
     results = []
     print(f'pose -> hair/points latency through DDS, one process ({os.cpu_count()} CPUs); '
           f'poses at {args.pose_rate:g} Hz, publish_rate_hz {args.publish_rate:g}, '
-          f'goal {FRAME_MS:.1f} ms')
+          f'numba_threads {args.threads}, goal {FRAME_MS:.1f} ms')
     print(f"{'ghosts':>7} {'mode':>8} | {'latency med':>11} {'p99':>8} | "
           f"{'step med':>8} {'p99':>8} | {'publish med':>11} {'p99':>8} | dropped")
     for ghosts in args.ghosts:

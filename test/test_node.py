@@ -402,6 +402,11 @@ def test_tf_input_selects_the_head_by_name_or_prefix(harness):
     assert node._tf_child == 'face_7'
     assert node.sim.head.position[0] == pytest.approx(0.16)
     assert node.output_frame_id() == 'camera'
+    node.set_parameters([Parameter('head_frame_prefix', value='person_')])
+    t4 = t3 + 4 * node.sim.dt_ns
+    node._on_tf(SimpleNamespace(transforms=[tf(t4, 'face_7', 3.0), tf(t4, 'person_1', 0.18)]))
+    assert node._tf_child == 'person_1'                  # a new prefix chooses again
+    assert node.sim.head.position[0] == pytest.approx(0.18)
 
 
 def test_diagnostics_are_published_with_the_step_numbers(harness):

@@ -199,3 +199,10 @@ def test_shipped_config_is_the_rendered_table():
     assert shipped == params.render_yaml(), \
         'config/hair_sim.yaml is out of date: python -m hair_tracking.params > ' \
         'config/hair_sim.yaml'
+
+
+def test_docs_carry_the_current_table():
+    with open(os.path.join(ROOT, 'docs', 'node.md'), encoding='utf-8') as f:
+        doc = f.read()
+    assert params.render_markdown() in doc, \
+        'docs/node.md is out of date: paste python -m hair_tracking.params --markdown'
