@@ -10,8 +10,10 @@ message. rviz semantics kept here:
 - ``scale.x`` is the line width [m]; ``lifetime`` 0 means forever, a few publishing periods
   makes a dead publisher's markers disappear;
 - pose is identity (x, y, z, w = 0, 0, 0, 1), so points are in ``frame_id`` [m];
-- an optional DELETEALL marker first (same ``frame_id``, which rviz requires) clears stale
-  markers, e.g. strips left over when the strand count drops.
+- an optional DELETEALL marker first (same ``frame_id``, which rviz requires, and same ``ns``)
+  clears stale markers, e.g. strips left over when the strand count drops. rviz2 scopes a
+  DELETEALL with a non-empty ``ns`` to that namespace (ros2/rviz#685, 2021); ``ns=''``
+  clears every namespace of the display.
 """
 from dataclasses import dataclass
 

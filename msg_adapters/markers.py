@@ -47,7 +47,8 @@ def _marker(spec, mid, mtype, action):
 
 
 def delete_all_marker(frame_id, stamp_ns=0, ns=''):
-    """A DELETEALL marker (rviz clears its markers; it needs a valid ``frame_id``).
+    """A DELETEALL marker: rviz2 clears the markers of namespace ``ns`` (all namespaces when
+    ``ns`` is ''); it needs a valid ``frame_id``.
 
     As bytes: ``strands_to_marker_array_cdr(np.empty((0, 2, 3)), style='line_strips',
     delete_all_first=True, ...)`` is a MarkerArray holding just this marker.
