@@ -27,6 +27,7 @@ import math
 
 from numba import njit, prange
 
+from hair_tracking.collision import surface_point
 from hair_tracking.integrate import BLOCK, FASTMATH, finalize_block, predict_block
 from hair_tracking.pbd_constraints import pbd_sweep_block
 
@@ -77,6 +78,78 @@ def ftl_pass_block(x, rest, rest_length, rot, corr, s0, s1):
             x[s, i, 0] = nx
             x[s, i, 1] = ny
             x[s, i, 2] = nz
+
+
+#: Surface projections per node in :func:`ftl_restore`.
+RESTORE_ITERATIONS = 4
+
+
+@njit(cache=True, parallel=True, fastmath=FASTMATH, error_model='numpy')
+def ftl_restore(x, rest, rest_length, rot, pos, center, axes, refine, corr):
+    """Kernel: a collision-aware FTL pass over all strands, run after the collider moved nodes.
+
+    The collider projects single nodes out of the head, which stretches their segments (by up to
+    ``margin / segment length``, and by tens of per cent in fast motion).  This pass walks every
+    strand from the root again and puts each node at its rest distance from its predecessor
+    (as the FTL pass does); if that point lies inside the collision ellipsoid (semi-axes
+    ``axes`` = radii + margin, centre ``center``, head frame; head pose ``rot``, ``pos``) it is
+    moved to the surface (:func:`hair_tracking.collision.surface_point`, ``refine`` refinements)
+    and put back at the rest distance along the new direction, :data:`RESTORE_ITERATIONS` times.
+    For a predecessor outside the surface this converges to the point of the circle where the
+    sphere of radius ``rest_length`` around it meets the surface, so lengths stay exact and a node
+    ends at most a small fraction of a segment inside the margin layer.  The correction of every
+    node is *added* to ``corr`` (the velocity update damps it like the first pass's).  No
+    friction here: the collider applied it.
+    """
+    ax, ay, az = axes[0], axes[1], axes[2]
+    ix, iy, iz = 1.0 / (ax * ax), 1.0 / (ay * ay), 1.0 / (az * az)
+    cx = rot[0, 0] * center[0] + rot[0, 1] * center[1] + rot[0, 2] * center[2] + pos[0]
+    cy = rot[1, 0] * center[0] + rot[1, 1] * center[1] + rot[1, 2] * center[2] + pos[1]
+    cz = rot[2, 0] * center[0] + rot[2, 1] * center[1] + rot[2, 2] * center[2] + pos[2]
+    n = x.shape[1]
+    for s in prange(x.shape[0]):
+        for i in range(2, n):
+            r = rest_length[s, i - 1]
+            bx, by, bz = x[s, i - 1, 0], x[s, i - 1, 1], x[s, i - 1, 2]
+            ox, oy, oz = x[s, i, 0], x[s, i, 1], x[s, i, 2]
+            px, py, pz = ox, oy, oz
+            for k in range(RESTORE_ITERATIONS + 1):
+                dx, dy, dz = px - bx, py - by, pz - bz
+                l2 = dx * dx + dy * dy + dz * dz
+                if l2 > FTL_TINY_SQ:
+                    f = r / math.sqrt(l2)
+                else:
+                    ex = rest[s, i, 0] - rest[s, i - 1, 0]
+                    ey = rest[s, i, 1] - rest[s, i - 1, 1]
+                    ez = rest[s, i, 2] - rest[s, i - 1, 2]
+                    dx = rot[0, 0] * ex + rot[0, 1] * ey + rot[0, 2] * ez
+                    dy = rot[1, 0] * ex + rot[1, 1] * ey + rot[1, 2] * ez
+                    dz = rot[2, 0] * ex + rot[2, 1] * ey + rot[2, 2] * ez
+                    le2 = ex * ex + ey * ey + ez * ez
+                    if le2 > FTL_TINY_SQ:
+                        f = r / math.sqrt(le2)
+                    else:
+                        dx, dy, dz = 0.0, 0.0, -1.0
+                        f = r
+                px, py, pz = bx + f * dx, by + f * dy, bz + f * dz
+                if k == RESTORE_ITERATIONS:
+                    break
+                wx, wy, wz = px - cx, py - cy, pz - cz
+                qx = rot[0, 0] * wx + rot[1, 0] * wy + rot[2, 0] * wz
+                qy = rot[0, 1] * wx + rot[1, 1] * wy + rot[2, 1] * wz
+                qz = rot[0, 2] * wx + rot[1, 2] * wy + rot[2, 2] * wz
+                if qx * qx * ix + qy * qy * iy + qz * qz * iz >= 1.0:
+                    break
+                yx, yy, yz = surface_point(qx, qy, qz, ax, ay, az, refine)
+                px = rot[0, 0] * yx + rot[0, 1] * yy + rot[0, 2] * yz + cx
+                py = rot[1, 0] * yx + rot[1, 1] * yy + rot[1, 2] * yz + cy
+                pz = rot[2, 0] * yx + rot[2, 1] * yy + rot[2, 2] * yz + cz
+            corr[s, i, 0] += px - ox
+            corr[s, i, 1] += py - oy
+            corr[s, i, 2] += pz - oz
+            x[s, i, 0] = px
+            x[s, i, 1] = py
+            x[s, i, 2] = pz
 
 
 @njit(cache=True, parallel=True, fastmath=FASTMATH, error_model='numpy')

@@ -15,7 +15,9 @@ d. centre-of-mass tracking -- per group and node index the ghosts' centre of mas
 e. optional spread control (HairControl, Milliez et al. 2018);
 f. optional length restoration (one Follow-The-Leader pass, Mueller, Kim & Chentanez 2012);
 g. roots (nodes 0 and 1) pinned at ``head.to_world(rest)``;
-h. optional collision with the head collider (``collider.apply`` on the whole arrays).
+h. optional collision with the head collider (``collider.apply`` on the whole arrays), followed,
+   when a node was pushed and length restoration is on, by the collision-aware FTL pass of the
+   guides (:func:`.ftl.ftl_restore`), so a push does not stretch the ghost.
 
 See ``docs/ghosts.md`` for the reasoning, the two readings of equation (4) and the energy argument.
 
@@ -28,7 +30,9 @@ from typing import Dict
 
 import numpy as np
 
+from .collision import Collider
 from .correspondence import assign_guides, node_correspondence
+from .ftl import ftl_restore
 from .model import HeadPose, StrandSet
 from .scene import Scene
 from .tracking_kernels import guide_frames, track_groups
@@ -139,6 +143,9 @@ class GhostTracker:
         self._scratch = np.empty((s_count, 6))
         self._clamped = np.zeros(n_groups, dtype=np.int64)
         self._x_prev = np.empty_like(ghosts.x) if tr.collide else None
+        # corrections of the collision-aware length restoration (not used: ghost velocities are
+        # taken from the displacement)
+        self._restore_corr = np.zeros_like(ghosts.x) if tr.collide else None
         self.stats: Dict[str, int] = {
             'ghosts': int(s_count), 'groups': int(n_groups),
             'largest_group': int(group_size.max()) if n_groups else 0,
@@ -175,8 +182,14 @@ class GhostTracker:
         self.stats['steps'] += 1
         self.stats['clamped'] = int(self._clamped.sum())
         if tr.collide:
-            self.stats['contacts'] = int(self.collider.apply(x, self._x_prev,
-                                                             self.ghosts.inv_mass, head))
+            contacts = int(self.collider.apply(x, self._x_prev, self.ghosts.inv_mass, head))
+            self.stats['contacts'] = contacts
+            c = self.collider
+            if contacts and tr.length_restore and isinstance(c, Collider):
+                # the push stretched segments: restore the lengths, staying outside (as guides)
+                ftl_restore(x, self.ghosts.rest, _f64(self.ghosts.rest_length),
+                            _f64(head.rotation), _f64(head.position), c.center,
+                            c.radii + c.margin, c.refine, self._restore_corr)
             np.subtract(x, self._x_prev, out=v)
             v *= 1.0 / dt
 

@@ -39,6 +39,9 @@ from hair_tracking.model import HeadPose, StrandSet
 
 #: PBD sweeps of the second-neighbour (bending) constraints per FTL substep, before the FTL pass.
 FTL_BEND_PASSES = 1
+#: Substep [s] at which ``solver.bend_stiffness`` applies as given to FTL (the default dt); see
+#: :func:`ftl_bend_stiffness`.
+BEND_REFERENCE_DT = 1.0 / 240.0
 
 
 class GuideSolver:
@@ -49,7 +52,14 @@ class GuideSolver:
     :class:`~hair_tracking.scene.Scene` (solver, gravity, damping, collider).
 
     Attributes: ``collider`` (``None`` when the scene has none; the simulator may hand it to the
-    ghost tracker), ``kind`` (``'pbd'``, ``'xpbd'`` or ``'ftl'``).
+    ghost tracker), ``kind`` (``'pbd'``, ``'xpbd'`` or ``'ftl'``), ``margin`` the collider margin
+    in use [m]: ``scene.collider.margin``, but at most the rest clearance of the closest free node
+    and half the shortest segment (see ``_fit_margin``).
+
+    With FTL and a collider, a substep is predict, bend, FTL pass, collide and, when a node was
+    pushed, a collision-aware second FTL pass (:func:`~hair_tracking.ftl.ftl_restore`): lengths
+    stay exact and nodes outside the bare collider (measured in the stability matrix,
+    ``docs/stability.md``).
     """
 
     def __init__(self, strands: StrandSet, scene):
@@ -60,6 +70,7 @@ class GuideSolver:
         self.strands = strands
         self.scene = scene
         self.collider = collision.make_collider(scene.collider)
+        self.margin = self._fit_margin()
         sv = scene.solver
         self._gravity = np.ascontiguousarray(scene.gravity, dtype=np.float64)
         self._damping = float(scene.damping)
@@ -130,7 +141,7 @@ class GuideSolver:
             clamped = ftl.ftl_step(
                 st.x, st.v, self._x_old, self._corr, st.rest, st.inv_mass, st.rest_length,
                 self._bend_rest, self._bend_w, rot, pos, rot_rel, pos_prev, self._gravity, damp,
-                dt, self._shock, FTL_BEND_PASSES, float(sv.bend_stiffness),
+                dt, self._shock, FTL_BEND_PASSES, ftl_bend_stiffness(sv.bend_stiffness, dt),
                 float(sv.ftl_damping), self._max_disp, fused)
         contacts = 0
         if not fused:
@@ -139,6 +150,11 @@ class GuideSolver:
             corr, s_damp = self._x_old, 0.0
             if self.kind == 'ftl':
                 corr, s_damp = self._corr, float(self.scene.solver.ftl_damping)
+                if contacts:
+                    # restore the lengths the collider's push broke, staying outside it
+                    c = self.collider
+                    ftl.ftl_restore(st.x, st.rest, st.rest_length, rot, pos, c.center,
+                                    c.radii + c.margin, c.refine, self._corr)
             clamped = integrate.finalize(st.x, st.v, self._x_old, st.inv_mass, corr, dt,
                                          self._max_disp, s_damp)
         c = self._counters
@@ -156,14 +172,34 @@ class GuideSolver:
         the clamp limited in the last substep, ``clamped_total``; ``contacts`` nodes projected out
         of the collider in the last substep, ``contacts_total``; ``max_stretch`` = max over
         segments of ``|l / l0 - 1|`` of the current state, i.e. after the last substep (computed
-        on access, about 0.2 ms for 1000 x 16 nodes).
+        on access, about 0.2 ms for 1000 x 16 nodes); ``margin`` the collider margin in use [m]
+        (see :attr:`margin`).
         """
         out = dict(self._counters)
         out['solver'] = self.kind
+        out['margin'] = self.margin
         out['max_stretch'] = max_stretch(self.strands.x, self.strands.rest_length)
         return out
 
     # ------------------------------------------------------------ internals
+    def _fit_margin(self) -> float:
+        """Collider margin actually used [m]: the scene's, but no more than the rest clearance of
+        the closest free node (the collider must never push a strand out of its own rest shape)
+        and no more than half the shortest segment (a push is resolved by moving a node; pushes
+        longer than its segments tear PBD strands: with 1 mm segments and a 4 mm margin the
+        first segments were stretched by 200 %)."""
+        if self.collider is None:
+            return 0.0
+        c = self.collider
+        st = self.strands
+        free = st.inv_mass > 0
+        if c.margin > 0.0 and np.any(free):
+            clearance = collision.outside_distance(st.rest[free] - c.center, c.radii)
+            positive = st.rest_length[st.rest_length > 0]
+            half_segment = 0.5 * positive.min() if positive.size else c.margin
+            c.margin = float(min(c.margin, clearance.min(), half_segment))
+        return c.margin
+
     def _xpbd_factors(self, dt):
         sv = self.scene.solver
         a_stretch = float(sv.compliance) / (dt * dt)
@@ -174,6 +210,23 @@ class GuideSolver:
             self._bend_gain = pbd_constraints.xpbd_gain(im, 2, a_bend)
             self._xpbd_dt = dt
         return a_stretch, a_bend
+
+
+def ftl_bend_stiffness(k: float, dt: float) -> float:
+    """Per-substep bending stiffness of the FTL solver for a substep ``dt`` [s].
+
+    ``solver.bend_stiffness`` ``k`` is the fraction of the bending violation removed per substep
+    of :data:`BEND_REFERENCE_DT`; for another ``dt`` it becomes ``1 - (1 - k)^(dt / dt_ref)``,
+    the same fraction per second (Müller et al. 2007, section 3.3, make stiffness independent of
+    the iteration count the same way).  Without it the bending correction per substep does not
+    shrink with ``dt`` while FTL's velocity correction ``s_damp d / dt`` grows as ``1 / dt``:
+    measured, 25 cm strands at dt = 1/4000 s and 1.5 m strands already at 1/480 s never came to
+    rest after a head shake (kinetic energy growing instead of decaying).
+    """
+    k = float(k)
+    if dt == BEND_REFERENCE_DT or k <= 0.0 or k >= 1.0:
+        return k
+    return 1.0 - (1.0 - k) ** (dt / BEND_REFERENCE_DT)
 
 
 def max_stretch(x: np.ndarray, rest_length: np.ndarray) -> float:

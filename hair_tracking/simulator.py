@@ -15,8 +15,19 @@ Time handling
 * Time going backwards or a teleport carries the hair rigidly to the new head pose with zero
   velocity (no whip); an explicit :meth:`reset` puts the hair back in its rest shape and lets it
   settle.
+* A substep in which a hair node would move farther than half the per-substep displacement clamp
+  (``solver.max_displacement``; 2.5 cm when the clamp is off) is *split* into equal shorter
+  substeps, at most :data:`MAX_SPLIT` and none shorter than :data:`MIN_SPLIT_DT`, with the head
+  interpolated between its two poses (lerp, slerp).  The estimate is the larger of the head's
+  rigid motion at the farthest hair node and the largest node speed of the previous substep
+  times ``dt``, plus ``|g| dt^2``.  Without this the clamp, a safety net, would become the
+  dynamics in fast motion (a 20 m/s head moves a root 8 cm per 1/240 s substep; a 1/10 s
+  substep lets hair fall 5 cm) and tear the strands apart: measured in the stability matrix
+  (docs/stability.md), up to 1500 % stretch.  The split count depends only on the state, so runs
+  stay deterministic; ``counters.extra['split_substeps']`` counts the extra substeps.
 """
 from dataclasses import dataclass, field
+import math
 import time
 from typing import Dict, Optional
 
@@ -31,6 +42,17 @@ from .head_track import HeadTrack, IDENTITY, PoseResult
 from .metrics import max_stretch
 from .model import HeadPose, StrandSet
 from .scene import Scene
+from .transforms import quat_angle, quat_to_matrix, slerp
+
+#: Most parts one substep is split into when the hair moves fast (see the module docstring).
+MAX_SPLIT = 16
+#: Parts are never shorter than this [s]: FTL's velocity correction injects energy into long
+#: strands at very short substeps (docs/stability.md), so splitting must not drive dt there.
+MIN_SPLIT_DT = 1.0 / 960.0
+#: Split when the estimated node motion of a substep exceeds this fraction of the clamp ...
+SPLIT_FRACTION = 0.5
+#: ... or this distance [m] when the clamp is off (``solver.max_displacement = 0``).
+SPLIT_DISTANCE = 0.025
 
 
 @dataclass
@@ -87,6 +109,13 @@ class HairSimulator:
                 self.ghosts, self.guides, scene,
                 self.collider if scene.tracking.collide else None)
         self._x_old = np.empty_like(self.guides.x)
+        # farthest any hair node can be from the head origin [m]: root distance + strand length
+        reach = [np.linalg.norm(self.guides.rest[:, 0], axis=1) + self.guides.strand_length]
+        if self.ghosts is not None:
+            reach.append(np.linalg.norm(self.ghosts.rest[:, 0], axis=1) +
+                         self.ghosts.strand_length)
+        self._reach = float(max(r.max() for r in reach))
+        self._last_speed = 0.0
         self.dt_ns = max(1, int(round(scene.solver.dt * 1e9)))
         self.head = head
         self._rest_at(head)
@@ -195,10 +224,46 @@ class HairSimulator:
 
     # ------------------------------------------------------------ internals
     def _substep(self, dt: float, head_prev: HeadPose, head: HeadPose) -> None:
+        parts = self._split_count(dt, head_prev, head)
+        if parts == 1:
+            self._step(dt, head_prev, head)
+            return
+        self.counters.extra['split_substeps'] = \
+            self.counters.extra.get('split_substeps', 0) + parts - 1
+        prev = head_prev
+        for k in range(1, parts + 1):
+            u = k / parts
+            if k == parts:
+                cur = head
+            else:
+                q = slerp(head_prev.quaternion, head.quaternion, u)
+                cur = HeadPose((1.0 - u) * head_prev.position + u * head.position, q,
+                               quat_to_matrix(q))
+            self._step(dt / parts, prev, cur)
+            prev = cur
+
+    def _split_count(self, dt: float, head_prev: HeadPose, head: HeadPose) -> int:
+        """Parts to split a substep into so that no node moves farther than the split limit."""
+        sv = self.scene.solver
+        limit = SPLIT_FRACTION * sv.max_displacement if sv.max_displacement > 0 else \
+            SPLIT_DISTANCE
+        angle = quat_angle(head_prev.quaternion, head.quaternion)
+        rigid = float(np.linalg.norm(head.position - head_prev.position)) + \
+            2.0 * math.sin(0.5 * angle) * self._reach
+        g = float(np.linalg.norm(self.scene.gravity))
+        motion = max(rigid, self._last_speed * dt) + g * dt * dt
+        if not motion > limit:          # also False for NaN: never split on bad numbers
+            return 1
+        floor = max(1, int(dt / MIN_SPLIT_DT + 1e-9))
+        return int(min(MAX_SPLIT, floor, math.ceil(motion / limit)))
+
+    def _step(self, dt: float, head_prev: HeadPose, head: HeadPose) -> None:
         np.copyto(self._x_old, self.guides.x)
         self.guide_solver.step(dt, head_prev, head)
         if self.ghost_tracker is not None:
             self.ghost_tracker.step(dt, self._x_old, head)
+        d = self.guides.x - self._x_old
+        self._last_speed = math.sqrt(float(np.max(np.einsum('snk,snk->sn', d, d)))) / dt
 
     def _rest_at(self, head: HeadPose) -> None:
         self.guide_solver.reset(head)
@@ -209,6 +274,7 @@ class HairSimulator:
         for strands in (self.guides, self.ghosts):
             if strands is not None:
                 strands.v[...] = 0.0
+        self._last_speed = 0.0
 
     def _carry_rigidly(self, old: HeadPose, new: HeadPose) -> None:
         """Move all hair with the head from ``old`` to ``new``, at rest (no whip)."""
@@ -217,3 +283,4 @@ class HairSimulator:
             if strands is not None:
                 strands.x[...] = (strands.x - old.position) @ rot.T + new.position
                 strands.v[...] = 0.0
+        self._last_speed = 0.0
