@@ -354,10 +354,13 @@ class HairSimNode(Node):
         offset = self._offset_ns
         if self._last_stamp_ns is not None and t_ns < self._last_stamp_ns:
             offset = 0                   # backwards: the simulator resets to this stamp
-        elif self.sim.time_ns is not None and t_ns + offset < self.sim.time_ns:
+        elif self._last_stamp_ns is not None and \
+                self.sim.time_ns > self._last_stamp_ns + offset and \
+                t_ns + offset <= self.sim.time_ns:
             # The stream resumes behind the time the hair settled to while it was stale
-            # (stamps slower than the node clock): continue from there, do not freeze.
-            offset = self.sim.time_ns - t_ns
+            # (stamps slower than the node clock): continue one substep after it, do not
+            # freeze.  Output stamps subtract the offset again.
+            offset = self.sim.time_ns + self.sim.dt_ns - t_ns
         result = self.sim.push_pose(t_ns + offset, sample.position, sample.quaternion)
         if result is PoseResult.REJECTED:
             self._reject(self.sim.track.last_rejection)

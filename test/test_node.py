@@ -310,6 +310,8 @@ def test_stamp_zero_means_now_and_time_going_backwards_resets(harness):
     pts, _ = pointcloud2_to_strands(h.cloud_at(back))
     np.testing.assert_allclose(roots_in_head(pts, [0.2, 0.0, 0.0], yaw_quat(0.5)),
                                h.node.sim.ghosts.rest[:, 0], atol=2e-5)
+    h.send(pub, pose_stamped_msg(back, [0.2, 0.0, 0.0], yaw_quat(0.5), 'world'))  # repeated
+    assert h.node.sim.time_ns == back and h.node._offset_ns == 0
 
 
 def test_stale_stream_holds_the_last_pose_and_the_hair_settles(harness):
@@ -332,6 +334,24 @@ def test_stale_stream_holds_the_last_pose_and_the_hair_settles(harness):
     assert np.abs(h.node.sim.ghosts.x[:, -1] - tips_then).max() > 1e-4   # the hair moved on
     status = h.node.diagnostics()
     assert status.level == DiagnosticStatus.WARN and 'stale' in status.message
+
+
+def test_a_stream_resuming_behind_the_settled_hair_goes_on(harness):
+    # stamps far slower than the node clock: the idle stepping runs ahead of them
+    h = harness(stale_timeout=0.05)
+    h.listen(markers=False)
+    pub = h.pose_publisher()
+    t0, t1, t2 = grid_times(h, 3)
+    h.send(pub, pose_stamped_msg(t0, [0.0, 0.0, 0.0], yaw_quat(0.0), 'world'))
+    h.spin_until(lambda: h.node.sim.time_ns > t1 + 10**8, what='idle stepping')
+    h.send(pub, pose_stamped_msg(t1, [0.01, 0.0, 0.0], yaw_quat(0.0), 'world'))
+    pts, _ = pointcloud2_to_strands(h.cloud_at(t1))            # stamped as the pose was
+    np.testing.assert_allclose(roots_in_head(pts, [0.01, 0.0, 0.0], yaw_quat(0.0)),
+                               h.node.sim.ghosts.rest[:, 0], atol=2e-5)
+    before = h.node.sim.counters.substeps
+    h.send(pub, pose_stamped_msg(t2, [0.02, 0.0, 0.0], yaw_quat(0.0), 'world'))
+    assert h.node.sim.counters.substeps > before                # not frozen
+    h.cloud_at(t2)
 
 
 def test_use_sim_time_follows_the_clock(harness):
