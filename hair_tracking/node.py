@@ -226,16 +226,21 @@ class HairSimNode(Node):
         self._idle_timer = self.create_timer(period, self._on_idle_timer)
         self._diag_timer = self.create_timer(1.0 / settings.diagnostics_rate_hz,
                                              self._on_diag_timer)
-        self.create_subscription(PoseStamped, 'head_pose', self._on_pose,
-                                 qos_profile_sensor_data)
-        self.create_subscription(TransformStamped, 'head_transform', self._on_pose,
-                                 qos_profile_sensor_data)
+        pose_qos = QoSProfile(history=qos_profile_sensor_data.history,
+                              depth=settings.pose_queue_depth,
+                              reliability=qos_profile_sensor_data.reliability,
+                              durability=qos_profile_sensor_data.durability)
+        self.create_subscription(PoseStamped, 'head_pose', self._on_pose, pose_qos)
+        self.create_subscription(TransformStamped, 'head_transform', self._on_pose, pose_qos)
         if settings.use_tf:
             if TFMessage is None:
                 self.get_logger().warn('use_tf is true but tf2_msgs is not installed: /tf is '
                                        'not subscribed (head_pose and head_transform still are)')
             else:
-                self.create_subscription(TFMessage, '/tf', self._on_tf, qos_profile_sensor_data)
+                tf_qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100,
+                                    reliability=ReliabilityPolicy.BEST_EFFORT,
+                                    durability=DurabilityPolicy.VOLATILE)
+                self.create_subscription(TFMessage, '/tf', self._on_tf, tf_qos)
         scene = settings.scene
         ghosts = self.sim.ghosts.count if self.sim.ghosts is not None else 0
         self.get_logger().info(

@@ -310,6 +310,10 @@ NODE_PARAMS: Tuple[Param, ...] = (
     Param('use_tf', 'bool', False,
           'also take the head pose from /tf (needs tf2_msgs), selected by head_frame or '
           'head_frame_prefix', read_only=True),
+    Param('pose_queue_depth', 'int', 5,
+          'queue depth of the pose subscriptions (sensor-data QoS keeps the newest ones): 5 '
+          'keeps every pose of a burst, 1 always simulates the newest pose (lowest latency '
+          'when the node falls behind)', lo=1, hi=1000, read_only=True),
     Param('head_frame', 'string', 'head',
           'name of the head frame: the /tf child frame that is the head, and the frame_id of '
           'the output when output_frame is head and the pose message names no child frame'),

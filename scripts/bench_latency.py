@@ -74,6 +74,7 @@ def run_case(ghosts, mode, args, domain_id):
         'groom.guides': guides, 'groom.ghosts_per_guide': per_guide,
         'publish_rate_hz': float(args.publish_rate), 'publish_on_pose': mode == 'on_pose',
         'stale_timeout': 10.0, 'solver.type': args.solver, 'numba_threads': args.threads,
+        'pose_queue_depth': args.pose_depth,
     }
     node = HairSimNode(context=ctx, parameter_overrides=[
         Parameter(k, value=v) for k, v in overrides.items()])
@@ -146,13 +147,14 @@ def run_case(ghosts, mode, args, domain_id):
         stamps = sorted(sent)[skip:]
         lat = [(received[t] - sent[t]) * 1e3 for t in stamps if t in received]
         missing = sum(1 for t in stamps if t not in received)
-    step_ms = list(node.step_ms)[skip:]
-    pub_ms = list(node.publish_ms)[skip:]
+    step_ms = list(node.step_ms)          # kernels were warmed up before the first pose
+    pub_ms = list(node.publish_ms)
     c = node.sim.counters
     result = {
         'ghosts': int(node.sim.ghosts.count), 'guides': int(node.sim.guides.count),
         'nodes_per_strand': int(node.sim.ghosts.nodes), 'mode': mode,
         'solver': args.solver, 'numba_threads': int(node.numba_threads),
+        'pose_queue_depth': args.pose_depth,
         'pose_rate_hz': args.pose_rate,
         'publish_rate_hz': args.publish_rate, 'markers_subscribed': bool(args.markers),
         'latency': stats(lat), 'poses_without_cloud': missing,
@@ -183,33 +185,41 @@ def main(argv=None):
     ap.add_argument('--pose-rate', type=float, default=60.0)
     ap.add_argument('--publish-rate', type=float, default=60.0)
     ap.add_argument('--solver', default='ftl', choices=['ftl', 'pbd', 'xpbd'])
+    ap.add_argument('--pose-depth', type=int, default=5,
+                    help='pose_queue_depth of the node (1: always the newest pose)')
     ap.add_argument('--threads', type=int, default=0,
                     help='numba_threads of the node (0 = all cores)')
     ap.add_argument('--markers', action='store_true',
                     help='also subscribe to hair/markers (the node then encodes both)')
     ap.add_argument('--domain-id', type=int, default=48)
     ap.add_argument('--json', metavar='PATH', help='write the results as JSON')
+    ap.add_argument('--switch-interval', type=float, default=0.0005,
+                    help="Python's GIL switch interval [s] (default 5 ms makes the node wait "
+                         'for the probe threads)')
     args = ap.parse_args(argv)
     os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+    sys.setswitchinterval(args.switch_interval)
 
     results = []
-    print(f'pose -> hair/points latency through DDS, one process ({os.cpu_count()} CPUs); '
+    print(f'pose -> hair/points latency through DDS, one process ({os.cpu_count()} CPUs, '
+          f'load average {os.getloadavg()[0]:.1f} at start); '
           f'poses at {args.pose_rate:g} Hz, publish_rate_hz {args.publish_rate:g}, '
           f'numba_threads {args.threads}, goal {FRAME_MS:.1f} ms')
     print(f"{'ghosts':>7} {'mode':>8} | {'latency med':>11} {'p99':>8} | "
-          f"{'step med':>8} {'p99':>8} | {'publish med':>11} {'p99':>8} | dropped")
+          f"{'step med':>8} {'p99':>8} | {'publish med':>11} {'p99':>8} | dropped / no cloud")
     for ghosts in args.ghosts:
         for mode in args.modes:
             r = run_case(ghosts, mode, args, args.domain_id)
             results.append(r)
             print(f"{r['ghosts']:>7} {mode:>8} | {fmt(r['latency']):>20} | "
                   f"{fmt(r['step']):>17} | {fmt(r['publish']):>20} | "
-                  f"{r['substeps_dropped']} substeps, {r['poses_without_cloud']} frames",
+                  f"{r['substeps_dropped']} substeps, {r['poses_without_cloud']} poses",
                   flush=True)
     if args.json:
         os.makedirs(os.path.dirname(os.path.abspath(args.json)), exist_ok=True)
         with open(args.json, 'w', encoding='utf-8') as f:
-            json.dump({'machine': {'cpus': os.cpu_count(), 'python': platform.python_version(),
+            json.dump({'machine': {'cpus': os.cpu_count(), 'loadavg_end': os.getloadavg(),
+                                   'python': platform.python_version(),
                                    'platform': platform.platform()},
                        'goal_ms': FRAME_MS, 'results': results}, f, indent=2)
         print(f'wrote {args.json}')
