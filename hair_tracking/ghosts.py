@@ -28,6 +28,7 @@ group through ``order`` (ghost indices sorted by guide, stable); group ``g`` is
 import math
 from typing import Dict
 
+import numba
 import numpy as np
 
 from .collision import Collider
@@ -37,6 +38,12 @@ from .model import HeadPose, StrandSet
 from .scene import Scene
 from .tracking_kernels import guide_frames, track_groups
 from .weights import arc_fractions, elastic_code
+
+
+#: Below this many ghost nodes the tracking kernel runs on one thread: the work (about 1 ms)
+#: is then smaller than what a busy second core costs to join (measured 3-5x slower on the
+#: shared 2-core machine).  Results do not depend on the thread count.
+PARALLEL_MIN_NODES = 1 << 17
 
 
 class GhostTracker:
@@ -126,8 +133,13 @@ class GhostTracker:
         frac = arc_fractions(ghosts.rest_length)[o]
         # per-node data (guide parameter, w_tip) as a table of distinct rows: ghosts with the
         # same arc-length layout share one row
-        table = np.stack([self._gparam, tr.tip_weight * frac], axis=-1).reshape(s_count, -1)
-        rows, inverse = np.unique(table, axis=0, return_inverse=True)
+        # (fractions rounded to 1e-12 so that rounding noise does not split equal layouts)
+        table = np.stack([self._gparam, tr.tip_weight * np.round(frac, 12)],
+                         axis=-1).reshape(s_count, -1)
+        if s_count == 0 or np.array_equal(table, np.broadcast_to(table[0], table.shape)):
+            rows, inverse = table[:1], np.zeros(s_count, dtype=np.int64)   # the usual case
+        else:
+            rows, inverse = np.unique(table, axis=0, return_inverse=True)
         self._node_table = np.ascontiguousarray(rows.reshape(-1, n_nodes, 2))
         self._node_row = np.ascontiguousarray(inverse.reshape(-1).astype(np.int64))
         length = ghosts.strand_length[o]
@@ -143,6 +155,7 @@ class GhostTracker:
         self._scratch = np.empty((s_count, 6))
         self._clamped = np.zeros(n_groups, dtype=np.int64)
         self._x_prev = np.empty_like(ghosts.x) if tr.collide else None
+        self._serial = s_count * n_nodes < PARALLEL_MIN_NODES
         # corrections of the collision-aware length restoration (not used: ghost velocities are
         # taken from the displacement)
         self._restore_corr = np.zeros_like(ghosts.x) if tr.collide else None
@@ -169,16 +182,29 @@ class GhostTracker:
                              f'{guide_x_old.shape}')
         tr = self.tracking
         x, v = self.ghosts.x, self.ghosts.v
+        if x.shape != self.ghosts.rest.shape or v.shape != x.shape or \
+                not (x.flags.c_contiguous and v.flags.c_contiguous):
+            raise ValueError(f'ghosts.x and ghosts.v must be C-contiguous arrays shaped '
+                             f'{self.ghosts.rest.shape}')
         if tr.collide:
             np.copyto(self._x_prev, x)
-        track_groups(x, v, self.ghosts.rest, _f64(self.ghosts.rest_length), self.order,
-                     self.group_start, self.group_guide, self._node_table, self._node_row,
-                     self._rest_off, self._inv_len, self._var_target,
-                     _f64(gx), _f64(guide_x_old), self._tan_rest,
-                     _f64(head.rotation), _f64(head.position), float(dt),
-                     self._elastic, tr.tip_weight > 0.0, tr.com_weight, tr.max_weight,
-                     tr.offset_strength, tr.com_strength, tr.spread, tr.length_restore,
-                     self._q_buf, self._scratch, self._clamped)
+        args = (x, v, self.ghosts.rest, _f64(self.ghosts.rest_length), self.order,
+                self.group_start, self.group_guide, self._node_table, self._node_row,
+                self._rest_off, self._inv_len, self._var_target,
+                _f64(gx), _f64(guide_x_old), self._tan_rest,
+                _f64(head.rotation), _f64(head.position), float(dt),
+                self._elastic, tr.tip_weight > 0.0, tr.com_weight, tr.max_weight,
+                tr.offset_strength, tr.com_strength, tr.spread, tr.length_restore,
+                self._q_buf, self._scratch, self._clamped)
+        threads = numba.get_num_threads()
+        if self._serial and threads > 1:
+            numba.set_num_threads(1)
+            try:
+                track_groups(*args)
+            finally:
+                numba.set_num_threads(threads)
+        else:
+            track_groups(*args)
         self.stats['steps'] += 1
         self.stats['clamped'] = int(self._clamped.sum())
         if tr.collide:

@@ -147,21 +147,34 @@ def track_groups(x, v, rest, rest_length, order, group_start, group_guide, node_
     ghosts of the group that share it.
     """
     n_nodes = x.shape[1]
-    m_last = guide_x.shape[1] - 2
+    m_nodes = guide_x.shape[1]
+    m_last = m_nodes - 2
     inv_dt = 1.0 / dt
     need_target = k_off > 0.0 or k_com > 0.0
     group_level = k_com > 0.0 or spread > 0.0
+    xf = x.reshape(x.size)
+    vf = v.reshape(v.size)
+    of = rest_off.reshape(rest_off.size)
+    tf = node_table.reshape(node_table.size)
+    gxf = guide_x.reshape(guide_x.size)
+    gof = guide_x_old.reshape(guide_x_old.size)
+    qf = q_buf.reshape(q_buf.size)
+    sf = scratch.reshape(scratch.size)
+    lf = rest_length.reshape(rest_length.size)
+    # flat views: one index per (ghost, node) instead of three keeps the inner loops short
     for g in prange(group_guide.shape[0]):
         gi = group_guide[g]
         k0 = group_start[g]
         k1 = group_start[g + 1]
         n = k1 - k0
-        Q = q_buf[g]
         n_clamped = 0
-        if need_target:
+        if need_target:     # frames Q of the guide's segments, once per group
+            Q = q_buf[g]
             for sg in range(m_last + 1):
                 _frame_into(guide_x, tan_rest, gi, sg, R, Q[sg])
         use_com_w = com_w > 0.0 and n > 1
+        qb = g * (m_last + 1) * 9
+        gb = gi * m_nodes * 3
         # (g) roots pinned to the head-carried rest shape
         for k in range(k0, k1):
             s = order[k]
@@ -176,10 +189,10 @@ def track_groups(x, v, rest, rest_length, order, group_start, group_guide, node_
             c0x = c0y = c0z = 0.0
             if use_com_w:
                 for k in range(k0, k1):
-                    s = order[k]
-                    c0x += x[s, j, 0]
-                    c0y += x[s, j, 1]
-                    c0z += x[s, j, 2]
+                    xb = (order[k] * n_nodes + j) * 3
+                    c0x += xf[xb]
+                    c0y += xf[xb + 1]
+                    c0z += xf[xb + 2]
                 c0x /= n
                 c0y /= n
                 c0z /= n
@@ -187,13 +200,14 @@ def track_groups(x, v, rest, rest_length, order, group_start, group_guide, node_
             ys0 = ys1 = ys2 = y2 = 0.0
             r0 = r1 = r2 = 0.0
             last_gp = -1.0
-            sg = 0
             px = py = pz = dx = dy = dz = 0.0
+            q00 = q01 = q02 = q10 = q11 = q12 = q20 = q21 = q22 = 0.0
             for k in range(k0, k1):
-                s = order[k]
-                row = node_row[k]
+                xb = (order[k] * n_nodes + j) * 3
+                tb = (node_row[k] * n_nodes + j) * 2
                 # (a) velocity transfer: displacement u dt of the target point on the guide
-                gp = node_table[row, j, 0]
+                # (computed once for consecutive ghosts sharing the point)
+                gp = tf[tb]
                 if gp != last_gp:
                     last_gp = gp
                     sg = int(gp)
@@ -201,19 +215,31 @@ def track_groups(x, v, rest, rest_length, order, group_start, group_guide, node_
                         sg = m_last
                     t = gp - sg
                     u = 1.0 - t
-                    px = u * guide_x[gi, sg, 0] + t * guide_x[gi, sg + 1, 0]
-                    py = u * guide_x[gi, sg, 1] + t * guide_x[gi, sg + 1, 1]
-                    pz = u * guide_x[gi, sg, 2] + t * guide_x[gi, sg + 1, 2]
-                    dx = px - (u * guide_x_old[gi, sg, 0] + t * guide_x_old[gi, sg + 1, 0])
-                    dy = py - (u * guide_x_old[gi, sg, 1] + t * guide_x_old[gi, sg + 1, 1])
-                    dz = pz - (u * guide_x_old[gi, sg, 2] + t * guide_x_old[gi, sg + 1, 2])
-                xo0 = x[s, j, 0]
-                xo1 = x[s, j, 1]
-                xo2 = x[s, j, 2]
+                    a0 = gb + sg * 3
+                    px = u * gxf[a0] + t * gxf[a0 + 3]
+                    py = u * gxf[a0 + 1] + t * gxf[a0 + 4]
+                    pz = u * gxf[a0 + 2] + t * gxf[a0 + 5]
+                    dx = px - (u * gof[a0] + t * gof[a0 + 3])
+                    dy = py - (u * gof[a0 + 1] + t * gof[a0 + 4])
+                    dz = pz - (u * gof[a0 + 2] + t * gof[a0 + 5])
+                    if need_target:
+                        b = qb + sg * 9
+                        q00 = qf[b]
+                        q01 = qf[b + 1]
+                        q02 = qf[b + 2]
+                        q10 = qf[b + 3]
+                        q11 = qf[b + 4]
+                        q12 = qf[b + 5]
+                        q20 = qf[b + 6]
+                        q21 = qf[b + 7]
+                        q22 = qf[b + 8]
+                xo0 = xf[xb]
+                xo1 = xf[xb + 1]
+                xo2 = xf[xb + 2]
                 # (b) weights, equations (4)-(5): pos* = pos + u dt (W* + w_tip + w_com)
-                w = elastic_weight(dx, dy, dz, v[s, j, 0], v[s, j, 1], v[s, j, 2], elastic_mode)
+                w = elastic_weight(dx, dy, dz, vf[xb], vf[xb + 1], vf[xb + 2], elastic_mode)
                 if use_tip:
-                    w += node_table[row, j, 1]
+                    w += tf[tb + 1]
                 if use_com_w:
                     ex = xo0 - c0x
                     ey = xo1 - c0y
@@ -225,14 +251,15 @@ def track_groups(x, v, rest, rest_length, order, group_start, group_guide, node_
                 x0 = xo0 + dx * w
                 x1 = xo1 + dy * w
                 x2 = xo2 + dz * w
-                # (c) offset feedback toward guide point + Q rest_offset
+                # (c) offset feedback toward the target q = guide point + Q rest_offset
                 if need_target:
-                    o0 = rest_off[k, j, 0]
-                    o1 = rest_off[k, j, 1]
-                    o2 = rest_off[k, j, 2]
-                    q0 = px + Q[sg, 0, 0] * o0 + Q[sg, 0, 1] * o1 + Q[sg, 0, 2] * o2
-                    q1 = py + Q[sg, 1, 0] * o0 + Q[sg, 1, 1] * o1 + Q[sg, 1, 2] * o2
-                    q2 = pz + Q[sg, 2, 0] * o0 + Q[sg, 2, 1] * o1 + Q[sg, 2, 2] * o2
+                    ob = (k * n_nodes + j) * 3
+                    o0 = of[ob]
+                    o1 = of[ob + 1]
+                    o2 = of[ob + 2]
+                    q0 = px + q00 * o0 + q01 * o1 + q02 * o2
+                    q1 = py + q10 * o0 + q11 * o1 + q12 * o2
+                    q2 = pz + q20 * o0 + q21 * o1 + q22 * o2
                     if k_off > 0.0:
                         x0 += k_off * (q0 - x0)
                         x1 += k_off * (q1 - x1)
@@ -241,8 +268,8 @@ def track_groups(x, v, rest, rest_length, order, group_start, group_guide, node_
                     qs1 += q1
                     qs2 += q2
                 if not group_level:
-                    _finish_node(x, v, rest, rest_length, R, s, j, x0, x1, x2,
-                                 xo0, xo1, xo2, ftl, inv_dt)
+                    _finish_node(xf, vf, lf, rest, R, order[k], n_nodes, j, xb,
+                                 x0, x1, x2, xo0, xo1, xo2, ftl, inv_dt)
                     continue
                 xs0 += x0
                 xs1 += x1
@@ -259,12 +286,13 @@ def track_groups(x, v, rest, rest_length, order, group_start, group_guide, node_
                     ys1 += e1
                     ys2 += e2
                     y2 += e0 * e0 + e1 * e1 + e2 * e2
-                scratch[k, 0] = xo0
-                scratch[k, 1] = xo1
-                scratch[k, 2] = xo2
-                scratch[k, 3] = x0
-                scratch[k, 4] = x1
-                scratch[k, 5] = x2
+                sb = k * 6          # old and predicted position, until the group sums are done
+                sf[sb] = xo0
+                sf[sb + 1] = xo1
+                sf[sb + 2] = xo2
+                sf[sb + 3] = x0
+                sf[sb + 4] = x1
+                sf[sb + 5] = x2
             if not group_level:
                 continue
             # (d) centre-of-mass tracking: shift toward the centre of mass of the targets
@@ -273,7 +301,7 @@ def track_groups(x, v, rest, rest_length, order, group_start, group_guide, node_
                 d0 = k_com * (qs0 - xs0) / n
                 d1 = k_com * (qs1 - xs1) / n
                 d2 = k_com * (qs2 - xs2) / n
-            # (e) spread control: scale about the (shifted) centre toward the target variance
+            # (e) spread control: scale about the shifted centre toward the target variance
             f = 1.0
             if spread > 0.0 and n > 1:
                 var = y2 - (ys0 * ys0 + ys1 * ys1 + ys2 * ys2) / n
@@ -287,30 +315,33 @@ def track_groups(x, v, rest, rest_length, order, group_start, group_guide, node_
             c0 = xs0 / n + d0
             c1 = xs1 / n + d1
             c2 = xs2 / n + d2
-            # (f) Follow-The-Leader and the velocities, per ghost
+            # apply (d), (e); (f) Follow-The-Leader; velocities
             for k in range(k0, k1):
-                s = order[k]
-                x0 = scratch[k, 3] + d0
-                x1 = scratch[k, 4] + d1
-                x2 = scratch[k, 5] + d2
+                sb = k * 6
+                x0 = sf[sb + 3] + d0
+                x1 = sf[sb + 4] + d1
+                x2 = sf[sb + 5] + d2
                 if f != 1.0:
                     x0 = c0 + f * (x0 - c0)
                     x1 = c1 + f * (x1 - c1)
                     x2 = c2 + f * (x2 - c2)
-                _finish_node(x, v, rest, rest_length, R, s, j, x0, x1, x2,
-                             scratch[k, 0], scratch[k, 1], scratch[k, 2], ftl, inv_dt)
+                xb = (order[k] * n_nodes + j) * 3
+                _finish_node(xf, vf, lf, rest, R, order[k], n_nodes, j, xb, x0, x1, x2,
+                             sf[sb], sf[sb + 1], sf[sb + 2], ftl, inv_dt)
         clamped[g] = n_clamped
 
 
 @njit(cache=True, inline='always')
-def _finish_node(x, v, rest, rest_length, R, s, j, x0, x1, x2, xo0, xo1, xo2, ftl, inv_dt):
-    """(f) Follow-The-Leader placement after node j-1 (if ``ftl``), store x and v = dx / dt."""
+def _finish_node(xf, vf, lf, rest, R, s, n_nodes, j, xb, x0, x1, x2, xo0, xo1, xo2, ftl, inv_dt):
+    """(f) Follow-The-Leader placement of node j of ghost s after node j-1 (if ``ftl``), then
+    store x and v = (x - x_old) / dt.  ``xf``, ``vf``, ``lf``: flat views of x, v, rest_length;
+    ``xb`` the flat index of (s, j, 0)."""
     if ftl:
-        d0 = x0 - x[s, j - 1, 0]
-        d1 = x1 - x[s, j - 1, 1]
-        d2 = x2 - x[s, j - 1, 2]
+        d0 = x0 - xf[xb - 3]
+        d1 = x1 - xf[xb - 2]
+        d2 = x2 - xf[xb - 1]
         nd = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
-        length = rest_length[s, j - 1]
+        length = lf[s * (n_nodes - 1) + j - 1]
         if nd > 1e-300 and nd < 1e300:
             sc = length / nd
         else:
@@ -322,15 +353,15 @@ def _finish_node(x, v, rest, rest_length, R, s, j, x0, x1, x2, xo0, xo1, xo2, ft
             d1 = R[1, 0] * r0 + R[1, 1] * r1 + R[1, 2] * r2
             d2 = R[2, 0] * r0 + R[2, 1] * r1 + R[2, 2] * r2
             sc = 1.0
-        x0 = x[s, j - 1, 0] + d0 * sc
-        x1 = x[s, j - 1, 1] + d1 * sc
-        x2 = x[s, j - 1, 2] + d2 * sc
-    v[s, j, 0] = (x0 - xo0) * inv_dt
-    v[s, j, 1] = (x1 - xo1) * inv_dt
-    v[s, j, 2] = (x2 - xo2) * inv_dt
-    x[s, j, 0] = x0
-    x[s, j, 1] = x1
-    x[s, j, 2] = x2
+        x0 = xf[xb - 3] + d0 * sc
+        x1 = xf[xb - 2] + d1 * sc
+        x2 = xf[xb - 1] + d2 * sc
+    vf[xb] = (x0 - xo0) * inv_dt
+    vf[xb + 1] = (x1 - xo1) * inv_dt
+    vf[xb + 2] = (x2 - xo2) * inv_dt
+    xf[xb] = x0
+    xf[xb + 1] = x1
+    xf[xb + 2] = x2
 
 
 def guide_frames(guide_x: np.ndarray, tan_rest: np.ndarray, rotation: np.ndarray) -> np.ndarray:
