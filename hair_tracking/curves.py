@@ -123,30 +123,19 @@ def apply_stencil(x, idx, w, out):
                                 w[p, 2] * x[s, idx[p, 2], a] + w[p, 3] * x[s, idx[p, 3], a])
 
 
-@njit(cache=True, inline='always')
-def _lerp_knots(t, ta, tb, pa, pb):
-    """Point at knot t on the line through (ta, pa) and (tb, pb) (Barry-Goldman step)."""
-    return ((tb - t) * pa + (t - ta) * pb) / (tb - ta)
-
-
-@njit(cache=True, inline='always')
-def _barry_goldman(t, t0, t1, t2, t3, p0, p1, p2, p3):
-    """One coordinate of the Catmull-Rom point at knot t (Barry & Goldman 1988 pyramid)."""
-    a1 = _lerp_knots(t, t0, t1, p0, p1)
-    a2 = _lerp_knots(t, t1, t2, p1, p2)
-    a3 = _lerp_knots(t, t2, t3, p2, p3)
-    b1 = _lerp_knots(t, t0, t2, a1, a2)
-    b2 = _lerp_knots(t, t1, t3, a2, a3)
-    return _lerp_knots(t, t1, t2, b1, b2)
-
-
 @njit(cache=True, parallel=True)
 def catmull_rom_kernel(x, seg, loc, alpha, out):
     """Catmull-Rom points of every strand: output point p lies on span seg[p] (nodes seg[p] and
-    seg[p] + 1) at local parameter loc[p] in [0, 1], with knot intervals |dP|^alpha."""
+    seg[p] + 1, non-decreasing in p) at local parameter loc[p] in [0, 1], with knot intervals
+    |dP|^alpha.  Each point is the Barry & Goldman (1988) pyramid of linear interpolations,
+    multiplied out into weights of the four nodes; what depends only on the span (the nodes,
+    the knot intervals and their reciprocals) is computed once per span."""
     n = x.shape[1]
     tiny = 1e-9
     for s in prange(x.shape[0]):
+        span = -1
+        p0x = p0y = p0z = p1x = p1y = p1z = p2x = p2y = p2z = p3x = p3y = p3z = 0.0
+        d01 = d12 = r01 = r12 = r23 = r02 = r13 = 1.0
         for p in range(seg.shape[0]):
             i = seg[p]
             u = loc[p]
@@ -158,41 +147,66 @@ def catmull_rom_kernel(x, seg, loc, alpha, out):
                 for a in range(3):
                     out[s, p, a] = x[s, i + 1, a]
                 continue
-            # the four points, with reflected neighbours beyond the ends
-            if i > 0:
-                p0x, p0y, p0z = x[s, i - 1, 0], x[s, i - 1, 1], x[s, i - 1, 2]
-            else:
-                p0x = 2.0 * x[s, 0, 0] - x[s, 1, 0]
-                p0y = 2.0 * x[s, 0, 1] - x[s, 1, 1]
-                p0z = 2.0 * x[s, 0, 2] - x[s, 1, 2]
-            if i + 2 < n:
-                p3x, p3y, p3z = x[s, i + 2, 0], x[s, i + 2, 1], x[s, i + 2, 2]
-            else:
-                p3x = 2.0 * x[s, n - 1, 0] - x[s, n - 2, 0]
-                p3y = 2.0 * x[s, n - 1, 1] - x[s, n - 2, 1]
-                p3z = 2.0 * x[s, n - 1, 2] - x[s, n - 2, 2]
-            p1x, p1y, p1z = x[s, i, 0], x[s, i, 1], x[s, i, 2]
-            p2x, p2y, p2z = x[s, i + 1, 0], x[s, i + 1, 1], x[s, i + 1, 2]
-            d01 = (p1x - p0x) ** 2 + (p1y - p0y) ** 2 + (p1z - p0z) ** 2
-            d12 = (p2x - p1x) ** 2 + (p2y - p1y) ** 2 + (p2z - p1z) ** 2
-            d23 = (p3x - p2x) ** 2 + (p3y - p2y) ** 2 + (p3z - p2z) ** 2
-            d01 = d01 ** (0.5 * alpha)
-            d12 = d12 ** (0.5 * alpha)
-            d23 = d23 ** (0.5 * alpha)
-            if not (d12 > tiny):
+            if i != span:
+                span = i
+                # the four points, with reflected neighbours beyond the ends
+                if i > 0:
+                    p0x, p0y, p0z = x[s, i - 1, 0], x[s, i - 1, 1], x[s, i - 1, 2]
+                else:
+                    p0x = 2.0 * x[s, 0, 0] - x[s, 1, 0]
+                    p0y = 2.0 * x[s, 0, 1] - x[s, 1, 1]
+                    p0z = 2.0 * x[s, 0, 2] - x[s, 1, 2]
+                if i + 2 < n:
+                    p3x, p3y, p3z = x[s, i + 2, 0], x[s, i + 2, 1], x[s, i + 2, 2]
+                else:
+                    p3x = 2.0 * x[s, n - 1, 0] - x[s, n - 2, 0]
+                    p3y = 2.0 * x[s, n - 1, 1] - x[s, n - 2, 1]
+                    p3z = 2.0 * x[s, n - 1, 2] - x[s, n - 2, 2]
+                p1x, p1y, p1z = x[s, i, 0], x[s, i, 1], x[s, i, 2]
+                p2x, p2y, p2z = x[s, i + 1, 0], x[s, i + 1, 1], x[s, i + 1, 2]
+                d01 = (p1x - p0x) ** 2 + (p1y - p0y) ** 2 + (p1z - p0z) ** 2
+                d12 = (p2x - p1x) ** 2 + (p2y - p1y) ** 2 + (p2z - p1z) ** 2
+                d23 = (p3x - p2x) ** 2 + (p3y - p2y) ** 2 + (p3z - p2z) ** 2
+                if alpha == 0.5:                 # |dP|^0.5 from |dP|^2, without pow
+                    d01 = math.sqrt(math.sqrt(d01))
+                    d12 = math.sqrt(math.sqrt(d12))
+                    d23 = math.sqrt(math.sqrt(d23))
+                else:
+                    d01 = d01 ** (0.5 * alpha)
+                    d12 = d12 ** (0.5 * alpha)
+                    d23 = d23 ** (0.5 * alpha)
+                if d12 > tiny:
+                    if not (d01 > tiny):
+                        d01 = d12
+                    if not (d23 > tiny):
+                        d23 = d12
+                    r01 = 1.0 / d01
+                    r12 = 1.0 / d12
+                    r23 = 1.0 / d23
+                    r02 = 1.0 / (d01 + d12)
+                    r13 = 1.0 / (d12 + d23)
+            if not (d12 > tiny):        # a collapsed span: its (single) point
                 out[s, p, 0] = p1x + u * (p2x - p1x)
                 out[s, p, 1] = p1y + u * (p2y - p1y)
                 out[s, p, 2] = p1z + u * (p2z - p1z)
                 continue
-            if not (d01 > tiny):
-                d01 = d12
-            if not (d23 > tiny):
-                d23 = d12
-            t0 = 0.0
-            t1 = d01
-            t2 = t1 + d12
-            t3 = t2 + d23
-            t = t1 + u * d12
-            out[s, p, 0] = _barry_goldman(t, t0, t1, t2, t3, p0x, p1x, p2x, p3x)
-            out[s, p, 1] = _barry_goldman(t, t0, t1, t2, t3, p0y, p1y, p2y, p3y)
-            out[s, p, 2] = _barry_goldman(t, t0, t1, t2, t3, p0z, p1z, p2z, p3z)
+            # knots t0 = -d01, t1 = 0, t2 = d12, t3 = d12 + d23; t = u d12
+            t = u * d12
+            a1a = -t * r01                  # A1 = a1a P0 + a1b P1
+            a1b = (t + d01) * r01
+            c1 = (d12 - t) * r12            # A2 = c1 P1 + c2 P2, and C = c1 B1 + c2 B2
+            c2 = t * r12
+            a3a = (d12 + d23 - t) * r23     # A3 = a3a P2 + a3b P3
+            a3b = (t - d12) * r23
+            b1a = (d12 - t) * r02           # B1 = b1a A1 + b1b A2
+            b1b = (t + d01) * r02
+            b2a = (d12 + d23 - t) * r13     # B2 = b2a A2 + b2b A3
+            b2b = t * r13
+            on_a2 = c1 * b1b + c2 * b2a     # weight of A2 in C
+            w0 = c1 * b1a * a1a
+            w1 = c1 * b1a * a1b + on_a2 * c1
+            w2 = on_a2 * c2 + c2 * b2b * a3a
+            w3 = c2 * b2b * a3b
+            out[s, p, 0] = w0 * p0x + w1 * p1x + w2 * p2x + w3 * p3x
+            out[s, p, 1] = w0 * p0y + w1 * p1y + w2 * p2y + w3 * p3y
+            out[s, p, 2] = w0 * p0z + w1 * p1z + w2 * p2z + w3 * p3z
