@@ -48,14 +48,15 @@ def elastic_weight(vx, vy, vz, v0x, v0y, v0z, mode):
     """W* of equation (4) from the current (v) and previous (v0) velocity of one node.
 
     Only the directions matter, so ``v`` may be given as a displacement.  Returns a value in
-    [0, 1]; 0 when ``mode`` is :data:`ELASTIC_OFF`.
+    [0, 1]; 0 when ``mode`` is :data:`ELASTIC_OFF`.  Directions are undefined (``cos`` taken as
+    0) when ``|v|^2 |v0|^2 <= 1e-300``, i.e. for speeds below about 1e-75 m/s.
     """
     if mode == ELASTIC_OFF:
         return 0.0
-    n = math.sqrt(vx * vx + vy * vy + vz * vz) * math.sqrt(v0x * v0x + v0y * v0y + v0z * v0z)
+    nn = (vx * vx + vy * vy + vz * vz) * (v0x * v0x + v0y * v0y + v0z * v0z)
     cos = 0.0
-    if n > 1e-300:
-        cos = (vx * v0x + vy * v0y + vz * v0z) / n
+    if nn > 1e-300:
+        cos = (vx * v0x + vy * v0y + vz * v0z) / math.sqrt(nn)
         if cos > 1.0:
             cos = 1.0
         elif cos < -1.0:

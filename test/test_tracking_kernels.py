@@ -83,9 +83,9 @@ def reference_step(x, v, ghost_rest, ghost_len, guide_of, seg, t, guide_rest, gx
             v0 = v[m, j]
             w = np.zeros(n)
             if elastic != ELASTIC_OFF:
-                nn = np.linalg.norm(d, axis=1) * np.linalg.norm(v0, axis=1)
-                cos = np.where(nn > 1e-300, np.sum(d * v0, axis=1) / np.where(nn > 1e-300, nn, 1),
-                               0.0)
+                nn = np.sum(d * d, axis=1) * np.sum(v0 * v0, axis=1)      # |d|^2 |v0|^2
+                ok = nn > 1e-300
+                cos = np.where(ok, np.sum(d * v0, axis=1) / np.sqrt(np.where(ok, nn, 1)), 0.0)
                 cos = np.clip(cos, -1, 1)
                 w += 0.5 * cos + 0.5 if elastic == ELASTIC_KEPT else 0.5 - 0.5 * cos
             if tr.tip_weight > 0:
