@@ -6,7 +6,7 @@ PY := $(VENV)/bin/python
 PIP := $(VENV)/bin/pip
 # ROS 2 Jazzy from PyPI wheels (the [fastrtps] extra brings the RMW library); kept out of setup.py.
 ROS_WHEELS := ros-jazzy-rclpy[fastrtps] ros-jazzy-common-interfaces
-PY_DEPS := numpy numba pyyaml rosbags matplotlib pytest flake8
+PY_DEPS := setuptools wheel numpy numba pyyaml rosbags matplotlib pytest flake8
 STAMP := $(VENV)/.complete
 TEST_ENV := ROS_PYTHON_CHECK_FIELDS=1 ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST PYTHONUNBUFFERED=1
 

@@ -83,9 +83,13 @@ _PARAM_TYPES = {
     'double_array': Parameter.Type.DOUBLE_ARRAY,
 }
 WARN_THROTTLE_S = 5.0
-OUTPUT_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=2,
-                        reliability=ReliabilityPolicy.RELIABLE,
-                        durability=DurabilityPolicy.VOLATILE)
+
+
+def output_qos(depth: int) -> QoSProfile:
+    """Reliable, volatile, keep-last ``depth`` (parameter ``output_queue_depth``)."""
+    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=depth,
+                      reliability=ReliabilityPolicy.RELIABLE,
+                      durability=DurabilityPolicy.VOLATILE)
 
 
 def descriptor(p: P.Param) -> ParameterDescriptor:
@@ -161,8 +165,8 @@ def strand_colors(n: int, rgba) -> np.ndarray:
 class _Output:
     """One published strand topic: its two publishers' state and a cache of the last bytes."""
 
-    def __init__(self, node: Node, topic: str, msg_type):
-        self.pub = node.create_publisher(msg_type, topic, OUTPUT_QOS)
+    def __init__(self, node: Node, topic: str, msg_type, depth: int = 2):
+        self.pub = node.create_publisher(msg_type, topic, output_qos(depth))
         self.cached: Optional[bytes] = None
         self.encoded = 0             # messages built (encoded) so far
         self.published = 0
@@ -213,11 +217,12 @@ class HairSimNode(Node):
         self.publish_ms = collections.deque(maxlen=1000)
         self._diag_marks = (0, 0)        # (dropped substeps, rejected) at the last report
 
+        depth = settings.output_queue_depth
         self.outputs: Dict[str, _Output] = {
-            'points': _Output(self, 'hair/points', PointCloud2),
-            'markers': _Output(self, 'hair/markers', MarkerArray),
-            'guide_points': _Output(self, 'hair/guides/points', PointCloud2),
-            'guide_markers': _Output(self, 'hair/guides/markers', MarkerArray),
+            'points': _Output(self, 'hair/points', PointCloud2, depth),
+            'markers': _Output(self, 'hair/markers', MarkerArray, depth),
+            'guide_points': _Output(self, 'hair/guides/points', PointCloud2, depth),
+            'guide_markers': _Output(self, 'hair/guides/markers', MarkerArray, depth),
         }
         self._diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
         self.create_service(Trigger, '~/reset', self._on_reset)

@@ -314,6 +314,10 @@ NODE_PARAMS: Tuple[Param, ...] = (
           'queue depth of the pose subscriptions (sensor-data QoS keeps the newest ones): 5 '
           'keeps every pose of a burst, 1 always simulates the newest pose (lowest latency '
           'when the node falls behind)', lo=1, hi=1000, read_only=True),
+    Param('output_queue_depth', 'int', 2,
+          'history depth of the reliable hair outputs: 2 keeps latency low for viewers; a '
+          'recorder that must not miss a frame under load wants more', lo=1, hi=1000,
+          read_only=True),
     Param('head_frame', 'string', 'head',
           'name of the head frame: the /tf child frame that is the head, and the frame_id of '
           'the output when output_frame is head and the pose message names no child frame'),

@@ -35,7 +35,9 @@ WAIT_S = 30.0
 TOLERANCE_M = 1e-6
 SMALL = {'groom.guides': 5, 'groom.ghosts_per_guide': 2, 'groom.guide_nodes': 7,
          'groom.ghost_nodes': 7, 'solver.settle_time': 0.05, 'stale_timeout': 30.0,
-         'publish_on_pose': True, 'publish_rate_hz': 1000.0}
+         'publish_on_pose': True, 'publish_rate_hz': 1000.0,
+         # no pose and no frame may be lost when the test machine is busy
+         'pose_queue_depth': 1000, 'output_queue_depth': 1000}
 
 
 @pytest.fixture(autouse=True)

@@ -1,0 +1,204 @@
+#!/usr/bin/env python3
+"""Core speed benchmark (issue 2): guides against pypbd, ghost throughput, numba compile time.
+
+    python scripts/bench.py [--json out/bench.json] [--quick]
+
+Guides: one substep of S strands x 16 nodes (S = 100, 1000, 4000) with stretch constraints between
+neighbours and bending as second-neighbour distance constraints, 4 iterations, dt = 1/240 s, no
+collider, roots pinned, gravity on — our PBD, XPBD and FTL solvers side by side with Jan Bender's
+PositionBasedDynamics (PyPI ``pypbd``: the same particles, the same constraints as
+``addDistanceConstraint``, NUM_SUB_STEPS 1, MAX_ITERATIONS 4, the same time step).  Reported:
+median ms per step and ns per node-iteration (ms / (S * 16 * iterations)), and the ratio to pypbd.
+
+Ghosts: one tracking substep of 10 k and 100 k ghost strands x 16 nodes (16 ghosts per guide,
+default tracking options): median ms and million ghost nodes per second.
+
+Compile: first use of every kernel of the default scene in a fresh process with an empty numba
+cache (compile), and again with that cache filled (cache load).
+
+All timings exclude compilation (every kernel is run before it is timed) and are medians of
+repeated runs in this one process."""
+import argparse
+import json
+import os
+import platform
+import subprocess
+import sys
+import tempfile
+import time
+
+import numpy as np
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(0, ROOT)
+
+from hair_tracking.ghosts import GhostTracker  # noqa: E402
+from hair_tracking.groom import make_groom  # noqa: E402
+from hair_tracking.guides import GuideSolver  # noqa: E402
+from hair_tracking.head_track import IDENTITY  # noqa: E402
+from hair_tracking.model import StrandSet  # noqa: E402
+from hair_tracking.scene import Scene  # noqa: E402
+
+NODES = 16
+ITERATIONS = 4
+DT = 1.0 / 240.0
+
+
+def median_ms(fn, repeats, warmup=3):
+    for _ in range(warmup):
+        fn()
+    samples = []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        fn()
+        samples.append(time.perf_counter() - start)
+    return float(np.median(samples) * 1e3)
+
+
+def hanging_rest(strands, nodes=NODES, length=0.25):
+    """Straight strands hanging down from a row of roots (head frame)."""
+    seg = length / (nodes - 1)
+    rest = np.zeros((strands, nodes, 3))
+    rest[:, :, 0] = (np.arange(strands) * 0.003)[:, None]
+    rest[:, :, 2] = -seg * np.arange(nodes)[None, :]
+    return rest
+
+
+def bench_ours(solver, strands, repeats):
+    scene = Scene().with_changes(solver__type=solver, solver__iterations=ITERATIONS,
+                                 solver__dt=DT, collider__shape='none',
+                                 solver__shock_propagation=0.0, solver__bend_stiffness=0.3)
+    s = StrandSet.from_rest(hanging_rest(strands))
+    gs = GuideSolver(s, scene)
+    gs.reset(IDENTITY)
+    return median_ms(lambda: gs.step(DT, IDENTITY, IDENTITY), repeats)
+
+
+def bench_pypbd(strands, repeats):
+    import pypbd as pbd
+    sim = pbd.Simulation.getCurrent()
+    sim.initDefault()
+    model = sim.getModel()
+    particles = model.getParticles()
+    ts = sim.getTimeStep()
+    ts.setValueUInt(pbd.TimeStepController.NUM_SUB_STEPS, 1)
+    ts.setValueUInt(pbd.TimeStepController.MAX_ITERATIONS, ITERATIONS)
+    pbd.TimeManager.getCurrent().setTimeStepSize(DT)
+    rest = hanging_rest(strands)
+    for p in rest.reshape(-1, 3):
+        particles.addVertex(p.tolist())
+    for s in range(strands):
+        b = s * NODES
+        particles.setMass(b, 0.0)
+        particles.setMass(b + 1, 0.0)
+        for k in range(NODES - 1):
+            model.addDistanceConstraint(b + k, b + k + 1, 1.0)
+        for k in range(NODES - 2):
+            model.addDistanceConstraint(b + k, b + k + 2, 0.3)
+    ms = median_ms(lambda: ts.step(model), repeats)
+    sim.reset()
+    model.cleanup()
+    return ms
+
+
+def bench_ghosts(ghosts, repeats):
+    per_guide = 16
+    scene = Scene().with_changes(groom__guides=ghosts // per_guide,
+                                 groom__ghosts_per_guide=per_guide,
+                                 groom__guide_nodes=NODES, groom__ghost_nodes=NODES)
+    groom = make_groom(scene.groom)
+    guides = StrandSet.from_rest(groom.guide_rest)
+    gh = StrandSet.from_rest(groom.ghost_rest)
+    tracker = GhostTracker(gh, guides, scene, None)
+    tracker.reset(IDENTITY)
+    guides.place_at(IDENTITY)
+    x_old = guides.x.copy()
+    phase = [0.0]
+
+    def step():
+        phase[0] += 0.05
+        np.copyto(x_old, guides.x)
+        guides.x[:, 2:, 0] = groom.guide_rest[:, 2:, 0] + 0.01 * np.sin(phase[0])
+        tracker.step(DT, x_old, IDENTITY)
+    return median_ms(step, repeats)
+
+
+COMPILE_SNIPPET = r'''
+import sys, time
+sys.path.insert(0, {root!r})
+start = time.perf_counter()
+from hair_tracking.scene import Scene
+from hair_tracking.resources import config_path
+from hair_tracking.demo import warm_up
+scene = Scene.from_yaml(config_path('default'))
+warm_up(scene)
+print(time.perf_counter() - start)
+'''
+
+
+def bench_compile():
+    out = {}
+    with tempfile.TemporaryDirectory() as cache:
+        env = dict(os.environ, NUMBA_CACHE_DIR=cache)
+        code = COMPILE_SNIPPET.format(root=ROOT)
+        for label in ('cold_cache_s', 'warm_cache_s'):
+            proc = subprocess.run([sys.executable, '-c', code], env=env, capture_output=True,
+                                  text=True, timeout=900)
+            if proc.returncode != 0:
+                raise RuntimeError(proc.stderr)
+            out[label] = float(proc.stdout.strip().splitlines()[-1])
+    return out
+
+
+def main():
+    ap = argparse.ArgumentParser(description='hair_tracking core benchmark')
+    ap.add_argument('--json', help='write the figures to this JSON file')
+    ap.add_argument('--quick', action='store_true', help='fewer repeats and sizes')
+    args = ap.parse_args()
+    reps = 5 if args.quick else 20
+    try:
+        import pypbd  # noqa: F401
+        have_pypbd = True
+    except ImportError:
+        have_pypbd = False
+        print('pypbd not installed: `pip install pypbd` (make bench does) for the peer column')
+
+    result = {'machine': {'cpus': os.cpu_count(), 'python': platform.python_version(),
+                          'numba_threads': int(os.environ.get('NUMBA_NUM_THREADS', 0)) or None},
+              'guides': [], 'ghosts': [], 'compile': {}}
+    print(f'guides: {NODES} nodes, {ITERATIONS} iterations, dt {DT * 1e3:.3f} ms, median of '
+          f'{reps} steps')
+    print(f'{"strands":>8} {"solver":>7} {"ms/step":>9} {"ns/node-it":>11} {"vs pypbd":>9}')
+    for strands in ((100, 1000) if args.quick else (100, 1000, 4000)):
+        peer = bench_pypbd(strands, reps) if have_pypbd else None
+        rows = [('pypbd', peer)] if peer is not None else []
+        rows += [(s, bench_ours(s, strands, reps)) for s in ('pbd', 'xpbd', 'ftl')]
+        for solver, ms in rows:
+            ns = ms * 1e6 / (strands * NODES * ITERATIONS)
+            ratio = peer / ms if peer else None
+            result['guides'].append({'strands': strands, 'solver': solver, 'ms_per_step': ms,
+                                     'ns_per_node_iteration': ns, 'speedup_vs_pypbd': ratio})
+            rs = f'{ratio:8.1f}x' if ratio else '        -'
+            print(f'{strands:8d} {solver:>7} {ms:9.3f} {ns:11.2f} {rs}')
+
+    print('ghosts: 16 nodes, 16 ghosts per guide, default tracking, one substep')
+    print(f'{"ghosts":>8} {"ms/step":>9} {"M nodes/s":>10}')
+    for ghosts in ((10_000,) if args.quick else (10_000, 100_000)):
+        ms = bench_ghosts(ghosts, max(5, reps // 2))
+        mnps = ghosts * NODES / (ms * 1e-3) / 1e6
+        result['ghosts'].append({'ghosts': ghosts, 'ms_per_step': ms, 'mnodes_per_s': mnps})
+        print(f'{ghosts:8d} {ms:9.3f} {mnps:10.1f}')
+
+    comp = bench_compile()
+    result['compile'] = comp
+    print(f'numba compile, default scene kernels: empty cache {comp["cold_cache_s"]:.1f} s, '
+          f'warm cache {comp["warm_cache_s"]:.1f} s (whole process start included)')
+    if args.json:
+        os.makedirs(os.path.dirname(os.path.abspath(args.json)), exist_ok=True)
+        with open(args.json, 'w') as f:
+            json.dump(result, f, indent=2)
+        print(f'wrote {args.json}')
+
+
+if __name__ == '__main__':
+    main()
