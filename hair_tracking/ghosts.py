@@ -170,10 +170,15 @@ class GhostTracker:
         """Ghosts in their rest shape carried by ``head``, at rest."""
         self.ghosts.place_at(head)
 
-    def step(self, dt: float, guide_x_old: np.ndarray, head: HeadPose) -> None:
-        """Advance the ghosts one substep of ``dt`` [s] after the guides moved from
-        ``guide_x_old`` to ``guides.x`` (both (G, M, 3), world [m]); ``head`` is the head pose at
-        the end of the substep."""
+    def step(self, dt: float, guide_x_old: np.ndarray, head: HeadPose,
+             substeps: int = 1) -> None:
+        """Advance the ghosts by ``dt`` [s] after the guides moved from ``guide_x_old`` to
+        ``guides.x`` (both (G, M, 3), world [m]); ``head`` is the head pose at the end.
+
+        ``substeps`` > 1 covers that many guide substeps in one tracking step: the per-step
+        feedback strengths ``k`` (offset, centre of mass, spread) become ``1 - (1 - k)^substeps``,
+        what ``substeps`` separate steps would have applied to a constant deviation, so the pull
+        per second does not depend on how often the ghosts are tracked."""
         if not (dt > 0.0 and math.isfinite(dt)):
             raise ValueError(f'dt must be a finite number > 0 [s], got {dt!r}')
         gx = self.guides.x
@@ -194,7 +199,8 @@ class GhostTracker:
                 _f64(gx), _f64(guide_x_old), self._tan_rest,
                 _f64(head.rotation), _f64(head.position), float(dt),
                 self._elastic, tr.tip_weight > 0.0, tr.com_weight, tr.max_weight,
-                tr.offset_strength, tr.com_strength, tr.spread, tr.length_restore,
+                _per(tr.offset_strength, substeps), _per(tr.com_strength, substeps),
+                _per(tr.spread, substeps), tr.length_restore,
                 self._q_buf, self._scratch, self._clamped)
         threads = numba.get_num_threads()
         if self._serial and threads > 1:
@@ -239,6 +245,11 @@ class GhostTracker:
     def group_members(self, g: int) -> np.ndarray:
         """Ghost indices of group ``g`` (which follows guide ``group_guide[g]``)."""
         return self.order[self.group_start[g]:self.group_start[g + 1]]
+
+
+def _per(strength: float, substeps: int) -> float:
+    """A per-substep relaxation strength applied over ``substeps`` substeps at once."""
+    return strength if substeps <= 1 else 1.0 - (1.0 - strength) ** substeps
 
 
 def _f64(a):

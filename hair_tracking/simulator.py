@@ -15,6 +15,8 @@ Time handling
 * Time going backwards or a teleport carries the hair rigidly to the new head pose with zero
   velocity (no whip); an explicit :meth:`reset` puts the hair back in its rest shape and lets it
   settle.
+* Ghosts are drawn, not simulated: they are tracked once per ``advance_to`` call (one head pose),
+  over all guide substeps of the call, unless ``tracking.every_substep`` asks for every substep.
 * A substep in which a hair node would move farther than half the per-substep displacement clamp
   (``solver.max_displacement``; 2.5 cm when the clamp is off) is *split* into equal shorter
   substeps, at most :data:`MAX_SPLIT` and none shorter than :data:`MIN_SPLIT_DT`, with the head
@@ -109,6 +111,7 @@ class HairSimulator:
                 self.ghosts, self.guides, scene,
                 self.collider if scene.tracking.collide else None)
         self._x_old = np.empty_like(self.guides.x)
+        self._ghost_guide_x = np.empty_like(self.guides.x)   # guides at the last ghost step
         # farthest any hair node can be from the head origin [m]: root distance + strand length
         reach = [np.linalg.norm(self.guides.rest[:, 0], axis=1) + self.guides.strand_length]
         if self.ghosts is not None:
@@ -175,10 +178,12 @@ class HairSimulator:
             times = [self.time_ns + self.dt_ns * (k + 1) for k in range(due)]
             self.time_ns += self.dt_ns * int(due)
         dt = self.scene.solver.dt
+        self._begin_ghosts()
         for t in times:
             head = self.track.sample(t)
             self._substep(dt, self.head, head)
             self.head = head
+        self._track_ghosts(dt * len(times), len(times))
         self.counters.substeps += len(times)
         self.counters.last_substeps = len(times)
         self.counters.last_advance_ms = (time.perf_counter() - start) * 1e3
@@ -260,17 +265,34 @@ class HairSimulator:
     def _step(self, dt: float, head_prev: HeadPose, head: HeadPose) -> None:
         np.copyto(self._x_old, self.guides.x)
         self.guide_solver.step(dt, head_prev, head)
-        if self.ghost_tracker is not None:
+        if self.ghost_tracker is not None and self.scene.tracking.every_substep:
             self.ghost_tracker.step(dt, self._x_old, head)
         d = self.guides.x - self._x_old
         self._last_speed = math.sqrt(float(np.max(np.einsum('snk,snk->sn', d, d)))) / dt
+
+    # Ghost tracking schedule.  The ghosts are drawn, not simulated: by default they are tracked
+    # once per advance_to() call (one head pose), over all the guide substeps of that call, with
+    # the per-substep feedback strengths compounded (GhostTracker.step's ``substeps``).  At
+    # 240 Hz substeps and a 60 Hz pose stream that is 4x fewer tracking steps, the dominant cost
+    # of a large groom.  ``tracking.every_substep`` restores tracking after every substep.
+    def _begin_ghosts(self) -> None:
+        if self.ghost_tracker is not None and not self.scene.tracking.every_substep:
+            np.copyto(self._ghost_guide_x, self.guides.x)
+
+    def _track_ghosts(self, dt: float, substeps: int) -> None:
+        if self.ghost_tracker is None or self.scene.tracking.every_substep or substeps == 0:
+            return
+        self.ghost_tracker.step(dt, self._ghost_guide_x, self.head, substeps=substeps)
 
     def _rest_at(self, head: HeadPose) -> None:
         self.guide_solver.reset(head)
         if self.ghost_tracker is not None:
             self.ghost_tracker.reset(head)
-        for _ in range(int(round(self.scene.solver.settle_time / self.scene.solver.dt))):
+        self._begin_ghosts()
+        settle = int(round(self.scene.solver.settle_time / self.scene.solver.dt))
+        for _ in range(settle):
             self._substep(self.scene.solver.dt, head, head)
+        self._track_ghosts(self.scene.solver.dt * settle, settle)
         for strands in (self.guides, self.ghosts):
             if strands is not None:
                 strands.v[...] = 0.0
