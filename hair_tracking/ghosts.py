@@ -28,29 +28,23 @@ group through ``order`` (ghost indices sorted by guide, stable); group ``g`` is
 import math
 from typing import Dict
 
-import numba
 import numpy as np
 
 from .collision import Collider
 from .correspondence import assign_guides, node_correspondence
 from .ftl import ftl_restore
+from .integrate import threads_for
 from .model import HeadPose, StrandSet
 from .scene import Scene
 from .tracking_kernels import guide_frames, track_groups
 from .weights import arc_fractions, elastic_code
 
 
-#: Below this many ghost nodes the tracking kernel runs on one thread: the work (about 1 ms)
-#: is then smaller than what a busy second core costs to join (measured 3-5x slower on the
-#: shared 2-core machine).  Results do not depend on the thread count.
-PARALLEL_MIN_NODES = 1 << 17
-
-
 class GhostTracker:
     """Moves ``ghosts`` (a :class:`StrandSet`) after ``guides`` each substep.
 
     ``ghosts.x``/``ghosts.v`` are updated in place (world frame [m], [m/s]).  ``collider`` is used
-    only when ``scene.tracking.collide`` is true and must then expose
+    only when ``scene.tracking.collide`` is true and it is given; it must then expose
     ``apply(x, x_prev, inv_mass, head) -> int``.
 
     ``regroup`` (default true): the ghost StrandSet is reordered **once**, at construction, so
@@ -79,10 +73,9 @@ class GhostTracker:
         _check_strandset('guides', guides)
         if guides.count == 0:
             raise ValueError('guides: a ghost tracker needs at least one guide strand')
-        if tr.collide and collider is None:
-            raise ValueError('tracking.collide is true but no collider was given '
-                             '(collider.shape is none?)')
-        if tr.collide and not callable(getattr(collider, 'apply', None)):
+        # tracking.collide means "collide with the head collider, if the scene has one"
+        self.collide = bool(tr.collide and collider is not None)
+        if self.collide and not callable(getattr(collider, 'apply', None)):
             raise ValueError('collider must expose apply(x, x_prev, inv_mass, head)')
         s_count, n_nodes = ghosts.count, ghosts.nodes
 
@@ -154,11 +147,10 @@ class GhostTracker:
         self._q_buf = np.empty((n_groups, guides.nodes - 1, 3, 3))
         self._scratch = np.empty((s_count, 6))
         self._clamped = np.zeros(n_groups, dtype=np.int64)
-        self._x_prev = np.empty_like(ghosts.x) if tr.collide else None
-        self._serial = s_count * n_nodes < PARALLEL_MIN_NODES
+        self._x_prev = np.empty_like(ghosts.x) if self.collide else None
         # corrections of the collision-aware length restoration (not used: ghost velocities are
         # taken from the displacement)
-        self._restore_corr = np.zeros_like(ghosts.x) if tr.collide else None
+        self._restore_corr = np.zeros_like(ghosts.x) if self.collide else None
         self.stats: Dict[str, int] = {
             'ghosts': int(s_count), 'groups': int(n_groups),
             'largest_group': int(group_size.max()) if n_groups else 0,
@@ -191,7 +183,7 @@ class GhostTracker:
                 not (x.flags.c_contiguous and v.flags.c_contiguous):
             raise ValueError(f'ghosts.x and ghosts.v must be C-contiguous arrays shaped '
                              f'{self.ghosts.rest.shape}')
-        if tr.collide:
+        if self.collide:
             np.copyto(self._x_prev, x)
         args = (x, v, self.ghosts.rest, _f64(self.ghosts.rest_length), self.order,
                 self.group_start, self.group_guide, self._node_table, self._node_row,
@@ -202,18 +194,11 @@ class GhostTracker:
                 _per(tr.offset_strength, substeps), _per(tr.com_strength, substeps),
                 _per(tr.spread, substeps), tr.length_restore,
                 self._q_buf, self._scratch, self._clamped)
-        threads = numba.get_num_threads()
-        if self._serial and threads > 1:
-            numba.set_num_threads(1)
-            try:
-                track_groups(*args)
-            finally:
-                numba.set_num_threads(threads)
-        else:
+        with threads_for(x.shape[0] * x.shape[1]):
             track_groups(*args)
         self.stats['steps'] += 1
         self.stats['clamped'] = int(self._clamped.sum())
-        if tr.collide:
+        if self.collide:
             contacts = int(self.collider.apply(x, self._x_prev, self.ghosts.inv_mass, head))
             self.stats['contacts'] = contacts
             c = self.collider

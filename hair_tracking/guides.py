@@ -106,6 +106,10 @@ class GuideSolver:
 
     def step(self, dt: float, head_prev: HeadPose, head: HeadPose) -> None:
         """Advance one substep ``dt`` [s] while the head moves from ``head_prev`` to ``head``."""
+        with integrate.threads_for(self.strands.x.shape[0] * self.strands.x.shape[1]):
+            self._step(dt, head_prev, head)
+
+    def _step(self, dt: float, head_prev: HeadPose, head: HeadPose) -> None:
         dt = float(dt)
         if not (math.isfinite(dt) and dt > 0.0):
             raise ValueError(f'dt: must be a positive finite number of seconds, got {dt!r}')

@@ -26,14 +26,36 @@ frame. Arrays are C-contiguous float64 ``(S, N, 3)``. The block helpers work on 
 ``s0 <= s < s1`` so that a fused solver kernel can run them back to back on a block of strands
 while it is in cache (see :data:`BLOCK`).
 """
+from contextlib import contextmanager
 import math
 
 import numpy as np
+import numba
 from numba import njit, prange
 
 #: Strands one thread processes together. The constraint sweeps interleave the strands of a
 #: block (strand index innermost), so the CPU overlaps their independent dependency chains;
 #: measured on the 2-core Xeon here: about 2.5x faster than one strand at a time.
+#: Below this many nodes a kernel runs on one thread: the work (about 1 ms or less) is then
+#: smaller than what a busy second core costs to join a parallel region (measured 3-15x slower
+#: on the shared 2-core machine).  Results do not depend on the thread count (tested).
+PARALLEL_MIN_NODES = 1 << 17
+
+
+@contextmanager
+def threads_for(nodes: int):
+    """Run the enclosed numba calls on one thread when ``nodes`` is below PARALLEL_MIN_NODES."""
+    threads = numba.get_num_threads()
+    if nodes >= PARALLEL_MIN_NODES or threads == 1:
+        yield
+        return
+    numba.set_num_threads(1)
+    try:
+        yield
+    finally:
+        numba.set_num_threads(threads)
+
+
 BLOCK = 8
 
 #: LLVM fast-math flags of every kernel: only ``contract`` (fused multiply-add). Results are

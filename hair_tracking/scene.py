@@ -90,7 +90,7 @@ class TrackingSpec:
     com_weight: float = 0.3           # w_com per metre of distance from the group centre / length
     max_weight: float = 1.5           # clamp of W* + w_tip + w_com (energy safety)
     length_restore: bool = True       # one Follow-The-Leader pass on ghosts
-    collide: bool = False             # ghosts collide with the head collider
+    collide: bool = True              # ghosts collide with the head collider (if any)
     spread: float = 0.0               # HairControl spread control strength 0..1 (0 = off)
     spread_target: float = 1.0        # target variance as a multiple of the initial variance
     every_substep: bool = False       # track after every guide substep (else once per pose)

@@ -21,13 +21,19 @@ repeated runs in this one process."""
 import argparse
 import json
 import os
-import platform
-import subprocess
 import sys
-import tempfile
-import time
 
-import numpy as np
+# Threads for both libraries (numba and pypbd's OpenMP) must be fixed before they load:
+# --threads N (default 1, the fairest comparison on a shared 2-core machine).
+_THREADS = sys.argv[sys.argv.index('--threads') + 1] if '--threads' in sys.argv else '1'
+os.environ['NUMBA_NUM_THREADS'] = _THREADS
+os.environ['OMP_NUM_THREADS'] = _THREADS
+import platform  # noqa: E402
+import subprocess  # noqa: E402
+import tempfile  # noqa: E402
+import time  # noqa: E402
+
+import numpy as np  # noqa: E402
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, ROOT)
@@ -154,6 +160,8 @@ def main():
     ap = argparse.ArgumentParser(description='hair_tracking core benchmark')
     ap.add_argument('--json', help='write the figures to this JSON file')
     ap.add_argument('--quick', action='store_true', help='fewer repeats and sizes')
+    ap.add_argument('--threads', default='1',
+                    help='threads for numba and for pypbd (OpenMP); read before import')
     args = ap.parse_args()
     reps = 5 if args.quick else 20
     try:
@@ -164,7 +172,8 @@ def main():
         print('pypbd not installed: `pip install pypbd` (make bench does) for the peer column')
 
     result = {'machine': {'cpus': os.cpu_count(), 'python': platform.python_version(),
-                          'numba_threads': int(os.environ.get('NUMBA_NUM_THREADS', 0)) or None},
+                          'threads': int(_THREADS),
+                          'load_average': os.getloadavg()},
               'guides': [], 'ghosts': [], 'compile': {}}
     print(f'guides: {NODES} nodes, {ITERATIONS} iterations, dt {DT * 1e3:.3f} ms, median of '
           f'{reps} steps')

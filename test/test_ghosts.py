@@ -315,8 +315,13 @@ def test_collision_stage_only_when_enabled():
     assert tracker.stats['contacts'] > 0
     assert ghosts.x[..., 2].min() >= -0.1
     np.testing.assert_allclose(ghosts.v, (ghosts.x - x_prev) / DT, atol=1e-9)
-    with pytest.raises(ValueError, match='collide'):
-        GhostTracker(ghosts, guides, scene_with(collide=True), None)
+    # collide means "with the scene's collider, if it has one": none given, none run
+    calls = collider.calls
+    tracker = GhostTracker(ghosts, guides, scene_with(collide=True), None)
+    tracker.step(DT, guides.x.copy(), pose())
+    assert not tracker.collide and collider.calls == calls
+    with pytest.raises(ValueError, match='apply'):
+        GhostTracker(ghosts, guides, scene_with(collide=True), object())
 
 
 def test_degenerate_strands_give_no_nan():
