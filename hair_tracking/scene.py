@@ -93,7 +93,7 @@ class TrackingSpec:
     collide: bool = True              # ghosts collide with the head collider (if any)
     spread: float = 0.0               # HairControl spread control strength 0..1 (0 = off)
     spread_target: float = 1.0        # target variance as a multiple of the initial variance
-    every_substep: bool = False       # track after every guide substep (else once per pose)
+    every_substep: bool = True        # track after every guide substep (false: once per pose)
 
 
 @dataclass(frozen=True)

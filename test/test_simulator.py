@@ -120,8 +120,9 @@ def test_stages_the_scene_does_not_need_are_not_built_or_run(monkeypatch):
 
 
 def test_ghosts_tracked_once_per_pose_unless_every_substep(monkeypatch):
-    per_pose = HairSimulator(scene())
+    per_pose = HairSimulator(scene(tracking__every_substep=False))
     every = HairSimulator(scene(tracking__every_substep=True))
+    assert Scene().tracking.every_substep            # the literal schedule is the default
     drive(per_pose, 50)
     drive(every, 50)
     substeps = per_pose.counters.substeps
