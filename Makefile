@@ -43,5 +43,15 @@ bench: $(STAMP)
 	$(TEST_ENV) $(PY) scripts/bench_msgs.py --json out/bench_msgs.json
 	$(TEST_ENV) $(PY) scripts/bench_latency.py --json out/bench_latency.json
 
+# The full matrix of stiff and extreme cases (about 25 min); writes docs/results/stability.*
+stability: $(STAMP)
+	$(PY) -m hair_tracking.eval_cli stability
+
+# Error against run time of every method (installs the peer pypbd); writes docs/results and
+# docs/figures
+eval: $(STAMP)
+	$(PY) -m pip install -q pypbd
+	$(PY) -m hair_tracking.eval_cli accuracy
+
 clean:
 	rm -rf $(VENV) out build *.egg-info
