@@ -171,6 +171,11 @@ class GhostTracker:
         feedback strengths ``k`` (offset, centre of mass, spread) become ``1 - (1 - k)^substeps``,
         what ``substeps`` separate steps would have applied to a constant deviation, so the pull
         per second does not depend on how often the ghosts are tracked."""
+        with threads_for(self.ghosts.x.shape[0] * self.ghosts.x.shape[1]):
+            self._step(dt, guide_x_old, head, substeps)
+
+    def _step(self, dt: float, guide_x_old: np.ndarray, head: HeadPose,
+              substeps: int = 1) -> None:
         if not (dt > 0.0 and math.isfinite(dt)):
             raise ValueError(f'dt must be a finite number > 0 [s], got {dt!r}')
         gx = self.guides.x
@@ -194,8 +199,7 @@ class GhostTracker:
                 _per(tr.offset_strength, substeps), _per(tr.com_strength, substeps),
                 _per(tr.spread, substeps), tr.length_restore,
                 self._q_buf, self._scratch, self._clamped)
-        with threads_for(x.shape[0] * x.shape[1]):
-            track_groups(*args)
+        track_groups(*args)
         self.stats['steps'] += 1
         self.stats['clamped'] = int(self._clamped.sum())
         if self.collide:

@@ -41,6 +41,7 @@ from .ghosts import GhostTracker
 from .groom import make_groom
 from .guides import GuideSolver
 from .head_track import HeadTrack, IDENTITY, PoseResult
+from .integrate import threads_for
 from .metrics import max_stretch
 from .model import HeadPose, StrandSet
 from .scene import Scene
@@ -111,6 +112,8 @@ class HairSimulator:
                 self.ghosts, self.guides, scene,
                 self.collider if scene.tracking.collide else None)
         self._x_old = np.empty_like(self.guides.x)
+        self._nodes = self.guides.x.shape[0] * self.guides.x.shape[1] + (
+            0 if self.ghosts is None else self.ghosts.x.shape[0] * self.ghosts.x.shape[1])
         self._ghost_guide_x = np.empty_like(self.guides.x)   # guides at the last ghost step
         # farthest any hair node can be from the head origin [m]: root distance + strand length
         reach = [np.linalg.norm(self.guides.rest[:, 0], axis=1) + self.guides.strand_length]
@@ -222,9 +225,10 @@ class HairSimulator:
         """Deepest hair node inside the head collider [m]; 0 without a collider."""
         if self.collider is None:
             return 0.0
-        d = self.collider.penetration(self.guides.x, self.head)
-        if self.ghosts is not None:
-            d = max(d, self.collider.penetration(self.ghosts.x, self.head))
+        with threads_for(self._nodes):
+            d = self.collider.penetration(self.guides.x, self.head)
+            if self.ghosts is not None:
+                d = max(d, self.collider.penetration(self.ghosts.x, self.head))
         return d
 
     # ------------------------------------------------------------ internals
