@@ -21,7 +21,11 @@ Methods (:func:`default_methods`)
     ratios; and the peer pypbd simulating all strands (skipped with a note when not installed).
 
 Metrics (per output frame at :data:`FRAME_RATE`, then aggregated over the run)
-    position error ``|x - x_ref| / L`` (RMS over nodes and frames, and the maximum), tip error
+    position error ``|x - x_ref| / L`` (RMS over nodes and frames, and the maximum); motion
+    error ``|(x - x0) - (x_ref - x_ref0)| / L`` (RMS), where ``x0`` is each method's own settled
+    state before the motion: the position error also counts a different rest shape (ghosts
+    hang like their guides, PBD sags by its stretch), the motion error only how differently the
+    hair moves; tip error
     (mean tip distance / L), max stretch ``max |l/l0 - 1|`` of the output, head penetration of the
     free nodes into the bare collider [mm], spread ratio (the variance of fixed ghost groups
     about their centre of mass, over the reference's: below 1 the hair clumps, above it fans out)
@@ -57,6 +61,16 @@ FRAME_RATE = 60.0
 
 #: The reference setting: XPBD, compliance 0, substep FRAME/32 (1/1920 s), 8 iterations.
 REFERENCE = {'type': 'xpbd', 'substeps': 32, 'iterations': 8}
+
+#: The reference is run a second time with its settled state perturbed by this much [m]: the
+#: growth of that perturbation shows where the hair's motion stops being predictable.
+CHAOS_PERTURBATION = 1e-6
+#: The predictable window ends where the perturbed reference is farther than this RMS [L] from
+#: the reference: errors after it measure the chaos of hair-head contact, not the methods.
+CHAOS_RMS = 0.01
+
+#: Per-frame metrics (see the module docstring).
+METRICS = ('rms', 'max', 'tip', 'stretch', 'pen', 'spread', 'motion')
 
 
 # ============================================================== head poses at substep times
@@ -136,9 +150,10 @@ def substeps_per_frame(dt: float, frame_rate: float = FRAME_RATE) -> int:
 class Scorer:
     """Per-frame metrics of a method's output against stored reference frames."""
 
-    def __init__(self, workload: Workload, ref_frames: np.ndarray):
+    def __init__(self, workload: Workload, ref_frames: np.ndarray, ref_settled: np.ndarray):
         self.w = workload
         self.ref = ref_frames                          # (F, S, N, 3) float32
+        self.ref0 = np.asarray(ref_settled, dtype=np.float64)
         self.collider = make_collider(workload.scene.collider)
         self._order = np.argsort(workload.groups, kind='stable')
         g = workload.groups[self._order]
@@ -154,19 +169,23 @@ class Scorer:
         d = xs - np.repeat(com, self._sizes, axis=0)
         return float(np.einsum('snk,snk->', d, d))
 
-    def frame(self, j: int, x: np.ndarray, head: HeadPose) -> Dict[str, float]:
+    def frame(self, j: int, x: np.ndarray, head: HeadPose, x0: np.ndarray) -> Dict[str, float]:
+        """Metrics of frame ``j``; ``x0`` is the method's settled state before the motion (for
+        the motion error: how far the hair moved from where it started, against how far the
+        reference moved from where it started)."""
         if not np.all(np.isfinite(x)):
             return {'rms': math.inf, 'max': math.inf, 'tip': math.inf, 'stretch': math.inf,
-                    'pen': math.inf, 'spread': math.nan}
+                    'pen': math.inf, 'spread': math.nan, 'motion': math.inf}
         ref = self.ref[j].astype(np.float64)
         rms, mx = position_error(x, ref, self.w.strand_length)
+        motion, _ = position_error(x - x0, ref - self.ref0, self.w.strand_length)
         pen = 0.0
         if self.collider is not None:
             pen = self.collider.penetration(x, head, self.w.inv_mass)
         rs = self.ref_spread[j]
         return {'rms': rms, 'max': mx, 'tip': tip_error(x, ref, self.w.strand_length),
                 'stretch': max_stretch(x, self.w.rest_length), 'pen': pen,
-                'spread': self.spread(x) / rs if rs > 0 else math.nan}
+                'spread': self.spread(x) / rs if rs > 0 else math.nan, 'motion': motion}
 
 
 @dataclass
@@ -181,15 +200,22 @@ class RunResult:
     per_frame: Dict[str, np.ndarray] = field(default_factory=dict)   # metric -> (F,)
     frame_ms: List[np.ndarray] = field(default_factory=list)        # one array per timed run
     failed: str = ''
+    horizon: int = 0                  # frames of the predictable window (0: all)
 
     def summary(self) -> Dict[str, float]:
         pf = self.per_frame
         runs = [float(np.median(r)) for r in self.frame_ms if len(r)]
+        h = self.horizon or None
         out = {
             'ms_frame': float(np.median(runs)) if runs else math.nan,
             'ms_frame_min_run': min(runs) if runs else math.nan,
             'ms_frame_max_run': max(runs) if runs else math.nan,
             'rms_err': float(np.sqrt(np.mean(pf['rms'] ** 2))) if 'rms' in pf else math.nan,
+            'motion_err': float(np.sqrt(np.mean(pf['motion'] ** 2))) if 'motion' in pf
+            else math.nan,
+            'rms_err_pred': float(np.sqrt(np.mean(pf['rms'][:h] ** 2))) if 'rms' in pf
+            else math.nan,
+            'tip_err_pred': float(np.mean(pf['tip'][:h])) if 'tip' in pf else math.nan,
             'max_err': float(np.max(pf['max'])) if 'max' in pf else math.nan,
             'tip_err': float(np.mean(pf['tip'])) if 'tip' in pf else math.nan,
             'max_stretch': float(np.max(pf['stretch'])) if 'stretch' in pf else math.nan,
@@ -204,6 +230,7 @@ def settle(method: Method, head: HeadPose, seconds: float) -> None:
     method.reset(head)
     for _ in range(int(round(seconds / method.dt))):
         method.step(method.dt, head, head)
+    method.output(head)             # methods that work per frame catch up here
     v = method.velocities()
     if v is not None:
         v[...] = 0.0
@@ -214,12 +241,15 @@ def run_frames(method: Method, schedule: HeadSchedule, frames: int,
                settle_s: float = 0.0) -> np.ndarray:
     """Settle, then run ``frames`` output frames; returns the seconds each frame took (only the
     stepping and the output, not ``on_frame`` nor what the method reports in
-    ``excluded_seconds``, i.e. pypbd's root driving).  Stops early (returning fewer times) when the
-    output becomes non-finite."""
+    ``excluded_seconds``, i.e. pypbd's root driving).  ``on_frame(j, x, head)`` is called with
+    ``j = -1`` once after settling, then for every frame ``j = 0 .. frames - 1``.  Stops early
+    (returning fewer times) when the output becomes non-finite."""
     k = substeps_per_frame(method.dt, schedule.frame_rate)
     poses = schedule.poses(k)
     head0 = schedule.start()
     settle(method, head0, settle_s)
+    if on_frame is not None:
+        on_frame(-1, method.output(head0), head0)       # the settled state, before the motion
     secs = np.empty(frames)
     prev = head0
     dt = method.dt
@@ -248,14 +278,19 @@ def reference_scene(scene: Scene, substeps: int = REFERENCE['substeps'],
 
 
 def record_reference(workload: Workload, schedule: HeadSchedule,
-                     scene: Optional[Scene] = None, log=print) -> np.ndarray:
-    """Run the reference and return its frames (F, S, N, 3) as float32 [m]."""
+                     scene: Optional[Scene] = None, log=print):
+    """Run the reference; returns its frames (F, S, N, 3) as float32 [m], its settled state
+    before the motion (S, N, 3) and the seconds each frame took."""
     scene = scene or reference_scene(workload.scene)
     ref = FullSim('reference', workload, scene)
     out = np.empty((schedule.frames,) + workload.ghost_rest.shape, dtype=np.float32)
+    settled = np.empty(workload.ghost_rest.shape)
 
     def keep(j, x, head):
-        out[j] = x
+        if j < 0:
+            settled[...] = x
+        else:
+            out[j] = x
 
     t0 = time.perf_counter()
     secs = run_frames(ref, schedule, schedule.frames, keep, scene.solver.settle_time)
@@ -264,22 +299,45 @@ def record_reference(workload: Workload, schedule: HeadSchedule,
     log(f'  reference ({scene.solver.type}, dt 1/{1 / scene.solver.dt:.0f} s, '
         f'{scene.solver.iterations} it): {time.perf_counter() - t0:.1f} s, '
         f'{1e3 * np.median(secs):.1f} ms/frame')
+    return out, settled, secs
+
+
+def perturbed_reference(workload: Workload, schedule: HeadSchedule, ref_frames: np.ndarray,
+                        ref_settled: np.ndarray, scene: Scene,
+                        perturbation: float = CHAOS_PERTURBATION, seed: int = 0) -> np.ndarray:
+    """Per-frame RMS distance [L] between the reference and the reference rerun with its
+    settled state moved by ``perturbation`` [m] (normal noise on the free nodes): a measure of
+    how sensitive the motion is (hair sliding over the scalp can fall either way)."""
+    method = FullSim('reference perturbed', workload, scene)
+    rng = np.random.default_rng(seed)
+    out = np.empty(schedule.frames)
+
+    def watch(j, x, head):
+        if j < 0:                       # x is the solver's state: perturb it in place
+            x[:, 2:] += rng.normal(scale=perturbation, size=x[:, 2:].shape)
+            return
+        out[j] = position_error(x, ref_frames[j].astype(np.float64), workload.strand_length)[0]
+    run_frames(method, schedule, schedule.frames, watch, scene.solver.settle_time)
     return out
 
 
 def reference_convergence(workload: Workload, schedule: HeadSchedule, ref_frames: np.ndarray,
-                          frames: int, log=print) -> Dict[str, float]:
+                          ref_settled: np.ndarray, frames: int, log=print) -> Dict[str, float]:
     """Error of the reference against a run with twice the substeps and twice the iterations
     over the first ``frames`` frames: the reference's own discretisation error."""
     fine = reference_scene(workload.scene, 2 * REFERENCE['substeps'],
                            2 * REFERENCE['iterations'], schedule.frame_rate)
-    scorer = Scorer(workload, ref_frames[:frames])
+    scorer = Scorer(workload, ref_frames[:frames], ref_settled)
     method = FullSim('reference x2', workload, fine)
     res = RunResult(None, method.name, method.family, {})
-    pf = {k: np.empty(frames) for k in ('rms', 'max', 'tip', 'stretch', 'pen', 'spread')}
+    pf = {k: np.empty(frames) for k in METRICS}
+    x0 = np.empty(workload.ghost_rest.shape)
 
     def score(j, x, head):
-        for key, val in scorer.frame(j, x, head).items():
+        if j < 0:
+            x0[...] = x
+            return
+        for key, val in scorer.frame(j, x, head, x0).items():
             pf[key][j] = val
     run_frames(method, schedule, frames, score, fine.solver.settle_time)
     res.per_frame = pf
@@ -287,7 +345,7 @@ def reference_convergence(workload: Workload, schedule: HeadSchedule, ref_frames
     log(f'  reference self-convergence over {frames} frames: RMS {s["rms_err"]:.2e} L, '
         f'max {s["max_err"]:.2e} L')
     return {'frames': frames, 'rms_err': s['rms_err'], 'max_err': s['max_err'],
-            'tip_err': s['tip_err']}
+            'tip_err': s['tip_err'], 'motion_err': s['motion_err']}
 
 
 # ============================================================================ method lists
@@ -303,13 +361,16 @@ class MethodSpec:
 
 GHOST_VARIANTS = {
     # name: (tracking changes, description)
-    'all on': ({}, 'weights, CoM tracking, length restoration (defaults)'),
+    'all on': ({}, 'weights, CoM tracking, length restoration, collision (defaults)'),
+    'no collision': ({'collide': False}, 'ghosts pass through the head'),
+    'once per frame': ({'every_substep': False},
+                       'tracked once per 1/60 s frame over its substeps'),
     'no weights': ({'elastic_weight': False, 'tip_weight': 0.0, 'com_weight': 0.0},
                    'equations (4)-(5) off'),
     'no CoM': ({'com_strength': 0.0}, 'centre-of-mass tracking off'),
     'no restore': ({'length_restore': False}, 'length restoration (FTL pass) off'),
     'plain copy': ({'elastic_weight': False, 'tip_weight': 0.0, 'com_weight': 0.0,
-                    'com_strength': 0.0, 'length_restore': False},
+                    'com_strength': 0.0, 'length_restore': False, 'collide': False},
                    'velocity copy + offset feedback only'),
 }
 
@@ -350,12 +411,17 @@ def default_methods(scene: Scene, quick: bool = False, with_pypbd: bool = True
                 {'ratio': r, 'variant': v, 'solver': scene.solver.type, 'dt': scene.solver.dt,
                  'iterations': scene.solver.iterations}))
     if not quick:
-        sc = scene.with_changes(tracking__collide=True)
-        specs.append(MethodSpec(
-            'ghost 1:16 + ghost collision', 'ghost',
-            lambda w, sc=sc: GhostTracking('ghost 1:16 + ghost collision', w, sc, 16),
-            {'ratio': 16, 'variant': 'all on + collide', 'solver': scene.solver.type,
-             'dt': scene.solver.dt}))
+        # the ghost method at coarser substeps (guides and ghosts step together)
+        for k in (1, 2):
+            for r in (4, 16, 64):
+                sc = _solver_scene(scene, scene.solver.type, 1.0 / (f * k),
+                                   scene.solver.iterations)
+                label = f'ghost 1:{r} all on dt 1/{int(f * k)}'
+                specs.append(MethodSpec(
+                    label, 'ghost', lambda w, sc=sc, n=label, r=r: GhostTracking(n, w, sc, r),
+                    {'ratio': r, 'variant': f'all on, dt 1/{int(f * k)}',
+                     'solver': scene.solver.type, 'dt': sc.solver.dt,
+                     'iterations': scene.solver.iterations}))
     for r in ratios:
         label = f'rigid offset 1:{r}'
         specs.append(MethodSpec(label, 'rigid',
@@ -389,6 +455,12 @@ class MotionReport:
     convergence: Dict[str, float]
     results: List[RunResult]
     skipped: List[str]
+    chaos: Optional[np.ndarray] = None    # (F,) RMS [L] of the perturbed reference
+    horizon: int = 0                      # frames of the predictable window
+
+    @property
+    def horizon_s(self) -> float:
+        return (self.horizon or self.frames) / FRAME_RATE
 
 
 def evaluate(workload: Workload, trajectory: Trajectory, specs: Sequence[MethodSpec],
@@ -399,14 +471,19 @@ def evaluate(workload: Workload, trajectory: Trajectory, specs: Sequence[MethodS
     log(f'{trajectory.name}: {sched.frames} frames ({sched.duration_s:.1f} s), '
         f'{workload.count} ghost strands x {workload.ghost_rest.shape[1]} nodes')
     ref_scene = reference_scene(workload.scene)
-    t0 = time.perf_counter()
-    ref = record_reference(workload, sched, ref_scene, log)
-    ref_ms = 1e3 * (time.perf_counter() - t0) / sched.frames
+    ref, ref0, ref_secs = record_reference(workload, sched, ref_scene, log)
+    ref_ms = 1e3 * float(np.median(ref_secs))
     conv = {}
     if convergence_frames:
-        conv = reference_convergence(workload, sched, ref, min(convergence_frames, sched.frames),
-                                     log)
-    scorer = Scorer(workload, ref)
+        conv = reference_convergence(workload, sched, ref, ref0,
+                                     min(convergence_frames, sched.frames), log)
+    chaos = perturbed_reference(workload, sched, ref, ref0, ref_scene)
+    above = np.flatnonzero(chaos > CHAOS_RMS)
+    horizon = int(above[0]) if above.size else sched.frames
+    horizon = max(horizon, 1)
+    log(f'  1 um perturbation of the reference grows past {100 * CHAOS_RMS:g} % L after '
+        f'{horizon / FRAME_RATE:.2f} s (predictable window), ends at {100 * chaos[-1]:.1f} % L')
+    scorer = Scorer(workload, ref, ref0)
     settle_s = workload.scene.solver.settle_time
     results, skipped = [], []
     for spec in specs:
@@ -416,12 +493,16 @@ def evaluate(workload: Workload, trajectory: Trajectory, specs: Sequence[MethodS
             skipped.append(f'{spec.name}: could not be built ({e})')
             log(f'  skip {spec.name}: {e}')
             continue
-        res = RunResult(spec, method.name, method.family, {**method.knobs, **spec.knobs})
-        pf = {k: np.full(sched.frames, np.nan) for k in
-              ('rms', 'max', 'tip', 'stretch', 'pen', 'spread')}
+        res = RunResult(spec, method.name, method.family, {**method.knobs, **spec.knobs},
+                        horizon=horizon)
+        pf = {k: np.full(sched.frames, np.nan) for k in METRICS}
+        x0 = np.empty(workload.ghost_rest.shape)
 
-        def score(j, x, head, pf=pf):
-            for key, val in scorer.frame(j, x, head).items():
+        def score(j, x, head, pf=pf, x0=x0):
+            if j < 0:
+                x0[...] = x
+                return
+            for key, val in scorer.frame(j, x, head, x0).items():
                 pf[key][j] = val
         try:
             run_frames(method, sched, 2, None, 0.0)            # compile + warm up, not timed
@@ -456,13 +537,16 @@ def evaluate(workload: Workload, trajectory: Trajectory, specs: Sequence[MethodS
             finally:
                 method.close()
         log(f'  timing run {rep + 1}/{repeats} done')
-    return MotionReport(trajectory, sched.frames, ref_ms, conv, results, skipped)
+    return MotionReport(trajectory, sched.frames, ref_ms, conv, results, skipped, chaos,
+                        horizon)
 
 
 # ================================================================================== output
 CSV_COLUMNS = ('motion', 'method', 'family', 'ratio', 'variant', 'solver', 'dt', 'iterations',
-               'ms_frame', 'ms_frame_min_run', 'ms_frame_max_run', 'rms_err', 'max_err',
-               'tip_err', 'max_stretch', 'penetration_mm', 'spread_ratio', 'pareto', 'note')
+               'ms_frame', 'ms_frame_min_run', 'ms_frame_max_run', 'rms_err_pred',
+               'tip_err_pred', 'rms_err', 'motion_err', 'max_err', 'tip_err', 'max_stretch',
+               'penetration_mm', 'spread_ratio', 'pareto', 'pareto_full', 'predictable_s',
+               'note')
 
 
 def pareto_front(points: Sequence[tuple]) -> List[int]:
@@ -481,15 +565,18 @@ def pareto_front(points: Sequence[tuple]) -> List[int]:
 def rows(report: MotionReport) -> List[Dict]:
     out = []
     summaries = [r.summary() for r in report.results]
-    front = set(pareto_front([(s['ms_frame'], s['rms_err']) for s in summaries]))
+    front = set(pareto_front([(s['ms_frame'], s['rms_err_pred']) for s in summaries]))
+    front_f = set(pareto_front([(s['ms_frame'], s['rms_err']) for s in summaries]))
     for i, (res, s) in enumerate(zip(report.results, summaries)):
         k = res.knobs
         row = {'motion': report.trajectory.name, 'method': res.name, 'family': res.family,
                'ratio': k.get('ratio', ''), 'variant': k.get('variant', ''),
                'solver': k.get('solver', ''), 'dt': k.get('dt', ''),
                'iterations': k.get('iterations', ''), 'pareto': int(i in front),
+               'pareto_full': int(i in front_f),
                'note': '; '.join(x for x in (res.note, res.failed) if x)}
         row.update(s)
+        row['predictable_s'] = report.horizon_s
         out.append(row)
     return out
 
@@ -511,23 +598,30 @@ def _fmt(v):
 
 
 def markdown_table(report: MotionReport) -> str:
+    conv = report.convergence
     lines = [f'### {report.trajectory.name}: {report.trajectory.description}', '',
              f'{report.frames} frames at {FRAME_RATE:g} Hz; reference '
              f'{report.reference_ms:.0f} ms/frame.'
-             + (f' Reference self-convergence (vs 2x substeps and iterations, first '
-                f'{report.convergence["frames"]} frames): RMS '
-                f'{report.convergence["rms_err"]:.1e} L, max {report.convergence["max_err"]:.1e}'
-                ' L.' if report.convergence else ''), '',
-             '| method | ms/frame | RMS err [% L] | max err [% L] | tip err [% L] | '
-             'max stretch [%] | penetration [mm] | spread ratio | Pareto |',
-             '|---|---:|---:|---:|---:|---:|---:|---:|:---:|']
+             + (f' Reference self-convergence (against twice the substeps and iterations, first '
+                f'{conv["frames"]} frames): RMS {100 * conv["rms_err"]:.2f} % L, max '
+                f'{100 * conv["max_err"]:.1f} % L.' if conv else '')
+             + (f' Predictable window: the first {report.horizon_s:.2f} s (a 1 um '
+                f'perturbation of the reference stays below {100 * CHAOS_RMS:g} % L RMS; at '
+                f'the end it reaches {100 * report.chaos[-1]:.1f} % L).'
+                if report.chaos is not None else ''), '',
+             '| method | ms/frame | RMS err, predictable [% L] | tip err, predictable [% L] | '
+             'RMS err, whole run [% L] | motion err, whole run [% L] | max err [% L] | '
+             'max stretch [%] | penetration [mm] | spread ratio | Pareto (pred. / whole) | '
+             'note |',
+             '|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|:---:|---|']
     for r in rows(report):
+        front = ('*' if r['pareto'] else '') + ' / ' + ('*' if r['pareto_full'] else '')
         lines.append(
-            f'| {r["method"]} | {r["ms_frame"]:.2f} | {100 * r["rms_err"]:.2f} | '
-            f'{100 * r["max_err"]:.1f} | {100 * r["tip_err"]:.2f} | '
+            f'| {r["method"]} | {r["ms_frame"]:.2f} | {100 * r["rms_err_pred"]:.2f} | '
+            f'{100 * r["tip_err_pred"]:.2f} | {100 * r["rms_err"]:.2f} | '
+            f'{100 * r["motion_err"]:.2f} | {100 * r["max_err"]:.1f} | '
             f'{100 * r["max_stretch"]:.2f} | {r["penetration_mm"]:.1f} | '
-            f'{r["spread_ratio"]:.2f} | {"*" if r["pareto"] else ""} |'
-            + (f' {r["note"]}' if r['note'] else ''))
+            f'{r["spread_ratio"]:.2f} | {front if front != " / " else ""} | {r["note"]} |')
     for s in report.skipped:
         lines.append(f'\nSkipped: {s}')
     return '\n'.join(lines) + '\n'
@@ -537,8 +631,10 @@ def markdown_table(report: MotionReport) -> str:
 _STYLE = {
     'full PBD': ('tab:blue', 's'), 'full XPBD': ('tab:cyan', 'D'), 'full FTL': ('tab:purple', 'v'),
     'ghost all on': ('tab:red', 'o'), 'ghost no weights': ('tab:orange', 'o'),
-    'ghost no CoM': ('tab:olive', 'o'), 'ghost no restore': ('tab:pink', 'o'),
-    'ghost plain copy': ('tab:brown', 'o'), 'ghost collide': ('darkred', 'P'),
+    'ghost no CoM': ('tab:olive', 'o'), 'ghost no restore': ('gold', 'o'),
+    'ghost plain copy': ('tab:brown', 'o'), 'ghost no collision': ('darkred', 'P'),
+    'ghost once per frame': ('tab:pink', 's'),
+    'ghost all on, dt 1/60': ('salmon', 'h'), 'ghost all on, dt 1/120': ('firebrick', 'p'),
     'rigid offset': ('tab:gray', 'x'), 'pypbd': ('tab:green', '^'),
 }
 
@@ -548,52 +644,59 @@ def series_of(row: Dict) -> str:
     if fam == 'full':
         return 'full ' + str(row['solver']).upper()
     if fam == 'ghost':
-        v = str(row['variant'])
-        return 'ghost collide' if 'collide' in v else 'ghost ' + v
+        return 'ghost ' + str(row['variant'])
     if fam == 'rigid':
         return 'rigid offset'
     return fam
 
 
 def plot_pareto(path: str, report_rows: List[Dict], title: str) -> None:
+    """Log-log error against ms/frame, one series per method family, Pareto fronts marked:
+    left the position error, right the motion error (see the module docstring)."""
     import matplotlib
     matplotlib.use('Agg')
     import matplotlib.pyplot as plt
-    fig, ax = plt.subplots(figsize=(9.5, 6.2), dpi=110)
-    by = {}
-    for r in report_rows:
-        if math.isfinite(r['ms_frame']) and math.isfinite(r['rms_err']) and r['rms_err'] > 0:
-            by.setdefault(series_of(r), []).append(r)
-    for name, rs in by.items():
-        color, marker = _STYLE.get(name, ('black', '.'))
-        rs = sorted(rs, key=lambda r: r['ms_frame'])
-        ax.plot([r['ms_frame'] for r in rs], [100 * r['rms_err'] for r in rs], marker=marker,
-                color=color, ls='-' if len(rs) > 1 else 'none', lw=0.8, ms=6, label=name,
-                alpha=0.9)
-        for r in rs:
-            lab = _short_label(r)
-            if lab:
-                ax.annotate(lab, (r['ms_frame'], 100 * r['rms_err']), fontsize=6.5,
-                            xytext=(3, 3), textcoords='offset points', color=color)
-    front = sorted([r for r in report_rows if r['pareto']], key=lambda r: r['ms_frame'])
-    if front:
-        xs, ys = [], []
-        for r in front:
-            if xs:
+    fig, axes = plt.subplots(1, 2, figsize=(15, 6.4), dpi=100)
+    panels = (('rms_err_pred', 'pareto', 'position error |x - x_ref| / L, RMS over the '
+                                         'predictable window'),
+              ('rms_err', 'pareto_full', 'position error |x - x_ref| / L, RMS over the whole '
+                                         'run'))
+    for ax, (key, flag, label) in zip(axes, panels):
+        by = {}
+        for r in report_rows:
+            if math.isfinite(r['ms_frame']) and math.isfinite(r[key]) and r[key] > 0:
+                by.setdefault(series_of(r), []).append(r)
+        for name, rs in by.items():
+            color, marker = _STYLE.get(name, ('black', '.'))
+            rs = sorted(rs, key=lambda r: r['ms_frame'])
+            ax.plot([r['ms_frame'] for r in rs], [100 * r[key] for r in rs], marker=marker,
+                    color=color, ls='-' if len(rs) > 1 else 'none', lw=0.8, ms=6, label=name,
+                    alpha=0.9)
+            for r in rs:
+                lab = _short_label(r)
+                if lab:
+                    ax.annotate(lab, (r['ms_frame'], 100 * r[key]), fontsize=6.5,
+                                xytext=(3, 3), textcoords='offset points', color=color)
+        front = sorted([r for r in report_rows if r[flag]], key=lambda r: r['ms_frame'])
+        if front:
+            xs, ys = [], []
+            for r in front:
+                if xs:
+                    xs.append(r['ms_frame'])
+                    ys.append(ys[-1])
                 xs.append(r['ms_frame'])
-                ys.append(ys[-1])
-            xs.append(r['ms_frame'])
-            ys.append(100 * r['rms_err'])
-        ax.plot(xs, ys, color='black', lw=1.6, ls='--', zorder=0, label='Pareto front')
-        ax.scatter([r['ms_frame'] for r in front], [100 * r['rms_err'] for r in front],
-                   s=140, facecolors='none', edgecolors='black', lw=1.2, zorder=5)
-    ax.set_xscale('log')
-    ax.set_yscale('log')
-    ax.set_xlabel('run time per 1/60 s frame [ms] (median, log)')
-    ax.set_ylabel('position error, RMS over nodes and frames [% of strand length] (log)')
-    ax.set_title(title, fontsize=10)
-    ax.grid(True, which='both', alpha=0.3)
-    ax.legend(fontsize=7.5, loc='best', ncol=2)
+                ys.append(100 * r[key])
+            ax.plot(xs, ys, color='black', lw=1.6, ls='--', zorder=0, label='Pareto front')
+            ax.scatter([r['ms_frame'] for r in front], [100 * r[key] for r in front],
+                       s=140, facecolors='none', edgecolors='black', lw=1.2, zorder=5)
+        ax.set_xscale('log')
+        ax.set_yscale('log')
+        ax.set_xlabel('run time per 1/60 s frame [ms] (median, log)')
+        ax.set_ylabel(label + ' [% of strand length] (log)')
+        ax.grid(True, which='both', alpha=0.3)
+    axes[0].legend(fontsize=7.5, loc='best', ncol=2)
+    fig.suptitle(title + '  (labels: guide ratio, or substeps per frame x iterations)',
+                 fontsize=10)
     fig.tight_layout()
     fig.savefig(path)
     plt.close(fig)
@@ -602,7 +705,8 @@ def plot_pareto(path: str, report_rows: List[Dict], title: str) -> None:
 def _short_label(r: Dict) -> str:
     fam = r['family']
     if fam in ('ghost', 'rigid'):
-        return f'1:{r["ratio"]}' if r.get('variant') in ('all on', '') or fam == 'rigid' else ''
+        shown = fam == 'rigid' or str(r.get('variant', '')).startswith(('all on', 'once'))
+        return f'1:{r["ratio"]}' if shown else ''
     if fam in ('full', 'pypbd'):
         k = int(round(1.0 / (float(r['dt']) * FRAME_RATE)))
         it = '' if r['solver'] == 'ftl' else f'x{r["iterations"]}'
@@ -619,6 +723,13 @@ def plot_error_over_time(path: str, report: MotionReport, names: Sequence[str]) 
     for res in report.results:
         if res.name in names and 'rms' in res.per_frame:
             ax.plot(t, 100 * res.per_frame['rms'], lw=1.0, label=res.name)
+    if report.chaos is not None:
+        ax.plot(t, 100 * report.chaos, color='black', ls='--', lw=1.2,
+                label='reference perturbed by 1 um')
+        ax.axvline(report.horizon_s, color='black', lw=0.8, ls=':')
+        ax.annotate('end of the predictable window', (report.horizon_s, 0.98),
+                    xycoords=('data', 'axes fraction'), fontsize=7.5, ha='left', va='top',
+                    xytext=(3, 0), textcoords='offset points')
     motion = report.trajectory.motion
     from .head_motion import angular_speed
     w = angular_speed(motion)

@@ -109,7 +109,14 @@ def cmd_accuracy(args) -> int:
              f'{int(ea.FRAME_RATE * ea.REFERENCE["substeps"])} s), '
              f'{ea.REFERENCE["iterations"]} iterations, head collider.',
              'ms/frame: median of per-run medians (accuracy run + '
-             f'{args.repeats} interleaved timing runs), compile time excluded.']
+             f'{args.repeats} interleaved timing runs), compile time excluded; the machine '
+             'is shared, so timings carry noise of some 20 % (compare the min/max run columns '
+             'of the CSV).',
+             'Predictable window: hair sliding over the head is chaotic (a strand on the '
+             'crown may fall to either side); the reference is rerun with its start perturbed '
+             f'by {ea.CHAOS_PERTURBATION * 1e6:g} um and the window ends where the two differ '
+             f'by {100 * ea.CHAOS_RMS:g} % L RMS. Errors after it measure that chaos as much as '
+             'the method; both are reported.']
     if missing:
         notes.append(f'pypbd skipped: {missing}.')
     paths = ea.write_outputs(reports, args.out, args.figures, command_line(args), notes,

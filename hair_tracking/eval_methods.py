@@ -8,7 +8,9 @@ head frame) node for node, so its output can be compared with the reference:
   compliance 0 this is the reference.
 * :class:`GhostTracking` -- the method of the package (Park & Kim): ``S / ratio`` guides made by
   :func:`~.groom.make_groom` (as :class:`~.simulator.HairSimulator` makes them) simulated by
-  :class:`~.guides.GuideSolver`, the ghosts moved by :class:`~.ghosts.GhostTracker` each substep.
+  :class:`~.guides.GuideSolver`, the ghosts moved by :class:`~.ghosts.GhostTracker` each substep
+  (or once per output frame over all its substeps with ``tracking.every_substep: false``, as the
+  simulator does once per pose).
 * :class:`RigidOffset` -- the game-engine "follow hair" baseline: a ghost node is its guide's
   point at the same arc-length fraction plus the node's rest offset from that point rotated with
   the head (AMD TressFX follow hairs use an unrotated offset; rotating it with the head is the
@@ -170,6 +172,8 @@ class GhostTracking(_GuidedMethod):
         collider = make_collider(scene.collider) if scene.tracking.collide else None
         self.tracker = GhostTracker(self.ghosts, self.guides, scene, collider)
         self._x_old = np.empty_like(self.guides.x)
+        self.every_substep = bool(getattr(scene.tracking, 'every_substep', True))
+        self._pending = 0
         # the tracker may store the ghosts grouped by guide: row i is the user's ghost perm[i]
         perm = getattr(self.tracker, 'permutation', None)
         self._perm = None
@@ -180,13 +184,24 @@ class GhostTracking(_GuidedMethod):
     def reset(self, head):
         self.solver.reset(head)
         self.tracker.reset(head)
+        self._pending = 0
+        np.copyto(self._x_old, self.guides.x)
 
     def step(self, dt, head_prev, head):
-        np.copyto(self._x_old, self.guides.x)
-        self.solver.step(dt, head_prev, head)
-        self.tracker.step(dt, self._x_old, head)
+        if self.every_substep:
+            np.copyto(self._x_old, self.guides.x)
+            self.solver.step(dt, head_prev, head)
+            self.tracker.step(dt, self._x_old, head)
+        else:           # tracked once per output frame, over all its substeps (simulator's way)
+            self.solver.step(dt, head_prev, head)
+            self._pending += 1
 
     def output(self, head):
+        if self._pending:
+            self.tracker.step(self._pending * self.dt, self._x_old, head,
+                              substeps=self._pending)
+            self._pending = 0
+            np.copyto(self._x_old, self.guides.x)
         if self._perm is None:
             return self.ghosts.x
         self._out[self._perm] = self.ghosts.x

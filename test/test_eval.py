@@ -173,23 +173,31 @@ def test_workload_and_guides(workload):
 
 
 def test_scorer_zero_for_the_reference_and_sensitive(workload):
-    ref = np.stack([workload.ghost_rest, workload.ghost_rest + 0.001]).astype(np.float32)
-    sc = ea.Scorer(workload, ref)
+    rest = workload.ghost_rest
+    ref = np.stack([rest, rest + 0.001]).astype(np.float32)
+    sc = ea.Scorer(workload, ref, rest)
     head = IDENTITY
-    same = sc.frame(0, workload.ghost_rest.copy(), head)
+    same = sc.frame(0, rest.copy(), head, rest)
     assert same['rms'] < 1e-7 and same['tip'] < 1e-7 and same['spread'] == pytest.approx(1.0)
-    shifted = sc.frame(0, workload.ghost_rest + np.array([0.01, 0.0, 0.0]), head)
-    assert shifted['rms'] == pytest.approx(np.sqrt(np.mean((0.01 / workload.strand_length)
-                                                           ** 2)), rel=1e-5)
+    assert same['motion'] < 1e-7
+    shift = np.array([0.01, 0.0, 0.0])
+    shifted = sc.frame(0, rest + shift, head, rest)
+    expected = np.sqrt(np.mean((0.01 / workload.strand_length) ** 2))
+    assert shifted['rms'] == pytest.approx(expected, rel=1e-5)
+    assert shifted['motion'] == pytest.approx(expected, rel=1e-5)
+    # a method that starts 1 cm off and moves exactly like the reference: position error, but
+    # no motion error
+    moved = sc.frame(1, rest + shift + 0.001, head, rest + shift)
+    assert moved['rms'] == pytest.approx(expected, rel=1e-3) and moved['motion'] < 1e-6
     # spreading every group about its centre doubles the spread: ratio 4 (variance)
     x = workload.ghost_rest.copy()
     for g in np.unique(workload.groups):
         m = workload.groups == g
         x[m, 2:] = 2 * x[m, 2:] - x[m, 2:].mean(axis=0)
-    assert sc.frame(0, x, head)['spread'] == pytest.approx(4.0, rel=1e-9)
+    assert sc.frame(0, x, head, rest)['spread'] == pytest.approx(4.0, rel=1e-9)
     bad = workload.ghost_rest.copy()
     bad[0, 3, 1] = np.nan
-    assert math.isinf(sc.frame(0, bad, head)['rms'])
+    assert math.isinf(sc.frame(0, bad, head, rest)['rms'])
 
 
 def _walk_schedule(seconds=0.5):
@@ -208,6 +216,7 @@ def test_rigid_offset_and_ghosts_start_at_rest_in_user_order(workload):
     sched = _walk_schedule(0.3)
     last = {}
     ea.run_frames(r, sched, sched.frames, lambda j, x, h: last.update(x=x.copy(), h=h), 0.1)
+    assert last['h'] is not sched.start()
     assert np.allclose(last['x'][:, :2], last['h'].to_world(workload.ghost_rest[:, :2]),
                        atol=1e-12)
 
@@ -221,7 +230,8 @@ def test_ghost_tracking_follows_the_full_simulation(workload):
                     ('1:1', GhostTracking('1:1', workload, Scene(), 1)),
                     ('1:16', GhostTracking('1:16', workload, Scene(), 16))):
         xs = []
-        ea.run_frames(m, sched, sched.frames, lambda j, x, h, xs=xs: xs.append(x.copy()), 0.5)
+        ea.run_frames(m, sched, sched.frames,
+                      lambda j, x, h, xs=xs: xs.append(x.copy()) if j >= 0 else None, 0.5)
         runs[name] = np.array(xs)
     e1 = position_error(runs['1:1'][-1], runs['full'][-1], workload.strand_length)[0]
     e16 = position_error(runs['1:16'][-1], runs['full'][-1], workload.strand_length)[0]
@@ -267,6 +277,7 @@ def test_evaluate_writes_tables_and_plots(tmp_path, workload):
     assert set(rows) == {s.name for s in specs}
     for r in rows.values():
         assert r['ms_frame'] > 0 and 0 < r['rms_err'] < 1 and r['max_err'] >= r['rms_err']
+        assert 0 < r['motion_err'] < 1
         assert len(next(x for x in rep.results if x.name == r['method']).frame_ms) == 2
     # length restoration: the default ghosts keep exact lengths, the plain copy does not
     assert rows['ghost 1:16 all on']['max_stretch'] < 1e-6
@@ -308,3 +319,29 @@ def test_vr_trajectory_is_the_busiest_window():
     # the head centre moves (neck pivot), and the window is busier than the trace on average
     assert linear_speed(vr).max() > 0.05
     assert angular_speed(vr).mean() > 0.3
+
+
+def test_busiest_window_and_window():
+    calm, busy = sm.still(3.0), sm.shake(6.0, 1.0, duration_s=2.0)
+    m = sm.concat(calm, busy, sm.still(3.0))
+    start = sm.busiest_window(m, 2.0)
+    assert 2.5 <= start <= 3.5
+    w = sm.window(m, start, 2.0)
+    assert w.duration_s == pytest.approx(2.0, abs=0.01)
+    with pytest.raises(sm.SyntheticMotionError, match='fewer than 2 samples'):
+        sm.window(m, 100.0, 1.0)
+
+
+def test_perturbed_reference_measures_sensitivity(workload):
+    """With the head still nothing amplifies a 1 um perturbation; in a fast shake with hair on
+    the scalp it grows by orders of magnitude (the chaos the report's predictable window
+    accounts for)."""
+    scene = ea.reference_scene(Scene(), substeps=4, iterations=4)
+    out = {}
+    for name, motion in (('still', sm.still(1.0)), ('shake', sm.shake(15.0, 3.0,
+                                                                      duration_s=1.0))):
+        sched = ea.HeadSchedule(motion, ea.FRAME_RATE)
+        ref, ref0, _ = ea.record_reference(workload, sched, scene, log=lambda s: None)
+        out[name] = ea.perturbed_reference(workload, sched, ref, ref0, scene)
+    assert out['still'].max() < 1e-4
+    assert out['shake'].max() > 100 * out['still'].max()
