@@ -330,3 +330,32 @@ def test_busiest_window_and_window():
     assert w.duration_s == pytest.approx(2.0, abs=0.01)
     with pytest.raises(sm.SyntheticMotionError, match='fewer than 2 samples'):
         sm.window(m, 100.0, 1.0)
+
+
+def test_ghosts_once_per_frame_track_like_every_substep(workload):
+    """The simulator's cheaper schedule (tracking.every_substep false): the eval method tracks
+    once per output frame over its substeps; the hair stays close to the per-substep one."""
+    sched = _walk_schedule(0.5)
+    out = {}
+    for every in (True, False):
+        scene = Scene().with_changes(tracking__every_substep=every)
+        m = GhostTracking(str(every), workload, scene, 4)
+        assert m.every_substep is every
+        xs = []
+        ea.run_frames(m, sched, sched.frames,
+                      lambda j, x, h, xs=xs: xs.append(x.copy()) if j >= 0 else None, 0.25)
+        out[every] = np.array(xs)
+    d = position_error(out[False][-1], out[True][-1], workload.strand_length)[0]
+    assert 0.0 < d < 0.05
+
+
+def test_perturbed_reference_measures_the_perturbation(workload):
+    """With a still head nothing amplifies the perturbation: the curve starts at its size
+    (1 um on 25 cm strands: a few 1e-6 L), stays there, and scales with it."""
+    scene = ea.reference_scene(Scene(), substeps=4, iterations=4)
+    sched = ea.HeadSchedule(sm.still(0.5), ea.FRAME_RATE)
+    ref, ref0, _ = ea.record_reference(workload, sched, scene, log=lambda s: None)
+    small = ea.perturbed_reference(workload, sched, ref, ref0, scene, perturbation=1e-6)
+    large = ea.perturbed_reference(workload, sched, ref, ref0, scene, perturbation=1e-4)
+    assert 1e-7 < small[0] < 1e-5 and small.max() < 1e-5
+    assert large[0] / small[0] == pytest.approx(100.0, rel=0.05)
