@@ -16,7 +16,7 @@ import numpy as np
 from .head_motion import load_bundled_walk
 from .resources import config_path
 from .scene import Scene, SceneError
-from .simulator import HairSimulator
+from .simulator import HairSimulator, warm_up as warm_up_simulator
 
 
 def run(scene: Scene, motion, keep_every: int = 0):
@@ -40,11 +40,7 @@ def run(scene: Scene, motion, keep_every: int = 0):
 def warm_up(scene: Scene) -> float:
     """Compile (or load from the on-disk cache) every kernel the scene uses; returns seconds."""
     start = time.perf_counter()
-    small = scene.with_changes(groom__guides=2, groom__ghosts_per_guide=2, solver__settle_time=0.0)
-    sim = HairSimulator(small)
-    sim.push_pose(0, [0, 0, 0], [0, 0, 0, 1])
-    sim.advance_to(int(3 * small.solver.dt * 1e9))
-    sim.frame()
+    warm_up_simulator(scene)
     return time.perf_counter() - start
 
 

@@ -68,7 +68,7 @@ from . import params as P
 from .head_track import PoseResult
 from .resources import config_path
 from .scene import Scene, SceneError
-from .simulator import HairSimulator
+from .simulator import HairSimulator, warm_up as warm_up_simulator
 
 try:                                    # optional: /tf input
     from tf2_msgs.msg import TFMessage
@@ -124,15 +124,7 @@ def warm_up(scene: Scene) -> float:
     Returns the seconds it took.
     """
     start = time.perf_counter()
-    g = scene.groom
-    small = scene.with_changes(groom__guides=min(g.guides, 2),
-                               groom__ghosts_per_guide=min(g.ghosts_per_guide, 2),
-                               solver__settle_time=0.0)
-    sim = HairSimulator(small)
-    dt_ns = max(1, int(round(small.solver.dt * 1e9)))
-    sim.push_pose(1, [0.0, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0])
-    sim.push_pose(1 + 4 * dt_ns, [0.01, 0.0, 0.0], [0.0, 0.0, 0.0871557, 0.9961947])
-    sim.advance_to(1 + 4 * dt_ns)
+    sim = warm_up_simulator(scene)
     for head_frame in (False, True):
         f = sim.frame(head_frame=head_frame, copy=False)
         for strands in (f.strands, f.guides):
@@ -141,8 +133,6 @@ def warm_up(scene: Scene) -> float:
             for style in P.MARKER_STYLES:
                 strands_to_marker_array_cdr(strands, frame_id='warmup', style=style,
                                             delete_all_first=True)
-    sim.max_stretch()
-    sim.penetration()
     return time.perf_counter() - start
 
 

@@ -312,3 +312,25 @@ class HairSimulator:
                 strands.x[...] = (strands.x - old.position) @ rot.T + new.position
                 strands.v[...] = 0.0
         self._last_speed = 0.0
+
+
+def warm_up(scene: Scene) -> HairSimulator:
+    """Compile (or load from numba's on-disk cache) every kernel ``scene`` uses.
+
+    Runs a tiny copy of the scene (same solver, collider, tracking and output options, at most
+    two guides with two ghosts each) through a moving, turning head, a frame in both frames and
+    the stretch and penetration checks, so the first real steps are not late.  Returns the tiny
+    simulator (callers may warm their own output code on its frames).
+    """
+    g = scene.groom
+    small = scene.with_changes(groom__guides=min(g.guides, 2),
+                               groom__ghosts_per_guide=min(g.ghosts_per_guide, 2),
+                               solver__settle_time=0.0)
+    sim = HairSimulator(small)
+    dt_ns = max(1, int(round(small.solver.dt * 1e9)))
+    sim.push_pose(1, [0.0, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0])
+    sim.push_pose(1 + 4 * dt_ns, [0.01, 0.0, 0.0], [0.0, 0.0, 0.0871557, 0.9961947])
+    sim.advance_to(1 + 4 * dt_ns)
+    sim.max_stretch()
+    sim.penetration()
+    return sim
