@@ -76,6 +76,49 @@ def surface_point(qx, qy, qz, ax, ay, az, refine):
     return yx, yy, yz
 
 
+@njit(cache=True, inline='always', fastmath=FASTMATH, error_model='numpy')
+def world_center(rot, pos, center):
+    """The ellipsoid centre ``pos + rot center`` in the world [m] (``center`` head frame)."""
+    return (rot[0, 0] * center[0] + rot[0, 1] * center[1] + rot[0, 2] * center[2] + pos[0],
+            rot[1, 0] * center[0] + rot[1, 1] * center[1] + rot[1, 2] * center[2] + pos[1],
+            rot[2, 0] * center[0] + rot[2, 1] * center[1] + rot[2, 2] * center[2] + pos[2])
+
+
+@njit(cache=True, inline='always', fastmath=FASTMATH, error_model='numpy')
+def push_out(x0, x1, x2, r0, r1, r2, rot, cx, cy, cz, ax, ay, az, friction, refine):
+    """One node ``x`` (world [m]) pushed out of the ellipsoid with semi-axes ``a`` around the
+    world point ``c`` (axes turned by the head rotation ``rot``), then the friction of the module
+    docstring relative to the reference position ``r``.  Returns ``(moved, y0, y1, y2)``; an
+    outside node comes back unchanged with ``moved`` false."""
+    dx, dy, dz = x0 - cx, x1 - cy, x2 - cz
+    qx = rot[0, 0] * dx + rot[1, 0] * dy + rot[2, 0] * dz      # R^T (x - c_world)
+    qy = rot[0, 1] * dx + rot[1, 1] * dy + rot[2, 1] * dz
+    qz = rot[0, 2] * dx + rot[1, 2] * dy + rot[2, 2] * dz
+    ix, iy, iz = 1.0 / (ax * ax), 1.0 / (ay * ay), 1.0 / (az * az)
+    if qx * qx * ix + qy * qy * iy + qz * qz * iz >= 1.0:
+        return False, x0, x1, x2
+    yx, yy, yz = surface_point(qx, qy, qz, ax, ay, az, refine)
+    if friction > 0.0:
+        ex, ey, ez = r0 - cx, r1 - cy, r2 - cz
+        px = rot[0, 0] * ex + rot[1, 0] * ey + rot[2, 0] * ez
+        py = rot[0, 1] * ex + rot[1, 1] * ey + rot[2, 1] * ez
+        pz = rot[0, 2] * ex + rot[1, 2] * ey + rot[2, 2] * ez
+        nx, ny, nz = yx * ix, yy * iy, yz * iz
+        nn = 1.0 / math.sqrt(nx * nx + ny * ny + nz * nz)
+        nx *= nn
+        ny *= nn
+        nz *= nn
+        mx, my, mz = yx - px, yy - py, yz - pz
+        dn = mx * nx + my * ny + mz * nz
+        yx -= friction * (mx - dn * nx)
+        yy -= friction * (my - dn * ny)
+        yz -= friction * (mz - dn * nz)
+    return (True,
+            rot[0, 0] * yx + rot[0, 1] * yy + rot[0, 2] * yz + cx,
+            rot[1, 0] * yx + rot[1, 1] * yy + rot[1, 2] * yz + cy,
+            rot[2, 0] * yx + rot[2, 1] * yy + rot[2, 2] * yz + cz)
+
+
 @njit(cache=True, parallel=True, fastmath=FASTMATH, error_model='numpy')
 def project_ellipsoid(x, x_prev, inv_mass, rot, pos, center, radii, margin, friction, refine):
     """Kernel: push nodes with ``inv_mass > 0`` out of the ellipsoid ``radii + margin``; friction.
@@ -85,46 +128,21 @@ def project_ellipsoid(x, x_prev, inv_mass, rot, pos, center, radii, margin, fric
     ``radii`` (3,) head frame [m]. Returns the number of nodes projected.
     """
     ax, ay, az = radii[0] + margin, radii[1] + margin, radii[2] + margin
-    ix, iy, iz = 1.0 / (ax * ax), 1.0 / (ay * ay), 1.0 / (az * az)
-    r00, r01, r02 = rot[0, 0], rot[0, 1], rot[0, 2]
-    r10, r11, r12 = rot[1, 0], rot[1, 1], rot[1, 2]
-    r20, r21, r22 = rot[2, 0], rot[2, 1], rot[2, 2]
-    # centre of the ellipsoid in the world
-    cx = r00 * center[0] + r01 * center[1] + r02 * center[2] + pos[0]
-    cy = r10 * center[0] + r11 * center[1] + r12 * center[2] + pos[1]
-    cz = r20 * center[0] + r21 * center[1] + r22 * center[2] + pos[2]
+    cx, cy, cz = world_center(rot, pos, center)
     n = x.shape[1]
     contacts = 0
     for s in prange(x.shape[0]):
         for i in range(n):
             if inv_mass[s, i] <= 0.0:
                 continue
-            dx, dy, dz = x[s, i, 0] - cx, x[s, i, 1] - cy, x[s, i, 2] - cz
-            qx = r00 * dx + r10 * dy + r20 * dz      # R^T (x - c_world)
-            qy = r01 * dx + r11 * dy + r21 * dz
-            qz = r02 * dx + r12 * dy + r22 * dz
-            if qx * qx * ix + qy * qy * iy + qz * qz * iz >= 1.0:
-                continue
-            yx, yy, yz = surface_point(qx, qy, qz, ax, ay, az, refine)
-            if friction > 0.0:
-                ex, ey, ez = x_prev[s, i, 0] - cx, x_prev[s, i, 1] - cy, x_prev[s, i, 2] - cz
-                px = r00 * ex + r10 * ey + r20 * ez
-                py = r01 * ex + r11 * ey + r21 * ez
-                pz = r02 * ex + r12 * ey + r22 * ez
-                nx, ny, nz = yx * ix, yy * iy, yz * iz
-                nn = 1.0 / math.sqrt(nx * nx + ny * ny + nz * nz)
-                nx *= nn
-                ny *= nn
-                nz *= nn
-                mx, my, mz = yx - px, yy - py, yz - pz
-                dn = mx * nx + my * ny + mz * nz
-                yx -= friction * (mx - dn * nx)
-                yy -= friction * (my - dn * ny)
-                yz -= friction * (mz - dn * nz)
-            x[s, i, 0] = r00 * yx + r01 * yy + r02 * yz + cx
-            x[s, i, 1] = r10 * yx + r11 * yy + r12 * yz + cy
-            x[s, i, 2] = r20 * yx + r21 * yy + r22 * yz + cz
-            contacts += 1
+            moved, y0, y1, y2 = push_out(x[s, i, 0], x[s, i, 1], x[s, i, 2], x_prev[s, i, 0],
+                                         x_prev[s, i, 1], x_prev[s, i, 2], rot, cx, cy, cz,
+                                         ax, ay, az, friction, refine)
+            if moved:
+                x[s, i, 0] = y0
+                x[s, i, 1] = y1
+                x[s, i, 2] = y2
+                contacts += 1
     return contacts
 
 
@@ -137,9 +155,7 @@ def penetration_ellipsoid(x, inv_mass, use_mass, rot, pos, center, radii, refine
     """
     ax, ay, az = radii[0], radii[1], radii[2]
     ix, iy, iz = 1.0 / (ax * ax), 1.0 / (ay * ay), 1.0 / (az * az)
-    cx = rot[0, 0] * center[0] + rot[0, 1] * center[1] + rot[0, 2] * center[2] + pos[0]
-    cy = rot[1, 0] * center[0] + rot[1, 1] * center[1] + rot[1, 2] * center[2] + pos[1]
-    cz = rot[2, 0] * center[0] + rot[2, 1] * center[1] + rot[2, 2] * center[2] + pos[2]
+    cx, cy, cz = world_center(rot, pos, center)
     n = x.shape[1]
     for s in prange(x.shape[0]):
         deepest = 0.0

@@ -27,7 +27,7 @@ import math
 
 from numba import njit, prange
 
-from hair_tracking.collision import surface_point
+from hair_tracking.collision import surface_point, world_center
 from hair_tracking.integrate import BLOCK, FASTMATH, finalize_block, predict_block
 from hair_tracking.pbd_constraints import pbd_sweep_block
 
@@ -84,6 +84,44 @@ def ftl_pass_block(x, rest, rest_length, rot, corr, s0, s1):
 RESTORE_ITERATIONS = 4
 
 
+@njit(cache=True, inline='always', fastmath=FASTMATH, error_model='numpy')
+def restore_node(px, py, pz, bx, by, bz, r, ex, ey, ez, rot, cx, cy, cz, ax, ay, az, refine):
+    """One node of the collision-aware FTL pass (see :func:`ftl_restore`): ``p`` put at the rest
+    distance ``r`` from its predecessor ``b`` and out of the ellipsoid (semi-axes ``a``, world
+    centre ``c``, head rotation ``rot``), :data:`RESTORE_ITERATIONS` times.  ``e`` is the rest
+    segment in the head frame, the direction used when ``p`` and ``b`` coincide.  World [m]."""
+    ix, iy, iz = 1.0 / (ax * ax), 1.0 / (ay * ay), 1.0 / (az * az)
+    for k in range(RESTORE_ITERATIONS + 1):
+        dx, dy, dz = px - bx, py - by, pz - bz
+        l2 = dx * dx + dy * dy + dz * dz
+        if l2 > FTL_TINY_SQ:
+            f = r / math.sqrt(l2)
+        else:
+            dx = rot[0, 0] * ex + rot[0, 1] * ey + rot[0, 2] * ez
+            dy = rot[1, 0] * ex + rot[1, 1] * ey + rot[1, 2] * ez
+            dz = rot[2, 0] * ex + rot[2, 1] * ey + rot[2, 2] * ez
+            le2 = ex * ex + ey * ey + ez * ez
+            if le2 > FTL_TINY_SQ:
+                f = r / math.sqrt(le2)
+            else:
+                dx, dy, dz = 0.0, 0.0, -1.0
+                f = r
+        px, py, pz = bx + f * dx, by + f * dy, bz + f * dz
+        if k == RESTORE_ITERATIONS:
+            break
+        wx, wy, wz = px - cx, py - cy, pz - cz
+        qx = rot[0, 0] * wx + rot[1, 0] * wy + rot[2, 0] * wz
+        qy = rot[0, 1] * wx + rot[1, 1] * wy + rot[2, 1] * wz
+        qz = rot[0, 2] * wx + rot[1, 2] * wy + rot[2, 2] * wz
+        if qx * qx * ix + qy * qy * iy + qz * qz * iz >= 1.0:
+            break
+        yx, yy, yz = surface_point(qx, qy, qz, ax, ay, az, refine)
+        px = rot[0, 0] * yx + rot[0, 1] * yy + rot[0, 2] * yz + cx
+        py = rot[1, 0] * yx + rot[1, 1] * yy + rot[1, 2] * yz + cy
+        pz = rot[2, 0] * yx + rot[2, 1] * yy + rot[2, 2] * yz + cz
+    return px, py, pz
+
+
 @njit(cache=True, parallel=True, fastmath=FASTMATH, error_model='numpy')
 def ftl_restore(x, rest, rest_length, rot, pos, center, axes, refine, corr):
     """Kernel: a collision-aware FTL pass over all strands, run after the collider moved nodes.
@@ -102,48 +140,15 @@ def ftl_restore(x, rest, rest_length, rot, pos, center, axes, refine, corr):
     friction here: the collider applied it.
     """
     ax, ay, az = axes[0], axes[1], axes[2]
-    ix, iy, iz = 1.0 / (ax * ax), 1.0 / (ay * ay), 1.0 / (az * az)
-    cx = rot[0, 0] * center[0] + rot[0, 1] * center[1] + rot[0, 2] * center[2] + pos[0]
-    cy = rot[1, 0] * center[0] + rot[1, 1] * center[1] + rot[1, 2] * center[2] + pos[1]
-    cz = rot[2, 0] * center[0] + rot[2, 1] * center[1] + rot[2, 2] * center[2] + pos[2]
+    cx, cy, cz = world_center(rot, pos, center)
     n = x.shape[1]
     for s in prange(x.shape[0]):
         for i in range(2, n):
-            r = rest_length[s, i - 1]
-            bx, by, bz = x[s, i - 1, 0], x[s, i - 1, 1], x[s, i - 1, 2]
             ox, oy, oz = x[s, i, 0], x[s, i, 1], x[s, i, 2]
-            px, py, pz = ox, oy, oz
-            for k in range(RESTORE_ITERATIONS + 1):
-                dx, dy, dz = px - bx, py - by, pz - bz
-                l2 = dx * dx + dy * dy + dz * dz
-                if l2 > FTL_TINY_SQ:
-                    f = r / math.sqrt(l2)
-                else:
-                    ex = rest[s, i, 0] - rest[s, i - 1, 0]
-                    ey = rest[s, i, 1] - rest[s, i - 1, 1]
-                    ez = rest[s, i, 2] - rest[s, i - 1, 2]
-                    dx = rot[0, 0] * ex + rot[0, 1] * ey + rot[0, 2] * ez
-                    dy = rot[1, 0] * ex + rot[1, 1] * ey + rot[1, 2] * ez
-                    dz = rot[2, 0] * ex + rot[2, 1] * ey + rot[2, 2] * ez
-                    le2 = ex * ex + ey * ey + ez * ez
-                    if le2 > FTL_TINY_SQ:
-                        f = r / math.sqrt(le2)
-                    else:
-                        dx, dy, dz = 0.0, 0.0, -1.0
-                        f = r
-                px, py, pz = bx + f * dx, by + f * dy, bz + f * dz
-                if k == RESTORE_ITERATIONS:
-                    break
-                wx, wy, wz = px - cx, py - cy, pz - cz
-                qx = rot[0, 0] * wx + rot[1, 0] * wy + rot[2, 0] * wz
-                qy = rot[0, 1] * wx + rot[1, 1] * wy + rot[2, 1] * wz
-                qz = rot[0, 2] * wx + rot[1, 2] * wy + rot[2, 2] * wz
-                if qx * qx * ix + qy * qy * iy + qz * qz * iz >= 1.0:
-                    break
-                yx, yy, yz = surface_point(qx, qy, qz, ax, ay, az, refine)
-                px = rot[0, 0] * yx + rot[0, 1] * yy + rot[0, 2] * yz + cx
-                py = rot[1, 0] * yx + rot[1, 1] * yy + rot[1, 2] * yz + cy
-                pz = rot[2, 0] * yx + rot[2, 1] * yy + rot[2, 2] * yz + cz
+            px, py, pz = restore_node(
+                ox, oy, oz, x[s, i - 1, 0], x[s, i - 1, 1], x[s, i - 1, 2], rest_length[s, i - 1],
+                rest[s, i, 0] - rest[s, i - 1, 0], rest[s, i, 1] - rest[s, i - 1, 1],
+                rest[s, i, 2] - rest[s, i - 1, 2], rot, cx, cy, cz, ax, ay, az, refine)
             corr[s, i, 0] += px - ox
             corr[s, i, 1] += py - oy
             corr[s, i, 2] += pz - oz

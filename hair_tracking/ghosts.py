@@ -32,11 +32,12 @@ import numpy as np
 
 from .collision import Collider
 from .correspondence import assign_guides, node_correspondence
-from .ftl import ftl_restore
+import numba
+
 from .integrate import threads_for
 from .model import HeadPose, StrandSet
 from .scene import Scene
-from .tracking_kernels import guide_frames, track_groups
+from .tracking_kernels import chunk_count, group_blocks, guide_frames, TMP_ROWS, track_groups
 from .weights import arc_fractions, elastic_code
 
 
@@ -122,7 +123,9 @@ class GhostTracker:
             # the offset targets carry the requested spread so (c) does not fight (e)
             target_rest = rest_com[group_of_row] + math.sqrt(tr.spread_target) * dev
             target_rest[:, :2] = ghost_rest[:, :2]
-        self._rest_off = np.ascontiguousarray(target_rest - guide_point_rest)
+        self._rest_off = np.ascontiguousarray(target_rest - guide_point_rest)   # (S, N, 3)
+        self._rest_off_blocks = group_blocks(self._rest_off, self.group_start)
+        self._seg_len_blocks = group_blocks(ghosts.rest_length[o], self.group_start)
         frac = arc_fractions(ghosts.rest_length)[o]
         # per-node data (guide parameter, w_tip) as a table of distinct rows: ghosts with the
         # same arc-length layout share one row
@@ -135,6 +138,12 @@ class GhostTracker:
             rows, inverse = np.unique(table, axis=0, return_inverse=True)
         self._node_table = np.ascontiguousarray(rows.reshape(-1, n_nodes, 2))
         self._node_row = np.ascontiguousarray(inverse.reshape(-1).astype(np.int64))
+        # the row shared by all ghosts of a group (-1: the group mixes layouts)
+        self._group_row = np.full(n_groups, -1, dtype=np.int64)
+        for g in range(n_groups):
+            r = self._node_row[self.group_start[g]:self.group_start[g + 1]]
+            if r.size and np.all(r == r[0]):
+                self._group_row[g] = r[0]
         length = ghosts.strand_length[o]
         self._inv_len = np.where(length > 0.0, 1.0 / np.where(length > 0.0, length, 1.0), 0.0)
         tan = np.diff(gr, axis=1)
@@ -145,12 +154,24 @@ class GhostTracker:
 
         # -- scratch
         self._q_buf = np.empty((n_groups, guides.nodes - 1, 3, 3))
-        self._scratch = np.empty((s_count, 6))
+        chunks = chunk_count(n_groups, numba.config.NUMBA_NUM_THREADS)
+        largest = int(group_size.max()) if n_groups else 1
+        self._buf = np.zeros((chunks, 9 * n_nodes * largest))
+        self._tmp = np.zeros((chunks, TMP_ROWS * largest))
         self._clamped = np.zeros(n_groups, dtype=np.int64)
-        self._x_prev = np.empty_like(ghosts.x) if self.collide else None
-        # corrections of the collision-aware length restoration (not used: ghost velocities are
-        # taken from the displacement)
-        self._restore_corr = np.zeros_like(ghosts.x) if self.collide else None
+        self._contacts = np.zeros(chunks, dtype=np.int64)
+        # the project's ellipsoid collider runs inside the kernel (h); any other collider object
+        # runs after it on the whole arrays
+        self._fused_collider = self.collide and isinstance(collider, Collider)
+        if self._fused_collider:
+            self._axes = np.ascontiguousarray(collider.radii + collider.margin)
+            self._center = collider.center
+            self._friction, self._refine = collider.friction, collider.refine
+        else:
+            self._axes, self._center = np.ones(3), np.zeros(3)
+            self._friction, self._refine = 0.0, 0
+        generic = self.collide and not self._fused_collider
+        self._x_prev = np.empty_like(ghosts.x) if generic else None
         self.stats: Dict[str, int] = {
             'ghosts': int(s_count), 'groups': int(n_groups),
             'largest_group': int(group_size.max()) if n_groups else 0,
@@ -188,29 +209,27 @@ class GhostTracker:
                 not (x.flags.c_contiguous and v.flags.c_contiguous):
             raise ValueError(f'ghosts.x and ghosts.v must be C-contiguous arrays shaped '
                              f'{self.ghosts.rest.shape}')
-        if self.collide:
+        generic = self.collide and not self._fused_collider
+        if generic:
             np.copyto(self._x_prev, x)
-        args = (x, v, self.ghosts.rest, _f64(self.ghosts.rest_length), self.order,
-                self.group_start, self.group_guide, self._node_table, self._node_row,
-                self._rest_off, self._inv_len, self._var_target,
-                _f64(gx), _f64(guide_x_old), self._tan_rest,
-                _f64(head.rotation), _f64(head.position), float(dt),
-                self._elastic, tr.tip_weight > 0.0, tr.com_weight, tr.max_weight,
-                _per(tr.offset_strength, substeps), _per(tr.com_strength, substeps),
-                _per(tr.spread, substeps), tr.length_restore,
-                self._q_buf, self._scratch, self._clamped)
-        track_groups(*args)
+        track_groups(x, v, self.ghosts.rest, self._seg_len_blocks, self.order,
+                     self.group_start, self.group_guide, self._group_row, self._node_table,
+                     self._node_row, self._rest_off_blocks, self._inv_len, self._var_target,
+                     _f64(gx), _f64(guide_x_old), self._tan_rest,
+                     _f64(head.rotation), _f64(head.position), float(dt),
+                     self._elastic, tr.tip_weight > 0.0, tr.com_weight, tr.max_weight,
+                     _per(tr.offset_strength, substeps), _per(tr.com_strength, substeps),
+                     _per(tr.spread, substeps), tr.length_restore,
+                     self._fused_collider, self._center, self._axes, self._friction,
+                     self._refine, self._q_buf, self._buf, self._tmp, self._clamped,
+                     self._contacts)
         self.stats['steps'] += 1
         self.stats['clamped'] = int(self._clamped.sum())
-        if self.collide:
-            contacts = int(self.collider.apply(x, self._x_prev, self.ghosts.inv_mass, head))
-            self.stats['contacts'] = contacts
-            c = self.collider
-            if contacts and tr.length_restore and isinstance(c, Collider):
-                # the push stretched segments: restore the lengths, staying outside (as guides)
-                ftl_restore(x, self.ghosts.rest, _f64(self.ghosts.rest_length),
-                            _f64(head.rotation), _f64(head.position), c.center,
-                            c.radii + c.margin, c.refine, self._restore_corr)
+        if self._fused_collider:
+            self.stats['contacts'] = int(self._contacts.sum())
+        elif generic:
+            self.stats['contacts'] = int(
+                self.collider.apply(x, self._x_prev, self.ghosts.inv_mass, head))
             np.subtract(x, self._x_prev, out=v)
             v *= 1.0 / dt
 

@@ -28,7 +28,9 @@ import math
 from numba import njit, prange
 import numpy as np
 
-from .weights import clamp_weight, com_weight, elastic_weight
+from .collision import push_out, world_center
+from .ftl import restore_node
+from .weights import clamp_weight, com_weight, direction_cos, ELASTIC_KEPT, ELASTIC_OFF
 
 
 @njit(cache=True, inline='always')
@@ -112,25 +114,44 @@ def guide_frames_kernel(guide_x, tan_rest, R, out):
             _frame_into(guide_x, tan_rest, g, s, R, out[g, s])
 
 
-@njit(cache=True, parallel=True)
-def track_groups(x, v, rest, rest_length, order, group_start, group_guide, node_table, node_row,
-                 rest_off, inv_len, var_target, guide_x, guide_x_old, tan_rest, R, pos, dt,
-                 elastic_mode, use_tip, com_w, max_weight, k_off, k_com, spread, ftl,
-                 q_buf, scratch, clamped):
+#: Fast-math flags of the tracking kernel: fused multiply-add and reassociation (so that LLVM
+#: vectorises the loops over a group's ghosts, sums included); no flag that assumes finite input.
+TRACK_FASTMATH = {'contract', 'reassoc'}
+
+#: Rows of the per-chunk work space ``tmp`` of :func:`track_groups` (per ghost of a group).
+_DX, _DY, _DZ, _QX, _QY, _QZ, _TW, _FLAG, _W = range(9)
+TMP_ROWS = 9
+
+
+def chunk_count(groups: int, threads: int) -> int:
+    """Chunks of groups that :func:`track_groups` spreads over ``threads`` threads."""
+    return max(1, min(groups, 4 * threads))
+
+
+@njit(cache=True, parallel=True, fastmath=TRACK_FASTMATH, error_model='numpy')
+def track_groups(x, v, rest, seg_len, order, group_start, group_guide, group_row,
+                 node_table, node_row, rest_off, inv_len, var_target, guide_x, guide_x_old,
+                 tan_rest, R, pos, dt, elastic_mode, use_tip, com_w, max_weight, k_off, k_com,
+                 spread, ftl, collide, center, axes, friction, refine,
+                 q_buf, buf, tmp, clamped, contacts):
     """One tracking substep of all ghosts, in place on ``x`` and ``v`` (see the module doc).
 
-    Parameters (S ghosts of N nodes, G guides of M nodes, K groups, U distinct node rows):
+    Parameters (S ghosts of N nodes, G guides of M nodes, K groups, U distinct node rows,
+    C chunks, B the largest group):
       x, v (S, N, 3)          ghost positions [m] / velocities [m/s], world, user order
       rest (S, N, 3)          ghost rest shapes, head frame [m] (roots and FTL fallback)
-      rest_length (S, N-1)    ghost rest segment lengths [m]
+      seg_len (S * (N-1),)    ghost rest segment lengths [m], in the layout of ``rest_off``
       order (S,)              ghost index of group-order row k
       group_start (K+1,)      rows of group g: group_start[g] .. group_start[g+1]-1
       group_guide (K,)        guide of group g
+      group_row (K,)          the node_table row shared by every ghost of group g, or -1
       node_table (U, N, 2)    per node: guide parameter ``seg + t`` and ``w_tip``
       node_row (S,)           row of node_table of each ghost (group order); ghosts with the
                               same arc-length layout share a row (all of them, for a groom with
-                              evenly spaced nodes), which keeps the per-node data in cache
-      rest_off (S, N, 3)      target offset from the guide point, head frame [m] (group order)
+                              evenly spaced nodes)
+      rest_off (S * N * 3,)   target offset from the guide point, head frame [m], stored group
+                              by group, inside a group as [node][axis][ghost] (see
+                              :func:`group_blocks`)
       inv_len (S,)            1 / ghost length [1/m] (group order)
       var_target (K, N)       target group variance (sum of squares) [m^2] for spread control
       guide_x, guide_x_old    (G, M, 3) guides after / before this substep, world [m]
@@ -138,230 +159,350 @@ def track_groups(x, v, rest, rest_length, order, group_start, group_guide, node_
       R (3, 3), pos (3,)      head pose;  dt [s]
       elastic_mode            weights.ELASTIC_OFF / KEPT / CHANGED
       use_tip, com_w, max_weight, k_off, k_com, spread, ftl   switches and strengths
-      q_buf (K, M-1, 3, 3), scratch (S, 6)   work space;  clamped (K,) out: clamped weight sums
+      collide                 (h) fused: push nodes out of the ellipsoid with semi-axes ``axes``
+                              around ``center`` (head frame [m]), ``friction`` relative to the
+                              node's start-of-substep position, ``refine`` projection refinements;
+                              with ``ftl`` the pushed node is put back at its rest distance
+                              (:func:`hair_tracking.ftl.restore_node`)
+      q_buf (K, M-1, 3, 3)    work space: guide segment frames
+      buf (C, 9 N B)          work space per chunk: old x, old v, new x of a group, each laid
+                              out [node][axis][ghost] (ghost stride = the group's size, so a
+                              group of 16 ghosts of 16 nodes takes 6 KiB per array and stays in
+                              the L1 cache) so the loops over the ghosts vectorise
+      tmp (C, TMP_ROWS B)     work space per chunk: per-ghost values of one node index
+      clamped (K,) out        clamped weight sums per group;  contacts (C,) out  pushed nodes
 
-    Within a group the loop runs over node index ``j`` (root to tip) outside and over the group's
-    ghosts inside: the ghosts at one node index are independent (instruction-level parallelism),
-    the group sums of (d) and (e) are complete before they are applied, Follow-The-Leader finds
-    node ``j - 1`` already final, and the target point on the guide is computed once for all
-    ghosts of the group that share it.
+    Each chunk (a contiguous range of groups, the unit of parallel work) walks its groups one
+    at a time: the group's ghosts are copied into ``buf`` (each ghost a contiguous run of
+    memory), advanced node index by node index from the root (the group sums of (d) and (e)
+    exist before they are applied, Follow-The-Leader finds node ``j - 1`` final) and copied
+    back with ``v = (x_new - x_old) / dt``.  Groups are independent: the result does not depend
+    on the number of chunks or threads.
     """
     n_nodes = x.shape[1]
-    m_nodes = guide_x.shape[1]
-    m_last = m_nodes - 2
+    m_last = guide_x.shape[1] - 2
+    n_groups = group_guide.shape[0]
+    n_chunks = buf.shape[0]
     inv_dt = 1.0 / dt
     need_target = k_off > 0.0 or k_com > 0.0
-    group_level = k_com > 0.0 or spread > 0.0
-    xf = x.reshape(x.size)
-    vf = v.reshape(v.size)
-    of = rest_off.reshape(rest_off.size)
-    tf = node_table.reshape(node_table.size)
-    gxf = guide_x.reshape(guide_x.size)
-    gof = guide_x_old.reshape(guide_x_old.size)
-    qf = q_buf.reshape(q_buf.size)
-    sf = scratch.reshape(scratch.size)
-    lf = rest_length.reshape(rest_length.size)
-    # flat views: one index per (ghost, node) instead of three keeps the inner loops short
-    for g in prange(group_guide.shape[0]):
-        gi = group_guide[g]
-        k0 = group_start[g]
-        k1 = group_start[g + 1]
-        n = k1 - k0
-        n_clamped = 0
-        if need_target:     # frames Q of the guide's segments, once per group
-            Q = q_buf[g]
-            for sg in range(m_last + 1):
-                _frame_into(guide_x, tan_rest, gi, sg, R, Q[sg])
-        use_com_w = com_w > 0.0 and n > 1
-        qb = g * (m_last + 1) * 9
-        gb = gi * m_nodes * 3
-        # (g) roots pinned to the head-carried rest shape
-        for k in range(k0, k1):
-            s = order[k]
-            for j in range(min(2, n_nodes)):
-                for a in range(3):
-                    new = pos[a] + R[a, 0] * rest[s, j, 0] + R[a, 1] * rest[s, j, 1] + \
-                        R[a, 2] * rest[s, j, 2]
-                    v[s, j, a] = (new - x[s, j, a]) * inv_dt
-                    x[s, j, a] = new
-        for j in range(2, n_nodes):
-            # centre of mass at the start of the substep (only w_com needs it)
-            c0x = c0y = c0z = 0.0
-            if use_com_w:
-                for k in range(k0, k1):
-                    xb = (order[k] * n_nodes + j) * 3
-                    c0x += xf[xb]
-                    c0y += xf[xb + 1]
-                    c0z += xf[xb + 2]
-                c0x /= n
-                c0y /= n
-                c0z /= n
-            xs0 = xs1 = xs2 = qs0 = qs1 = qs2 = 0.0
-            ys0 = ys1 = ys2 = y2 = 0.0
-            r0 = r1 = r2 = 0.0
-            last_gp = -1.0
-            px = py = pz = dx = dy = dz = 0.0
-            q00 = q01 = q02 = q10 = q11 = q12 = q20 = q21 = q22 = 0.0
-            for k in range(k0, k1):
-                xb = (order[k] * n_nodes + j) * 3
-                tb = (node_row[k] * n_nodes + j) * 2
-                # (a) velocity transfer: displacement u dt of the target point on the guide
-                # (computed once for consecutive ghosts sharing the point)
-                gp = tf[tb]
-                if gp != last_gp:
-                    last_gp = gp
-                    sg = int(gp)
-                    if sg > m_last:
-                        sg = m_last
-                    t = gp - sg
-                    u = 1.0 - t
-                    a0 = gb + sg * 3
-                    px = u * gxf[a0] + t * gxf[a0 + 3]
-                    py = u * gxf[a0 + 1] + t * gxf[a0 + 4]
-                    pz = u * gxf[a0 + 2] + t * gxf[a0 + 5]
-                    dx = px - (u * gof[a0] + t * gof[a0 + 3])
-                    dy = py - (u * gof[a0 + 1] + t * gof[a0 + 4])
-                    dz = pz - (u * gof[a0 + 2] + t * gof[a0 + 5])
-                    if need_target:
-                        b = qb + sg * 9
-                        q00 = qf[b]
-                        q01 = qf[b + 1]
-                        q02 = qf[b + 2]
-                        q10 = qf[b + 3]
-                        q11 = qf[b + 4]
-                        q12 = qf[b + 5]
-                        q20 = qf[b + 6]
-                        q21 = qf[b + 7]
-                        q22 = qf[b + 8]
-                xo0 = xf[xb]
-                xo1 = xf[xb + 1]
-                xo2 = xf[xb + 2]
-                # (b) weights, equations (4)-(5): pos* = pos + u dt (W* + w_tip + w_com)
-                w = elastic_weight(dx, dy, dz, vf[xb], vf[xb + 1], vf[xb + 2], elastic_mode)
-                if use_tip:
-                    w += tf[tb + 1]
-                if use_com_w:
-                    ex = xo0 - c0x
-                    ey = xo1 - c0y
-                    ez = xo2 - c0z
-                    w += com_weight(math.sqrt(ex * ex + ey * ey + ez * ez), inv_len[k], com_w)
-                if w > max_weight:
-                    n_clamped += 1
-                w = 1.0 + clamp_weight(w, max_weight)
-                x0 = xo0 + dx * w
-                x1 = xo1 + dy * w
-                x2 = xo2 + dz * w
-                # (c) offset feedback toward the target q = guide point + Q rest_offset
-                if need_target:
-                    ob = (k * n_nodes + j) * 3
-                    o0 = of[ob]
-                    o1 = of[ob + 1]
-                    o2 = of[ob + 2]
-                    q0 = px + q00 * o0 + q01 * o1 + q02 * o2
-                    q1 = py + q10 * o0 + q11 * o1 + q12 * o2
-                    q2 = pz + q20 * o0 + q21 * o1 + q22 * o2
-                    if k_off > 0.0:
-                        x0 += k_off * (q0 - x0)
-                        x1 += k_off * (q1 - x1)
-                        x2 += k_off * (q2 - x2)
-                    qs0 += q0
-                    qs1 += q1
-                    qs2 += q2
-                if not group_level:
-                    _finish_node(xf, vf, lf, rest, R, order[k], n_nodes, j, xb,
-                                 x0, x1, x2, xo0, xo1, xo2, ftl, inv_dt)
-                    continue
-                xs0 += x0
-                xs1 += x1
-                xs2 += x2
-                if spread > 0.0:
-                    if k == k0:
-                        r0 = x0
-                        r1 = x1
-                        r2 = x2
-                    e0 = x0 - r0
-                    e1 = x1 - r1
-                    e2 = x2 - r2
-                    ys0 += e0
-                    ys1 += e1
-                    ys2 += e2
-                    y2 += e0 * e0 + e1 * e1 + e2 * e2
-                sb = k * 6          # old and predicted position, until the group sums are done
-                sf[sb] = xo0
-                sf[sb + 1] = xo1
-                sf[sb + 2] = xo2
-                sf[sb + 3] = x0
-                sf[sb + 4] = x1
-                sf[sb + 5] = x2
-            if not group_level:
+    use_v = elastic_mode != ELASTIC_OFF
+    ax, ay, az = axes[0], axes[1], axes[2]
+    ix, iy, iz = 1.0 / (ax * ax), 1.0 / (ay * ay), 1.0 / (az * az)
+    cx, cy, cz = world_center(R, pos, center)
+    for c in prange(n_chunks):
+        g_first = c * n_groups // n_chunks
+        g_end = (c + 1) * n_groups // n_chunks
+        W = buf[c]
+        Tc = tmp[c]
+        n_contacts = 0
+        for g in range(g_first, g_end):
+            gi = group_guide[g]
+            k0 = group_start[g]
+            n = group_start[g + 1] - k0
+            if n == 0:
+                clamped[g] = 0
                 continue
-            # (d) centre-of-mass tracking: shift toward the centre of mass of the targets
-            d0 = d1 = d2 = 0.0
-            if k_com > 0.0:
-                d0 = k_com * (qs0 - xs0) / n
-                d1 = k_com * (qs1 - xs1) / n
-                d2 = k_com * (qs2 - xs2) / n
-            # (e) spread control: scale about the shifted centre toward the target variance
-            f = 1.0
-            if spread > 0.0 and n > 1:
-                var = y2 - (ys0 * ys0 + ys1 * ys1 + ys2 * ys2) / n
-                if var > 1e-30:
-                    ratio = math.sqrt(var_target[g, j] / var)
-                    if ratio > 2.0:
-                        ratio = 2.0
-                    elif ratio < 0.5:
-                        ratio = 0.5
-                    f = 1.0 + spread * (ratio - 1.0)
-            c0 = xs0 / n + d0
-            c1 = xs1 / n + d1
-            c2 = xs2 / n + d2
-            # apply (d), (e); (f) Follow-The-Leader; velocities
-            for k in range(k0, k1):
-                sb = k * 6
-                x0 = sf[sb + 3] + d0
-                x1 = sf[sb + 4] + d1
-                x2 = sf[sb + 5] + d2
-                if f != 1.0:
-                    x0 = c0 + f * (x0 - c0)
-                    x1 = c1 + f * (x1 - c1)
-                    x2 = c2 + f * (x2 - c2)
-                xb = (order[k] * n_nodes + j) * 3
-                _finish_node(xf, vf, lf, rest, R, order[k], n_nodes, j, xb, x0, x1, x2,
-                             sf[sb], sf[sb + 1], sf[sb + 2], ftl, inv_dt)
-        clamped[g] = n_clamped
+            if need_target:     # frames Q of the guide's segments, once per group
+                for sg in range(m_last + 1):
+                    _frame_into(guide_x, tan_rest, gi, sg, R, q_buf[g, sg])
+            # the group's work space: old x, old v, new x, each (N, 3, n) [node][axis][ghost]
+            Wg = W[:9 * n_nodes * n].reshape((3, n_nodes, 3, n))
+            X0 = Wg[0]
+            V0 = Wg[1]
+            XN = Wg[2]
+            T = Tc[:TMP_ROWS * n].reshape((TMP_ROWS, n))
+            # gather the group: old positions (and velocities), roots pinned (g)
+            for kk in range(n):
+                s = order[k0 + kk]
+                for j in range(n_nodes):
+                    for a in range(3):
+                        X0[j, a, kk] = x[s, j, a]
+                if use_v:
+                    for j in range(n_nodes):
+                        for a in range(3):
+                            V0[j, a, kk] = v[s, j, a]
+                for j in range(min(2, n_nodes)):
+                    for a in range(3):
+                        XN[j, a, kk] = pos[a] + R[a, 0] * rest[s, j, 0] + \
+                            R[a, 1] * rest[s, j, 1] + R[a, 2] * rest[s, j, 2]
+            use_com_w = com_w > 0.0 and n > 1
+            n_clamped = 0
+            ob = k0 * n_nodes * 3
+            lb = k0 * (n_nodes - 1)
+            for j in range(2, n_nodes):
+                _targets(T, n, k0, g, gi, j, group_row[g], node_table, node_row,
+                         rest_off[ob + j * 3 * n:ob + (j + 1) * 3 * n].reshape((3, n)),
+                         guide_x, guide_x_old, q_buf, m_last, need_target)
+                n_clamped += _predict(X0[j], V0[j], XN[j], T, n, inv_len[k0:k0 + n], elastic_mode,
+                                      use_tip, use_com_w, com_w, max_weight, k_off)
+                if k_com > 0.0 or (spread > 0.0 and n > 1):
+                    _group_stage(XN[j], T, n, k_com, spread, var_target[g, j], need_target)
+                if ftl:
+                    _follow(XN[j - 1], XN[j], T, n, k0, order,
+                            seg_len[lb + (j - 1) * n:lb + j * n], rest, R, j)
+                if collide:
+                    n_contacts += _collide(X0[j], XN[j - 1], XN[j], T, n, k0, order,
+                                           seg_len[lb + (j - 1) * n:lb + j * n], rest, R, j,
+                                           ftl, cx, cy, cz,
+                                           ax, ay, az, ix, iy, iz, friction, refine)
+            clamped[g] = n_clamped
+            # scatter: new positions and v = (x_new - x_old) / dt
+            for kk in range(n):
+                s = order[k0 + kk]
+                for j in range(n_nodes):
+                    for a in range(3):
+                        xn = XN[j, a, kk]
+                        v[s, j, a] = (xn - X0[j, a, kk]) * inv_dt
+                        x[s, j, a] = xn
+        contacts[c] = n_contacts
 
 
-@njit(cache=True, inline='always')
-def _finish_node(xf, vf, lf, rest, R, s, n_nodes, j, xb, x0, x1, x2, xo0, xo1, xo2, ftl, inv_dt):
-    """(f) Follow-The-Leader placement of node j of ghost s after node j-1 (if ``ftl``), then
-    store x and v = (x - x_old) / dt.  ``xf``, ``vf``, ``lf``: flat views of x, v, rest_length;
-    ``xb`` the flat index of (s, j, 0)."""
-    if ftl:
-        d0 = x0 - xf[xb - 3]
-        d1 = x1 - xf[xb - 2]
-        d2 = x2 - xf[xb - 1]
+@njit(cache=True, inline='always', fastmath=TRACK_FASTMATH, error_model='numpy')
+def _targets(T, n, k0, g, gi, j, row, node_table, node_row, off, guide_x, guide_x_old, q_buf,
+             m_last, need_target):
+    """Per ghost of group ``g`` at node ``j``: displacement ``u dt`` of its guide point (a) into
+    T[_DX.._DZ], its target ``q = P + Q o`` (c) into T[_QX.._QZ] (if ``need_target``) and w_tip
+    into T[_TW].  ``off`` (3, n): the ghosts' rest offsets at node ``j``."""
+    if row >= 0:
+        # the usual case: the whole group shares one arc-length layout (scalars, then a loop
+        # over the ghosts that vectorises)
+        gp = node_table[row, j, 0]
+        tw = node_table[row, j, 1]
+        sg = min(int(gp), m_last)
+        t = gp - sg
+        u = 1.0 - t
+        px = u * guide_x[gi, sg, 0] + t * guide_x[gi, sg + 1, 0]
+        py = u * guide_x[gi, sg, 1] + t * guide_x[gi, sg + 1, 1]
+        pz = u * guide_x[gi, sg, 2] + t * guide_x[gi, sg + 1, 2]
+        dx = px - (u * guide_x_old[gi, sg, 0] + t * guide_x_old[gi, sg + 1, 0])
+        dy = py - (u * guide_x_old[gi, sg, 1] + t * guide_x_old[gi, sg + 1, 1])
+        dz = pz - (u * guide_x_old[gi, sg, 2] + t * guide_x_old[gi, sg + 1, 2])
+        for kk in range(n):
+            T[_DX, kk] = dx
+            T[_DY, kk] = dy
+            T[_DZ, kk] = dz
+            T[_TW, kk] = tw
+        if need_target:
+            Q = q_buf[g, sg]
+            q00, q01, q02 = Q[0, 0], Q[0, 1], Q[0, 2]
+            q10, q11, q12 = Q[1, 0], Q[1, 1], Q[1, 2]
+            q20, q21, q22 = Q[2, 0], Q[2, 1], Q[2, 2]
+            for kk in range(n):
+                o0 = off[0, kk]
+                o1 = off[1, kk]
+                o2 = off[2, kk]
+                T[_QX, kk] = px + q00 * o0 + q01 * o1 + q02 * o2
+                T[_QY, kk] = py + q10 * o0 + q11 * o1 + q12 * o2
+                T[_QZ, kk] = pz + q20 * o0 + q21 * o1 + q22 * o2
+        return
+    for kk in range(n):
+        r = node_row[k0 + kk]
+        gp = node_table[r, j, 0]
+        T[_TW, kk] = node_table[r, j, 1]
+        sg = min(int(gp), m_last)
+        t = gp - sg
+        u = 1.0 - t
+        px = u * guide_x[gi, sg, 0] + t * guide_x[gi, sg + 1, 0]
+        py = u * guide_x[gi, sg, 1] + t * guide_x[gi, sg + 1, 1]
+        pz = u * guide_x[gi, sg, 2] + t * guide_x[gi, sg + 1, 2]
+        T[_DX, kk] = px - (u * guide_x_old[gi, sg, 0] + t * guide_x_old[gi, sg + 1, 0])
+        T[_DY, kk] = py - (u * guide_x_old[gi, sg, 1] + t * guide_x_old[gi, sg + 1, 1])
+        T[_DZ, kk] = pz - (u * guide_x_old[gi, sg, 2] + t * guide_x_old[gi, sg + 1, 2])
+        if need_target:
+            Q = q_buf[g, sg]
+            o0 = off[0, kk]
+            o1 = off[1, kk]
+            o2 = off[2, kk]
+            T[_QX, kk] = px + Q[0, 0] * o0 + Q[0, 1] * o1 + Q[0, 2] * o2
+            T[_QY, kk] = py + Q[1, 0] * o0 + Q[1, 1] * o1 + Q[1, 2] * o2
+            T[_QZ, kk] = pz + Q[2, 0] * o0 + Q[2, 1] * o1 + Q[2, 2] * o2
+
+
+@njit(cache=True, inline='always', fastmath=TRACK_FASTMATH, error_model='numpy')
+def _predict(X0, V0, P, T, n, inv_len, elastic_mode, use_tip, use_com_w, com_w,
+             max_weight, k_off):
+    """(a)-(c) for node index ``j`` of a group: the new position (rows at ``W[pb:]``) = old
+    position (``W[xb:]``) + ``u dt`` (1 + W), pulled by ``k_off`` toward the target; ``W[vb:]``
+    the old velocity.  Returns the number of clamped weight sums.
+
+    Every stage is its own branch-free loop over the group's ghosts, so that each vectorises."""
+    # (b) weights, equations (4)-(5): W = W* + w_tip + w_com
+    if use_tip:
+        for kk in range(n):
+            T[_W, kk] = T[_TW, kk]
+    else:
+        for kk in range(n):
+            T[_W, kk] = 0.0
+    if elastic_mode != ELASTIC_OFF:
+        sign = 0.5 if elastic_mode == ELASTIC_KEPT else -0.5
+        for kk in range(n):
+            dx = T[_DX, kk]
+            dy = T[_DY, kk]
+            dz = T[_DZ, kk]
+            v0 = V0[0, kk]
+            v1 = V0[1, kk]
+            v2 = V0[2, kk]
+            T[_W, kk] += 0.5 + sign * direction_cos(dx, dy, dz, v0, v1, v2)
+    if use_com_w:       # distance from the centre of mass at the start of the substep
+        c0 = c1 = c2 = 0.0
+        for kk in range(n):
+            c0 += X0[0, kk]
+            c1 += X0[1, kk]
+            c2 += X0[2, kk]
+        c0 /= n
+        c1 /= n
+        c2 /= n
+        for kk in range(n):
+            e0 = X0[0, kk] - c0
+            e1 = X0[1, kk] - c1
+            e2 = X0[2, kk] - c2
+            T[_W, kk] += com_weight(math.sqrt(e0 * e0 + e1 * e1 + e2 * e2), inv_len[kk], com_w)
+    # pos* = pos + u dt (1 + W), W clamped to [0, max_weight]
+    n_clamped = 0
+    for kk in range(n):
+        w = T[_W, kk]
+        n_clamped += 1 if w > max_weight else 0
+        w = 1.0 + clamp_weight(w, max_weight)
+        P[0, kk] = X0[0, kk] + T[_DX, kk] * w
+        P[1, kk] = X0[1, kk] + T[_DY, kk] * w
+        P[2, kk] = X0[2, kk] + T[_DZ, kk] * w
+    # (c) offset feedback toward the target q = guide point + Q rest_offset
+    if k_off > 0.0:
+        for kk in range(n):
+            P[0, kk] += k_off * (T[_QX, kk] - P[0, kk])
+            P[1, kk] += k_off * (T[_QY, kk] - P[1, kk])
+            P[2, kk] += k_off * (T[_QZ, kk] - P[2, kk])
+    return n_clamped
+
+
+@njit(cache=True, inline='always', fastmath=TRACK_FASTMATH, error_model='numpy')
+def _group_stage(P, T, n, k_com, spread, var_target, have_target):
+    """(d) centre-of-mass tracking and (e) spread control of one node index of a group, on the
+    predicted positions (rows at ``W[pb:]``) in place; ``T[_QX.._QZ]`` the targets."""
+    xs0 = xs1 = xs2 = 0.0
+    for kk in range(n):
+        xs0 += P[0, kk]
+        xs1 += P[1, kk]
+        xs2 += P[2, kk]
+    m0 = xs0 / n
+    m1 = xs1 / n
+    m2 = xs2 / n
+    # (d) shift toward the centre of mass of the targets
+    d0 = d1 = d2 = 0.0
+    if k_com > 0.0 and have_target:
+        qs0 = qs1 = qs2 = 0.0
+        for kk in range(n):
+            qs0 += T[_QX, kk]
+            qs1 += T[_QY, kk]
+            qs2 += T[_QZ, kk]
+        d0 = k_com * (qs0 / n - m0)
+        d1 = k_com * (qs1 / n - m1)
+        d2 = k_com * (qs2 / n - m2)
+    # (e) scale about the shifted centre toward the target variance
+    f = 1.0
+    if spread > 0.0 and n > 1:
+        var = 0.0
+        for kk in range(n):
+            e0 = P[0, kk] - m0
+            e1 = P[1, kk] - m1
+            e2 = P[2, kk] - m2
+            var += e0 * e0 + e1 * e1 + e2 * e2
+        if var > 1e-30:
+            ratio = math.sqrt(var_target / var)
+            if ratio > 2.0:
+                ratio = 2.0
+            elif ratio < 0.5:
+                ratio = 0.5
+            f = 1.0 + spread * (ratio - 1.0)
+    # x -> c + f (x + d - c) with c = m + d, i.e. x -> m + d + f (x - m)
+    for kk in range(n):
+        P[0, kk] = m0 + d0 + f * (P[0, kk] - m0)
+        P[1, kk] = m1 + d1 + f * (P[1, kk] - m1)
+        P[2, kk] = m2 + d2 + f * (P[2, kk] - m2)
+
+
+@njit(cache=True, inline='always', fastmath=TRACK_FASTMATH, error_model='numpy')
+def _follow(B, P, T, n, k0, order, seg_len, rest, R, j):
+    """(f) Follow-The-Leader: node ``j`` (rows at ``W[pb:]``) put at its rest length from node
+    ``j - 1`` (rows at ``W[bb:]``, final), along the current direction; a node without a
+    direction continues along its head-carried rest segment."""
+    n_bad = 0
+    for kk in range(n):
+        d0 = P[0, kk] - B[0, kk]
+        d1 = P[1, kk] - B[1, kk]
+        d2 = P[2, kk] - B[2, kk]
         nd = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
-        length = lf[s * (n_nodes - 1) + j - 1]
-        if nd > 1e-300 and nd < 1e300:
-            sc = length / nd
-        else:
-            # no direction: continue along the head-carried rest segment (already |.| = length)
-            r0 = rest[s, j, 0] - rest[s, j - 1, 0]
-            r1 = rest[s, j, 1] - rest[s, j - 1, 1]
-            r2 = rest[s, j, 2] - rest[s, j - 1, 2]
-            d0 = R[0, 0] * r0 + R[0, 1] * r1 + R[0, 2] * r2
-            d1 = R[1, 0] * r0 + R[1, 1] * r1 + R[1, 2] * r2
-            d2 = R[2, 0] * r0 + R[2, 1] * r1 + R[2, 2] * r2
-            sc = 1.0
-        x0 = xf[xb - 3] + d0 * sc
-        x1 = xf[xb - 2] + d1 * sc
-        x2 = xf[xb - 1] + d2 * sc
-    vf[xb] = (x0 - xo0) * inv_dt
-    vf[xb + 1] = (x1 - xo1) * inv_dt
-    vf[xb + 2] = (x2 - xo2) * inv_dt
-    xf[xb] = x0
-    xf[xb + 1] = x1
-    xf[xb + 2] = x2
+        ok = nd > 1e-300 and nd < 1e300
+        sc = seg_len[kk] / nd if ok else 0.0
+        T[_FLAG, kk] = 0.0 if ok else 1.0
+        n_bad += 0 if ok else 1
+        P[0, kk] = B[0, kk] + d0 * sc
+        P[1, kk] = B[1, kk] + d1 * sc
+        P[2, kk] = B[2, kk] + d2 * sc
+    if n_bad == 0:
+        return
+    for kk in range(n):
+        if T[_FLAG, kk] == 0.0:
+            continue
+        s = order[k0 + kk]
+        r0 = rest[s, j, 0] - rest[s, j - 1, 0]
+        r1 = rest[s, j, 1] - rest[s, j - 1, 1]
+        r2 = rest[s, j, 2] - rest[s, j - 1, 2]
+        P[0, kk] = B[0, kk] + R[0, 0] * r0 + R[0, 1] * r1 + R[0, 2] * r2
+        P[1, kk] = B[1, kk] + R[1, 0] * r0 + R[1, 1] * r1 + R[1, 2] * r2
+        P[2, kk] = B[2, kk] + R[2, 0] * r0 + R[2, 1] * r1 + R[2, 2] * r2
+
+
+@njit(cache=True, inline='always', fastmath=TRACK_FASTMATH, error_model='numpy')
+def _collide(X0, B, P, T, n, k0, order, seg_len, rest, R, j, ftl, cx, cy, cz,
+             ax, ay, az, ix, iy, iz, friction, refine):
+    """(h) node ``j`` (rows at ``W[pb:]``) pushed out of the head ellipsoid with friction
+    relative to its start-of-substep position (``W[xb:]``); with ``ftl`` then put back at its
+    rest distance from node ``j - 1`` (``W[bb:]``) outside the surface.  Returns the number of
+    pushed nodes."""
+    n_in = 0
+    for kk in range(n):     # inside test for the whole group (vectorises); few nodes are in
+        w0 = P[0, kk] - cx
+        w1 = P[1, kk] - cy
+        w2 = P[2, kk] - cz
+        q0 = R[0, 0] * w0 + R[1, 0] * w1 + R[2, 0] * w2
+        q1 = R[0, 1] * w0 + R[1, 1] * w1 + R[2, 1] * w2
+        q2 = R[0, 2] * w0 + R[1, 2] * w1 + R[2, 2] * w2
+        inside = q0 * q0 * ix + q1 * q1 * iy + q2 * q2 * iz < 1.0
+        T[_FLAG, kk] = 1.0 if inside else 0.0
+        n_in += 1 if inside else 0
+    if n_in == 0:
+        return 0
+    for kk in range(n):
+        if T[_FLAG, kk] == 0.0:
+            continue
+        moved, y0, y1, y2 = push_out(P[0, kk], P[1, kk], P[2, kk],
+                                     X0[0, kk], X0[1, kk], X0[2, kk],
+                                     R, cx, cy, cz, ax, ay, az, friction, refine)
+        if moved and ftl:
+            s = order[k0 + kk]
+            y0, y1, y2 = restore_node(
+                y0, y1, y2, B[0, kk], B[1, kk], B[2, kk], seg_len[kk],
+                rest[s, j, 0] - rest[s, j - 1, 0], rest[s, j, 1] - rest[s, j - 1, 1],
+                rest[s, j, 2] - rest[s, j - 1, 2], R, cx, cy, cz, ax, ay, az, refine)
+        P[0, kk] = y0
+        P[1, kk] = y1
+        P[2, kk] = y2
+    return n_in
+
+
+def group_blocks(a: np.ndarray, group_start: np.ndarray) -> np.ndarray:
+    """(S, ...) per-ghost data in group order -> the flat layout of ``rest_off`` and ``seg_len``
+    in :func:`track_groups`: group by group, inside a group the ghost index last (for (S, N, 3)
+    data [node][axis][ghost])."""
+    a = np.asarray(a, dtype=np.float64)
+    per = a[0].size if a.shape[0] else 0
+    out = np.empty(a.size)
+    axes = tuple(range(1, a.ndim)) + (0,)
+    for g in range(group_start.size - 1):
+        k0, k1 = int(group_start[g]), int(group_start[g + 1])
+        out[k0 * per:k1 * per] = a[k0:k1].transpose(axes).reshape(-1)
+    return out
 
 
 def guide_frames(guide_x: np.ndarray, tan_rest: np.ndarray, rotation: np.ndarray) -> np.ndarray:

@@ -44,25 +44,28 @@ def elastic_code(tracking) -> int:
 
 
 @njit(cache=True, inline='always')
+def direction_cos(vx, vy, vz, v0x, v0y, v0z):
+    """Cosine of the angle between ``v`` and ``v0``, in [-1, 1]; 0 where a direction is undefined
+    (``|v|^2 |v0|^2 <= 1e-300``, i.e. speeds below about 1e-75 m/s) or the input is not finite.
+    Branch-free, so that loops calling it vectorise."""
+    nn = (vx * vx + vy * vy + vz * vz) * (v0x * v0x + v0y * v0y + v0z * v0z)
+    ok = nn > 1e-300
+    cos = (vx * v0x + vy * v0y + vz * v0z) / math.sqrt(nn if ok else 1.0)
+    cos = min(max(cos, -1.0), 1.0)
+    return cos if ok and cos == cos else 0.0
+
+
+@njit(cache=True, inline='always')
 def elastic_weight(vx, vy, vz, v0x, v0y, v0z, mode):
     """W* of equation (4) from the current (v) and previous (v0) velocity of one node.
 
     Only the directions matter, so ``v`` may be given as a displacement.  Returns a value in
     [0, 1]; 0 when ``mode`` is :data:`ELASTIC_OFF`.  Directions are undefined (``cos`` taken as
-    0) when ``|v|^2 |v0|^2 <= 1e-300``, i.e. for speeds below about 1e-75 m/s.
+    0, see :func:`direction_cos`) for speeds below about 1e-75 m/s.
     """
     if mode == ELASTIC_OFF:
         return 0.0
-    nn = (vx * vx + vy * vy + vz * vz) * (v0x * v0x + v0y * v0y + v0z * v0z)
-    cos = 0.0
-    if nn > 1e-300:
-        cos = (vx * v0x + vy * v0y + vz * v0z) / math.sqrt(nn)
-        if cos > 1.0:
-            cos = 1.0
-        elif cos < -1.0:
-            cos = -1.0
-        elif not (cos == cos):      # NaN (non-finite input): neutral
-            cos = 0.0
+    cos = direction_cos(vx, vy, vz, v0x, v0y, v0z)
     if mode == ELASTIC_KEPT:
         return 0.5 * cos + 0.5
     return 0.5 - 0.5 * cos
