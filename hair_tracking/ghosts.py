@@ -15,9 +15,11 @@ d. centre-of-mass tracking -- per group and node index the ghosts' centre of mas
 e. optional spread control (HairControl, Milliez et al. 2018);
 f. optional length restoration (one Follow-The-Leader pass, Mueller, Kim & Chentanez 2012);
 g. roots (nodes 0 and 1) pinned at ``head.to_world(rest)``;
-h. optional collision with the head collider (``collider.apply`` on the whole arrays), followed,
-   when a node was pushed and length restoration is on, by the collision-aware FTL pass of the
-   guides (:func:`.ftl.ftl_restore`), so a push does not stretch the ghost.
+h. optional collision with the head collider: inside the kernel for the project's
+   :class:`.collision.Collider`, node by node after (f) (push out with friction, then, with length
+   restoration on, the collision-aware FTL step of the guides, :func:`.ftl.restore_node`, so a
+   push does not stretch the ghost); any other collider's ``apply`` runs after the kernel on the
+   whole arrays.
 
 See ``docs/ghosts.md`` for the reasoning, the two readings of equation (4) and the energy argument.
 
