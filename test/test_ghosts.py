@@ -324,6 +324,43 @@ def test_collision_stage_only_when_enabled():
         GhostTracker(ghosts, guides, scene_with(collide=True), object())
 
 
+@pytest.mark.parametrize('length_restore', [True, False])
+def test_fused_ellipsoid_collision_pushes_ghosts_out(length_restore):
+    """The project's Collider runs inside the kernel: after a step that drives the ghosts into a
+    sphere, no free node is inside it; with length restoration the segments keep their rest
+    lengths; velocities stay the displacement over dt; with collision off they stay inside."""
+    from hair_tracking.collision import Collider
+    guides, ghosts = comb([(0.0, 0.0, 0.0), (0.03, 0.0, 0.0)], 8)
+    radius, margin = 0.05, 0.004
+    collider = Collider('sphere', (0.02, 0.0, -0.15), (radius,) * 3, margin, 0.3)
+    opts = dict(length_restore=length_restore, offset_strength=0.0, com_strength=0.0)
+    results = {}
+    for collide in (False, True):
+        g = StrandSet.from_rest(guides.rest)
+        h = StrandSet.from_rest(ghosts.rest)
+        tracker = GhostTracker(h, g, scene_with(collide=collide, **opts), collider)
+        assert tracker.collide == collide
+        old = g.x.copy()
+        g.x[:, 2:, 0] += 0.02            # guides swing toward the sphere's centre
+        g.x[:, 2:, 2] -= 0.01
+        x_prev = h.x.copy()
+        tracker.step(DT, old, pose())
+        np.testing.assert_allclose(h.v, (h.x - x_prev) / DT, atol=1e-9)
+        results[collide] = (h, tracker)
+    c = collider.center
+    inside_before = np.linalg.norm(results[False][0].x[:, 2:] - c, axis=-1).min()
+    assert inside_before < radius - 0.01       # without collision the ghosts went in
+    h, tracker = results[True]
+    assert tracker.stats['contacts'] > 0
+    depth = np.linalg.norm(h.x[:, 2:] - c, axis=-1).min()
+    assert depth >= radius - 1e-9               # outside the bare sphere
+    if length_restore:
+        seg = np.linalg.norm(np.diff(h.x, axis=1), axis=-1)
+        np.testing.assert_allclose(seg[:, 1:], h.rest_length[:, 1:], rtol=1e-9)
+    else:
+        assert depth >= radius + margin - 1e-9  # a plain push ends on the surface + margin
+
+
 def test_degenerate_strands_give_no_nan():
     guide = hanging_strand((0.0, 0.0, 0.0), 8)
     guide_flat = guide.copy()
