@@ -179,85 +179,101 @@ def track_groups(x, v, rest, seg_len, order, group_start, group_guide, group_row
     back with ``v = (x_new - x_old) / dt``.  Groups are independent: the result does not depend
     on the number of chunks or threads.
     """
+    n_chunks = buf.shape[0]
+    for c in prange(n_chunks):
+        _track_chunk(c, n_chunks, x, v, rest, seg_len, order, group_start, group_guide,
+                     group_row, node_table, node_row, rest_off, inv_len, var_target, guide_x,
+                     guide_x_old, tan_rest, R, pos, dt, elastic_mode, use_tip, com_w,
+                     max_weight, k_off, k_com, spread, ftl, collide, center, axes, friction,
+                     refine, q_buf, buf, tmp, clamped, contacts)
+
+
+@njit(cache=True, fastmath=TRACK_FASTMATH, error_model='numpy')
+def _track_chunk(c, n_chunks, x, v, rest, seg_len, order, group_start, group_guide, group_row,
+                 node_table, node_row, rest_off, inv_len, var_target, guide_x, guide_x_old,
+                 tan_rest, R, pos, dt, elastic_mode, use_tip, com_w, max_weight, k_off, k_com,
+                 spread, ftl, collide, center, axes, friction, refine, q_buf, buf, tmp,
+                 clamped, contacts):
+    """Chunk ``c`` of :func:`track_groups` (its groups ``c K / C .. (c+1) K / C - 1``).  A
+    function of its own so that the parallel loop's body stays small (numba's parfor lowering
+    copies the body's IR, which took most of the compile time when everything was inlined)."""
     n_nodes = x.shape[1]
     m_last = guide_x.shape[1] - 2
     n_groups = group_guide.shape[0]
-    n_chunks = buf.shape[0]
     inv_dt = 1.0 / dt
     need_target = k_off > 0.0 or k_com > 0.0
     use_v = elastic_mode != ELASTIC_OFF
     ax, ay, az = axes[0], axes[1], axes[2]
     ix, iy, iz = 1.0 / (ax * ax), 1.0 / (ay * ay), 1.0 / (az * az)
     cx, cy, cz = world_center(R, pos, center)
-    for c in prange(n_chunks):
-        g_first = c * n_groups // n_chunks
-        g_end = (c + 1) * n_groups // n_chunks
-        W = buf[c]
-        Tc = tmp[c]
-        n_contacts = 0
-        for g in range(g_first, g_end):
-            gi = group_guide[g]
-            k0 = group_start[g]
-            n = group_start[g + 1] - k0
-            if n == 0:
-                clamped[g] = 0
-                continue
-            if need_target:     # frames Q of the guide's segments, once per group
-                for sg in range(m_last + 1):
-                    _frame_into(guide_x, tan_rest, gi, sg, R, q_buf[g, sg])
-            # the group's work space: old x, old v, new x, each (N, 3, n) [node][axis][ghost]
-            Wg = W[:9 * n_nodes * n].reshape((3, n_nodes, 3, n))
-            X0 = Wg[0]
-            V0 = Wg[1]
-            XN = Wg[2]
-            T = Tc[:TMP_ROWS * n].reshape((TMP_ROWS, n))
-            # gather the group: old positions (and velocities), roots pinned (g)
-            for kk in range(n):
-                s = order[k0 + kk]
+    g_first = c * n_groups // n_chunks
+    g_end = (c + 1) * n_groups // n_chunks
+    W = buf[c]
+    Tc = tmp[c]
+    n_contacts = 0
+    for g in range(g_first, g_end):
+        gi = group_guide[g]
+        k0 = group_start[g]
+        n = group_start[g + 1] - k0
+        if n == 0:
+            clamped[g] = 0
+            continue
+        if need_target:     # frames Q of the guide's segments, once per group
+            for sg in range(m_last + 1):
+                _frame_into(guide_x, tan_rest, gi, sg, R, q_buf[g, sg])
+        # the group's work space: old x, old v, new x, each (N, 3, n) [node][axis][ghost]
+        Wg = W[:9 * n_nodes * n].reshape((3, n_nodes, 3, n))
+        X0 = Wg[0]
+        V0 = Wg[1]
+        XN = Wg[2]
+        T = Tc[:TMP_ROWS * n].reshape((TMP_ROWS, n))
+        # gather the group: old positions (and velocities), roots pinned (g)
+        for kk in range(n):
+            s = order[k0 + kk]
+            for j in range(n_nodes):
+                for a in range(3):
+                    X0[j, a, kk] = x[s, j, a]
+            if use_v:
                 for j in range(n_nodes):
                     for a in range(3):
-                        X0[j, a, kk] = x[s, j, a]
-                if use_v:
-                    for j in range(n_nodes):
-                        for a in range(3):
-                            V0[j, a, kk] = v[s, j, a]
-                for j in range(min(2, n_nodes)):
-                    for a in range(3):
-                        XN[j, a, kk] = pos[a] + R[a, 0] * rest[s, j, 0] + \
-                            R[a, 1] * rest[s, j, 1] + R[a, 2] * rest[s, j, 2]
-            use_com_w = com_w > 0.0 and n > 1
-            n_clamped = 0
-            ob = k0 * n_nodes * 3
-            lb = k0 * (n_nodes - 1)
-            for j in range(2, n_nodes):
-                _targets(T, n, k0, g, gi, j, group_row[g], node_table, node_row,
-                         rest_off[ob + j * 3 * n:ob + (j + 1) * 3 * n].reshape((3, n)),
-                         guide_x, guide_x_old, q_buf, m_last, need_target)
-                n_clamped += _predict(X0[j], V0[j], XN[j], T, n, inv_len[k0:k0 + n], elastic_mode,
-                                      use_tip, use_com_w, com_w, max_weight, k_off)
-                if k_com > 0.0 or (spread > 0.0 and n > 1):
-                    _group_stage(XN[j], T, n, k_com, spread, var_target[g, j], need_target)
-                if ftl:
-                    _follow(XN[j - 1], XN[j], T, n, k0, order,
-                            seg_len[lb + (j - 1) * n:lb + j * n], rest, R, j)
-                if collide:
-                    n_contacts += _collide(X0[j], XN[j - 1], XN[j], T, n, k0, order,
-                                           seg_len[lb + (j - 1) * n:lb + j * n], rest, R, j,
-                                           ftl, cx, cy, cz,
-                                           ax, ay, az, ix, iy, iz, friction, refine)
-            clamped[g] = n_clamped
-            # scatter: new positions and v = (x_new - x_old) / dt
-            for kk in range(n):
-                s = order[k0 + kk]
-                for j in range(n_nodes):
-                    for a in range(3):
-                        xn = XN[j, a, kk]
-                        v[s, j, a] = (xn - X0[j, a, kk]) * inv_dt
-                        x[s, j, a] = xn
-        contacts[c] = n_contacts
+                        V0[j, a, kk] = v[s, j, a]
+            for j in range(min(2, n_nodes)):
+                for a in range(3):
+                    XN[j, a, kk] = pos[a] + R[a, 0] * rest[s, j, 0] + \
+                        R[a, 1] * rest[s, j, 1] + R[a, 2] * rest[s, j, 2]
+        use_com_w = com_w > 0.0 and n > 1
+        n_clamped = 0
+        ob = k0 * n_nodes * 3
+        lb = k0 * (n_nodes - 1)
+        for j in range(2, n_nodes):
+            _targets(T, n, k0, g, gi, j, group_row[g], node_table, node_row,
+                     rest_off[ob + j * 3 * n:ob + (j + 1) * 3 * n].reshape((3, n)),
+                     guide_x, guide_x_old, q_buf, m_last, need_target)
+            n_clamped += _predict(X0[j], V0[j], XN[j], T, n, inv_len[k0:k0 + n], elastic_mode,
+                                  use_tip, use_com_w, com_w, max_weight, k_off)
+            if k_com > 0.0 or (spread > 0.0 and n > 1):
+                _group_stage(XN[j], T, n, k_com, spread, var_target[g, j], need_target)
+            if ftl:
+                _follow(XN[j - 1], XN[j], T, n, k0, order,
+                        seg_len[lb + (j - 1) * n:lb + j * n], rest, R, j)
+            if collide:
+                n_contacts += _collide(X0[j], XN[j - 1], XN[j], T, n, k0, order,
+                                       seg_len[lb + (j - 1) * n:lb + j * n], rest, R, j,
+                                       ftl, cx, cy, cz,
+                                       ax, ay, az, ix, iy, iz, friction, refine)
+        clamped[g] = n_clamped
+        # scatter: new positions and v = (x_new - x_old) / dt
+        for kk in range(n):
+            s = order[k0 + kk]
+            for j in range(n_nodes):
+                for a in range(3):
+                    xn = XN[j, a, kk]
+                    v[s, j, a] = (xn - X0[j, a, kk]) * inv_dt
+                    x[s, j, a] = xn
+    contacts[c] = n_contacts
 
 
-@njit(cache=True, inline='always', fastmath=TRACK_FASTMATH, error_model='numpy')
+@njit(cache=True, fastmath=TRACK_FASTMATH, error_model='numpy')
 def _targets(T, n, k0, g, gi, j, row, node_table, node_row, off, guide_x, guide_x_old, q_buf,
              m_last, need_target):
     """Per ghost of group ``g`` at node ``j``: displacement ``u dt`` of its guide point (a) into
@@ -318,7 +334,7 @@ def _targets(T, n, k0, g, gi, j, row, node_table, node_row, off, guide_x, guide_
             T[_QZ, kk] = pz + Q[2, 0] * o0 + Q[2, 1] * o1 + Q[2, 2] * o2
 
 
-@njit(cache=True, inline='always', fastmath=TRACK_FASTMATH, error_model='numpy')
+@njit(cache=True, fastmath=TRACK_FASTMATH, error_model='numpy')
 def _predict(X0, V0, P, T, n, inv_len, elastic_mode, use_tip, use_com_w, com_w,
              max_weight, k_off):
     """(a)-(c) for node index ``j`` of a group: the new position (rows at ``W[pb:]``) = old
@@ -375,7 +391,7 @@ def _predict(X0, V0, P, T, n, inv_len, elastic_mode, use_tip, use_com_w, com_w,
     return n_clamped
 
 
-@njit(cache=True, inline='always', fastmath=TRACK_FASTMATH, error_model='numpy')
+@njit(cache=True, fastmath=TRACK_FASTMATH, error_model='numpy')
 def _group_stage(P, T, n, k_com, spread, var_target, have_target):
     """(d) centre-of-mass tracking and (e) spread control of one node index of a group, on the
     predicted positions (rows at ``W[pb:]``) in place; ``T[_QX.._QZ]`` the targets."""
@@ -421,7 +437,7 @@ def _group_stage(P, T, n, k_com, spread, var_target, have_target):
         P[2, kk] = m2 + d2 + f * (P[2, kk] - m2)
 
 
-@njit(cache=True, inline='always', fastmath=TRACK_FASTMATH, error_model='numpy')
+@njit(cache=True, fastmath=TRACK_FASTMATH, error_model='numpy')
 def _follow(B, P, T, n, k0, order, seg_len, rest, R, j):
     """(f) Follow-The-Leader: node ``j`` (rows at ``W[pb:]``) put at its rest length from node
     ``j - 1`` (rows at ``W[bb:]``, final), along the current direction; a node without a
@@ -453,7 +469,7 @@ def _follow(B, P, T, n, k0, order, seg_len, rest, R, j):
         P[2, kk] = B[2, kk] + R[2, 0] * r0 + R[2, 1] * r1 + R[2, 2] * r2
 
 
-@njit(cache=True, inline='always', fastmath=TRACK_FASTMATH, error_model='numpy')
+@njit(cache=True, fastmath=TRACK_FASTMATH, error_model='numpy')
 def _collide(X0, B, P, T, n, k0, order, seg_len, rest, R, j, ftl, cx, cy, cz,
              ax, ay, az, ix, iy, iz, friction, refine):
     """(h) node ``j`` (rows at ``W[pb:]``) pushed out of the head ellipsoid with friction

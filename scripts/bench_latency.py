@@ -51,6 +51,22 @@ def groom_for(ghosts):
     return guides, max(1, int(round(ghosts / guides)))
 
 
+def _setting(text):
+    """``NAME=VALUE`` -> (name, bool / int / float / str value) for a node parameter."""
+    name, sep, value = text.partition('=')
+    if not sep or not name:
+        raise argparse.ArgumentTypeError(f'{text!r}: expected NAME=VALUE')
+    low = value.strip().lower()
+    if low in ('true', 'false'):
+        return name, low == 'true'
+    for cast in (int, float):
+        try:
+            return name, cast(value)
+        except ValueError:
+            pass
+    return name, value
+
+
 def stats(values):
     a = np.asarray(values, dtype=float)
     if a.size == 0:
@@ -76,6 +92,7 @@ def run_case(ghosts, mode, args, domain_id):
         'stale_timeout': 10.0, 'solver.type': args.solver, 'numba_threads': args.threads,
         'pose_queue_depth': args.pose_depth,
     }
+    overrides.update(args.set)
     node = HairSimNode(context=ctx, parameter_overrides=[
         Parameter(k, value=v) for k, v in overrides.items()])
     probe = rclpy.create_node('bench_probe', context=ctx)
@@ -153,7 +170,8 @@ def run_case(ghosts, mode, args, domain_id):
     result = {
         'ghosts': int(node.sim.ghosts.count), 'guides': int(node.sim.guides.count),
         'nodes_per_strand': int(node.sim.ghosts.nodes), 'mode': mode,
-        'solver': args.solver, 'numba_threads': int(node.numba_threads),
+        'solver': args.solver, 'settings': dict(args.set),
+        'numba_threads': int(node.numba_threads),
         'pose_queue_depth': args.pose_depth,
         'pose_rate_hz': args.pose_rate,
         'publish_rate_hz': args.publish_rate, 'markers_subscribed': bool(args.markers),
@@ -191,12 +209,15 @@ def main(argv=None):
                     help='numba_threads of the node (0 = all cores)')
     ap.add_argument('--markers', action='store_true',
                     help='also subscribe to hair/markers (the node then encodes both)')
+    ap.add_argument('--set', nargs='+', default=[], type=_setting, metavar='NAME=VALUE',
+                    help='more node parameters, e.g. tracking.every_substep=false')
     ap.add_argument('--domain-id', type=int, default=48)
     ap.add_argument('--json', metavar='PATH', help='write the results as JSON')
     ap.add_argument('--switch-interval', type=float, default=0.0005,
                     help="Python's GIL switch interval [s] (default 5 ms makes the node wait "
                          'for the probe threads)')
     args = ap.parse_args(argv)
+    args.set = dict(args.set)
     os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
     sys.setswitchinterval(args.switch_interval)
 
