@@ -36,10 +36,11 @@ from .collision import Collider
 from .correspondence import assign_guides, node_correspondence
 import numba
 
-from .integrate import threads_for
+from .integrate import PARALLEL_MIN_NODES, threads_for
 from .model import HeadPose, StrandSet
 from .scene import Scene
-from .tracking_kernels import chunk_count, group_blocks, guide_frames, TMP_ROWS, track_groups
+from .tracking_kernels import (chunk_count, group_blocks, guide_frames, TMP_ROWS, track_groups,
+                               track_groups_serial)
 from .weights import arc_fractions, elastic_code
 
 
@@ -194,8 +195,7 @@ class GhostTracker:
         feedback strengths ``k`` (offset, centre of mass, spread) become ``1 - (1 - k)^substeps``,
         what ``substeps`` separate steps would have applied to a constant deviation, so the pull
         per second does not depend on how often the ghosts are tracked."""
-        with threads_for(self.ghosts.x.shape[0] * self.ghosts.x.shape[1]):
-            self._step(dt, guide_x_old, head, substeps)
+        self._step(dt, guide_x_old, head, substeps)
 
     def _step(self, dt: float, guide_x_old: np.ndarray, head: HeadPose,
               substeps: int = 1) -> None:
@@ -214,24 +214,27 @@ class GhostTracker:
         generic = self.collide and not self._fused_collider
         if generic:
             np.copyto(self._x_prev, x)
-        track_groups(x, v, self.ghosts.rest, self._seg_len_blocks, self.order,
-                     self.group_start, self.group_guide, self._group_row, self._node_table,
-                     self._node_row, self._rest_off_blocks, self._inv_len, self._var_target,
-                     _f64(gx), _f64(guide_x_old), self._tan_rest,
-                     _f64(head.rotation), _f64(head.position), float(dt),
-                     self._elastic, tr.tip_weight > 0.0, tr.com_weight, tr.max_weight,
-                     _per(tr.offset_strength, substeps), _per(tr.com_strength, substeps),
-                     _per(tr.spread, substeps), tr.length_restore,
-                     self._fused_collider, self._center, self._axes, self._friction,
-                     self._refine, self._q_buf, self._buf, self._tmp, self._clamped,
-                     self._contacts)
+        kernel = track_groups if x.shape[0] * x.shape[1] >= PARALLEL_MIN_NODES and \
+            numba.get_num_threads() > 1 else track_groups_serial
+        kernel(x, v, self.ghosts.rest, self._seg_len_blocks, self.order,
+               self.group_start, self.group_guide, self._group_row, self._node_table,
+               self._node_row, self._rest_off_blocks, self._inv_len, self._var_target,
+               _f64(gx), _f64(guide_x_old), self._tan_rest,
+               _f64(head.rotation), _f64(head.position), float(dt),
+               self._elastic, tr.tip_weight > 0.0, tr.com_weight, tr.max_weight,
+               _per(tr.offset_strength, substeps), _per(tr.com_strength, substeps),
+               _per(tr.spread, substeps), tr.length_restore,
+               self._fused_collider, self._center, self._axes, self._friction,
+               self._refine, self._q_buf, self._buf, self._tmp, self._clamped,
+               self._contacts)
         self.stats['steps'] += 1
         self.stats['clamped'] = int(self._clamped.sum())
         if self._fused_collider:
             self.stats['contacts'] = int(self._contacts.sum())
         elif generic:
-            self.stats['contacts'] = int(
-                self.collider.apply(x, self._x_prev, self.ghosts.inv_mass, head))
+            with threads_for(x.shape[0] * x.shape[1]):
+                self.stats['contacts'] = int(
+                    self.collider.apply(x, self._x_prev, self.ghosts.inv_mass, head))
             np.subtract(x, self._x_prev, out=v)
             v *= 1.0 / dt
 

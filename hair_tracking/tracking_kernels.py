@@ -189,6 +189,24 @@ def track_groups(x, v, rest, seg_len, order, group_start, group_guide, group_row
 
 
 @njit(cache=True, fastmath=TRACK_FASTMATH, error_model='numpy')
+def track_groups_serial(x, v, rest, seg_len, order, group_start, group_guide, group_row,
+                        node_table, node_row, rest_off, inv_len, var_target, guide_x,
+                        guide_x_old, tan_rest, R, pos, dt, elastic_mode, use_tip, com_w,
+                        max_weight, k_off, k_com, spread, ftl, collide, center, axes, friction,
+                        refine, q_buf, buf, tmp, clamped, contacts):
+    """:func:`track_groups` on the calling thread, for small problems: no parallel region to
+    launch (which costs a few hundred microseconds a call on this shared machine, more than a
+    1 k-ghost substep's arithmetic).  Same results."""
+    n_chunks = buf.shape[0]
+    for c in range(n_chunks):
+        _track_chunk(c, n_chunks, x, v, rest, seg_len, order, group_start, group_guide,
+                     group_row, node_table, node_row, rest_off, inv_len, var_target, guide_x,
+                     guide_x_old, tan_rest, R, pos, dt, elastic_mode, use_tip, com_w,
+                     max_weight, k_off, k_com, spread, ftl, collide, center, axes, friction,
+                     refine, q_buf, buf, tmp, clamped, contacts)
+
+
+@njit(cache=True, fastmath=TRACK_FASTMATH, error_model='numpy')
 def _track_chunk(c, n_chunks, x, v, rest, seg_len, order, group_start, group_guide, group_row,
                  node_table, node_row, rest_off, inv_len, var_target, guide_x, guide_x_old,
                  tan_rest, R, pos, dt, elastic_mode, use_tip, com_w, max_weight, k_off, k_com,
@@ -273,7 +291,7 @@ def _track_chunk(c, n_chunks, x, v, rest, seg_len, order, group_start, group_gui
     contacts[c] = n_contacts
 
 
-@njit(cache=True, fastmath=TRACK_FASTMATH, error_model='numpy')
+@njit(cache=True, inline='always', fastmath=TRACK_FASTMATH, error_model='numpy')
 def _targets(T, n, k0, g, gi, j, row, node_table, node_row, off, guide_x, guide_x_old, q_buf,
              m_last, need_target):
     """Per ghost of group ``g`` at node ``j``: displacement ``u dt`` of its guide point (a) into
@@ -334,7 +352,7 @@ def _targets(T, n, k0, g, gi, j, row, node_table, node_row, off, guide_x, guide_
             T[_QZ, kk] = pz + Q[2, 0] * o0 + Q[2, 1] * o1 + Q[2, 2] * o2
 
 
-@njit(cache=True, fastmath=TRACK_FASTMATH, error_model='numpy')
+@njit(cache=True, inline='always', fastmath=TRACK_FASTMATH, error_model='numpy')
 def _predict(X0, V0, P, T, n, inv_len, elastic_mode, use_tip, use_com_w, com_w,
              max_weight, k_off):
     """(a)-(c) for node index ``j`` of a group: the new position (rows at ``W[pb:]``) = old
@@ -391,7 +409,7 @@ def _predict(X0, V0, P, T, n, inv_len, elastic_mode, use_tip, use_com_w, com_w,
     return n_clamped
 
 
-@njit(cache=True, fastmath=TRACK_FASTMATH, error_model='numpy')
+@njit(cache=True, inline='always', fastmath=TRACK_FASTMATH, error_model='numpy')
 def _group_stage(P, T, n, k_com, spread, var_target, have_target):
     """(d) centre-of-mass tracking and (e) spread control of one node index of a group, on the
     predicted positions (rows at ``W[pb:]``) in place; ``T[_QX.._QZ]`` the targets."""
@@ -437,7 +455,7 @@ def _group_stage(P, T, n, k_com, spread, var_target, have_target):
         P[2, kk] = m2 + d2 + f * (P[2, kk] - m2)
 
 
-@njit(cache=True, fastmath=TRACK_FASTMATH, error_model='numpy')
+@njit(cache=True, inline='always', fastmath=TRACK_FASTMATH, error_model='numpy')
 def _follow(B, P, T, n, k0, order, seg_len, rest, R, j):
     """(f) Follow-The-Leader: node ``j`` (rows at ``W[pb:]``) put at its rest length from node
     ``j - 1`` (rows at ``W[bb:]``, final), along the current direction; a node without a
@@ -469,7 +487,7 @@ def _follow(B, P, T, n, k0, order, seg_len, rest, R, j):
         P[2, kk] = B[2, kk] + R[2, 0] * r0 + R[2, 1] * r1 + R[2, 2] * r2
 
 
-@njit(cache=True, fastmath=TRACK_FASTMATH, error_model='numpy')
+@njit(cache=True, inline='always', fastmath=TRACK_FASTMATH, error_model='numpy')
 def _collide(X0, B, P, T, n, k0, order, seg_len, rest, R, j, ftl, cx, cy, cz,
              ax, ay, az, ix, iy, iz, friction, refine):
     """(h) node ``j`` (rows at ``W[pb:]``) pushed out of the head ellipsoid with friction
