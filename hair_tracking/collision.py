@@ -119,7 +119,7 @@ def push_out(x0, x1, x2, r0, r1, r2, rot, cx, cy, cz, ax, ay, az, friction, refi
             rot[2, 0] * yx + rot[2, 1] * yy + rot[2, 2] * yz + cz)
 
 
-@njit(cache=True, parallel=True, fastmath=FASTMATH, error_model='numpy')
+@njit(cache=True, nogil=True, parallel=True, fastmath=FASTMATH, error_model='numpy')
 def project_ellipsoid(x, x_prev, inv_mass, rot, pos, center, radii, margin, friction, refine):
     """Kernel: push nodes with ``inv_mass > 0`` out of the ellipsoid ``radii + margin``; friction.
 
@@ -146,7 +146,7 @@ def project_ellipsoid(x, x_prev, inv_mass, rot, pos, center, radii, margin, fric
     return contacts
 
 
-@njit(cache=True, parallel=True, fastmath=FASTMATH, error_model='numpy')
+@njit(cache=True, nogil=True, parallel=True, fastmath=FASTMATH, error_model='numpy')
 def penetration_ellipsoid(x, inv_mass, use_mass, rot, pos, center, radii, refine, out):
     """Kernel: ``out[s]`` = deepest distance [m] of strand ``s``'s nodes inside the ellipsoid.
 

@@ -91,7 +91,7 @@ def _scan_cell(q, points, cell_start, cell_items, c, best_d, best_i, count, k):
     return count
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, nogil=True, parallel=True)
 def knn_grid_kernel(queries, points, lo, h, dims, cell_start, cell_items, out_i, out_d):
     """For every query (Q, 3) the k = out_i.shape[1] nearest ``points`` (exact, by rings of
     grid cells; ties by lower index).  Writes indices to ``out_i`` and squared distances to
@@ -151,7 +151,7 @@ def nearest_roots(ghost_roots: np.ndarray, guide_roots: np.ndarray, k: int) -> n
 
 
 # ------------------------------------------------------------------ equation (1)
-@njit(cache=True, parallel=True)
+@njit(cache=True, nogil=True, parallel=True)
 def equation1_kernel(ghost_rest, guide_rest, candidates, guide_of, cost):
     """Equation (1) over the candidate guides of every ghost: ``guide_of[s]`` the minimiser
     (ties: lower guide index), ``cost[s]`` its value [m^2]."""

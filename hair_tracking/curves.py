@@ -113,7 +113,7 @@ def bezier_stencil(n: int, points: int):
     return idx, w
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, nogil=True, parallel=True)
 def apply_stencil(x, idx, w, out):
     """out[s, p] = sum_i w[p, i] x[s, idx[p, i]] for every strand (a fixed linear resampling)."""
     for s in prange(x.shape[0]):
@@ -123,7 +123,7 @@ def apply_stencil(x, idx, w, out):
                                 w[p, 2] * x[s, idx[p, 2], a] + w[p, 3] * x[s, idx[p, 3], a])
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, nogil=True, parallel=True)
 def catmull_rom_kernel(x, seg, loc, alpha, out):
     """Catmull-Rom points of every strand: output point p lies on span seg[p] (nodes seg[p] and
     seg[p] + 1, non-decreasing in p) at local parameter loc[p] in [0, 1], with knot intervals

@@ -122,7 +122,7 @@ def restore_node(px, py, pz, bx, by, bz, r, ex, ey, ez, rot, cx, cy, cz, ax, ay,
     return px, py, pz
 
 
-@njit(cache=True, parallel=True, fastmath=FASTMATH, error_model='numpy')
+@njit(cache=True, nogil=True, parallel=True, fastmath=FASTMATH, error_model='numpy')
 def ftl_restore(x, rest, rest_length, rot, pos, center, axes, refine, corr):
     """Kernel: a collision-aware FTL pass over all strands, run after the collider moved nodes.
 
@@ -157,7 +157,7 @@ def ftl_restore(x, rest, rest_length, rot, pos, center, axes, refine, corr):
             x[s, i, 2] = pz
 
 
-@njit(cache=True, parallel=True, fastmath=FASTMATH, error_model='numpy')
+@njit(cache=True, nogil=True, parallel=True, fastmath=FASTMATH, error_model='numpy')
 def ftl_step(x, v, x_old, corr, rest, inv_mass, rest_length, bend_rest, bend_w,
              rot, pos, rot_rel, pos_prev, gravity, damp, dt, shock,
              bend_passes, bend_stiffness, s_damp, max_disp, do_finalize):

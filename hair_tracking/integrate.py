@@ -214,7 +214,7 @@ def finalize_block(x, v, x_old, inv_mass, corr, s0, s1, dt, max_disp, s_damp):
     return clamped
 
 
-@njit(cache=True, parallel=True, fastmath=FASTMATH, error_model='numpy')
+@njit(cache=True, nogil=True, parallel=True, fastmath=FASTMATH, error_model='numpy')
 def finalize(x, v, x_old, inv_mass, corr, dt, max_disp, s_damp):
     """Kernel: :func:`finalize_block` over all strands (used when a collider runs in between)."""
     total = 0
@@ -223,7 +223,7 @@ def finalize(x, v, x_old, inv_mass, corr, dt, max_disp, s_damp):
     return total
 
 
-@njit(cache=True, parallel=True, fastmath=FASTMATH, error_model='numpy')
+@njit(cache=True, nogil=True, parallel=True, fastmath=FASTMATH, error_model='numpy')
 def carry_rigid(x, rot_rel, pos_prev, pos, out):
     """Kernel: ``out = R_rel (x - pos_prev) + pos``, the points moved rigidly with the head.
 

@@ -130,7 +130,7 @@ def xpbd_sweep_block(x, inv_mass, rest_dist, gain, lam, gap, alpha_tilde, s0, s1
             x[s, j, 2] += b * dz
 
 
-@njit(cache=True, parallel=True, fastmath=FASTMATH, error_model='numpy')
+@njit(cache=True, nogil=True, parallel=True, fastmath=FASTMATH, error_model='numpy')
 def pbd_step(x, v, x_old, rest, inv_mass, rest_length, bend_rest, stretch_w, bend_w,
              rot, pos, rot_rel, pos_prev, gravity, damp, dt, shock,
              iterations, stiffness, bend_stiffness, max_disp, do_finalize):
@@ -158,7 +158,7 @@ def pbd_step(x, v, x_old, rest, inv_mass, rest_length, bend_rest, stretch_w, ben
     return clamped
 
 
-@njit(cache=True, parallel=True, fastmath=FASTMATH, error_model='numpy')
+@njit(cache=True, nogil=True, parallel=True, fastmath=FASTMATH, error_model='numpy')
 def xpbd_step(x, v, x_old, rest, inv_mass, rest_length, bend_rest, stretch_gain, bend_gain,
               lam_stretch, lam_bend, rot, pos, rot_rel, pos_prev, gravity, damp, dt, shock,
               iterations, alpha_stretch, alpha_bend, max_disp, do_finalize):

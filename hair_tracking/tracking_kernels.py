@@ -104,7 +104,7 @@ def _frame_into(guide_x, tan_rest, gi, s, R, Q):
         Q[2, col] = m20 * r0 + m21 * r1 + m22 * r2
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, nogil=True, parallel=True)
 def guide_frames_kernel(guide_x, tan_rest, R, out):
     """Frames of every guide segment: ``out[g, s]`` (3, 3) = ``R_min(R t_rest[g, s] -> t_now) R``
     (see :func:`_frame_into`).  ``guide_x`` (G, M, 3) world [m], ``tan_rest`` (G, M-1, 3) unit rest
@@ -128,7 +128,7 @@ def chunk_count(groups: int, threads: int) -> int:
     return max(1, min(groups, 4 * threads))
 
 
-@njit(cache=True, parallel=True, fastmath=TRACK_FASTMATH, error_model='numpy')
+@njit(cache=True, nogil=True, parallel=True, fastmath=TRACK_FASTMATH, error_model='numpy')
 def track_groups(x, v, rest, seg_len, order, group_start, group_guide, group_row,
                  node_table, node_row, rest_off, inv_len, var_target, guide_x, guide_x_old,
                  tan_rest, R, pos, dt, elastic_mode, use_tip, com_w, max_weight, k_off, k_com,
@@ -188,7 +188,7 @@ def track_groups(x, v, rest, seg_len, order, group_start, group_guide, group_row
                      refine, q_buf, buf, tmp, clamped, contacts)
 
 
-@njit(cache=True, fastmath=TRACK_FASTMATH, error_model='numpy')
+@njit(cache=True, nogil=True, fastmath=TRACK_FASTMATH, error_model='numpy')
 def track_groups_serial(x, v, rest, seg_len, order, group_start, group_guide, group_row,
                         node_table, node_row, rest_off, inv_len, var_target, guide_x,
                         guide_x_old, tan_rest, R, pos, dt, elastic_mode, use_tip, com_w,
