@@ -85,24 +85,27 @@ def world_center(rot, pos, center):
 
 
 @njit(cache=True, inline='always', fastmath=FASTMATH, error_model='numpy')
+def to_head(x0, x1, x2, rot, cx, cy, cz):
+    """``R^T (x - c)``: a world point [m] relative to the world point ``c``, in the head axes."""
+    dx, dy, dz = x0 - cx, x1 - cy, x2 - cz
+    return (rot[0, 0] * dx + rot[1, 0] * dy + rot[2, 0] * dz,
+            rot[0, 1] * dx + rot[1, 1] * dy + rot[2, 1] * dz,
+            rot[0, 2] * dx + rot[1, 2] * dy + rot[2, 2] * dz)
+
+
+@njit(cache=True, inline='always', fastmath=FASTMATH, error_model='numpy')
 def push_out(x0, x1, x2, r0, r1, r2, rot, cx, cy, cz, ax, ay, az, friction, refine):
     """One node ``x`` (world [m]) pushed out of the ellipsoid with semi-axes ``a`` around the
     world point ``c`` (axes turned by the head rotation ``rot``), then the friction of the module
     docstring relative to the reference position ``r``.  Returns ``(moved, y0, y1, y2)``; an
     outside node comes back unchanged with ``moved`` false."""
-    dx, dy, dz = x0 - cx, x1 - cy, x2 - cz
-    qx = rot[0, 0] * dx + rot[1, 0] * dy + rot[2, 0] * dz      # R^T (x - c_world)
-    qy = rot[0, 1] * dx + rot[1, 1] * dy + rot[2, 1] * dz
-    qz = rot[0, 2] * dx + rot[1, 2] * dy + rot[2, 2] * dz
+    qx, qy, qz = to_head(x0, x1, x2, rot, cx, cy, cz)
     ix, iy, iz = 1.0 / (ax * ax), 1.0 / (ay * ay), 1.0 / (az * az)
     if qx * qx * ix + qy * qy * iy + qz * qz * iz >= 1.0:
         return False, x0, x1, x2
     yx, yy, yz = surface_point(qx, qy, qz, ax, ay, az, refine)
     if friction > 0.0:
-        ex, ey, ez = r0 - cx, r1 - cy, r2 - cz
-        px = rot[0, 0] * ex + rot[1, 0] * ey + rot[2, 0] * ez
-        py = rot[0, 1] * ex + rot[1, 1] * ey + rot[2, 1] * ez
-        pz = rot[0, 2] * ex + rot[1, 2] * ey + rot[2, 2] * ez
+        px, py, pz = to_head(r0, r1, r2, rot, cx, cy, cz)
         nx, ny, nz = yx * ix, yy * iy, yz * iz
         nn = 1.0 / math.sqrt(nx * nx + ny * ny + nz * nz)
         nx *= nn
@@ -162,10 +165,7 @@ def penetration_ellipsoid(x, inv_mass, use_mass, rot, pos, center, radii, refine
         for i in range(n):
             if use_mass and inv_mass[s, i] <= 0.0:
                 continue
-            dx, dy, dz = x[s, i, 0] - cx, x[s, i, 1] - cy, x[s, i, 2] - cz
-            qx = rot[0, 0] * dx + rot[1, 0] * dy + rot[2, 0] * dz
-            qy = rot[0, 1] * dx + rot[1, 1] * dy + rot[2, 1] * dz
-            qz = rot[0, 2] * dx + rot[1, 2] * dy + rot[2, 2] * dz
+            qx, qy, qz = to_head(x[s, i, 0], x[s, i, 1], x[s, i, 2], rot, cx, cy, cz)
             if qx * qx * ix + qy * qy * iy + qz * qz * iz >= 1.0:
                 continue
             yx, yy, yz = surface_point(qx, qy, qz, ax, ay, az, refine)

@@ -27,7 +27,7 @@ import math
 
 from numba import njit, prange
 
-from hair_tracking.collision import surface_point, world_center
+from hair_tracking.collision import surface_point, to_head, world_center
 from hair_tracking.integrate import BLOCK, FASTMATH, finalize_block, predict_block
 from hair_tracking.pbd_constraints import pbd_sweep_block
 
@@ -53,22 +53,9 @@ def ftl_pass_block(x, rest, rest_length, rot, corr, s0, s1):
             dx = x[s, i, 0] - x[s, i - 1, 0]
             dy = x[s, i, 1] - x[s, i - 1, 1]
             dz = x[s, i, 2] - x[s, i - 1, 2]
-            l2 = dx * dx + dy * dy + dz * dz
-            if l2 > FTL_TINY_SQ:
-                f = r / math.sqrt(l2)
-            else:
-                bx = rest[s, i, 0] - rest[s, i - 1, 0]
-                by = rest[s, i, 1] - rest[s, i - 1, 1]
-                bz = rest[s, i, 2] - rest[s, i - 1, 2]
-                dx = rot[0, 0] * bx + rot[0, 1] * by + rot[0, 2] * bz
-                dy = rot[1, 0] * bx + rot[1, 1] * by + rot[1, 2] * bz
-                dz = rot[2, 0] * bx + rot[2, 1] * by + rot[2, 2] * bz
-                lb2 = bx * bx + by * by + bz * bz
-                if lb2 > FTL_TINY_SQ:
-                    f = r / math.sqrt(lb2)
-                else:
-                    dx, dy, dz = 0.0, 0.0, -1.0
-                    f = r
+            dx, dy, dz, f = ftl_direction(
+                dx, dy, dz, r, rest[s, i, 0] - rest[s, i - 1, 0],
+                rest[s, i, 1] - rest[s, i - 1, 1], rest[s, i, 2] - rest[s, i - 1, 2], rot)
             nx = x[s, i - 1, 0] + f * dx
             ny = x[s, i - 1, 1] + f * dy
             nz = x[s, i - 1, 2] + f * dz
@@ -78,6 +65,23 @@ def ftl_pass_block(x, rest, rest_length, rot, corr, s0, s1):
             x[s, i, 0] = nx
             x[s, i, 1] = ny
             x[s, i, 2] = nz
+
+
+@njit(cache=True, inline='always', fastmath=FASTMATH, error_model='numpy')
+def ftl_direction(dx, dy, dz, r, ex, ey, ez, rot):
+    """``(d, f)`` of one FTL placement ``p = b + f d`` at rest length ``r`` along ``d`` (the
+    current segment ``p - b``); a collapsed segment (``|d|^2 <= FTL_TINY_SQ``) continues along the
+    rest segment ``e`` (head frame) carried by the head rotation ``rot``, a zero rest segment
+    along -z with ``f = r``."""
+    l2 = dx * dx + dy * dy + dz * dz
+    if l2 > FTL_TINY_SQ:
+        return dx, dy, dz, r / math.sqrt(l2)
+    le2 = ex * ex + ey * ey + ez * ez
+    if le2 > FTL_TINY_SQ:
+        return (rot[0, 0] * ex + rot[0, 1] * ey + rot[0, 2] * ez,
+                rot[1, 0] * ex + rot[1, 1] * ey + rot[1, 2] * ez,
+                rot[2, 0] * ex + rot[2, 1] * ey + rot[2, 2] * ez, r / math.sqrt(le2))
+    return 0.0, 0.0, -1.0, r
 
 
 #: Surface projections per node in :func:`ftl_restore`.
@@ -92,27 +96,11 @@ def restore_node(px, py, pz, bx, by, bz, r, ex, ey, ez, rot, cx, cy, cz, ax, ay,
     segment in the head frame, the direction used when ``p`` and ``b`` coincide.  World [m]."""
     ix, iy, iz = 1.0 / (ax * ax), 1.0 / (ay * ay), 1.0 / (az * az)
     for k in range(RESTORE_ITERATIONS + 1):
-        dx, dy, dz = px - bx, py - by, pz - bz
-        l2 = dx * dx + dy * dy + dz * dz
-        if l2 > FTL_TINY_SQ:
-            f = r / math.sqrt(l2)
-        else:
-            dx = rot[0, 0] * ex + rot[0, 1] * ey + rot[0, 2] * ez
-            dy = rot[1, 0] * ex + rot[1, 1] * ey + rot[1, 2] * ez
-            dz = rot[2, 0] * ex + rot[2, 1] * ey + rot[2, 2] * ez
-            le2 = ex * ex + ey * ey + ez * ez
-            if le2 > FTL_TINY_SQ:
-                f = r / math.sqrt(le2)
-            else:
-                dx, dy, dz = 0.0, 0.0, -1.0
-                f = r
+        dx, dy, dz, f = ftl_direction(px - bx, py - by, pz - bz, r, ex, ey, ez, rot)
         px, py, pz = bx + f * dx, by + f * dy, bz + f * dz
         if k == RESTORE_ITERATIONS:
             break
-        wx, wy, wz = px - cx, py - cy, pz - cz
-        qx = rot[0, 0] * wx + rot[1, 0] * wy + rot[2, 0] * wz
-        qy = rot[0, 1] * wx + rot[1, 1] * wy + rot[2, 1] * wz
-        qz = rot[0, 2] * wx + rot[1, 2] * wy + rot[2, 2] * wz
+        qx, qy, qz = to_head(px, py, pz, rot, cx, cy, cz)
         if qx * qx * ix + qy * qy * iy + qz * qz * iz >= 1.0:
             break
         yx, yy, yz = surface_point(qx, qy, qz, ax, ay, az, refine)

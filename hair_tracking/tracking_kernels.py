@@ -28,7 +28,7 @@ import math
 from numba import njit, prange
 import numpy as np
 
-from .collision import push_out, world_center
+from .collision import push_out, to_head, world_center
 from .ftl import restore_node
 from .weights import clamp_weight, com_weight, direction_cos, ELASTIC_KEPT, ELASTIC_OFF
 
@@ -496,12 +496,7 @@ def _collide(X0, B, P, T, n, k0, order, seg_len, rest, R, j, ftl, cx, cy, cz,
     pushed nodes."""
     n_in = 0
     for kk in range(n):     # inside test for the whole group (vectorises); few nodes are in
-        w0 = P[0, kk] - cx
-        w1 = P[1, kk] - cy
-        w2 = P[2, kk] - cz
-        q0 = R[0, 0] * w0 + R[1, 0] * w1 + R[2, 0] * w2
-        q1 = R[0, 1] * w0 + R[1, 1] * w1 + R[2, 1] * w2
-        q2 = R[0, 2] * w0 + R[1, 2] * w1 + R[2, 2] * w2
+        q0, q1, q2 = to_head(P[0, kk], P[1, kk], P[2, kk], R, cx, cy, cz)
         inside = q0 * q0 * ix + q1 * q1 * iy + q2 * q2 * iz < 1.0
         T[_FLAG, kk] = 1.0 if inside else 0.0
         n_in += 1 if inside else 0
