@@ -261,24 +261,23 @@ def _track_chunk(c, n_chunks, x, v, rest, seg_len, order, group_start, group_gui
                         R[a, 1] * rest[s, j, 1] + R[a, 2] * rest[s, j, 2]
         use_com_w = com_w > 0.0 and n > 1
         n_clamped = 0
-        ob = k0 * n_nodes * 3
-        lb = k0 * (n_nodes - 1)
+        # the group's rest offsets (N, 3, n) and segment lengths (N-1, n), reshaped once
+        off_g = rest_off[k0 * n_nodes * 3:(k0 + n) * n_nodes * 3].reshape((n_nodes, 3, n))
+        len_g = seg_len[k0 * (n_nodes - 1):(k0 + n) * (n_nodes - 1)].reshape((n_nodes - 1, n))
+        ilen_g = inv_len[k0:k0 + n]
         for j in range(2, n_nodes):
-            _targets(T, n, k0, g, gi, j, group_row[g], node_table, node_row,
-                     rest_off[ob + j * 3 * n:ob + (j + 1) * 3 * n].reshape((3, n)),
+            _targets(T, n, k0, g, gi, j, group_row[g], node_table, node_row, off_g[j],
                      guide_x, guide_x_old, q_buf, m_last, need_target)
-            n_clamped += _predict(X0[j], V0[j], XN[j], T, n, inv_len[k0:k0 + n], elastic_mode,
-                                  use_tip, use_com_w, com_w, max_weight, k_off)
+            n_clamped += _predict(X0[j], V0[j], XN[j], T, n, ilen_g, elastic_mode, use_tip,
+                                  use_com_w, com_w, max_weight, k_off)
             if k_com > 0.0 or (spread > 0.0 and n > 1):
                 _group_stage(XN[j], T, n, k_com, spread, var_target[g, j], need_target)
             if ftl:
-                _follow(XN[j - 1], XN[j], T, n, k0, order,
-                        seg_len[lb + (j - 1) * n:lb + j * n], rest, R, j)
+                _follow(XN[j - 1], XN[j], T, n, k0, order, len_g[j - 1], rest, R, j)
             if collide:
-                n_contacts += _collide(X0[j], XN[j - 1], XN[j], T, n, k0, order,
-                                       seg_len[lb + (j - 1) * n:lb + j * n], rest, R, j,
-                                       ftl, cx, cy, cz,
-                                       ax, ay, az, ix, iy, iz, friction, refine)
+                n_contacts += _collide(X0[j], XN[j - 1], XN[j], T, n, k0, order, len_g[j - 1],
+                                       rest, R, j, ftl, cx, cy, cz, ax, ay, az, ix, iy, iz,
+                                       friction, refine)
         clamped[g] = n_clamped
         # scatter: new positions and v = (x_new - x_old) / dt
         for kk in range(n):
@@ -311,23 +310,28 @@ def _targets(T, n, k0, g, gi, j, row, node_table, node_row, off, guide_x, guide_
         dx = px - (u * guide_x_old[gi, sg, 0] + t * guide_x_old[gi, sg + 1, 0])
         dy = py - (u * guide_x_old[gi, sg, 1] + t * guide_x_old[gi, sg + 1, 1])
         dz = pz - (u * guide_x_old[gi, sg, 2] + t * guide_x_old[gi, sg + 1, 2])
-        for kk in range(n):
+        if not need_target:
+            for kk in range(n):
+                T[_DX, kk] = dx
+                T[_DY, kk] = dy
+                T[_DZ, kk] = dz
+                T[_TW, kk] = tw
+            return
+        Q = q_buf[g, sg]
+        q00, q01, q02 = Q[0, 0], Q[0, 1], Q[0, 2]
+        q10, q11, q12 = Q[1, 0], Q[1, 1], Q[1, 2]
+        q20, q21, q22 = Q[2, 0], Q[2, 1], Q[2, 2]
+        for kk in range(n):     # one loop: each loop over a group has a fixed cost
             T[_DX, kk] = dx
             T[_DY, kk] = dy
             T[_DZ, kk] = dz
             T[_TW, kk] = tw
-        if need_target:
-            Q = q_buf[g, sg]
-            q00, q01, q02 = Q[0, 0], Q[0, 1], Q[0, 2]
-            q10, q11, q12 = Q[1, 0], Q[1, 1], Q[1, 2]
-            q20, q21, q22 = Q[2, 0], Q[2, 1], Q[2, 2]
-            for kk in range(n):
-                o0 = off[0, kk]
-                o1 = off[1, kk]
-                o2 = off[2, kk]
-                T[_QX, kk] = px + q00 * o0 + q01 * o1 + q02 * o2
-                T[_QY, kk] = py + q10 * o0 + q11 * o1 + q12 * o2
-                T[_QZ, kk] = pz + q20 * o0 + q21 * o1 + q22 * o2
+            o0 = off[0, kk]
+            o1 = off[1, kk]
+            o2 = off[2, kk]
+            T[_QX, kk] = px + q00 * o0 + q01 * o1 + q02 * o2
+            T[_QY, kk] = py + q10 * o0 + q11 * o1 + q12 * o2
+            T[_QZ, kk] = pz + q20 * o0 + q21 * o1 + q22 * o2
         return
     for kk in range(n):
         r = node_row[k0 + kk]
@@ -353,32 +357,18 @@ def _targets(T, n, k0, g, gi, j, row, node_table, node_row, off, guide_x, guide_
 
 
 @njit(cache=True, inline='always', fastmath=TRACK_FASTMATH, error_model='numpy')
-def _predict(X0, V0, P, T, n, inv_len, elastic_mode, use_tip, use_com_w, com_w,
-             max_weight, k_off):
-    """(a)-(c) for node index ``j`` of a group: the new position (rows at ``W[pb:]``) = old
-    position (``W[xb:]``) + ``u dt`` (1 + W), pulled by ``k_off`` toward the target; ``W[vb:]``
-    the old velocity.  Returns the number of clamped weight sums.
+def _predict(X0, V0, P, T, n, inv_len, elastic_mode, use_tip, use_com_w, com_w, max_weight,
+             k_off):
+    """(a)-(c) at one node index of a group: the new position ``P`` (3, n) = old position
+    ``X0`` + ``u dt`` (1 + W), pulled by ``k_off`` toward the target; ``V0`` the old velocity.
+    Returns the number of clamped weight sums.
 
-    Every stage is its own branch-free loop over the group's ghosts, so that each vectorises."""
-    # (b) weights, equations (4)-(5): W = W* + w_tip + w_com
-    if use_tip:
-        for kk in range(n):
-            T[_W, kk] = T[_TW, kk]
-    else:
-        for kk in range(n):
-            T[_W, kk] = 0.0
-    if elastic_mode != ELASTIC_OFF:
-        sign = 0.5 if elastic_mode == ELASTIC_KEPT else -0.5
-        for kk in range(n):
-            dx = T[_DX, kk]
-            dy = T[_DY, kk]
-            dz = T[_DZ, kk]
-            v0 = V0[0, kk]
-            v1 = V0[1, kk]
-            v2 = V0[2, kk]
-            T[_W, kk] += 0.5 + sign * direction_cos(dx, dy, dz, v0, v1, v2)
-    if use_com_w:       # distance from the centre of mass at the start of the substep
-        c0 = c1 = c2 = 0.0
+    One branch-free loop over the ghosts (switched-off terms enter with a factor 0), so that it
+    vectorises and pays a loop's fixed cost once: groups are small (16 ghosts by default)."""
+    tip_f = 1.0 if use_tip else 0.0
+    cw = com_w if use_com_w else 0.0
+    c0 = c1 = c2 = 0.0
+    if use_com_w:       # centre of mass at the start of the substep (only w_com needs it)
         for kk in range(n):
             c0 += X0[0, kk]
             c1 += X0[1, kk]
@@ -386,49 +376,62 @@ def _predict(X0, V0, P, T, n, inv_len, elastic_mode, use_tip, use_com_w, com_w,
         c0 /= n
         c1 /= n
         c2 /= n
-        for kk in range(n):
-            e0 = X0[0, kk] - c0
-            e1 = X0[1, kk] - c1
-            e2 = X0[2, kk] - c2
-            T[_W, kk] += com_weight(math.sqrt(e0 * e0 + e1 * e1 + e2 * e2), inv_len[kk], com_w)
-    # pos* = pos + u dt (1 + W), W clamped to [0, max_weight]
     n_clamped = 0
-    for kk in range(n):
-        w = T[_W, kk]
-        n_clamped += 1 if w > max_weight else 0
-        w = 1.0 + clamp_weight(w, max_weight)
-        P[0, kk] = X0[0, kk] + T[_DX, kk] * w
-        P[1, kk] = X0[1, kk] + T[_DY, kk] * w
-        P[2, kk] = X0[2, kk] + T[_DZ, kk] * w
-    # (c) offset feedback toward the target q = guide point + Q rest_offset
-    if k_off > 0.0:
+    if elastic_mode != ELASTIC_OFF:
+        sign = 0.5 if elastic_mode == ELASTIC_KEPT else -0.5
         for kk in range(n):
-            P[0, kk] += k_off * (T[_QX, kk] - P[0, kk])
-            P[1, kk] += k_off * (T[_QY, kk] - P[1, kk])
-            P[2, kk] += k_off * (T[_QZ, kk] - P[2, kk])
+            w = 0.5 + sign * direction_cos(T[_DX, kk], T[_DY, kk], T[_DZ, kk],
+                                           V0[0, kk], V0[1, kk], V0[2, kk])
+            n_clamped += _advance(X0, P, T, kk, w, tip_f, cw, c0, c1, c2, inv_len, max_weight,
+                                  k_off)
+    else:
+        for kk in range(n):
+            n_clamped += _advance(X0, P, T, kk, 0.0, tip_f, cw, c0, c1, c2, inv_len,
+                                  max_weight, k_off)
     return n_clamped
+
+
+@njit(cache=True, inline='always', fastmath=TRACK_FASTMATH, error_model='numpy')
+def _advance(X0, P, T, kk, w, tip_f, cw, c0, c1, c2, inv_len, max_weight, k_off):
+    """Lane ``kk`` of :func:`_predict` given its elastic weight ``w``: adds w_tip and w_com,
+    clamps (b), moves by ``u dt (1 + W)`` (a) and pulls toward the target (c); 1 if clamped."""
+    xo0 = X0[0, kk]
+    xo1 = X0[1, kk]
+    xo2 = X0[2, kk]
+    e0 = xo0 - c0
+    e1 = xo1 - c1
+    e2 = xo2 - c2
+    w += tip_f * T[_TW, kk] + com_weight(math.sqrt(e0 * e0 + e1 * e1 + e2 * e2), inv_len[kk],
+                                         cw)
+    clamped = 1 if w > max_weight else 0
+    w = 1.0 + clamp_weight(w, max_weight)
+    x0 = xo0 + T[_DX, kk] * w
+    x1 = xo1 + T[_DY, kk] * w
+    x2 = xo2 + T[_DZ, kk] * w
+    P[0, kk] = x0 + k_off * (T[_QX, kk] - x0)
+    P[1, kk] = x1 + k_off * (T[_QY, kk] - x1)
+    P[2, kk] = x2 + k_off * (T[_QZ, kk] - x2)
+    return clamped
 
 
 @njit(cache=True, inline='always', fastmath=TRACK_FASTMATH, error_model='numpy')
 def _group_stage(P, T, n, k_com, spread, var_target, have_target):
     """(d) centre-of-mass tracking and (e) spread control of one node index of a group, on the
     predicted positions (rows at ``W[pb:]``) in place; ``T[_QX.._QZ]`` the targets."""
-    xs0 = xs1 = xs2 = 0.0
-    for kk in range(n):
+    xs0 = xs1 = xs2 = qs0 = qs1 = qs2 = 0.0
+    for kk in range(n):     # one loop for all six sums
         xs0 += P[0, kk]
         xs1 += P[1, kk]
         xs2 += P[2, kk]
+        qs0 += T[_QX, kk]
+        qs1 += T[_QY, kk]
+        qs2 += T[_QZ, kk]
     m0 = xs0 / n
     m1 = xs1 / n
     m2 = xs2 / n
     # (d) shift toward the centre of mass of the targets
     d0 = d1 = d2 = 0.0
     if k_com > 0.0 and have_target:
-        qs0 = qs1 = qs2 = 0.0
-        for kk in range(n):
-            qs0 += T[_QX, kk]
-            qs1 += T[_QY, kk]
-            qs2 += T[_QZ, kk]
         d0 = k_com * (qs0 / n - m0)
         d1 = k_com * (qs1 / n - m1)
         d2 = k_com * (qs2 / n - m2)
