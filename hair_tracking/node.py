@@ -69,6 +69,7 @@ from .head_track import PoseResult
 from .resources import config_path
 from .scene import Scene, SceneError
 from .simulator import HairSimulator, warm_up as warm_up_simulator
+from .strand_colors import strand_colors
 
 try:                                    # optional: /tf input
     from tf2_msgs.msg import TFMessage
@@ -134,22 +135,6 @@ def warm_up(scene: Scene) -> float:
                 strands_to_marker_array_cdr(strands, frame_id='warmup', style=style,
                                             delete_all_first=True)
     return time.perf_counter() - start
-
-
-def strand_colors(n: int, rgba) -> np.ndarray:
-    """(n, 4) per-strand colours: ``rgba`` with a fixed +-15 % brightness variation per strand.
-
-    The variation (a hash of the strand index, so stable across frames and rebuilds) lets rviz
-    tell strands apart when colouring the cloud by ``rgb``.
-    """
-    idx = np.arange(n, dtype=np.uint64)
-    h = (idx * np.uint64(2654435761)) % np.uint64(1000)
-    shade = 0.85 + 0.3 * (h.astype(np.float64) / 999.0)
-    out = np.empty((n, 4))
-    out[:, :3] = np.clip(np.asarray(rgba[:3], dtype=np.float64)[None, :] * shade[:, None],
-                         0.0, 1.0)
-    out[:, 3] = rgba[3]
-    return out
 
 
 class _Output:

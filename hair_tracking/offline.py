@@ -30,6 +30,7 @@ from . import bag_io
 from .bag_io import BagError, EXIT_CONTENT, EXIT_FAILURE, EXIT_USAGE
 from .params import make_settings, NODE_NAME, ParamError, Settings
 from .scene import Scene, SceneError
+from .strand_colors import strand_colors
 
 POINTS_TOPIC = '/hair/points'
 MARKERS_TOPIC = '/hair/markers'
@@ -118,12 +119,11 @@ def load_settings(scene: Optional[str] = None, params_file: Optional[str] = None
 # ================================================================ encoding
 class FrameEncoder:
     """Serialized output messages of one frame, exactly as the node builds them (CDR bytes):
-    per-strand colours from ``node.strand_colors``, ``line_list``/``line_strips`` markers with a
-    DELETEALL in front of the first array (and whenever the strand count changes), marker
-    lifetime of ``marker_lifetime_periods`` publishing periods."""
+    per-strand colours from :func:`.strand_colors.strand_colors`, ``line_list``/``line_strips``
+    markers with a DELETEALL in front of the first array (and whenever the strand count
+    changes), marker lifetime of ``marker_lifetime_periods`` publishing periods."""
 
     def __init__(self, settings: Settings):
-        from .node import strand_colors
         self.settings = settings
         self._strand_colors = strand_colors
         self._colors: Dict[str, tuple] = {}

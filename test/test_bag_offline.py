@@ -286,3 +286,10 @@ def test_console_errors_have_no_traceback(tmp_path):
         assert proc.returncode == code, proc.stderr
         assert 'Traceback' not in proc.stderr and 'error' in proc.stderr
     assert not any(tmp_path.iterdir())
+
+
+def test_offline_runs_need_no_rclpy():
+    """`hair_sim_bag run` works without a ROS installation: its modules never import rclpy."""
+    code = ('import sys, hair_tracking.offline, hair_tracking.strand_colors; '
+            'sys.exit(1 if "rclpy" in sys.modules else 0)')
+    assert subprocess.run([sys.executable, '-c', code], timeout=120).returncode == 0

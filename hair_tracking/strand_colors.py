@@ -1,0 +1,18 @@
+"""Per-strand colours of the published hair (ROS-free: shared by the node and offline runs)."""
+import numpy as np
+
+
+def strand_colors(n: int, rgba) -> np.ndarray:
+    """(n, 4) per-strand colours: ``rgba`` with a fixed +-15 % brightness variation per strand.
+
+    The variation (a hash of the strand index, so stable across frames and rebuilds) lets rviz
+    tell strands apart when colouring the cloud by ``rgb``.
+    """
+    idx = np.arange(n, dtype=np.uint64)
+    h = (idx * np.uint64(2654435761)) % np.uint64(1000)
+    shade = 0.85 + 0.3 * (h.astype(np.float64) / 999.0)
+    out = np.empty((n, 4))
+    out[:, :3] = np.clip(np.asarray(rgba[:3], dtype=np.float64)[None, :] * shade[:, None],
+                         0.0, 1.0)
+    out[:, 3] = rgba[3]
+    return out
