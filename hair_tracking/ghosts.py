@@ -30,13 +30,12 @@ group through ``order`` (ghost indices sorted by guide, stable); group ``g`` is
 import math
 from typing import Dict
 
+import numba
 import numpy as np
 
 from .collision import Collider
 from .correspondence import assign_guides, node_correspondence
-import numba
-
-from .integrate import PARALLEL_MIN_NODES, threads_for
+from .integrate import runs_parallel, threads_for
 from .model import HeadPose, StrandSet
 from .scene import Scene
 from .tracking_kernels import (chunk_count, group_blocks, guide_frames, TMP_ROWS, track_groups,
@@ -156,8 +155,8 @@ class GhostTracker:
         self._elastic = elastic_code(tr)
 
         # -- scratch
-        self._q_buf = np.empty((n_groups, guides.nodes - 1, 3, 3))
         chunks = chunk_count(n_groups, numba.config.NUMBA_NUM_THREADS)
+        self._q_buf = np.empty((chunks, guides.nodes - 1, 3, 3))
         largest = int(group_size.max()) if n_groups else 1
         self._buf = np.zeros((chunks, 9 * n_nodes * largest))
         self._tmp = np.zeros((chunks, TMP_ROWS * largest))
@@ -173,8 +172,8 @@ class GhostTracker:
         else:
             self._axes, self._center = np.ones(3), np.zeros(3)
             self._friction, self._refine = 0.0, 0
-        generic = self.collide and not self._fused_collider
-        self._x_prev = np.empty_like(ghosts.x) if generic else None
+        self._collide_after = self.collide and not self._fused_collider
+        self._x_prev = np.empty_like(ghosts.x) if self._collide_after else None
         self.stats: Dict[str, int] = {
             'ghosts': int(s_count), 'groups': int(n_groups),
             'largest_group': int(group_size.max()) if n_groups else 0,
@@ -195,10 +194,6 @@ class GhostTracker:
         feedback strengths ``k`` (offset, centre of mass, spread) become ``1 - (1 - k)^substeps``,
         what ``substeps`` separate steps would have applied to a constant deviation, so the pull
         per second does not depend on how often the ghosts are tracked."""
-        self._step(dt, guide_x_old, head, substeps)
-
-    def _step(self, dt: float, guide_x_old: np.ndarray, head: HeadPose,
-              substeps: int = 1) -> None:
         if not (dt > 0.0 and math.isfinite(dt)):
             raise ValueError(f'dt must be a finite number > 0 [s], got {dt!r}')
         gx = self.guides.x
@@ -211,11 +206,9 @@ class GhostTracker:
                 not (x.flags.c_contiguous and v.flags.c_contiguous):
             raise ValueError(f'ghosts.x and ghosts.v must be C-contiguous arrays shaped '
                              f'{self.ghosts.rest.shape}')
-        generic = self.collide and not self._fused_collider
-        if generic:
+        if self._collide_after:
             np.copyto(self._x_prev, x)
-        kernel = track_groups if x.shape[0] * x.shape[1] >= PARALLEL_MIN_NODES and \
-            numba.get_num_threads() > 1 else track_groups_serial
+        kernel = track_groups if runs_parallel(x.shape[0] * x.shape[1]) else track_groups_serial
         kernel(x, v, self.ghosts.rest, self._seg_len_blocks, self.order,
                self.group_start, self.group_guide, self._group_row, self._node_table,
                self._node_row, self._rest_off_blocks, self._inv_len, self._var_target,
@@ -231,7 +224,7 @@ class GhostTracker:
         self.stats['clamped'] = int(self._clamped.sum())
         if self._fused_collider:
             self.stats['contacts'] = int(self._contacts.sum())
-        elif generic:
+        elif self._collide_after:
             with threads_for(x.shape[0] * x.shape[1]):
                 self.stats['contacts'] = int(
                     self.collider.apply(x, self._x_prev, self.ghosts.inv_mass, head))

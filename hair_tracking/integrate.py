@@ -42,11 +42,17 @@ from numba import njit, prange
 PARALLEL_MIN_NODES = 1 << 17
 
 
+def runs_parallel(nodes: int) -> bool:
+    """Whether a problem of ``nodes`` nodes runs its kernels on more than one thread: at least
+    PARALLEL_MIN_NODES nodes and more than one numba thread available."""
+    return nodes >= PARALLEL_MIN_NODES and numba.get_num_threads() > 1
+
+
 @contextmanager
 def threads_for(nodes: int):
-    """Run the enclosed numba calls on one thread when ``nodes`` is below PARALLEL_MIN_NODES."""
+    """Run the enclosed numba calls on one thread unless :func:`runs_parallel` (``nodes``)."""
     threads = numba.get_num_threads()
-    if nodes >= PARALLEL_MIN_NODES or threads == 1:
+    if threads == 1 or runs_parallel(nodes):
         yield
         return
     numba.set_num_threads(1)

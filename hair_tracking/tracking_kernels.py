@@ -30,7 +30,7 @@ import numpy as np
 
 from .collision import push_out, to_head, world_center
 from .ftl import restore_node
-from .weights import clamp_weight, com_weight, direction_cos, ELASTIC_KEPT, ELASTIC_OFF
+from .weights import clamp_weight, com_weight, direction_cos, ELASTIC_OFF, elastic_sign
 
 
 @njit(cache=True, inline='always')
@@ -119,8 +119,8 @@ def guide_frames_kernel(guide_x, tan_rest, R, out):
 TRACK_FASTMATH = {'contract', 'reassoc'}
 
 #: Rows of the per-chunk work space ``tmp`` of :func:`track_groups` (per ghost of a group).
-_DX, _DY, _DZ, _QX, _QY, _QZ, _TW, _FLAG, _W = range(9)
-TMP_ROWS = 9
+_DX, _DY, _DZ, _QX, _QY, _QZ, _TW, _FLAG = range(8)
+TMP_ROWS = 8
 
 
 def chunk_count(groups: int, threads: int) -> int:
@@ -164,7 +164,7 @@ def track_groups(x, v, rest, seg_len, order, group_start, group_guide, group_row
                               node's start-of-substep position, ``refine`` projection refinements;
                               with ``ftl`` the pushed node is put back at its rest distance
                               (:func:`hair_tracking.ftl.restore_node`)
-      q_buf (K, M-1, 3, 3)    work space: guide segment frames
+      q_buf (C, M-1, 3, 3)    work space per chunk: the segment frames of the current guide
       buf (C, 9 N B)          work space per chunk: old x, old v, new x of a group, each laid
                               out [node][axis][ghost] (ghost stride = the group's size, so a
                               group of 16 ghosts of 16 nodes takes 6 KiB per array and stays in
@@ -228,6 +228,7 @@ def _track_chunk(c, n_chunks, x, v, rest, seg_len, order, group_start, group_gui
     g_end = (c + 1) * n_groups // n_chunks
     W = buf[c]
     Tc = tmp[c]
+    Qc = q_buf[c]
     n_contacts = 0
     for g in range(g_first, g_end):
         gi = group_guide[g]
@@ -238,7 +239,7 @@ def _track_chunk(c, n_chunks, x, v, rest, seg_len, order, group_start, group_gui
             continue
         if need_target:     # frames Q of the guide's segments, once per group
             for sg in range(m_last + 1):
-                _frame_into(guide_x, tan_rest, gi, sg, R, q_buf[g, sg])
+                _frame_into(guide_x, tan_rest, gi, sg, R, Qc[sg])
         # the group's work space: old x, old v, new x, each (N, 3, n) [node][axis][ghost]
         Wg = W[:9 * n_nodes * n].reshape((3, n_nodes, 3, n))
         X0 = Wg[0]
@@ -266,8 +267,8 @@ def _track_chunk(c, n_chunks, x, v, rest, seg_len, order, group_start, group_gui
         len_g = seg_len[k0 * (n_nodes - 1):(k0 + n) * (n_nodes - 1)].reshape((n_nodes - 1, n))
         ilen_g = inv_len[k0:k0 + n]
         for j in range(2, n_nodes):
-            _targets(T, n, k0, g, gi, j, group_row[g], node_table, node_row, off_g[j],
-                     guide_x, guide_x_old, q_buf, m_last, need_target)
+            _targets(T, n, k0, gi, j, group_row[g], node_table, node_row, off_g[j],
+                     guide_x, guide_x_old, Qc, m_last, need_target)
             n_clamped += _predict(X0[j], V0[j], XN[j], T, n, ilen_g, elastic_mode, use_tip,
                                   use_com_w, com_w, max_weight, k_off)
             if k_com > 0.0 or (spread > 0.0 and n > 1):
@@ -291,11 +292,13 @@ def _track_chunk(c, n_chunks, x, v, rest, seg_len, order, group_start, group_gui
 
 
 @njit(cache=True, inline='always', fastmath=TRACK_FASTMATH, error_model='numpy')
-def _targets(T, n, k0, g, gi, j, row, node_table, node_row, off, guide_x, guide_x_old, q_buf,
+def _targets(T, n, k0, gi, j, row, node_table, node_row, off, guide_x, guide_x_old, frames,
              m_last, need_target):
-    """Per ghost of group ``g`` at node ``j``: displacement ``u dt`` of its guide point (a) into
-    T[_DX.._DZ], its target ``q = P + Q o`` (c) into T[_QX.._QZ] (if ``need_target``) and w_tip
-    into T[_TW].  ``off`` (3, n): the ghosts' rest offsets at node ``j``."""
+    """Per ghost of a group following guide ``gi``, at node ``j``: displacement ``u dt`` of its
+    guide point (a) into T[_DX.._DZ], its target ``q = P + Q o`` (c) into T[_QX.._QZ] (if
+    ``need_target``) and w_tip into T[_TW].  ``off`` (3, n): the ghosts' rest offsets at node
+    ``j``; ``frames`` (M-1, 3, 3): the guide's segment frames ``Q``; ``row``: the group's shared
+    node_table row, or -1."""
     if row >= 0:
         # the usual case: the whole group shares one arc-length layout (scalars, then a loop
         # over the ghosts that vectorises)
@@ -317,7 +320,7 @@ def _targets(T, n, k0, g, gi, j, row, node_table, node_row, off, guide_x, guide_
                 T[_DZ, kk] = dz
                 T[_TW, kk] = tw
             return
-        Q = q_buf[g, sg]
+        Q = frames[sg]
         q00, q01, q02 = Q[0, 0], Q[0, 1], Q[0, 2]
         q10, q11, q12 = Q[1, 0], Q[1, 1], Q[1, 2]
         q20, q21, q22 = Q[2, 0], Q[2, 1], Q[2, 2]
@@ -347,7 +350,7 @@ def _targets(T, n, k0, g, gi, j, row, node_table, node_row, off, guide_x, guide_
         T[_DY, kk] = py - (u * guide_x_old[gi, sg, 1] + t * guide_x_old[gi, sg + 1, 1])
         T[_DZ, kk] = pz - (u * guide_x_old[gi, sg, 2] + t * guide_x_old[gi, sg + 1, 2])
         if need_target:
-            Q = q_buf[g, sg]
+            Q = frames[sg]
             o0 = off[0, kk]
             o1 = off[1, kk]
             o2 = off[2, kk]
@@ -378,7 +381,7 @@ def _predict(X0, V0, P, T, n, inv_len, elastic_mode, use_tip, use_com_w, com_w, 
         c2 /= n
     n_clamped = 0
     if elastic_mode != ELASTIC_OFF:
-        sign = 0.5 if elastic_mode == ELASTIC_KEPT else -0.5
+        sign = elastic_sign(elastic_mode)
         for kk in range(n):
             w = 0.5 + sign * direction_cos(T[_DX, kk], T[_DY, kk], T[_DZ, kk],
                                            V0[0, kk], V0[1, kk], V0[2, kk])

@@ -65,10 +65,14 @@ def elastic_weight(vx, vy, vz, v0x, v0y, v0z, mode):
     """
     if mode == ELASTIC_OFF:
         return 0.0
-    cos = direction_cos(vx, vy, vz, v0x, v0y, v0z)
-    if mode == ELASTIC_KEPT:
-        return 0.5 * cos + 0.5
-    return 0.5 - 0.5 * cos
+    return 0.5 + elastic_sign(mode) * direction_cos(vx, vy, vz, v0x, v0y, v0z)
+
+
+@njit(cache=True, inline='always')
+def elastic_sign(mode):
+    """``s`` of ``W* = 0.5 + s cos`` for an elastic mode that is on: 0.5 for
+    :data:`ELASTIC_KEPT` (the equation as printed), -0.5 for :data:`ELASTIC_CHANGED`."""
+    return 0.5 if mode == ELASTIC_KEPT else -0.5
 
 
 @njit(cache=True, inline='always')

@@ -236,13 +236,13 @@ def test_tip_weights_follow_arc_length():
 def test_parallel_and_serial_kernels_agree_bit_for_bit(monkeypatch):
     """Below 2^17 nodes the tracker calls the serial kernel; forcing the parallel one (any
     thread count) gives the same bits, with the fused collider on."""
-    import hair_tracking.ghosts as ghosts_module
+    import hair_tracking.integrate as integrate_module
     from hair_tracking.collision import make_collider
     scene = scene_with(spread=0.5, spread_target=1.5)
     collider = make_collider(scene.collider)
     runs = []
     for threshold in (1 << 40, 0):
-        monkeypatch.setattr(ghosts_module, 'PARALLEL_MIN_NODES', threshold)
+        monkeypatch.setattr(integrate_module, 'PARALLEL_MIN_NODES', threshold)
         rng = np.random.default_rng(5)
         guides = StrandSet.from_rest(random_strands(rng, 6, 8) + [0.0, 0.0, 0.12])
         ghosts = StrandSet.from_rest(random_strands(rng, 70, 8, seg=0.015) + [0.0, 0.0, 0.12])
