@@ -10,6 +10,8 @@ import glob
 import hashlib
 import os
 
+import pytest
+
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 os.environ.setdefault('ROS_PYTHON_CHECK_FIELDS', '1')
@@ -25,3 +27,15 @@ def _source_hash() -> str:
 
 
 os.environ.setdefault('NUMBA_CACHE_DIR', os.path.join(ROOT, '.numba_cache', _source_hash()))
+
+
+@pytest.fixture(scope='module')
+def one_numba_thread():
+    """numba on one thread for a module that checks behaviour, not speed: numba's thread pool
+    stalls on a loaded two-core machine (measured 30x slower there); restored afterwards.
+    (numba is imported here, not at the top: it reads NUMBA_CACHE_DIR when first imported.)"""
+    import numba
+    before = numba.get_num_threads()
+    numba.set_num_threads(1)
+    yield
+    numba.set_num_threads(before)

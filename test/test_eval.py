@@ -3,7 +3,6 @@ import csv
 import math
 import os
 
-import numba
 import numpy as np
 import pytest
 
@@ -24,14 +23,8 @@ VR = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), '
                   'data', 'head_motion', 'vr360_user1_quaternion.txt')
 
 
-@pytest.fixture(autouse=True, scope='module')
-def one_numba_thread():
-    """These tests check behaviour, not speed: one thread avoids numba's thread pool stalling
-    on a loaded two-core machine (measured 30x slower there); restored afterwards."""
-    before = numba.get_num_threads()
-    numba.set_num_threads(1)
-    yield
-    numba.set_num_threads(before)
+# behaviour, not speed: these modules run numba on one thread (conftest.py)
+pytestmark = pytest.mark.usefixtures('one_numba_thread')
 
 
 # ------------------------------------------------------------------ synthetic motions

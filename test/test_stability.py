@@ -2,7 +2,6 @@
 simulation fixes the matrix led to (each kernel against a plain-numpy reference)."""
 import math
 
-import numba
 import numpy as np
 import pytest
 
@@ -19,14 +18,8 @@ from hair_tracking.transforms import quat_from_axis_angle, quat_to_matrix
 QUICK = stability.matrix(quick=True)
 
 
-@pytest.fixture(autouse=True, scope='module')
-def one_numba_thread():
-    """These tests check behaviour, not speed: one thread avoids numba's thread pool stalling
-    on a loaded two-core machine (measured 30x slower there); restored afterwards."""
-    before = numba.get_num_threads()
-    numba.set_num_threads(1)
-    yield
-    numba.set_num_threads(before)
+# behaviour, not speed: these modules run numba on one thread (conftest.py)
+pytestmark = pytest.mark.usefixtures('one_numba_thread')
 
 
 # ------------------------------------------------------------------ the reduced matrix
