@@ -128,8 +128,10 @@ def test_outputs_written(tmp_path):
 
 
 # ------------------------------------------------------------------ the fixes
-def ref_ftl_restore(x, rest, rest_length, rot, pos, center, axes, refine, corr, iterations):
-    """Plain numpy/python reference of :func:`ftl.ftl_restore`."""
+def ref_ftl_restore(x, rest, rest_length, rot, pos, center, axes, refine, corr, iterations,
+                    tolerance):
+    """Plain numpy/python reference of :func:`ftl.ftl_restore`: placements stop once one lies
+    outside the ellipsoid scaled by ``1 - tolerance / max(axes)``."""
     x = x.copy()
     corr = corr.copy()
     c_world = rot @ center + pos
@@ -148,7 +150,7 @@ def ref_ftl_restore(x, rest, rest_length, rot, pos, center, axes, refine, corr, 
                 if k == iterations:
                     break
                 q = rot.T @ (p - c_world)
-                if np.sum((q / axes) ** 2) >= 1.0:
+                if np.sqrt(np.sum((q / axes) ** 2)) >= 1.0 - tolerance / axes.max():
                     break
                 y = np.array(surface_point(q[0], q[1], q[2], axes[0], axes[1], axes[2], refine))
                 p = rot @ y + c_world
@@ -190,7 +192,7 @@ def test_ftl_restore_matches_reference_and_keeps_lengths():
     x = _into_head(rest, rng) @ rot.T + pos
     corr = rng.normal(scale=1e-3, size=x.shape)
     x_ref, corr_ref = ref_ftl_restore(x, rest, st.rest_length, rot, pos, center, axes, 2, corr,
-                                      ftl.RESTORE_ITERATIONS)
+                                      ftl.RESTORE_ITERATIONS, ftl.RESTORE_TOLERANCE)
     xk, ck = x.copy(), corr.copy()
     ftl.ftl_restore(xk, rest, st.rest_length, rot, pos, center, axes, 2, ck)
     assert np.allclose(xk, x_ref, atol=1e-12) and np.allclose(ck, corr_ref, atol=1e-12)

@@ -32,8 +32,10 @@ def scene_with(**tracking):
 
 
 def reference_step(x, v, ghost_rest, ghost_len, guide_of, seg, t, guide_rest, gx, gx_old,
-                   head, dt, tr):
-    """Plain-numpy tracking substep written from docs/ghosts.md (stages a-g, no collision)."""
+                   head, dt, tr, collider=None):
+    """Plain-numpy tracking substep written from docs/ghosts.md (stages a-g); with ``collider``
+    also (h), node by node with the project's scalar one-node functions
+    (:func:`collision.push_out`, then with length restoration :func:`ftl.restore_node`)."""
     x = x.copy()
     v = v.copy()
     R, pos = head.rotation, head.position
@@ -115,9 +117,31 @@ def reference_step(x, v, ghost_rest, ghost_len, guide_of, seg, t, guide_rest, gx
                 fallback = (ghost_rest[m, j] - ghost_rest[m, j - 1]) @ R.T
                 xp = np.where(nd > 1e-300, prev + dv * ghost_len[m, j - 1][:, None] /
                               np.where(nd > 1e-300, nd, 1.0), prev + fallback)
+            if collider is not None:
+                xp = _collide_reference(xp, xo, x[m, j - 1], ghost_len[m, j - 1],
+                                        ghost_rest[m, j] - ghost_rest[m, j - 1], head,
+                                        collider, tr.length_restore)
             v[m, j] = (xp - xo) / dt
             x[m, j] = xp
     return x, v
+
+
+def _collide_reference(p, start, prev, seg_len, rest_seg, head, collider, restore):
+    """(h) for the lanes of one node index, one lane at a time with the scalar functions."""
+    from hair_tracking.collision import push_out
+    from hair_tracking.ftl import restore_node
+    R = head.rotation
+    c = head.position + R @ collider.center
+    a = collider.radii + collider.margin
+    out = p.copy()
+    for k in range(p.shape[0]):
+        moved, y0, y1, y2 = push_out(*p[k], *start[k], R, *c, *a, collider.friction,
+                                     collider.refine)
+        if moved and restore:
+            y0, y1, y2 = restore_node(y0, y1, y2, *prev[k], seg_len[k], *rest_seg[k], R, *c,
+                                      *a, collider.refine)
+        out[k] = (y0, y1, y2)
+    return out
 
 
 OPTION_SETS = [
@@ -158,6 +182,40 @@ def test_kernel_matches_numpy_reference(options, regroup):
         np.testing.assert_allclose(ghosts.x, want_x, rtol=0, atol=1e-11)
         np.testing.assert_allclose(ghosts.v, want_v, rtol=1e-9, atol=1e-8)
     assert tracker.stats['steps'] == 4
+
+
+@pytest.mark.parametrize('shape', ['sphere', 'ellipsoid'])
+@pytest.mark.parametrize('length_restore', [True, False])
+def test_kernel_collision_matches_scalar_reference(shape, length_restore):
+    """(h) inside the kernel (lane-parallel, all lanes of a group at once) against the scalar
+    one-node functions applied node by node: a collider placed where the ghosts hang, so that
+    many nodes are pushed each substep."""
+    from hair_tracking.collision import Collider
+    rng = np.random.default_rng(11)
+    guides = StrandSet.from_rest(random_strands(rng, 4, 6))
+    ghosts = StrandSet.from_rest(random_strands(rng, 37, 9, seg=0.013))
+    scene = scene_with(collide=True, length_restore=length_restore)
+    radii = (0.06,) * 3 if shape == 'sphere' else (0.06, 0.05, 0.07)
+    collider = Collider(shape, (0.0, 0.0, -0.09), radii, 0.004, 0.3)
+    tracker = GhostTracker(ghosts, guides, scene, collider)
+    dt = 1.0 / 240.0
+    head = head_pose(rng, angle_scale=0.05, shift=0.005)
+    guides.place_at(head)
+    ghosts.place_at(head)
+    contacts = 0
+    for _ in range(4):
+        old = guides.x.copy()
+        head = head_pose(rng, angle_scale=0.05, shift=0.005)
+        guides.x[...] = head.to_world(guides.rest) + rng.normal(scale=0.004, size=old.shape)
+        want_x, want_v = reference_step(
+            ghosts.x, ghosts.v, ghosts.rest, ghosts.rest_length, tracker.guide_of,
+            tracker.seg, tracker.t, guides.rest, guides.x, old, head, dt, scene.tracking,
+            collider)
+        tracker.step(dt, old, head)
+        contacts += tracker.stats['contacts']
+        np.testing.assert_allclose(ghosts.x, want_x, rtol=0, atol=1e-10)
+        np.testing.assert_allclose(ghosts.v, want_v, rtol=1e-8, atol=1e-7)
+    assert contacts > 50
 
 
 def test_guide_frames_match_rotation_between():
