@@ -38,22 +38,26 @@ from .correspondence import assign_guides, node_correspondence
 from .integrate import runs_parallel, threads_for
 from .model import HeadPose, StrandSet
 from .scene import Scene
-from .tracking_kernels import (chunk_count, group_blocks, guide_frames, TMP_ROWS, track_groups,
-                               track_groups_serial)
+from .tracking_kernels import (chunk_count, copy_blocks, group_blocks, guide_frames, TMP_ROWS,
+                               track_groups, track_groups_serial)
 from .weights import arc_fractions, elastic_code
 
 
 class GhostTracker:
     """Moves ``ghosts`` (a :class:`StrandSet`) after ``guides`` each substep.
 
-    ``ghosts.x``/``ghosts.v`` are updated in place (world frame [m], [m/s]).  ``collider`` is used
+    ``ghosts.x``/``ghosts.v`` (world frame [m], [m/s]) show the state whenever they are read:
+    between steps the tracker keeps it in its kernel's layout (group by group, [node][axis]
+    [ghost], see :mod:`.tracking_kernels`) and writes it back into the arrays only when they
+    are read or assigned (:meth:`release`, called by the StrandSet's properties); a write into
+    them is taken by the next step.  So several substeps without a read cost no conversion.  ``collider`` is used
     only when ``scene.tracking.collide`` is true and it is given; it must then expose
     ``apply(x, x_prev, inv_mass, head) -> int``.
 
     ``regroup`` (default true): the ghost StrandSet is reordered **once**, at construction, so
     that the ghosts of each guide are contiguous in memory (stable order within a group); its
-    arrays are replaced by reordered copies (take references to ``ghosts.x`` after
-    construction).  The kernel then streams through memory instead of jumping between strands,
+    arrays are replaced by reordered copies (read ``ghosts.x`` after stepping rather than
+    keeping a reference to it).  The kernel then streams through memory instead of jumping between strands,
     several times faster for 10^5 ghosts.  ``permutation[i]`` is the index, before
     construction, of the ghost now in row ``i`` (identity when the set was already grouped, e.g.
     when a tracker is rebuilt on the same ghosts).  With ``regroup=False`` the rows are left
@@ -158,7 +162,11 @@ class GhostTracker:
         chunks = chunk_count(n_groups, numba.config.NUMBA_NUM_THREADS)
         self._q_buf = np.empty((chunks, guides.nodes - 1, 3, 3))
         largest = int(group_size.max()) if n_groups else 1
-        self._buf = np.zeros((chunks, 9 * n_nodes * largest))
+        self._buf = np.zeros((chunks, 3 * n_nodes * largest))
+        # the state between substeps, in the kernel's layout (see StrandSet.hold / release)
+        self._xb = np.empty(s_count * n_nodes * 3)
+        self._vb = np.empty(s_count * n_nodes * 3)
+        self._held = False
         self._tmp = np.zeros((chunks, TMP_ROWS * largest))
         self._clamped = np.zeros(n_groups, dtype=np.int64)
         self._contacts = np.zeros(chunks, dtype=np.int64)
@@ -181,6 +189,32 @@ class GhostTracker:
         }
 
     # ------------------------------------------------------------------ API
+    def release(self) -> None:
+        """Write the state kept in the kernel's layout back into ``ghosts.x`` and ``ghosts.v``
+        (called by :class:`~hair_tracking.model.StrandSet` whenever they are read or
+        assigned); the next step reads them again."""
+        if self._held:
+            self._held = False
+            copy_blocks(self.ghosts._x, self.ghosts._v, self.order, self.group_start,
+                        self._xb, self._vb, False)
+
+    def _take(self) -> None:
+        """Copy ``ghosts.x`` and ``ghosts.v`` into the kernel's layout and keep them there."""
+        ghosts = self.ghosts
+        if ghosts._holder is not self:
+            ghosts.hold(self)
+        if self._held:
+            return
+        x, v = ghosts._x, ghosts._v
+        if not (isinstance(x, np.ndarray) and isinstance(v, np.ndarray) and
+                x.dtype == np.float64 and v.dtype == np.float64 and
+                x.shape == ghosts.rest.shape and v.shape == x.shape and
+                x.flags.c_contiguous and v.flags.c_contiguous):
+            raise ValueError(f'ghosts.x and ghosts.v must be C-contiguous float64 arrays shaped '
+                             f'{ghosts.rest.shape}')
+        copy_blocks(x, v, self.order, self.group_start, self._xb, self._vb, True)
+        self._held = True
+
     def reset(self, head: HeadPose) -> None:
         """Ghosts in their rest shape carried by ``head``, at rest."""
         self.ghosts.place_at(head)
@@ -201,15 +235,12 @@ class GhostTracker:
             raise ValueError(f'guide_x_old must be shaped {gx.shape} like guides.x, got '
                              f'{guide_x_old.shape}')
         tr = self.tracking
-        x, v = self.ghosts.x, self.ghosts.v
-        if x.shape != self.ghosts.rest.shape or v.shape != x.shape or \
-                not (x.flags.c_contiguous and v.flags.c_contiguous):
-            raise ValueError(f'ghosts.x and ghosts.v must be C-contiguous arrays shaped '
-                             f'{self.ghosts.rest.shape}')
         if self._collide_after:
-            np.copyto(self._x_prev, x)
-        kernel = track_groups if runs_parallel(x.shape[0] * x.shape[1]) else track_groups_serial
-        kernel(x, v, self.ghosts.rest, self._seg_len_blocks, self.order,
+            np.copyto(self._x_prev, self.ghosts.x)
+        self._take()
+        nodes = self._xb.size // 3
+        kernel = track_groups if runs_parallel(nodes) else track_groups_serial
+        kernel(self._xb, self._vb, self.ghosts.rest, self._seg_len_blocks, self.order,
                self.group_start, self.group_guide, self._group_row, self._node_table,
                self._node_row, self._rest_off_blocks, self._inv_len, self._var_target,
                _f64(gx), _f64(guide_x_old), self._tan_rest,
@@ -225,7 +256,8 @@ class GhostTracker:
         if self._fused_collider:
             self.stats['contacts'] = int(self._contacts.sum())
         elif self._collide_after:
-            with threads_for(x.shape[0] * x.shape[1]):
+            x, v = self.ghosts.x, self.ghosts.v          # written back from the blocks
+            with threads_for(nodes):
                 self.stats['contacts'] = int(
                     self.collider.apply(x, self._x_prev, self.ghosts.inv_mass, head))
             np.subtract(x, self._x_prev, out=v)

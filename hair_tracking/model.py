@@ -24,15 +24,60 @@ class HeadPose:
         return (points_world - self.position) @ self.rotation
 
 
-@dataclass
 class StrandSet:
-    """Topology and rest shape of a set of strands, plus their dynamic state."""
+    """Topology and rest shape of a set of strands, plus their dynamic state.
 
-    rest: np.ndarray          # (S, N, 3) rest node positions, head frame [m]
-    rest_length: np.ndarray   # (S, N-1) rest segment lengths [m]
-    inv_mass: np.ndarray      # (S, N) inverse masses; 0 for the two attached root nodes
-    x: np.ndarray             # (S, N, 3) positions, world frame [m]
-    v: np.ndarray             # (S, N, 3) velocities, world frame [m/s]
+    ``rest`` (S, N, 3) rest node positions, head frame [m]; ``rest_length`` (S, N-1) rest
+    segment lengths [m]; ``inv_mass`` (S, N) inverse masses, 0 for the two attached root nodes;
+    ``x`` (S, N, 3) positions, world frame [m]; ``v`` (S, N, 3) velocities [m/s].
+
+    ``x`` and ``v`` are properties because a solver may keep the state in a layout of its own
+    between its steps (the ghost tracker does, see :class:`hair_tracking.ghosts.GhostTracker`):
+    it registers itself with :meth:`hold`, and reading or assigning ``x`` or ``v`` first calls
+    its ``release()``, which writes the current state into these arrays and makes them the
+    truth again (the holder reads them back on its next step).  So read ``x`` after stepping
+    rather than keeping an old reference to it.
+    """
+
+    def __init__(self, rest: np.ndarray, rest_length: np.ndarray, inv_mass: np.ndarray,
+                 x: np.ndarray, v: np.ndarray):
+        self.rest = rest
+        self.rest_length = rest_length
+        self.inv_mass = inv_mass
+        self._x = x
+        self._v = v
+        self._holder = None
+
+    def hold(self, holder) -> None:
+        """Register ``holder`` (an object with ``release()``) as the keeper of the state; a
+        previous holder releases first."""
+        if self._holder is not None and self._holder is not holder:
+            self._holder.release()
+        self._holder = holder
+
+    def _release(self) -> None:
+        if self._holder is not None:
+            self._holder.release()
+
+    @property
+    def x(self) -> np.ndarray:
+        self._release()
+        return self._x
+
+    @x.setter
+    def x(self, value: np.ndarray) -> None:
+        self._release()
+        self._x = value
+
+    @property
+    def v(self) -> np.ndarray:
+        self._release()
+        return self._v
+
+    @v.setter
+    def v(self, value: np.ndarray) -> None:
+        self._release()
+        self._v = value
 
     @staticmethod
     def from_rest(rest: np.ndarray) -> 'StrandSet':

@@ -14,14 +14,21 @@ e. spread control (HairControl, Milliez et al. 2018, eqs. (2)-(3)): offsets from
    mass scaled toward the target variance;
 f. length restoration: one Follow-The-Leader pass (Mueller, Kim & Chentanez 2012);
 g. roots (nodes 0 and 1) pinned at the head-carried rest shape;
-then ``v = (x_new - x_old) / dt``.  (h, collision with the head, is a separate call on the whole
-arrays, see :class:`hair_tracking.ghosts.GhostTracker`.)
+h. (optional) collision with the head ellipsoid, node by node after (f);
+then ``v = (x_new - x_old) / dt``.
 
 Conventions: world frame positions [m] and velocities [m/s]; rest data in the head frame;
-``R`` (3, 3) and ``pos`` (3,) the head pose (``p_world = pos + R p_head``).  Ghost state arrays
-``x``, ``v`` are in the user's ghost order and reached through ``order``; every per-ghost static
-array (``node_row``, ``rest_off``, ``inv_len``) is stored in group order (row ``k`` belongs
-to ghost ``order[k]``).  No cross-thread reductions: results are deterministic.
+``R`` (3, 3) and ``pos`` (3,) the head pose (``p_world = pos + R p_head``).  Every per-ghost
+array of the kernel is stored in group order (row ``k`` belongs to ghost ``order[k]``); the
+per-node ones (the state ``xb``, ``vb``, the rest offsets, the segment lengths) *group by group,
+inside a group [node][axis][ghost]* (:func:`group_blocks`), so that every stage is a unit-stride
+loop over the group's ghosts that LLVM vectorises.  The tracker keeps its ghosts' state in this
+layout between substeps (:func:`copy_blocks` converts from and to the
+``(S, N, 3)`` arrays of the user's order only when those are read or written): the two
+transposes, scalar loops, cost as much as all stages together when they ran every substep.
+Only the rest shapes ``rest`` stay ``(S, N, 3)`` in the user's order (read for the pinned roots
+and the rare fallbacks), reached through ``order``.  No cross-thread reductions: results are
+deterministic.
 """
 import math
 
@@ -129,16 +136,17 @@ def chunk_count(groups: int, threads: int) -> int:
 
 
 @njit(cache=True, nogil=True, parallel=True, fastmath=TRACK_FASTMATH, error_model='numpy')
-def track_groups(x, v, rest, seg_len, order, group_start, group_guide, group_row,
+def track_groups(xb, vb, rest, seg_len, order, group_start, group_guide, group_row,
                  node_table, node_row, rest_off, inv_len, var_target, guide_x, guide_x_old,
                  tan_rest, R, pos, dt, elastic_mode, use_tip, com_w, max_weight, k_off, k_com,
                  spread, ftl, collide, center, axes, friction, refine,
                  q_buf, buf, tmp, clamped, contacts):
-    """One tracking substep of all ghosts, in place on ``x`` and ``v`` (see the module doc).
+    """One tracking substep of all ghosts, in place on ``xb`` and ``vb`` (see the module doc).
 
     Parameters (S ghosts of N nodes, G guides of M nodes, K groups, U distinct node rows,
     C chunks, B the largest group):
-      x, v (S, N, 3)          ghost positions [m] / velocities [m/s], world, user order
+      xb, vb (S * N * 3,)     ghost positions [m] / velocities [m/s], world, in the layout of
+                              ``rest_off`` (:func:`copy_blocks`)
       rest (S, N, 3)          ghost rest shapes, head frame [m] (roots and FTL fallback)
       seg_len (S * (N-1),)    ghost rest segment lengths [m], in the layout of ``rest_off``
       order (S,)              ghost index of group-order row k
@@ -165,23 +173,22 @@ def track_groups(x, v, rest, seg_len, order, group_start, group_guide, group_row
                               with ``ftl`` the pushed node is put back at its rest distance
                               (:func:`hair_tracking.ftl.restore_node`)
       q_buf (C, M-1, 3, 3)    work space per chunk: the segment frames of the current guide
-      buf (C, 9 N B)          work space per chunk: old x, old v, new x of a group, each laid
-                              out [node][axis][ghost] (ghost stride = the group's size, so a
-                              group of 16 ghosts of 16 nodes takes 6 KiB per array and stays in
-                              the L1 cache) so the loops over the ghosts vectorise
+      buf (C, 3 N B)          work space per chunk: the new positions of a group, [node][axis]
+                              [ghost] (a group of 16 ghosts of 16 nodes: 6 KiB, in the L1
+                              cache)
       tmp (C, TMP_ROWS B)     work space per chunk: per-ghost values of one node index
       clamped (K,) out        clamped weight sums per group;  contacts (C,) out  pushed nodes
 
     Each chunk (a contiguous range of groups, the unit of parallel work) walks its groups one
-    at a time: the group's ghosts are copied into ``buf`` (each ghost a contiguous run of
-    memory), advanced node index by node index from the root (the group sums of (d) and (e)
-    exist before they are applied, Follow-The-Leader finds node ``j - 1`` final) and copied
-    back with ``v = (x_new - x_old) / dt``.  Groups are independent: the result does not depend
-    on the number of chunks or threads.
+    at a time: a group is advanced node index by node index from the root into ``buf`` (the
+    group sums of (d) and (e) exist before they are applied, Follow-The-Leader finds node
+    ``j - 1`` final), then its block of ``xb`` and ``vb`` is rewritten with
+    ``v = (x_new - x_old) / dt`` in one contiguous loop.  Groups are independent: the result
+    does not depend on the number of chunks or threads.
     """
     n_chunks = buf.shape[0]
     for c in prange(n_chunks):
-        _track_chunk(c, n_chunks, x, v, rest, seg_len, order, group_start, group_guide,
+        _track_chunk(c, n_chunks, xb, vb, rest, seg_len, order, group_start, group_guide,
                      group_row, node_table, node_row, rest_off, inv_len, var_target, guide_x,
                      guide_x_old, tan_rest, R, pos, dt, elastic_mode, use_tip, com_w,
                      max_weight, k_off, k_com, spread, ftl, collide, center, axes, friction,
@@ -189,7 +196,7 @@ def track_groups(x, v, rest, seg_len, order, group_start, group_guide, group_row
 
 
 @njit(cache=True, nogil=True, fastmath=TRACK_FASTMATH, error_model='numpy')
-def track_groups_serial(x, v, rest, seg_len, order, group_start, group_guide, group_row,
+def track_groups_serial(xb, vb, rest, seg_len, order, group_start, group_guide, group_row,
                         node_table, node_row, rest_off, inv_len, var_target, guide_x,
                         guide_x_old, tan_rest, R, pos, dt, elastic_mode, use_tip, com_w,
                         max_weight, k_off, k_com, spread, ftl, collide, center, axes, friction,
@@ -199,7 +206,7 @@ def track_groups_serial(x, v, rest, seg_len, order, group_start, group_guide, gr
     1 k-ghost substep's arithmetic).  Same results."""
     n_chunks = buf.shape[0]
     for c in range(n_chunks):
-        _track_chunk(c, n_chunks, x, v, rest, seg_len, order, group_start, group_guide,
+        _track_chunk(c, n_chunks, xb, vb, rest, seg_len, order, group_start, group_guide,
                      group_row, node_table, node_row, rest_off, inv_len, var_target, guide_x,
                      guide_x_old, tan_rest, R, pos, dt, elastic_mode, use_tip, com_w,
                      max_weight, k_off, k_com, spread, ftl, collide, center, axes, friction,
@@ -207,7 +214,7 @@ def track_groups_serial(x, v, rest, seg_len, order, group_start, group_guide, gr
 
 
 @njit(cache=True, fastmath=TRACK_FASTMATH, error_model='numpy')
-def _track_chunk(c, n_chunks, x, v, rest, seg_len, order, group_start, group_guide, group_row,
+def _track_chunk(c, n_chunks, xb, vb, rest, seg_len, order, group_start, group_guide, group_row,
                  node_table, node_row, rest_off, inv_len, var_target, guide_x, guide_x_old,
                  tan_rest, R, pos, dt, elastic_mode, use_tip, com_w, max_weight, k_off, k_com,
                  spread, ftl, collide, center, axes, friction, refine, q_buf, buf, tmp,
@@ -215,12 +222,11 @@ def _track_chunk(c, n_chunks, x, v, rest, seg_len, order, group_start, group_gui
     """Chunk ``c`` of :func:`track_groups` (its groups ``c K / C .. (c+1) K / C - 1``).  A
     function of its own so that the parallel loop's body stays small (numba's parfor lowering
     copies the body's IR, which took most of the compile time when everything was inlined)."""
-    n_nodes = x.shape[1]
+    n_nodes = rest.shape[1]
     m_last = guide_x.shape[1] - 2
     n_groups = group_guide.shape[0]
     inv_dt = 1.0 / dt
     need_target = k_off > 0.0 or k_com > 0.0
-    use_v = elastic_mode != ELASTIC_OFF
     ax, ay, az = axes[0], axes[1], axes[2]
     ix, iy, iz = 1.0 / (ax * ax), 1.0 / (ay * ay), 1.0 / (az * az)
     cx, cy, cz = world_center(R, pos, center)
@@ -240,22 +246,16 @@ def _track_chunk(c, n_chunks, x, v, rest, seg_len, order, group_start, group_gui
         if need_target:     # frames Q of the guide's segments, once per group
             for sg in range(m_last + 1):
                 _frame_into(guide_x, tan_rest, gi, sg, R, Qc[sg])
-        # the group's work space: old x, old v, new x, each (N, 3, n) [node][axis][ghost]
-        Wg = W[:9 * n_nodes * n].reshape((3, n_nodes, 3, n))
-        X0 = Wg[0]
-        V0 = Wg[1]
-        XN = Wg[2]
+        # the group's state, old x and old v, (N, 3, n) [node][axis][ghost] views of the block
+        # arrays, and the new positions in the work space; roots pinned (g)
+        b0 = k0 * n_nodes * 3
+        b1 = (k0 + n) * n_nodes * 3
+        X0 = xb[b0:b1].reshape((n_nodes, 3, n))
+        V0 = vb[b0:b1].reshape((n_nodes, 3, n))
+        XN = W[:3 * n_nodes * n].reshape((n_nodes, 3, n))
         T = Tc[:TMP_ROWS * n].reshape((TMP_ROWS, n))
-        # gather the group: old positions (and velocities), roots pinned (g)
         for kk in range(n):
             s = order[k0 + kk]
-            for j in range(n_nodes):
-                for a in range(3):
-                    X0[j, a, kk] = x[s, j, a]
-            if use_v:
-                for j in range(n_nodes):
-                    for a in range(3):
-                        V0[j, a, kk] = v[s, j, a]
             for j in range(min(2, n_nodes)):
                 for a in range(3):
                     XN[j, a, kk] = pos[a] + R[a, 0] * rest[s, j, 0] + \
@@ -280,14 +280,14 @@ def _track_chunk(c, n_chunks, x, v, rest, seg_len, order, group_start, group_gui
                                        rest, R, j, ftl, cx, cy, cz, ax, ay, az, ix, iy, iz,
                                        friction, refine)
         clamped[g] = n_clamped
-        # scatter: new positions and v = (x_new - x_old) / dt
-        for kk in range(n):
-            s = order[k0 + kk]
-            for j in range(n_nodes):
-                for a in range(3):
-                    xn = XN[j, a, kk]
-                    v[s, j, a] = (xn - X0[j, a, kk]) * inv_dt
-                    x[s, j, a] = xn
+        # the new state: v = (x_new - x_old) / dt, then x = x_new (one contiguous loop)
+        xg = xb[b0:b1]
+        vg = vb[b0:b1]
+        xw = W[:b1 - b0]
+        for i in range(b1 - b0):
+            xn = xw[i]
+            vg[i] = (xn - xg[i]) * inv_dt
+            xg[i] = xn
     contacts[c] = n_contacts
 
 
@@ -524,6 +524,29 @@ def _collide(X0, B, P, T, n, k0, order, seg_len, rest, R, j, ftl, cx, cy, cz,
         P[1, kk] = y1
         P[2, kk] = y2
     return n_in
+
+
+@njit(cache=True, nogil=True)
+def copy_blocks(x, v, order, group_start, xb, vb, into_blocks):
+    """Ghost state between the user's ``x``, ``v`` (S, N, 3) and the kernel's ``xb``, ``vb``
+    (S * N * 3,) (group by group, [node][axis][ghost]; see :func:`group_blocks`): into the
+    blocks if ``into_blocks``, else out of them."""
+    n_nodes = x.shape[1]
+    for g in range(group_start.shape[0] - 1):
+        k0 = group_start[g]
+        n = group_start[g + 1] - k0
+        base = k0 * n_nodes * 3
+        for kk in range(n):
+            s = order[k0 + kk]
+            for j in range(n_nodes):
+                for a in range(3):
+                    i = base + (j * 3 + a) * n + kk
+                    if into_blocks:
+                        xb[i] = x[s, j, a]
+                        vb[i] = v[s, j, a]
+                    else:
+                        x[s, j, a] = xb[i]
+                        v[s, j, a] = vb[i]
 
 
 def group_blocks(a: np.ndarray, group_start: np.ndarray) -> np.ndarray:

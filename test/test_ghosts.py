@@ -396,3 +396,39 @@ def test_bad_input_is_rejected_with_a_reason():
     bad.rest[0, 3, 1] = np.nan
     with pytest.raises(ValueError, match='NaN'):
         GhostTracker(bad, guides, Scene())
+
+
+def test_state_in_kernel_layout_is_seen_and_taken_whenever_touched():
+    """The tracker keeps the ghost state in its kernel's layout between steps: reading
+    ``ghosts.x`` after any step shows the current state, an in-place write between steps is
+    used by the next step, and a second tracker on the same ghosts continues from the state the
+    first one held.  Results do not depend on when the arrays were read."""
+    def run(read_between, touch, handover=False):
+        guides, ghosts = comb([(0.0, 0.0, 0.0), (0.02, 0.0, 0.0)], 5, seed=3)
+        scene = scene_with()
+        tracker = GhostTracker(ghosts, guides, scene)
+        seen = []
+        for k in range(6):
+            head = oscillating_head(k)
+            old = guides.x.copy()
+            guides.x[...] = head.to_world(guides.rest)
+            if handover and k == 3:
+                tracker = GhostTracker(ghosts, guides, scene)
+            tracker.step(DT, old, head)
+            if read_between:
+                seen.append(ghosts.x.copy())
+            if touch and k == 2:
+                ghosts.x[:, 2:, 0] += 0.002           # through the property: taken next step
+        return ghosts.x.copy(), ghosts.v.copy(), seen
+
+    x_read, v_read, seen = run(True, True)
+    x_quiet, v_quiet, _ = run(False, True)
+    np.testing.assert_array_equal(x_read, x_quiet)
+    np.testing.assert_array_equal(v_read, v_quiet)
+    np.testing.assert_array_equal(seen[-1], x_read)
+    assert not np.array_equal(seen[1], seen[2])       # each read shows the newest state
+    x_untouched, _, _ = run(False, False)
+    assert np.abs(x_untouched - x_quiet).max() > 1e-4  # the write was not lost
+    x_handover, v_handover, _ = run(False, True, handover=True)
+    np.testing.assert_array_equal(x_handover, x_quiet)
+    np.testing.assert_array_equal(v_handover, v_quiet)
