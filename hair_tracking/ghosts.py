@@ -50,15 +50,16 @@ class GhostTracker:
     between steps the tracker keeps it in its kernel's layout (group by group, [node][axis]
     [ghost], see :mod:`.tracking_kernels`) and writes it back into the arrays only when they
     are read or assigned (:meth:`release`, called by the StrandSet's properties); a write into
-    them is taken by the next step.  So several substeps without a read cost no conversion.  ``collider`` is used
-    only when ``scene.tracking.collide`` is true and it is given; it must then expose
-    ``apply(x, x_prev, inv_mass, head) -> int``.
+    them is taken by the next step.  So several substeps without a read cost no conversion.
+
+    ``collider`` is used only when ``scene.tracking.collide`` is true and it is given; it must
+    then expose ``apply(x, x_prev, inv_mass, head) -> int``.
 
     ``regroup`` (default true): the ghost StrandSet is reordered **once**, at construction, so
     that the ghosts of each guide are contiguous in memory (stable order within a group); its
     arrays are replaced by reordered copies (read ``ghosts.x`` after stepping rather than
-    keeping a reference to it).  The kernel then streams through memory instead of jumping between strands,
-    several times faster for 10^5 ghosts.  ``permutation[i]`` is the index, before
+    keeping a reference to it).  The kernel then streams through memory instead of jumping
+    between strands, several times faster for 10^5 ghosts.  ``permutation[i]`` is the index, before
     construction, of the ghost now in row ``i`` (identity when the set was already grouped, e.g.
     when a tracker is rebuilt on the same ghosts).  With ``regroup=False`` the rows are left
     alone and visited through ``order``.
