@@ -38,8 +38,8 @@ from .correspondence import assign_guides, node_correspondence
 from .integrate import runs_parallel, threads_for
 from .model import HeadPose, StrandSet
 from .scene import Scene
-from .tracking_kernels import (chunk_count, copy_blocks, group_blocks, guide_frames, TMP_ROWS,
-                               track_groups, track_groups_serial)
+from .tracking_kernels import (block_groups, chunk_count, copy_blocks, group_blocks,
+                               guide_frames, TMP_ROWS, track_groups, track_groups_serial)
 from .weights import arc_fractions, elastic_code
 
 
@@ -131,8 +131,11 @@ class GhostTracker:
             target_rest = rest_com[group_of_row] + math.sqrt(tr.spread_target) * dev
             target_rest[:, :2] = ghost_rest[:, :2]
         self._rest_off = np.ascontiguousarray(target_rest - guide_point_rest)   # (S, N, 3)
-        self._rest_off_blocks = group_blocks(self._rest_off, self.group_start)
-        self._seg_len_blocks = group_blocks(ghosts.rest_length[o], self.group_start)
+        # blocks of consecutive groups (the kernel's unit of work and of its per-node layout)
+        self.block_group = block_groups(self.group_start)
+        self._block_rows = np.ascontiguousarray(self.group_start[self.block_group])
+        self._rest_off_blocks = group_blocks(self._rest_off, self._block_rows)
+        self._seg_len_blocks = group_blocks(ghosts.rest_length[o], self._block_rows)
         frac = arc_fractions(ghosts.rest_length)[o]
         # per-node data (guide parameter, w_tip) as a table of distinct rows: ghosts with the
         # same arc-length layout share one row
@@ -160,16 +163,18 @@ class GhostTracker:
         self._elastic = elastic_code(tr)
 
         # -- scratch
-        chunks = chunk_count(n_groups, numba.config.NUMBA_NUM_THREADS)
-        self._q_buf = np.empty((chunks, guides.nodes - 1, 3, 3))
-        largest = int(group_size.max()) if n_groups else 1
-        self._buf = np.zeros((chunks, 3 * n_nodes * largest))
+        n_blocks = self.block_group.size - 1
+        chunks = chunk_count(n_blocks, numba.config.NUMBA_NUM_THREADS)
+        groups_per_block = int(np.diff(self.block_group).max()) if n_blocks else 1
+        self._q_buf = np.empty((chunks, groups_per_block, guides.nodes - 1, 3, 3))
+        lanes = int(np.diff(self._block_rows).max()) if n_blocks else 1
+        self._buf = np.zeros((chunks, 3 * n_nodes * lanes))
         # the state between substeps, in the kernel's layout (see StrandSet.hold / release)
         self._xb = np.empty(s_count * n_nodes * 3)
         self._vb = np.empty(s_count * n_nodes * 3)
         self._held = False
-        self._tmp = np.zeros((chunks, TMP_ROWS * largest))
-        self._clamped = np.zeros(n_groups, dtype=np.int64)
+        self._tmp = np.zeros((chunks, TMP_ROWS * lanes))
+        self._clamped = np.zeros(n_blocks, dtype=np.int64)
         self._contacts = np.zeros(chunks, dtype=np.int64)
         # the project's ellipsoid collider runs inside the kernel (h); any other collider object
         # runs after it on the whole arrays
@@ -196,7 +201,7 @@ class GhostTracker:
         assigned); the next step reads them again."""
         if self._held:
             self._held = False
-            copy_blocks(self.ghosts._x, self.ghosts._v, self.order, self.group_start,
+            copy_blocks(self.ghosts._x, self.ghosts._v, self.order, self._block_rows,
                         self._xb, self._vb, False)
 
     def _take(self) -> None:
@@ -213,7 +218,7 @@ class GhostTracker:
                 x.flags.c_contiguous and v.flags.c_contiguous):
             raise ValueError(f'ghosts.x and ghosts.v must be C-contiguous float64 arrays shaped '
                              f'{ghosts.rest.shape}')
-        copy_blocks(x, v, self.order, self.group_start, self._xb, self._vb, True)
+        copy_blocks(x, v, self.order, self._block_rows, self._xb, self._vb, True)
         self._held = True
 
     def reset(self, head: HeadPose) -> None:
@@ -242,9 +247,9 @@ class GhostTracker:
         nodes = self._xb.size // 3
         kernel = track_groups if runs_parallel(nodes) else track_groups_serial
         kernel(self._xb, self._vb, self.ghosts.rest, self._seg_len_blocks, self.order,
-               self.group_start, self.group_guide, self._group_row, self._node_table,
-               self._node_row, self._rest_off_blocks, self._inv_len, self._var_target,
-               _f64(gx), _f64(guide_x_old), self._tan_rest,
+               self.group_start, self.block_group, self.group_guide, self._group_row,
+               self._node_table, self._node_row, self._rest_off_blocks, self._inv_len,
+               self._var_target, _f64(gx), _f64(guide_x_old), self._tan_rest,
                _f64(head.rotation), _f64(head.position), float(dt),
                self._elastic, tr.tip_weight > 0.0, tr.com_weight, tr.max_weight,
                _per(tr.offset_strength, substeps), _per(tr.com_strength, substeps),

@@ -32,7 +32,7 @@ deterministic.
 """
 import math
 
-from numba import njit, prange
+from numba import njit, prange, uint64
 import numpy as np
 
 from .collision import push_out, to_head, world_center
@@ -41,8 +41,9 @@ from .weights import clamp_weight, com_weight, direction_cos, ELASTIC_OFF, elast
 
 
 @njit(cache=True, inline='always')
-def _frame_into(guide_x, tan_rest, gi, s, R, Q):
-    """Q (3, 3) = R_min(R t_rest -> t_now) @ R for segment ``s`` of guide ``gi``.
+def _frame_into(guide_x, tan_rest, gi, s, R, Q, q0):
+    """``Q[q0, s]`` (3, 3) = R_min(R t_rest -> t_now) @ R for segment ``s`` of guide ``gi``
+    (written through indices, not a view: creating views in the hot loops costs).
 
     ``R_min(a -> b) = c I + [a x b]_x + (a x b)(a x b)^T / (1 + c)``, ``c = a . b`` (the smallest
     rotation taking unit ``a`` onto unit ``b``, Rodrigues' formula).  Within 1e-6 of a half turn
@@ -60,7 +61,7 @@ def _frame_into(guide_x, tan_rest, gi, s, R, Q):
     if na < 0.25 or not (nb > 1e-300) or not (nb < 1e300):
         for r in range(3):
             for c in range(3):
-                Q[r, c] = R[r, c]
+                Q[q0, s, r, c] = R[r, c]
         return
     bx /= nb
     by /= nb
@@ -106,9 +107,9 @@ def _frame_into(guide_x, tan_rest, gi, s, R, Q):
         r0 = R[0, col]
         r1 = R[1, col]
         r2 = R[2, col]
-        Q[0, col] = m00 * r0 + m01 * r1 + m02 * r2
-        Q[1, col] = m10 * r0 + m11 * r1 + m12 * r2
-        Q[2, col] = m20 * r0 + m21 * r1 + m22 * r2
+        Q[q0, s, 0, col] = m00 * r0 + m01 * r1 + m02 * r2
+        Q[q0, s, 1, col] = m10 * r0 + m11 * r1 + m12 * r2
+        Q[q0, s, 2, col] = m20 * r0 + m21 * r1 + m22 * r2
 
 
 @njit(cache=True, nogil=True, parallel=True)
@@ -118,47 +119,75 @@ def guide_frames_kernel(guide_x, tan_rest, R, out):
     tangents in the head frame (zero rows for degenerate segments)."""
     for g in prange(guide_x.shape[0]):
         for s in range(guide_x.shape[1] - 1):
-            _frame_into(guide_x, tan_rest, g, s, R, out[g, s])
+            _frame_into(guide_x, tan_rest, g, s, R, out, g)
 
 
 #: Fast-math flags of the tracking kernel: fused multiply-add and reassociation (so that LLVM
 #: vectorises the loops over a group's ghosts, sums included); no flag that assumes finite input.
 TRACK_FASTMATH = {'contract', 'reassoc'}
 
-#: Rows of the per-chunk work space ``tmp`` of :func:`track_groups` (per ghost of a group).
-_DX, _DY, _DZ, _QX, _QY, _QZ, _TW, _FLAG = range(8)
-TMP_ROWS = 8
+#: Rows of the per-chunk work space ``tmp`` of :func:`track_groups` (per lane of a block).
+_DX, _DY, _DZ, _QX, _QY, _QZ, _TW, _FLAG, _C0, _C1, _C2, _CW = range(12)
+TMP_ROWS = 12
+# (h), the last stage of a node index, reuses the rows of (a)-(c): the head-frame point q, its
+# F(q) and the head-frame surface point y
+_HQ0, _HQ1, _HQ2, _HF, _HY0, _HY1, _HY2 = _DX, _DY, _DZ, _TW, _QX, _QY, _QZ
+
+#: Lanes (ghosts) a block of consecutive groups holds at most (a larger group is a block of its
+#: own).  Every loop has a fixed cost (set-up, runtime alias checks, remainder), which groups of
+#: 4-16 ghosts felt: on one thread 10 k ghosts took 19 / 16 / 7.5 / 5.2 / 5.4 ms a substep with
+#: 4 / 8 / 16 / 32 / 128 ghosts per group when every loop ran over one group.
+BLOCK_LANES = 64
 
 
-def chunk_count(groups: int, threads: int) -> int:
-    """Chunks of groups that :func:`track_groups` spreads over ``threads`` threads."""
-    return max(1, min(groups, 4 * threads))
+def chunk_count(blocks: int, threads: int) -> int:
+    """Chunks of blocks that :func:`track_groups` spreads over ``threads`` threads."""
+    return max(1, min(blocks, 4 * threads))
+
+
+def block_groups(group_start: np.ndarray, lanes: int = BLOCK_LANES) -> np.ndarray:
+    """(B+1,) first group of each block: consecutive groups packed while the block holds at
+    most ``lanes`` ghosts (a larger group forms a block alone)."""
+    starts = [0]
+    sizes = np.diff(group_start)
+    held = 0
+    for g, size in enumerate(sizes):
+        if held > 0 and held + size > lanes:
+            starts.append(g)
+            held = 0
+        held += int(size)
+    starts.append(sizes.size)
+    if sizes.size == 0:
+        starts = [0, 0]
+    return np.asarray(starts, dtype=np.int64)
 
 
 @njit(cache=True, nogil=True, parallel=True, fastmath=TRACK_FASTMATH, error_model='numpy')
-def track_groups(xb, vb, rest, seg_len, order, group_start, group_guide, group_row,
-                 node_table, node_row, rest_off, inv_len, var_target, guide_x, guide_x_old,
-                 tan_rest, R, pos, dt, elastic_mode, use_tip, com_w, max_weight, k_off, k_com,
-                 spread, ftl, collide, center, axes, friction, refine,
+def track_groups(xb, vb, rest, seg_len, order, group_start, block_group, group_guide,
+                 group_row, node_table, node_row, rest_off, inv_len, var_target, guide_x,
+                 guide_x_old, tan_rest, R, pos, dt, elastic_mode, use_tip, com_w, max_weight,
+                 k_off, k_com, spread, ftl, collide, center, axes, friction, refine,
                  q_buf, buf, tmp, clamped, contacts):
     """One tracking substep of all ghosts, in place on ``xb`` and ``vb`` (see the module doc).
 
-    Parameters (S ghosts of N nodes, G guides of M nodes, K groups, U distinct node rows,
-    C chunks, B the largest group):
+    Parameters (S ghosts of N nodes, G guides of M nodes, K groups in B blocks, U distinct node
+    rows, C chunks, L the most lanes of a block, E the most groups of a block):
       xb, vb (S * N * 3,)     ghost positions [m] / velocities [m/s], world, in the layout of
                               ``rest_off`` (:func:`copy_blocks`)
       rest (S, N, 3)          ghost rest shapes, head frame [m] (roots and FTL fallback)
       seg_len (S * (N-1),)    ghost rest segment lengths [m], in the layout of ``rest_off``
       order (S,)              ghost index of group-order row k
       group_start (K+1,)      rows of group g: group_start[g] .. group_start[g+1]-1
+      block_group (B+1,)      groups of block b: block_group[b] .. block_group[b+1]-1
+                              (:func:`block_groups`)
       group_guide (K,)        guide of group g
       group_row (K,)          the node_table row shared by every ghost of group g, or -1
       node_table (U, N, 2)    per node: guide parameter ``seg + t`` and ``w_tip``
       node_row (S,)           row of node_table of each ghost (group order); ghosts with the
                               same arc-length layout share a row (all of them, for a groom with
                               evenly spaced nodes)
-      rest_off (S * N * 3,)   target offset from the guide point, head frame [m], stored group
-                              by group, inside a group as [node][axis][ghost] (see
+      rest_off (S * N * 3,)   target offset from the guide point, head frame [m], stored block
+                              by block, inside a block as [node][axis][ghost] (see
                               :func:`group_blocks`)
       inv_len (S,)            1 / ghost length [1/m] (group order)
       var_target (K, N)       target group variance (sum of squares) [m^2] for spread control
@@ -172,114 +201,126 @@ def track_groups(xb, vb, rest, seg_len, order, group_start, group_guide, group_r
                               node's start-of-substep position, ``refine`` projection refinements;
                               with ``ftl`` the pushed node is put back at its rest distance
                               (:func:`hair_tracking.ftl.restore_node`)
-      q_buf (C, M-1, 3, 3)    work space per chunk: the segment frames of the current guide
-      buf (C, 3 N B)          work space per chunk: the new positions of a group, [node][axis]
-                              [ghost] (a group of 16 ghosts of 16 nodes: 6 KiB, in the L1
-                              cache)
-      tmp (C, TMP_ROWS B)     work space per chunk: per-ghost values of one node index
-      clamped (K,) out        clamped weight sums per group;  contacts (C,) out  pushed nodes
+      q_buf (C, E, M-1, 3, 3) work space per chunk: the segment frames of the block's guides
+      buf (C, 3 N L)          work space per chunk: the new positions of a block, [node][axis]
+                              [ghost] (64 ghosts of 16 nodes: 24 KiB)
+      tmp (C, TMP_ROWS L)     work space per chunk: per-ghost values of one node index
+      clamped (B,) out        clamped weight sums per block;  contacts (C,) out  pushed nodes
 
-    Each chunk (a contiguous range of groups, the unit of parallel work) walks its groups one
-    at a time: a group is advanced node index by node index from the root into ``buf`` (the
-    group sums of (d) and (e) exist before they are applied, Follow-The-Leader finds node
-    ``j - 1`` final), then its block of ``xb`` and ``vb`` is rewritten with
-    ``v = (x_new - x_old) / dt`` in one contiguous loop.  Groups are independent: the result
-    does not depend on the number of chunks or threads.
+    Each chunk (a contiguous range of blocks, the unit of parallel work) walks its blocks one
+    at a time and a block node index by node index from the root, into ``buf``: the stages of
+    one ghost ((a)-(c), (f), (h)) run as one loop over all the block's ghosts, those of a group
+    (the guide's target points, the centre of mass for w_com, (d) and (e)) as loops over the
+    group's ghosts; the group sums of (d) and (e) exist before they are applied, and
+    Follow-The-Leader finds node ``j - 1`` final.  Then the block's part of ``xb`` and ``vb`` is
+    rewritten with ``v = (x_new - x_old) / dt`` in one contiguous loop.  Groups are independent:
+    the result does not depend on the number of chunks or threads.
     """
     n_chunks = buf.shape[0]
     for c in prange(n_chunks):
-        _track_chunk(c, n_chunks, xb, vb, rest, seg_len, order, group_start, group_guide,
-                     group_row, node_table, node_row, rest_off, inv_len, var_target, guide_x,
-                     guide_x_old, tan_rest, R, pos, dt, elastic_mode, use_tip, com_w,
-                     max_weight, k_off, k_com, spread, ftl, collide, center, axes, friction,
-                     refine, q_buf, buf, tmp, clamped, contacts)
+        _track_chunk(c, n_chunks, xb, vb, rest, seg_len, order, group_start, block_group,
+                     group_guide, group_row, node_table, node_row, rest_off, inv_len,
+                     var_target, guide_x, guide_x_old, tan_rest, R, pos, dt, elastic_mode,
+                     use_tip, com_w, max_weight, k_off, k_com, spread, ftl, collide, center,
+                     axes, friction, refine, q_buf, buf, tmp, clamped, contacts)
 
 
 @njit(cache=True, nogil=True, fastmath=TRACK_FASTMATH, error_model='numpy')
-def track_groups_serial(xb, vb, rest, seg_len, order, group_start, group_guide, group_row,
-                        node_table, node_row, rest_off, inv_len, var_target, guide_x,
-                        guide_x_old, tan_rest, R, pos, dt, elastic_mode, use_tip, com_w,
-                        max_weight, k_off, k_com, spread, ftl, collide, center, axes, friction,
-                        refine, q_buf, buf, tmp, clamped, contacts):
+def track_groups_serial(xb, vb, rest, seg_len, order, group_start, block_group, group_guide,
+                        group_row, node_table, node_row, rest_off, inv_len, var_target,
+                        guide_x, guide_x_old, tan_rest, R, pos, dt, elastic_mode, use_tip,
+                        com_w, max_weight, k_off, k_com, spread, ftl, collide, center, axes,
+                        friction, refine, q_buf, buf, tmp, clamped, contacts):
     """:func:`track_groups` on the calling thread, for small problems: no parallel region to
     launch (which costs a few hundred microseconds a call on this shared machine, more than a
     1 k-ghost substep's arithmetic).  Same results."""
     n_chunks = buf.shape[0]
     for c in range(n_chunks):
-        _track_chunk(c, n_chunks, xb, vb, rest, seg_len, order, group_start, group_guide,
-                     group_row, node_table, node_row, rest_off, inv_len, var_target, guide_x,
-                     guide_x_old, tan_rest, R, pos, dt, elastic_mode, use_tip, com_w,
-                     max_weight, k_off, k_com, spread, ftl, collide, center, axes, friction,
-                     refine, q_buf, buf, tmp, clamped, contacts)
+        _track_chunk(c, n_chunks, xb, vb, rest, seg_len, order, group_start, block_group,
+                     group_guide, group_row, node_table, node_row, rest_off, inv_len,
+                     var_target, guide_x, guide_x_old, tan_rest, R, pos, dt, elastic_mode,
+                     use_tip, com_w, max_weight, k_off, k_com, spread, ftl, collide, center,
+                     axes, friction, refine, q_buf, buf, tmp, clamped, contacts)
 
 
 @njit(cache=True, fastmath=TRACK_FASTMATH, error_model='numpy')
-def _track_chunk(c, n_chunks, xb, vb, rest, seg_len, order, group_start, group_guide, group_row,
-                 node_table, node_row, rest_off, inv_len, var_target, guide_x, guide_x_old,
-                 tan_rest, R, pos, dt, elastic_mode, use_tip, com_w, max_weight, k_off, k_com,
-                 spread, ftl, collide, center, axes, friction, refine, q_buf, buf, tmp,
-                 clamped, contacts):
-    """Chunk ``c`` of :func:`track_groups` (its groups ``c K / C .. (c+1) K / C - 1``).  A
+def _track_chunk(c, n_chunks, xb, vb, rest, seg_len, order, group_start, block_group,
+                 group_guide, group_row, node_table, node_row, rest_off, inv_len, var_target,
+                 guide_x, guide_x_old, tan_rest, R, pos, dt, elastic_mode, use_tip, com_w,
+                 max_weight, k_off, k_com, spread, ftl, collide, center, axes, friction, refine,
+                 q_buf, buf, tmp, clamped, contacts):
+    """Chunk ``c`` of :func:`track_groups` (its blocks ``c B / C .. (c+1) B / C - 1``).  A
     function of its own so that the parallel loop's body stays small (numba's parfor lowering
     copies the body's IR, which took most of the compile time when everything was inlined)."""
     n_nodes = rest.shape[1]
     m_last = guide_x.shape[1] - 2
-    n_groups = group_guide.shape[0]
+    n_blocks = block_group.shape[0] - 1
     inv_dt = 1.0 / dt
     need_target = k_off > 0.0 or k_com > 0.0
+    group_level = k_com > 0.0 or spread > 0.0
     ax, ay, az = axes[0], axes[1], axes[2]
     ix, iy, iz = 1.0 / (ax * ax), 1.0 / (ay * ay), 1.0 / (az * az)
     cx, cy, cz = world_center(R, pos, center)
-    g_first = c * n_groups // n_chunks
-    g_end = (c + 1) * n_groups // n_chunks
     W = buf[c]
     Tc = tmp[c]
     Qc = q_buf[c]
     n_contacts = 0
-    for g in range(g_first, g_end):
-        gi = group_guide[g]
-        k0 = group_start[g]
-        n = group_start[g + 1] - k0
+    for b in range(c * n_blocks // n_chunks, (c + 1) * n_blocks // n_chunks):
+        g0 = block_group[b]
+        g1 = block_group[b + 1]
+        r0 = group_start[g0]
+        n = group_start[g1] - r0
+        clamped[b] = 0
         if n == 0:
-            clamped[g] = 0
             continue
-        if need_target:     # frames Q of the guide's segments, once per group
-            for sg in range(m_last + 1):
-                _frame_into(guide_x, tan_rest, gi, sg, R, Qc[sg])
-        # the group's state, old x and old v, (N, 3, n) [node][axis][ghost] views of the block
-        # arrays, and the new positions in the work space; roots pinned (g)
-        b0 = k0 * n_nodes * 3
-        b1 = (k0 + n) * n_nodes * 3
+        if need_target:     # frames Q of the segments of the block's guides
+            for gg in range(g1 - g0):
+                for sg in range(m_last + 1):
+                    _frame_into(guide_x, tan_rest, group_guide[g0 + gg], sg, R, Qc, gg)
+        # the block's state, old x and old v, (N, 3, n) [node][axis][ghost] views of the
+        # block arrays, and the new positions in the work space; roots pinned (g)
+        b0 = r0 * n_nodes * 3
+        b1 = (r0 + n) * n_nodes * 3
         X0 = xb[b0:b1].reshape((n_nodes, 3, n))
         V0 = vb[b0:b1].reshape((n_nodes, 3, n))
         XN = W[:3 * n_nodes * n].reshape((n_nodes, 3, n))
         T = Tc[:TMP_ROWS * n].reshape((TMP_ROWS, n))
         for kk in range(n):
-            s = order[k0 + kk]
+            s = order[r0 + kk]
             for j in range(min(2, n_nodes)):
                 for a in range(3):
                     XN[j, a, kk] = pos[a] + R[a, 0] * rest[s, j, 0] + \
                         R[a, 1] * rest[s, j, 1] + R[a, 2] * rest[s, j, 2]
-        use_com_w = com_w > 0.0 and n > 1
         n_clamped = 0
-        # the group's rest offsets (N, 3, n) and segment lengths (N-1, n), reshaped once
-        off_g = rest_off[k0 * n_nodes * 3:(k0 + n) * n_nodes * 3].reshape((n_nodes, 3, n))
-        len_g = seg_len[k0 * (n_nodes - 1):(k0 + n) * (n_nodes - 1)].reshape((n_nodes - 1, n))
-        ilen_g = inv_len[k0:k0 + n]
+        # the block's rest offsets (N, 3, n) and segment lengths (N-1, n)
+        off_b = rest_off[b0:b1].reshape((n_nodes, 3, n))
+        len_b = seg_len[r0 * (n_nodes - 1):(r0 + n) * (n_nodes - 1)].reshape((n_nodes - 1, n))
+        ilen_b = inv_len[r0:r0 + n]
         for j in range(2, n_nodes):
-            _targets(T, n, k0, gi, j, group_row[g], node_table, node_row, off_g[j],
-                     guide_x, guide_x_old, Qc, m_last, need_target)
-            n_clamped += _predict(X0[j], V0[j], XN[j], T, n, ilen_g, elastic_mode, use_tip,
-                                  use_com_w, com_w, max_weight, k_off)
-            if k_com > 0.0 or (spread > 0.0 and n > 1):
-                _group_stage(XN[j], T, n, k_com, spread, var_target[g, j], need_target)
+            X0j = X0[j]
+            for gg in range(g1 - g0):       # per group: target points, w_com's centre
+                g = g0 + gg
+                l0 = group_start[g] - r0
+                l1 = group_start[g + 1] - r0
+                _targets(T, l0, l1, group_start[g], group_guide[g], j, group_row[g],
+                         node_table, node_row, off_b[j], guide_x, guide_x_old, Qc, gg, m_last,
+                         need_target)
+                _com_lanes(X0j, T, l0, l1, com_w)
+            n_clamped += _predict(X0j, V0[j], XN[j], T, n, ilen_b, elastic_mode, use_tip,
+                                  max_weight, k_off)
+            if group_level:
+                for g in range(g0, g1):
+                    l0 = group_start[g] - r0
+                    l1 = group_start[g + 1] - r0
+                    _group_stage(XN[j], T, l0, l1, k_com, spread, var_target[g, j],
+                                 need_target)
             if ftl:
-                _follow(XN[j - 1], XN[j], T, n, k0, order, len_g[j - 1], rest, R, j)
+                _follow(XN[j - 1], XN[j], T, n, r0, order, len_b[j - 1], rest, R, j)
             if collide:
-                n_contacts += _collide(X0[j], XN[j - 1], XN[j], T, n, k0, order, len_g[j - 1],
+                n_contacts += _collide(X0j, XN[j - 1], XN[j], T, n, r0, order, len_b[j - 1],
                                        rest, R, j, ftl, cx, cy, cz, ax, ay, az, ix, iy, iz,
                                        friction, refine)
-        clamped[g] = n_clamped
+        clamped[b] = n_clamped
         # the new state: v = (x_new - x_old) / dt, then x = x_new (one contiguous loop)
         xg = xb[b0:b1]
         vg = vb[b0:b1]
@@ -292,13 +333,22 @@ def _track_chunk(c, n_chunks, xb, vb, rest, seg_len, order, group_start, group_g
 
 
 @njit(cache=True, inline='always', fastmath=TRACK_FASTMATH, error_model='numpy')
-def _targets(T, n, k0, gi, j, row, node_table, node_row, off, guide_x, guide_x_old, frames,
-             m_last, need_target):
-    """Per ghost of a group following guide ``gi``, at node ``j``: displacement ``u dt`` of its
-    guide point (a) into T[_DX.._DZ], its target ``q = P + Q o`` (c) into T[_QX.._QZ] (if
-    ``need_target``) and w_tip into T[_TW].  ``off`` (3, n): the ghosts' rest offsets at node
-    ``j``; ``frames`` (M-1, 3, 3): the guide's segment frames ``Q``; ``row``: the group's shared
-    node_table row, or -1."""
+def _targets(T, l0, l1, k0, gi, j, row, node_table, node_row, off, guide_x, guide_x_old,
+             frames, fg, m_last, need_target):
+    """Lanes ``l0 .. l1-1`` of a block, the ghosts of one group following guide ``gi`` (group
+    order rows from ``k0``), at node ``j``: displacement ``u dt`` of the guide point (a) into
+    T[_DX.._DZ], the target ``q = P + Q o`` (c) into T[_QX.._QZ] (if ``need_target``) and w_tip
+    into T[_TW].  ``off`` (3, lanes): the block's rest offsets at node ``j``; ``frames[fg]``
+    (M-1, 3, 3): the guide's segment frames ``Q``; ``row``: the group's shared node_table row,
+    or -1.
+
+    The lanes of a group are indexed with unsigned integers (``uint64``): numba wraps negative
+    signed indices around, and that select turns the loop's loads into gathers LLVM does not
+    vectorise; views of the lanes (indices from 0) vectorise too but cost about 20 ns each to
+    create, which small groups felt (8 ghosts a group: 7 of a 16 ms substep of 10 k ghosts
+    went to this function with views, 3 with unsigned indices)."""
+    u0 = uint64(l0)
+    n = uint64(l1 - l0)
     if row >= 0:
         # the usual case: the whole group shares one arc-length layout (scalars, then a loop
         # over the ghosts that vectorises)
@@ -313,99 +363,114 @@ def _targets(T, n, k0, gi, j, row, node_table, node_row, off, guide_x, guide_x_o
         dx = px - (u * guide_x_old[gi, sg, 0] + t * guide_x_old[gi, sg + 1, 0])
         dy = py - (u * guide_x_old[gi, sg, 1] + t * guide_x_old[gi, sg + 1, 1])
         dz = pz - (u * guide_x_old[gi, sg, 2] + t * guide_x_old[gi, sg + 1, 2])
-        if not need_target:
-            for kk in range(n):
-                T[_DX, kk] = dx
-                T[_DY, kk] = dy
-                T[_DZ, kk] = dz
-                T[_TW, kk] = tw
-            return
-        Q = frames[sg]
-        q00, q01, q02 = Q[0, 0], Q[0, 1], Q[0, 2]
-        q10, q11, q12 = Q[1, 0], Q[1, 1], Q[1, 2]
-        q20, q21, q22 = Q[2, 0], Q[2, 1], Q[2, 2]
-        for kk in range(n):     # one loop: each loop over a group has a fixed cost
-            T[_DX, kk] = dx
-            T[_DY, kk] = dy
-            T[_DZ, kk] = dz
-            T[_TW, kk] = tw
-            o0 = off[0, kk]
-            o1 = off[1, kk]
-            o2 = off[2, kk]
-            T[_QX, kk] = px + q00 * o0 + q01 * o1 + q02 * o2
-            T[_QY, kk] = py + q10 * o0 + q11 * o1 + q12 * o2
-            T[_QZ, kk] = pz + q20 * o0 + q21 * o1 + q22 * o2
+        q00 = q01 = q02 = q10 = q11 = q12 = q20 = q21 = q22 = 0.0
+        if need_target:
+            q00, q01, q02 = frames[fg, sg, 0, 0], frames[fg, sg, 0, 1], frames[fg, sg, 0, 2]
+            q10, q11, q12 = frames[fg, sg, 1, 0], frames[fg, sg, 1, 1], frames[fg, sg, 1, 2]
+            q20, q21, q22 = frames[fg, sg, 2, 0], frames[fg, sg, 2, 1], frames[fg, sg, 2, 2]
+        for kk in range(n):     # one loop: each loop has a fixed cost
+            i = u0 + kk
+            T[_DX, i] = dx
+            T[_DY, i] = dy
+            T[_DZ, i] = dz
+            T[_TW, i] = tw
+            o0 = off[0, i]
+            o1 = off[1, i]
+            o2 = off[2, i]
+            T[_QX, i] = px + q00 * o0 + q01 * o1 + q02 * o2
+            T[_QY, i] = py + q10 * o0 + q11 * o1 + q12 * o2
+            T[_QZ, i] = pz + q20 * o0 + q21 * o1 + q22 * o2
         return
     for kk in range(n):
-        r = node_row[k0 + kk]
+        i = u0 + kk
+        r = node_row[uint64(k0) + kk]
         gp = node_table[r, j, 0]
-        T[_TW, kk] = node_table[r, j, 1]
+        T[_TW, i] = node_table[r, j, 1]
         sg = min(int(gp), m_last)
         t = gp - sg
         u = 1.0 - t
         px = u * guide_x[gi, sg, 0] + t * guide_x[gi, sg + 1, 0]
         py = u * guide_x[gi, sg, 1] + t * guide_x[gi, sg + 1, 1]
         pz = u * guide_x[gi, sg, 2] + t * guide_x[gi, sg + 1, 2]
-        T[_DX, kk] = px - (u * guide_x_old[gi, sg, 0] + t * guide_x_old[gi, sg + 1, 0])
-        T[_DY, kk] = py - (u * guide_x_old[gi, sg, 1] + t * guide_x_old[gi, sg + 1, 1])
-        T[_DZ, kk] = pz - (u * guide_x_old[gi, sg, 2] + t * guide_x_old[gi, sg + 1, 2])
+        T[_DX, i] = px - (u * guide_x_old[gi, sg, 0] + t * guide_x_old[gi, sg + 1, 0])
+        T[_DY, i] = py - (u * guide_x_old[gi, sg, 1] + t * guide_x_old[gi, sg + 1, 1])
+        T[_DZ, i] = pz - (u * guide_x_old[gi, sg, 2] + t * guide_x_old[gi, sg + 1, 2])
         if need_target:
-            Q = frames[sg]
-            o0 = off[0, kk]
-            o1 = off[1, kk]
-            o2 = off[2, kk]
-            T[_QX, kk] = px + Q[0, 0] * o0 + Q[0, 1] * o1 + Q[0, 2] * o2
-            T[_QY, kk] = py + Q[1, 0] * o0 + Q[1, 1] * o1 + Q[1, 2] * o2
-            T[_QZ, kk] = pz + Q[2, 0] * o0 + Q[2, 1] * o1 + Q[2, 2] * o2
+            o0 = off[0, i]
+            o1 = off[1, i]
+            o2 = off[2, i]
+            px += (frames[fg, sg, 0, 0] * o0 + frames[fg, sg, 0, 1] * o1 +
+                   frames[fg, sg, 0, 2] * o2)
+            py += (frames[fg, sg, 1, 0] * o0 + frames[fg, sg, 1, 1] * o1 +
+                   frames[fg, sg, 1, 2] * o2)
+            pz += (frames[fg, sg, 2, 0] * o0 + frames[fg, sg, 2, 1] * o1 +
+                   frames[fg, sg, 2, 2] * o2)
+        T[_QX, i] = px
+        T[_QY, i] = py
+        T[_QZ, i] = pz
 
 
 @njit(cache=True, inline='always', fastmath=TRACK_FASTMATH, error_model='numpy')
-def _predict(X0, V0, P, T, n, inv_len, elastic_mode, use_tip, use_com_w, com_w, max_weight,
-             k_off):
-    """(a)-(c) at one node index of a group: the new position ``P`` (3, n) = old position
-    ``X0`` + ``u dt`` (1 + W), pulled by ``k_off`` toward the target; ``V0`` the old velocity.
-    Returns the number of clamped weight sums.
-
-    One branch-free loop over the ghosts (switched-off terms enter with a factor 0), so that it
-    vectorises and pays a loop's fixed cost once: groups are small (16 ghosts by default)."""
-    tip_f = 1.0 if use_tip else 0.0
-    cw = com_w if use_com_w else 0.0
+def _com_lanes(X0, T, l0, l1, com_w):
+    """w_com's inputs for lanes ``l0 .. l1-1`` (one group): the group's centre of mass at the
+    start of the substep into T[_C0.._C2] and the weight per length into T[_CW] (0 for a
+    group of one ghost, or with ``com_w`` off)."""
+    n = l1 - l0
+    cw = com_w if com_w > 0.0 and n > 1 else 0.0
+    u0 = uint64(l0)
     c0 = c1 = c2 = 0.0
-    if use_com_w:       # centre of mass at the start of the substep (only w_com needs it)
-        for kk in range(n):
-            c0 += X0[0, kk]
-            c1 += X0[1, kk]
-            c2 += X0[2, kk]
+    if cw > 0.0:
+        for kk in range(uint64(n)):
+            i = u0 + kk
+            c0 += X0[0, i]
+            c1 += X0[1, i]
+            c2 += X0[2, i]
         c0 /= n
         c1 /= n
         c2 /= n
+    for kk in range(uint64(n)):
+        i = u0 + kk
+        T[_C0, i] = c0
+        T[_C1, i] = c1
+        T[_C2, i] = c2
+        T[_CW, i] = cw
+
+
+@njit(cache=True, inline='always', fastmath=TRACK_FASTMATH, error_model='numpy')
+def _predict(X0, V0, P, T, n, inv_len, elastic_mode, use_tip, max_weight, k_off):
+    """(a)-(c) at one node index of a block: the new position ``P`` (3, n) = old position
+    ``X0`` + ``u dt`` (1 + W), pulled by ``k_off`` toward the target; ``V0`` the old velocity.
+    Returns the number of clamped weight sums.
+
+    One branch-free loop over the block's ghosts (switched-off terms enter with a factor 0), so
+    that it vectorises and pays a loop's fixed cost once."""
+    tip_f = 1.0 if use_tip else 0.0
     n_clamped = 0
     if elastic_mode != ELASTIC_OFF:
         sign = elastic_sign(elastic_mode)
         for kk in range(n):
             w = 0.5 + sign * direction_cos(T[_DX, kk], T[_DY, kk], T[_DZ, kk],
                                            V0[0, kk], V0[1, kk], V0[2, kk])
-            n_clamped += _advance(X0, P, T, kk, w, tip_f, cw, c0, c1, c2, inv_len, max_weight,
-                                  k_off)
+            n_clamped += _advance(X0, P, T, kk, w, tip_f, inv_len, max_weight, k_off)
     else:
         for kk in range(n):
-            n_clamped += _advance(X0, P, T, kk, 0.0, tip_f, cw, c0, c1, c2, inv_len,
-                                  max_weight, k_off)
+            n_clamped += _advance(X0, P, T, kk, 0.0, tip_f, inv_len, max_weight, k_off)
     return n_clamped
 
 
 @njit(cache=True, inline='always', fastmath=TRACK_FASTMATH, error_model='numpy')
-def _advance(X0, P, T, kk, w, tip_f, cw, c0, c1, c2, inv_len, max_weight, k_off):
-    """Lane ``kk`` of :func:`_predict` given its elastic weight ``w``: adds w_tip and w_com,
-    clamps (b), moves by ``u dt (1 + W)`` (a) and pulls toward the target (c); 1 if clamped."""
+def _advance(X0, P, T, kk, w, tip_f, inv_len, max_weight, k_off):
+    """Lane ``kk`` of :func:`_predict` given its elastic weight ``w``: adds w_tip and w_com
+    (centre and weight per length from T[_C0.._CW]), clamps (b), moves by ``u dt (1 + W)`` (a)
+    and pulls toward the target (c); 1 if clamped."""
     xo0 = X0[0, kk]
     xo1 = X0[1, kk]
     xo2 = X0[2, kk]
-    e0 = xo0 - c0
-    e1 = xo1 - c1
-    e2 = xo2 - c2
+    e0 = xo0 - T[_C0, kk]
+    e1 = xo1 - T[_C1, kk]
+    e2 = xo2 - T[_C2, kk]
     w += tip_f * T[_TW, kk] + com_weight(math.sqrt(e0 * e0 + e1 * e1 + e2 * e2), inv_len[kk],
-                                         cw)
+                                         T[_CW, kk])
     clamped = 1 if w > max_weight else 0
     w = 1.0 + clamp_weight(w, max_weight)
     x0 = xo0 + T[_DX, kk] * w
@@ -418,17 +483,22 @@ def _advance(X0, P, T, kk, w, tip_f, cw, c0, c1, c2, inv_len, max_weight, k_off)
 
 
 @njit(cache=True, inline='always', fastmath=TRACK_FASTMATH, error_model='numpy')
-def _group_stage(P, T, n, k_com, spread, var_target, have_target):
-    """(d) centre-of-mass tracking and (e) spread control of one node index of a group, on the
-    predicted positions (rows at ``W[pb:]``) in place; ``T[_QX.._QZ]`` the targets."""
+def _group_stage(P, T, l0, l1, k_com, spread, var_target, have_target):
+    """(d) centre-of-mass tracking and (e) spread control of one node index of one group (lanes
+    ``l0 .. l1-1`` of the block), on the predicted positions ``P`` in place; ``T[_QX.._QZ]``
+    the targets."""
+    n = l1 - l0
+    u0 = uint64(l0)
+    lanes = uint64(n)
     xs0 = xs1 = xs2 = qs0 = qs1 = qs2 = 0.0
-    for kk in range(n):     # one loop for all six sums
-        xs0 += P[0, kk]
-        xs1 += P[1, kk]
-        xs2 += P[2, kk]
-        qs0 += T[_QX, kk]
-        qs1 += T[_QY, kk]
-        qs2 += T[_QZ, kk]
+    for kk in range(lanes):     # one loop for all six sums
+        i = u0 + kk
+        xs0 += P[0, i]
+        xs1 += P[1, i]
+        xs2 += P[2, i]
+        qs0 += T[_QX, i]
+        qs1 += T[_QY, i]
+        qs2 += T[_QZ, i]
     m0 = xs0 / n
     m1 = xs1 / n
     m2 = xs2 / n
@@ -442,10 +512,11 @@ def _group_stage(P, T, n, k_com, spread, var_target, have_target):
     f = 1.0
     if spread > 0.0 and n > 1:
         var = 0.0
-        for kk in range(n):
-            e0 = P[0, kk] - m0
-            e1 = P[1, kk] - m1
-            e2 = P[2, kk] - m2
+        for kk in range(lanes):
+            i = u0 + kk
+            e0 = P[0, i] - m0
+            e1 = P[1, i] - m1
+            e2 = P[2, i] - m2
             var += e0 * e0 + e1 * e1 + e2 * e2
         if var > 1e-30:
             ratio = math.sqrt(var_target / var)
@@ -455,10 +526,11 @@ def _group_stage(P, T, n, k_com, spread, var_target, have_target):
                 ratio = 0.5
             f = 1.0 + spread * (ratio - 1.0)
     # x -> c + f (x + d - c) with c = m + d, i.e. x -> m + d + f (x - m)
-    for kk in range(n):
-        P[0, kk] = m0 + d0 + f * (P[0, kk] - m0)
-        P[1, kk] = m1 + d1 + f * (P[1, kk] - m1)
-        P[2, kk] = m2 + d2 + f * (P[2, kk] - m2)
+    for kk in range(lanes):
+        i = u0 + kk
+        P[0, i] = m0 + d0 + f * (P[0, i] - m0)
+        P[1, i] = m1 + d1 + f * (P[1, i] - m1)
+        P[2, i] = m2 + d2 + f * (P[2, i] - m2)
 
 
 @njit(cache=True, inline='always', fastmath=TRACK_FASTMATH, error_model='numpy')
