@@ -170,8 +170,20 @@ def diagnostics_bytes(stamp_ns: int, level: int, message: str, values: Dict[str,
 
 
 def pose_stamped_bytes(t_ns, position, quaternion, frame_id) -> bytes:
-    mt, msg = bag_io.head_pose_message('pose', t_ns, position, quaternion, frame_id, '')
-    return bytes(bag_io.typestore().serialize_cdr(msg, mt))
+    """A serialized geometry_msgs/PoseStamped, written field by field with
+    :class:`msg_adapters.cdr.CdrWriter` (byte-identical to the rosbags serializer, tested; it
+    took 0.2 ms a message through message objects, 5 % of a default ``run``)."""
+    from msg_adapters.cdr import CdrWriter, ENCAPSULATION_LE
+    sec, nanosec = divmod(int(t_ns), 1_000_000_000)
+    if not 0 <= sec <= 2 ** 31 - 1:
+        raise BagError(f'time {t_ns} ns does not fit a ROS stamp (sec is int32, >= 0)',
+                       EXIT_USAGE)
+    w = CdrWriter()
+    w.time(sec, nanosec)
+    w.string(frame_id)
+    for value in (*position, *quaternion):
+        w.float64(float(value))
+    return ENCAPSULATION_LE + w.template()
 
 
 # ================================================================ schedule

@@ -293,3 +293,22 @@ def test_offline_runs_need_no_rclpy():
     code = ('import sys, hair_tracking.offline, hair_tracking.strand_colors; '
             'sys.exit(1 if "rclpy" in sys.modules else 0)')
     assert subprocess.run([sys.executable, '-c', code], timeout=120).returncode == 0
+
+
+@pytest.mark.parametrize('frame_id', ['', 'w', 'world', 'map_frame_1', 'ünïcode'])
+def test_pose_stamped_bytes_match_the_rosbags_serializer(frame_id):
+    """The direct CDR writer of the head-pose copies gives the bytes rosbags' own serializer
+    gives (every frame-name length mod 8, so each padding case is covered), and they read
+    back to the same pose."""
+    from hair_tracking.offline import pose_stamped_bytes
+    rng = np.random.default_rng(len(frame_id))
+    t = 1_700_000_123_456_789_012 // 1000
+    p, q = rng.normal(size=3), rng.normal(size=4)
+    mt, msg = bag_io.head_pose_message('pose', t, p, q, frame_id, '')
+    want = bytes(bag_io.typestore().serialize_cdr(msg, mt))
+    got = pose_stamped_bytes(t, p, q, frame_id)
+    assert got == want
+    back = bag_io.typestore().deserialize_cdr(got, mt)
+    assert back.header.frame_id == frame_id and back.pose.orientation.w == q[3]
+    with pytest.raises(bag_io.BagError, match='int32'):
+        pose_stamped_bytes(-1, p, q, frame_id)
