@@ -313,3 +313,46 @@ def test_parallel_and_serial_kernels_agree_bit_for_bit(monkeypatch):
     assert runs[0][2] == runs[1][2] and runs[0][2] > 0
     np.testing.assert_array_equal(runs[0][0], runs[1][0])
     np.testing.assert_array_equal(runs[0][1], runs[1][1])
+
+
+def test_blocks_of_groups_large_small_and_single():
+    """Blocks pack consecutive groups up to BLOCK_LANES ghosts: a group larger than a block, a
+    group of one ghost and a mid-sized one beside it, with the collider on, all agree with the
+    plain-numpy reference."""
+    from hair_tracking.collision import Collider
+    from hair_tracking.tracking_kernels import block_groups, BLOCK_LANES
+    rng = np.random.default_rng(23)
+    roots = np.array([[0.0, 0.0, 0.0], [0.3, 0.0, 0.0], [0.0, 0.3, 0.0]])[:, None]
+    guide_rest = random_strands(rng, 3, 7, spread=0.0) + roots
+    sizes = (BLOCK_LANES + 37, 1, 30)
+    ghost_rest = np.concatenate([random_strands(rng, k, 7, seg=0.012, spread=0.005) +
+                                 guide_rest[g, :1] for g, k in enumerate(sizes)])
+    ghost_rest = ghost_rest[rng.permutation(ghost_rest.shape[0])]      # groups interleaved
+    guides = StrandSet.from_rest(guide_rest)
+    ghosts = StrandSet.from_rest(ghost_rest)
+    scene = scene_with(collide=True, spread=0.3, spread_target=1.3)
+    collider = Collider('sphere', (0.0, 0.0, -0.08), (0.05,) * 3, 0.004, 0.3)
+    tracker = GhostTracker(ghosts, guides, scene, collider)
+    assert sorted(np.diff(tracker.group_start)) == sorted(sizes)
+    blocks = block_groups(tracker.group_start)
+    lanes = np.diff(tracker.group_start[blocks])
+    assert lanes.max() == BLOCK_LANES + 37 and blocks.size - 1 == 2
+    assert np.array_equal(block_groups(np.array([0])), [0, 0])            # no ghosts
+    dt = 1.0 / 240.0
+    head = head_pose(rng, angle_scale=0.05, shift=0.005)
+    guides.place_at(head)
+    ghosts.place_at(head)
+    contacts = 0
+    for _ in range(3):
+        old = guides.x.copy()
+        head = head_pose(rng, angle_scale=0.05, shift=0.005)
+        guides.x[...] = head.to_world(guides.rest) + rng.normal(scale=0.004, size=old.shape)
+        want_x, want_v = reference_step(
+            ghosts.x, ghosts.v, ghosts.rest, ghosts.rest_length, tracker.guide_of,
+            tracker.seg, tracker.t, guides.rest, guides.x, old, head, dt, scene.tracking,
+            collider)
+        tracker.step(dt, old, head)
+        contacts += tracker.stats['contacts']
+        np.testing.assert_allclose(ghosts.x, want_x, rtol=0, atol=1e-10)
+        np.testing.assert_allclose(ghosts.v, want_v, rtol=1e-8, atol=1e-7)
+    assert contacts > 20
