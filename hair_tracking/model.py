@@ -24,6 +24,24 @@ class HeadPose:
         return (points_world - self.position) @ self.rotation
 
 
+class _HeldArray:
+    """A state array of :class:`StrandSet` (``x`` or ``v``): reading or assigning it first lets
+    the registered holder write its state back (see :meth:`StrandSet.hold`)."""
+
+    def __set_name__(self, owner, name):
+        self.attr = '_' + name
+
+    def __get__(self, obj, objtype=None):
+        if obj is None:
+            return self
+        obj._release()
+        return getattr(obj, self.attr)
+
+    def __set__(self, obj, value):
+        obj._release()
+        setattr(obj, self.attr, value)
+
+
 class StrandSet:
     """Topology and rest shape of a set of strands, plus their dynamic state.
 
@@ -38,6 +56,9 @@ class StrandSet:
     truth again (the holder reads them back on its next step).  So read ``x`` after stepping
     rather than keeping an old reference to it.
     """
+
+    x = _HeldArray()
+    v = _HeldArray()
 
     def __init__(self, rest: np.ndarray, rest_length: np.ndarray, inv_mass: np.ndarray,
                  x: np.ndarray, v: np.ndarray):
@@ -58,26 +79,6 @@ class StrandSet:
     def _release(self) -> None:
         if self._holder is not None:
             self._holder.release()
-
-    @property
-    def x(self) -> np.ndarray:
-        self._release()
-        return self._x
-
-    @x.setter
-    def x(self, value: np.ndarray) -> None:
-        self._release()
-        self._x = value
-
-    @property
-    def v(self) -> np.ndarray:
-        self._release()
-        return self._v
-
-    @v.setter
-    def v(self, value: np.ndarray) -> None:
-        self._release()
-        self._v = value
 
     @staticmethod
     def from_rest(rest: np.ndarray) -> 'StrandSet':

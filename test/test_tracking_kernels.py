@@ -184,6 +184,29 @@ def test_kernel_matches_numpy_reference(options, regroup):
     assert tracker.stats['steps'] == 4
 
 
+def _steps_match_reference(rng, tracker, guides, ghosts, scene, collider, steps):
+    """``steps`` substeps of small random head and guide motion, each checked against
+    :func:`reference_step` with the collider; returns the contacts counted."""
+    dt = 1.0 / 240.0
+    head = head_pose(rng, angle_scale=0.05, shift=0.005)
+    guides.place_at(head)
+    ghosts.place_at(head)
+    contacts = 0
+    for _ in range(steps):
+        old = guides.x.copy()
+        head = head_pose(rng, angle_scale=0.05, shift=0.005)
+        guides.x[...] = head.to_world(guides.rest) + rng.normal(scale=0.004, size=old.shape)
+        want_x, want_v = reference_step(
+            ghosts.x, ghosts.v, ghosts.rest, ghosts.rest_length, tracker.guide_of,
+            tracker.seg, tracker.t, guides.rest, guides.x, old, head, dt, scene.tracking,
+            collider)
+        tracker.step(dt, old, head)
+        contacts += tracker.stats['contacts']
+        np.testing.assert_allclose(ghosts.x, want_x, rtol=0, atol=1e-10)
+        np.testing.assert_allclose(ghosts.v, want_v, rtol=1e-8, atol=1e-7)
+    return contacts
+
+
 @pytest.mark.parametrize('shape', ['sphere', 'ellipsoid'])
 @pytest.mark.parametrize('length_restore', [True, False])
 def test_kernel_collision_matches_scalar_reference(shape, length_restore):
@@ -198,24 +221,7 @@ def test_kernel_collision_matches_scalar_reference(shape, length_restore):
     radii = (0.06,) * 3 if shape == 'sphere' else (0.06, 0.05, 0.07)
     collider = Collider(shape, (0.0, 0.0, -0.09), radii, 0.004, 0.3)
     tracker = GhostTracker(ghosts, guides, scene, collider)
-    dt = 1.0 / 240.0
-    head = head_pose(rng, angle_scale=0.05, shift=0.005)
-    guides.place_at(head)
-    ghosts.place_at(head)
-    contacts = 0
-    for _ in range(4):
-        old = guides.x.copy()
-        head = head_pose(rng, angle_scale=0.05, shift=0.005)
-        guides.x[...] = head.to_world(guides.rest) + rng.normal(scale=0.004, size=old.shape)
-        want_x, want_v = reference_step(
-            ghosts.x, ghosts.v, ghosts.rest, ghosts.rest_length, tracker.guide_of,
-            tracker.seg, tracker.t, guides.rest, guides.x, old, head, dt, scene.tracking,
-            collider)
-        tracker.step(dt, old, head)
-        contacts += tracker.stats['contacts']
-        np.testing.assert_allclose(ghosts.x, want_x, rtol=0, atol=1e-10)
-        np.testing.assert_allclose(ghosts.v, want_v, rtol=1e-8, atol=1e-7)
-    assert contacts > 50
+    assert _steps_match_reference(rng, tracker, guides, ghosts, scene, collider, 4) > 50
 
 
 def test_guide_frames_match_rotation_between():
@@ -338,21 +344,4 @@ def test_blocks_of_groups_large_small_and_single():
     lanes = np.diff(tracker.group_start[blocks])
     assert lanes.max() == BLOCK_LANES + 37 and blocks.size - 1 == 2
     assert np.array_equal(block_groups(np.array([0])), [0, 0])            # no ghosts
-    dt = 1.0 / 240.0
-    head = head_pose(rng, angle_scale=0.05, shift=0.005)
-    guides.place_at(head)
-    ghosts.place_at(head)
-    contacts = 0
-    for _ in range(3):
-        old = guides.x.copy()
-        head = head_pose(rng, angle_scale=0.05, shift=0.005)
-        guides.x[...] = head.to_world(guides.rest) + rng.normal(scale=0.004, size=old.shape)
-        want_x, want_v = reference_step(
-            ghosts.x, ghosts.v, ghosts.rest, ghosts.rest_length, tracker.guide_of,
-            tracker.seg, tracker.t, guides.rest, guides.x, old, head, dt, scene.tracking,
-            collider)
-        tracker.step(dt, old, head)
-        contacts += tracker.stats['contacts']
-        np.testing.assert_allclose(ghosts.x, want_x, rtol=0, atol=1e-10)
-        np.testing.assert_allclose(ghosts.v, want_v, rtol=1e-8, atol=1e-7)
-    assert contacts > 20
+    assert _steps_match_reference(rng, tracker, guides, ghosts, scene, collider, 3) > 20
