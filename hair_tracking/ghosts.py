@@ -173,6 +173,7 @@ class GhostTracker:
         self._xb = np.empty(s_count * n_nodes * 3)
         self._vb = np.empty(s_count * n_nodes * 3)
         self._held = False
+        self._synced = False          # the arrays equal the kept state (no step since)
         self._tmp = np.zeros((chunks, TMP_ROWS * lanes))
         self._clamped = np.zeros(n_blocks, dtype=np.int64)
         self._contacts = np.zeros(chunks, dtype=np.int64)
@@ -201,8 +202,29 @@ class GhostTracker:
         assigned); the next step reads them again."""
         if self._held:
             self._held = False
-            copy_blocks(self.ghosts._x, self.ghosts._v, self.order, self._block_rows,
-                        self._xb, self._vb, False)
+            if not self._synced:
+                copy_blocks(self.ghosts._x, self.ghosts._v, self.order, self._block_rows,
+                            self._xb, self._vb, False)
+
+    def positions(self) -> np.ndarray:
+        """The ghosts' positions (S, N, 3), world [m], as a read-only view of ``ghosts.x``:
+        written back from the kernel's layout if a step ran since, but *without* handing the
+        state back, so the next step continues from its own copy instead of reading the arrays
+        again (which a read of ``ghosts.x`` must make it do: the caller may write into them).
+        For output and measurements; at 10 k ghosts each direction of the copy costs about
+        3 ms here."""
+        ghosts = self.ghosts
+        if ghosts._holder is self and self._held:
+            if not self._synced:
+                copy_blocks(ghosts._x, ghosts._v, self.order, self._block_rows, self._xb,
+                            self._vb, False)
+                self._synced = True
+            x = ghosts._x
+        else:
+            x = ghosts.x
+        view = x.view()
+        view.flags.writeable = False
+        return view
 
     def _take(self) -> None:
         """Copy ``ghosts.x`` and ``ghosts.v`` into the kernel's layout and keep them there."""
@@ -220,6 +242,7 @@ class GhostTracker:
                              f'{ghosts.rest.shape}')
         copy_blocks(x, v, self.order, self._block_rows, self._xb, self._vb, True)
         self._held = True
+        self._synced = True
 
     def reset(self, head: HeadPose) -> None:
         """Ghosts in their rest shape carried by ``head``, at rest."""
@@ -257,6 +280,7 @@ class GhostTracker:
                self._fused_collider, self._center, self._axes, self._friction,
                self._refine, self._q_buf, self._buf, self._tmp, self._clamped,
                self._contacts)
+        self._synced = False
         self.stats['steps'] += 1
         self.stats['clamped'] = int(self._clamped.sum())
         if self._fused_collider:

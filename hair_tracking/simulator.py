@@ -199,8 +199,9 @@ class HairSimulator:
 
     # --------------------------------------------------------------- output
     def frame(self, head_frame: bool = False, copy: bool = True) -> Frame:
+        """The hair now; with ``copy`` false the arrays may be read-only views of the state."""
         g = self.guides.x
-        s = self.ghosts.x if self.ghosts is not None else None
+        s = self._ghost_x()
         if head_frame:
             g = self.head.to_head(g)
             s = self.head.to_head(s) if s is not None else None
@@ -218,7 +219,7 @@ class HairSimulator:
         """max |l/l0 - 1| over guide and ghost segments (0 = exact lengths)."""
         m = max_stretch(self.guides.x, self.guides.rest_length)
         if self.ghosts is not None:
-            m = max(m, max_stretch(self.ghosts.x, self.ghosts.rest_length))
+            m = max(m, max_stretch(self._ghost_x(), self.ghosts.rest_length))
         return m
 
     def penetration(self) -> float:
@@ -228,10 +229,17 @@ class HairSimulator:
         with threads_for(self._nodes):
             d = self.collider.penetration(self.guides.x, self.head)
             if self.ghosts is not None:
-                d = max(d, self.collider.penetration(self.ghosts.x, self.head))
+                d = max(d, self.collider.penetration(self._ghost_x(), self.head))
         return d
 
     # ------------------------------------------------------------ internals
+    def _ghost_x(self) -> Optional[np.ndarray]:
+        """Ghost positions to read (output, checks) without taking the state away from the
+        tracker, which keeps it in its kernel's layout between steps."""
+        if self.ghost_tracker is not None:
+            return self.ghost_tracker.positions()
+        return self.ghosts.x if self.ghosts is not None else None
+
     def _substep(self, dt: float, head_prev: HeadPose, head: HeadPose) -> None:
         parts = self._split_count(dt, head_prev, head)
         if parts == 1:

@@ -432,3 +432,32 @@ def test_state_in_kernel_layout_is_seen_and_taken_whenever_touched():
     x_handover, v_handover, _ = run(False, True, handover=True)
     np.testing.assert_array_equal(x_handover, x_quiet)
     np.testing.assert_array_equal(v_handover, v_quiet)
+
+
+def test_positions_for_output_keep_the_state_in_the_kernel_layout(monkeypatch):
+    """``positions()`` (what the simulator's frames and checks read) shows the current state
+    read-only and leaves it with the tracker: the next step does not copy the arrays in again,
+    whereas a read of ``ghosts.x`` (which the caller may write into) makes it."""
+    import hair_tracking.ghosts as ghosts_module
+    copies = []
+    real = ghosts_module.copy_blocks
+
+    def counting(*args):
+        copies.append(args[-1])            # into_blocks
+        return real(*args)
+    monkeypatch.setattr(ghosts_module, 'copy_blocks', counting)
+    guides, ghosts = comb([(0.0, 0.0, 0.0), (0.02, 0.0, 0.0)], 4, seed=5)
+    tracker = GhostTracker(ghosts, guides, scene_with())
+    old = guides.x.copy()
+    guides.x[:, 2:, 0] += 0.003
+    tracker.step(DT, old, pose())
+    seen = tracker.positions()
+    assert copies == [True, False]
+    with pytest.raises(ValueError):
+        seen[0, 0, 0] = 1.0                 # read-only
+    assert np.array_equal(tracker.positions(), seen) and copies == [True, False]
+    tracker.step(DT, guides.x.copy(), pose())
+    assert copies == [True, False]          # no copy back in: the tracker kept the state
+    np.testing.assert_array_equal(ghosts.x, tracker.positions())
+    tracker.step(DT, guides.x.copy(), pose())
+    assert copies == [True, False, False, True]   # ghosts.x was read: taken again
