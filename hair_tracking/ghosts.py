@@ -47,10 +47,11 @@ class GhostTracker:
     """Moves ``ghosts`` (a :class:`StrandSet`) after ``guides`` each substep.
 
     ``ghosts.x``/``ghosts.v`` (world frame [m], [m/s]) show the state whenever they are read:
-    between steps the tracker keeps it in its kernel's layout (group by group, [node][axis]
+    between steps the tracker keeps it in its kernel's layout (block by block, [node][axis]
     [ghost], see :mod:`.tracking_kernels`) and writes it back into the arrays only when they
     are read or assigned (:meth:`release`, called by the StrandSet's properties); a write into
-    them is taken by the next step.  So several substeps without a read cost no conversion.
+    them is taken by the next step.  So several substeps without a read cost no conversion;
+    :meth:`positions` reads without handing the state back.
 
     ``collider`` is used only when ``scene.tracking.collide`` is true and it is given; it must
     then expose ``apply(x, x_prev, inv_mass, head) -> int``.
