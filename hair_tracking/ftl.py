@@ -84,14 +84,17 @@ def ftl_direction(dx, dy, dz, r, ex, ey, ez, rot):
     return 0.0, 0.0, -1.0, r
 
 
-#: Surface projections per node in :func:`ftl_restore`.
-RESTORE_ITERATIONS = 4
+#: Surface projections per node in :func:`ftl_restore` at most (the tolerance below ends most
+#: contacts after one or two).  Long segments need more: with 10 cm segments (1.5 m strands,
+#: 'ftl segment 100 mm' of the quick stability matrix) and ghosts tracked once per pose, 4 left
+#: ghost nodes 6.2 mm inside the head (margin 4 mm); 8 leave none inside.
+RESTORE_ITERATIONS = 8
 #: Depth [m] inside the collision surface at which :func:`restore_node` stops iterating.  The
 #: alternating placements converge geometrically: on the bundled walk with the default head, a
 #: pushed ghost node lies a median 2 um (90th percentile 15 um) inside after the first placement
-#: and 0.03 um after the second, so iterating to the strict surface spent four projections on
-#: sub-micrometre depths in most contacts (and still ended a few um inside).  10 um is 0.25 % of
-#: the default 4 mm margin.
+#: and 0.03 um after the second, so iterating to the strict surface spent all the projections
+#: (then four) on sub-micrometre depths in most contacts (and still ended a few um inside).
+#: 10 um is 0.25 % of the default 4 mm margin.
 RESTORE_TOLERANCE = 1e-5
 
 
