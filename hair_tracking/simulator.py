@@ -286,9 +286,10 @@ class HairSimulator:
     # once per advance_to() call (one head pose), over all the guide substeps of that call, with
     # the per-substep feedback strengths compounded (GhostTracker.step's ``substeps``).  At
     # 240 Hz substeps and a 60 Hz pose stream that is 4x fewer tracking steps, the dominant cost
-    # of a large groom.  Not the default: on 1.5 m strands (stability matrix, 'ftl segment
-    # 100 mm') the weights applied to a whole pose interval let energy rise over a still tail
-    # (1.6 vs 0.7 J/kg, bound 1.4) and ghosts reach 4.8 mm into the head (margin 4 mm).
+    # of a large groom.  Not the default: on 1.5 m strands (quick stability matrix, 'ftl
+    # segment 100 mm') the energy measured over the still tail rises by 1.46 J/kg (bound 1.39;
+    # 0.57 every substep), with centre-of-mass tracking on whatever its strength, while the
+    # hair still swings there (see docs/ghosts.md and the session notes).
     def _begin_ghosts(self) -> None:
         if self.ghost_tracker is not None and not self.scene.tracking.every_substep:
             np.copyto(self._ghost_guide_x, self.guides.x)
