@@ -20,9 +20,10 @@ then ``v = (x_new - x_old) / dt``.
 Conventions: world frame positions [m] and velocities [m/s]; rest data in the head frame;
 ``R`` (3, 3) and ``pos`` (3,) the head pose (``p_world = pos + R p_head``).  Every per-ghost
 array of the kernel is stored in group order (row ``k`` belongs to ghost ``order[k]``); the
-per-node ones (the state ``xb``, ``vb``, the rest offsets, the segment lengths) *group by group,
-inside a group [node][axis][ghost]* (:func:`group_blocks`), so that every stage is a unit-stride
-loop over the group's ghosts that LLVM vectorises.  The tracker keeps its ghosts' state in this
+per-node ones (the state ``xb``, ``vb``, the rest offsets, the segment lengths) *block by block
+(runs of consecutive groups, :func:`block_groups`), inside a block [node][axis][ghost]*
+(:func:`group_blocks`), so that every stage is a unit-stride loop over ghosts that LLVM
+vectorises.  The tracker keeps its ghosts' state in this
 layout between substeps (:func:`copy_blocks` converts from and to the
 ``(S, N, 3)`` arrays of the user's order only when those are read or written): the two
 transposes, scalar loops, cost as much as all stages together when they ran every substep.
@@ -129,9 +130,6 @@ TRACK_FASTMATH = {'contract', 'reassoc'}
 #: Rows of the per-chunk work space ``tmp`` of :func:`track_groups` (per lane of a block).
 _DX, _DY, _DZ, _QX, _QY, _QZ, _TW, _FLAG, _C0, _C1, _C2, _CW = range(12)
 TMP_ROWS = 12
-# (h), the last stage of a node index, reuses the rows of (a)-(c): the head-frame point q, its
-# F(q) and the head-frame surface point y
-_HQ0, _HQ1, _HQ2, _HF, _HY0, _HY1, _HY2 = _DX, _DY, _DZ, _TW, _QX, _QY, _QZ
 
 #: Lanes (ghosts) a block of consecutive groups holds at most (a larger group is a block of its
 #: own).  Every loop has a fixed cost (set-up, runtime alias checks, remainder), which groups of
@@ -157,8 +155,6 @@ def block_groups(group_start: np.ndarray, lanes: int = BLOCK_LANES) -> np.ndarra
             held = 0
         held += int(size)
     starts.append(sizes.size)
-    if sizes.size == 0:
-        starts = [0, 0]
     return np.asarray(starts, dtype=np.int64)
 
 
@@ -599,14 +595,15 @@ def _collide(X0, B, P, T, n, k0, order, seg_len, rest, R, j, ftl, cx, cy, cz,
 
 
 @njit(cache=True, nogil=True)
-def copy_blocks(x, v, order, group_start, xb, vb, into_blocks):
+def copy_blocks(x, v, order, block_rows, xb, vb, into_blocks):
     """Ghost state between the user's ``x``, ``v`` (S, N, 3) and the kernel's ``xb``, ``vb``
-    (S * N * 3,) (group by group, [node][axis][ghost]; see :func:`group_blocks`): into the
-    blocks if ``into_blocks``, else out of them."""
+    (S * N * 3,) (block by block, [node][axis][ghost]; see :func:`group_blocks`): into the
+    blocks if ``into_blocks``, else out of them.  ``block_rows`` (B+1,): the first group-order
+    row of each block."""
     n_nodes = x.shape[1]
-    for g in range(group_start.shape[0] - 1):
-        k0 = group_start[g]
-        n = group_start[g + 1] - k0
+    for g in range(block_rows.shape[0] - 1):
+        k0 = block_rows[g]
+        n = block_rows[g + 1] - k0
         base = k0 * n_nodes * 3
         for kk in range(n):
             s = order[k0 + kk]
@@ -621,16 +618,16 @@ def copy_blocks(x, v, order, group_start, xb, vb, into_blocks):
                         v[s, j, a] = vb[i]
 
 
-def group_blocks(a: np.ndarray, group_start: np.ndarray) -> np.ndarray:
+def group_blocks(a: np.ndarray, block_rows: np.ndarray) -> np.ndarray:
     """(S, ...) per-ghost data in group order -> the flat layout of ``rest_off`` and ``seg_len``
-    in :func:`track_groups`: group by group, inside a group the ghost index last (for (S, N, 3)
-    data [node][axis][ghost])."""
+    in :func:`track_groups`: block by block (``block_rows`` (B+1,), the first row of each),
+    inside a block the ghost index last (for (S, N, 3) data [node][axis][ghost])."""
     a = np.asarray(a, dtype=np.float64)
     per = a[0].size if a.shape[0] else 0
     out = np.empty(a.size)
     axes = tuple(range(1, a.ndim)) + (0,)
-    for g in range(group_start.size - 1):
-        k0, k1 = int(group_start[g]), int(group_start[g + 1])
+    for g in range(block_rows.size - 1):
+        k0, k1 = int(block_rows[g]), int(block_rows[g + 1])
         out[k0 * per:k1 * per] = a[k0:k1].transpose(axes).reshape(-1)
     return out
 
