@@ -202,10 +202,15 @@ class GhostTracker:
         (called by :class:`~hair_tracking.model.StrandSet` whenever they are read or
         assigned); the next step reads them again."""
         if self._held:
+            self._write_back()
             self._held = False
-            if not self._synced:
-                copy_blocks(self.ghosts._x, self.ghosts._v, self.order, self._block_rows,
-                            self._xb, self._vb, False)
+
+    def _write_back(self) -> None:
+        """The kept state into ``ghosts.x`` and ``ghosts.v``, unless they hold it already."""
+        if not self._synced:
+            copy_blocks(self.ghosts._x, self.ghosts._v, self.order, self._block_rows, self._xb,
+                        self._vb, False)
+            self._synced = True
 
     def positions(self) -> np.ndarray:
         """The ghosts' positions (S, N, 3), world [m], as a read-only view of ``ghosts.x``:
@@ -216,10 +221,7 @@ class GhostTracker:
         3 ms here."""
         ghosts = self.ghosts
         if ghosts._holder is self and self._held:
-            if not self._synced:
-                copy_blocks(ghosts._x, ghosts._v, self.order, self._block_rows, self._xb,
-                            self._vb, False)
-                self._synced = True
+            self._write_back()
             x = ghosts._x
         else:
             x = ghosts.x
@@ -266,7 +268,7 @@ class GhostTracker:
                              f'{guide_x_old.shape}')
         tr = self.tracking
         if self._collide_after:
-            np.copyto(self._x_prev, self.ghosts.x)
+            np.copyto(self._x_prev, self.positions())
         self._take()
         nodes = self._xb.size // 3
         kernel = track_groups if runs_parallel(nodes) else track_groups_serial
