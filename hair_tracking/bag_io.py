@@ -706,13 +706,18 @@ def cloud_to_strands(msg) -> np.ndarray:
 POSE_KINDS = ('pose', 'transform', 'tf')
 
 
-def _time(sec_ns: int):
-    T = typestore().types['builtin_interfaces/msg/Time']
-    sec, nanosec = divmod(int(sec_ns), 1_000_000_000)
+def stamp_parts(t_ns: int) -> Tuple[int, int]:
+    """``(sec, nanosec)`` of a ROS stamp [ns]; BagError (EXIT_USAGE) when it does not fit."""
+    sec, nanosec = divmod(int(t_ns), 1_000_000_000)
     if not 0 <= sec <= 2 ** 31 - 1:
-        raise BagError(f'time {sec_ns} ns does not fit a ROS stamp (sec is int32, >= 0)',
+        raise BagError(f'time {t_ns} ns does not fit a ROS stamp (sec is int32, >= 0)',
                        EXIT_USAGE)
-    return T(sec=sec, nanosec=nanosec)
+    return sec, nanosec
+
+
+def _time(t_ns: int):
+    sec, nanosec = stamp_parts(t_ns)
+    return typestore().types['builtin_interfaces/msg/Time'](sec=sec, nanosec=nanosec)
 
 
 def head_pose_message(kind: str, t_ns: int, position, quaternion, frame_id: str,

@@ -174,12 +174,8 @@ def pose_stamped_bytes(t_ns, position, quaternion, frame_id) -> bytes:
     :class:`msg_adapters.cdr.CdrWriter` (byte-identical to the rosbags serializer, tested; it
     took 0.2 ms a message through message objects, 5 % of a default ``run``)."""
     from msg_adapters.cdr import CdrWriter, ENCAPSULATION_LE
-    sec, nanosec = divmod(int(t_ns), 1_000_000_000)
-    if not 0 <= sec <= 2 ** 31 - 1:
-        raise BagError(f'time {t_ns} ns does not fit a ROS stamp (sec is int32, >= 0)',
-                       EXIT_USAGE)
     w = CdrWriter()
-    w.time(sec, nanosec)
+    w.time(*bag_io.stamp_parts(t_ns))
     w.string(frame_id)
     for value in (*position, *quaternion):
         w.float64(float(value))
