@@ -28,14 +28,15 @@ import math
 from numba import njit, prange
 
 from hair_tracking.collision import surface_point, to_head, world_center
-from hair_tracking.integrate import BLOCK, FASTMATH, finalize_block, predict_block
+from hair_tracking.integrate import (BLOCK, FASTMATH, finalize_block, NO_REFCOUNT,
+                                     predict_block)
 from hair_tracking.pbd_constraints import pbd_sweep_block
 
 #: Below this squared segment length [m²] the current direction is unreliable.
 FTL_TINY_SQ = 1e-24
 
 
-@njit(cache=True, fastmath=FASTMATH, error_model='numpy')
+@njit(cache=True, fastmath=FASTMATH, error_model='numpy', **NO_REFCOUNT)
 def ftl_pass_block(x, rest, rest_length, rot, corr, s0, s1):
     """FTL pass over strands ``s0..s1-1`` in place; ``corr`` (S, N, 3) receives the ``d_i``.
 

@@ -32,7 +32,8 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from hair_tracking.integrate import BLOCK, FASTMATH, finalize_block, predict_block
+from hair_tracking.integrate import (BLOCK, FASTMATH, finalize_block, NO_REFCOUNT,
+                                     predict_block)
 
 #: Floor of ``|p_j - p_i|²`` [m²] when inverting a distance (zero-length segments).
 TINY_SQ = 1e-30
@@ -68,7 +69,7 @@ def xpbd_gain(inv_mass: np.ndarray, gap: int, alpha_tilde: float) -> np.ndarray:
     return out
 
 
-@njit(cache=True, fastmath=FASTMATH, error_model='numpy')
+@njit(cache=True, fastmath=FASTMATH, error_model='numpy', **NO_REFCOUNT)
 def pbd_sweep_block(x, rest_dist, weights, gap, k, s0, s1):
     """One PBD Gauss–Seidel sweep over the constraints ``(i, i+gap)`` of strands ``s0..s1-1``.
 
@@ -97,7 +98,7 @@ def pbd_sweep_block(x, rest_dist, weights, gap, k, s0, s1):
             x[s, j, 2] -= c * dz
 
 
-@njit(cache=True, fastmath=FASTMATH, error_model='numpy')
+@njit(cache=True, fastmath=FASTMATH, error_model='numpy', **NO_REFCOUNT)
 def xpbd_sweep_block(x, inv_mass, rest_dist, gain, lam, gap, alpha_tilde, s0, s1):
     """One XPBD Gauss–Seidel sweep over the constraints ``(i, i+gap)`` of strands ``s0..s1-1``.
 

@@ -38,6 +38,7 @@ import numpy as np
 
 from .collision import push_out, to_head, world_center
 from .ftl import restore_node
+from .integrate import NO_REFCOUNT
 from .weights import clamp_weight, com_weight, direction_cos, ELASTIC_OFF, elastic_sign
 
 
@@ -239,7 +240,7 @@ def track_groups_serial(xb, vb, rest, seg_len, order, group_start, block_group, 
                      axes, friction, refine, q_buf, buf, tmp, clamped, contacts)
 
 
-@njit(cache=True, fastmath=TRACK_FASTMATH, error_model='numpy')
+@njit(cache=True, fastmath=TRACK_FASTMATH, error_model='numpy', **NO_REFCOUNT)
 def _track_chunk(c, n_chunks, xb, vb, rest, seg_len, order, group_start, block_group,
                  group_guide, group_row, node_table, node_row, rest_off, inv_len, var_target,
                  guide_x, guide_x_old, tan_rest, R, pos, dt, elastic_mode, use_tip, com_w,
@@ -594,7 +595,7 @@ def _collide(X0, B, P, T, n, k0, order, seg_len, rest, R, j, ftl, cx, cy, cz,
     return n_in
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, **NO_REFCOUNT)
 def copy_blocks(x, v, order, block_rows, xb, vb, into_blocks):
     """Ghost state between the user's ``x``, ``v`` (S, N, 3) and the kernel's ``xb``, ``vb``
     (S * N * 3,) (block by block, [node][axis][ghost]; see :func:`group_blocks`): into the
