@@ -345,3 +345,20 @@ def test_blocks_of_groups_large_small_and_single():
     assert lanes.max() == BLOCK_LANES + 37 and blocks.size - 1 == 2
     assert np.array_equal(block_groups(np.array([0])), [0, 0])            # no ghosts
     assert _steps_match_reference(rng, tracker, guides, ghosts, scene, collider, 3) > 20
+
+
+def test_kernel_bodies_compile_without_reference_counting():
+    """The per-block kernel bodies are built without numba's NRT reference counting
+    (``integrate.NO_REFCOUNT``): its atomic counts of array views were a quarter of the ghost
+    kernel's time.  A numba without the option is reported as a skip (the kernels then run,
+    slower, with reference counting)."""
+    from hair_tracking import ftl, integrate, pbd_constraints
+    from hair_tracking import tracking_kernels as tk
+    if not integrate.NO_REFCOUNT:
+        pytest.skip('this numba has no _nrt option: kernels keep reference counting')
+    assert integrate.NO_REFCOUNT == {'_nrt': False}
+    bodies = (tk._track_chunk, tk.copy_blocks, integrate.head_motion, integrate.predict_block,
+              integrate.finalize_block, ftl.ftl_pass_block, pbd_constraints.pbd_sweep_block,
+              pbd_constraints.xpbd_sweep_block)
+    for body in bodies:
+        assert body.targetoptions.get('_nrt') is False, body.__name__
