@@ -68,7 +68,7 @@ from . import params as P
 from .head_track import PoseResult
 from .resources import config_path
 from .scene import Scene, SceneError
-from .simulator import HairSimulator, warm_up as warm_up_simulator
+from .simulator import freeze_heap, HairSimulator, warm_up as warm_up_simulator
 from .strand_colors import strand_colors
 
 try:                                    # optional: /tf input
@@ -172,6 +172,7 @@ class HairSimNode(Node):
         if settings.warmup:
             secs = warm_up(settings.scene)
             self.get_logger().info(f'kernels and encoders ready in {secs:.2f} s')
+        freeze_heap()       # no 70 ms full garbage collections over the start-up objects
 
         # state read by the step and publish paths
         self._pose_frame = ''            # header.frame_id of the last pose

@@ -321,7 +321,7 @@ def run_bag(input_path: str, output_path: str, settings: Settings,
     output path then).  ``progress(done, total)`` is called as poses are processed.
     """
     from .head_track import PoseResult
-    from .simulator import HairSimulator
+    from .simulator import freeze_heap, HairSimulator
 
     opt = options or RunOptions()
     scene = settings.scene
@@ -348,6 +348,7 @@ def run_bag(input_path: str, output_path: str, settings: Settings,
     t_setup = time.perf_counter()
     sim = HairSimulator(scene)
     enc = FrameEncoder(settings)
+    freeze_heap()
     summary.setup_s = time.perf_counter() - t_setup
 
     custom = {'hair_tracking.input': os.path.basename(str(input_path)),

@@ -3,6 +3,7 @@
 Every test gets its own rclpy Context on its own domain id (20-34 here; test_node_params.py
 uses 35-49), discovery limited to localhost (conftest.py), and every wait is bounded.
 """
+import gc
 import itertools
 import os
 import signal
@@ -184,6 +185,7 @@ def test_poses_give_clouds_and_markers_whose_roots_follow_the_head(harness):
     np.testing.assert_allclose(head_roots, head_roots[:1].repeat(len(times), 0), atol=2e-5)
     assert np.ptp(head_roots[0], axis=0).max() > 0.02          # distinct roots on the scalp
     np.testing.assert_allclose(head_roots[0], h.node.sim.ghosts.rest[:, 0], atol=2e-5)
+    assert gc.get_freeze_count() > 0    # start-up objects frozen (simulator.freeze_heap)
 
 
 def test_first_markers_clear_old_ones_and_colours_reach_the_cloud(harness):
