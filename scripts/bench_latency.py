@@ -40,6 +40,7 @@ from visualization_msgs.msg import MarkerArray
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 from hair_tracking.node import HairSimNode  # noqa: E402
+from hair_tracking import params as P  # noqa: E402
 from msg_adapters.pose import pose_stamped_msg  # noqa: E402
 
 FRAME_MS = 1000.0 / 60.0
@@ -56,6 +57,9 @@ def _setting(text):
     name, sep, value = text.partition('=')
     if not sep or not name:
         raise argparse.ArgumentTypeError(f'{text!r}: expected NAME=VALUE')
+    if name not in P.by_name():     # rclpy ignores overrides of undeclared names silently
+        raise argparse.ArgumentTypeError(f'{name!r} is not a parameter of the node '
+                                         f'(NAME=VALUE, e.g. tracking.every_substep=false)')
     low = value.strip().lower()
     if low in ('true', 'false'):
         return name, low == 'true'
