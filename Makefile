@@ -54,4 +54,4 @@ eval: $(STAMP)
 	$(PY) -m hair_tracking.eval_cli accuracy
 
 clean:
-	rm -rf $(VENV) out build *.egg-info
+	rm -rf $(VENV) out build *.egg-info hair_tracking/__pycache__/numba-*
