@@ -74,8 +74,9 @@ FASTMATH = {'contract'}
 #: array view it creates (``x[j]``, ``a.reshape(...)``, an array bound as an argument of an
 #: inlined function) with an atomic ``lock`` instruction, 20-40 cycles each on this machine, and
 #: its pruning pass cannot remove the pairs inside loops with branches: in the ghost kernel they
-#: were a quarter of the samples under ``perf``, and without them a default-scene substep (512
-#: ghosts in groups of 8) took 0.28 instead of 0.42 ms (alternated runs).  Safe for functions that
+#: were a quarter of the samples under ``perf``, and without them a default-scene ghost step
+#: (512 ghosts in groups of 8, head contact on) took 0.31 instead of 0.47 ms (medians, old and
+#: new kernels alternated in one process).  Safe for functions that
 #: allocate nothing and return no array: the arrays they see are owned by their caller.  Empty
 #: when this numba has no such option (the kernels then run with reference counting).
 try:

@@ -69,7 +69,7 @@ from .head_track import PoseResult
 from .resources import config_path
 from .scene import Scene, SceneError
 from .simulator import freeze_heap, HairSimulator, warm_up as warm_up_simulator
-from .strand_colors import strand_colors
+from .strand_colors import StrandColorCache
 
 try:                                    # optional: /tf input
     from tf2_msgs.msg import TFMessage
@@ -185,7 +185,7 @@ class HairSimNode(Node):
         self._last_publish = -math.inf   # time.monotonic() of the last publication
         self._tf_child: Optional[str] = None
         self._tf_seen_ns = 0
-        self._color_cache: Dict[str, tuple] = {}
+        self._color_cache = StrandColorCache()
         self.rejected = 0                # poses dropped (malformed, NaN, zero quaternion ...)
         self.rebuilds = 0
         self.frames_built = 0            # sim.frame() calls made for publishing
@@ -491,11 +491,7 @@ class HairSimNode(Node):
         self.publish_ms.append((time.perf_counter() - start) * 1e3)
 
     def _colors(self, ns: str, n: int, rgba) -> np.ndarray:
-        key = (n, tuple(rgba))
-        c = self._color_cache.get(ns)
-        if c is None or c[0] != key:
-            c = self._color_cache[ns] = (key, strand_colors(n, rgba))
-        return c[1]
+        return self._color_cache.get(ns, n, rgba)
 
     # ================================================================ diagnostics
     def diagnostics(self) -> DiagnosticStatus:

@@ -30,7 +30,7 @@ from . import bag_io
 from .bag_io import BagError, EXIT_CONTENT, EXIT_FAILURE, EXIT_USAGE
 from .params import make_settings, NODE_NAME, ParamError, Settings
 from .scene import Scene, SceneError
-from .strand_colors import strand_colors
+from .strand_colors import StrandColorCache
 
 POINTS_TOPIC = '/hair/points'
 MARKERS_TOPIC = '/hair/markers'
@@ -125,17 +125,12 @@ class FrameEncoder:
 
     def __init__(self, settings: Settings):
         self.settings = settings
-        self._strand_colors = strand_colors
-        self._colors: Dict[str, tuple] = {}
+        self._colors = StrandColorCache()
         self._shapes: Dict[str, tuple] = {}
         self.lifetime_ns = int(round(settings.marker_lifetime * 1e9))
 
     def colors(self, ns: str, n: int, rgba) -> np.ndarray:
-        key = (n, tuple(rgba))
-        c = self._colors.get(ns)
-        if c is None or c[0] != key:
-            c = self._colors[ns] = (key, self._strand_colors(n, rgba))
-        return c[1]
+        return self._colors.get(ns, n, rgba)
 
     def points(self, strands, frame_id, stamp_ns, ns='hair', rgba=None) -> bytes:
         from msg_adapters.pointcloud import strands_to_pointcloud2_cdr

@@ -1,4 +1,6 @@
 """Per-strand colours of the published hair (ROS-free: shared by the node and offline runs)."""
+from typing import Dict, Tuple
+
 import numpy as np
 
 
@@ -16,3 +18,18 @@ def strand_colors(n: int, rgba) -> np.ndarray:
                          0.0, 1.0)
     out[:, 3] = rgba[3]
     return out
+
+
+class StrandColorCache:
+    """The last :func:`strand_colors` of each namespace, recomputed only when the strand count
+    or the colour changes (the node and ``FrameEncoder`` ask once per published frame)."""
+
+    def __init__(self):
+        self._cache: Dict[str, Tuple[tuple, np.ndarray]] = {}
+
+    def get(self, ns: str, n: int, rgba) -> np.ndarray:
+        key = (n, tuple(rgba))
+        c = self._cache.get(ns)
+        if c is None or c[0] != key:
+            c = self._cache[ns] = (key, strand_colors(n, rgba))
+        return c[1]

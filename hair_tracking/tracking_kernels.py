@@ -532,9 +532,9 @@ def _group_stage(P, T, l0, l1, k_com, spread, var_target, have_target):
 
 @njit(cache=True, inline='always', fastmath=TRACK_FASTMATH, error_model='numpy')
 def _follow(B, P, T, n, k0, order, seg_len, rest, R, j):
-    """(f) Follow-The-Leader: node ``j`` (rows at ``W[pb:]``) put at its rest length from node
-    ``j - 1`` (rows at ``W[bb:]``, final), along the current direction; a node without a
-    direction continues along its head-carried rest segment."""
+    """(f) Follow-The-Leader: node ``j`` of the block's lanes (``P`` (3, n)) put at its rest
+    length ``seg_len`` from node ``j - 1`` (``B`` (3, n), final), along the current direction; a
+    node without a direction continues along its head-carried rest segment."""
     n_bad = 0
     for kk in range(n):
         d0 = P[0, kk] - B[0, kk]
@@ -565,10 +565,10 @@ def _follow(B, P, T, n, k0, order, seg_len, rest, R, j):
 @njit(cache=True, inline='always', fastmath=TRACK_FASTMATH, error_model='numpy')
 def _collide(X0, B, P, T, n, k0, order, seg_len, rest, R, j, ftl, cx, cy, cz,
              ax, ay, az, ix, iy, iz, friction, refine):
-    """(h) node ``j`` (rows at ``W[pb:]``) pushed out of the head ellipsoid with friction
-    relative to its start-of-substep position (``W[xb:]``); with ``ftl`` then put back at its
-    rest distance from node ``j - 1`` (``W[bb:]``) outside the surface.  Returns the number of
-    pushed nodes."""
+    """(h) node ``j`` of the block's lanes (``P`` (3, n)) pushed out of the head ellipsoid with
+    friction relative to its start-of-substep position (``X0`` (3, n)); with ``ftl`` then put
+    back at its rest distance from node ``j - 1`` (``B`` (3, n)) outside the surface.  Returns
+    the number of pushed nodes."""
     n_in = 0
     for kk in range(n):     # inside test for the whole group (vectorises); few nodes are in
         q0, q1, q2 = to_head(P[0, kk], P[1, kk], P[2, kk], R, cx, cy, cz)

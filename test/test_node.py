@@ -28,7 +28,8 @@ from sensor_msgs.msg import PointCloud2
 from std_srvs.srv import Trigger
 from visualization_msgs.msg import Marker, MarkerArray
 
-from hair_tracking.node import HairSimNode, strand_colors
+from hair_tracking.node import HairSimNode
+from hair_tracking.strand_colors import strand_colors
 from hair_tracking.simulator import HairSimulator
 from hair_tracking.transforms import quat_to_matrix
 from msg_adapters.pointcloud import pointcloud2_to_strands
