@@ -596,10 +596,11 @@ def _collide(X0, B, P, T, n, k0, order, seg_len, rest, R, j, ftl, cx, cy, cz,
 
 
 @njit(cache=True, nogil=True, **NO_REFCOUNT)
-def copy_blocks(x, v, order, block_rows, xb, vb, into_blocks):
+def copy_blocks(x, v, order, block_rows, xb, vb, into_blocks, with_v):
     """Ghost state between the user's ``x``, ``v`` (S, N, 3) and the kernel's ``xb``, ``vb``
     (S * N * 3,) (block by block, [node][axis][ghost]; see :func:`group_blocks`): into the
-    blocks if ``into_blocks``, else out of them.  ``block_rows`` (B+1,): the first group-order
+    blocks if ``into_blocks``, else out of them; the velocities only ``with_v`` (positions
+    for output need half the memory traffic).  ``block_rows`` (B+1,): the first group-order
     row of each block."""
     n_nodes = x.shape[1]
     for g in range(block_rows.shape[0] - 1):
@@ -613,10 +614,12 @@ def copy_blocks(x, v, order, block_rows, xb, vb, into_blocks):
                     i = base + (j * 3 + a) * n + kk
                     if into_blocks:
                         xb[i] = x[s, j, a]
-                        vb[i] = v[s, j, a]
+                        if with_v:
+                            vb[i] = v[s, j, a]
                     else:
                         x[s, j, a] = xb[i]
-                        v[s, j, a] = vb[i]
+                        if with_v:
+                            v[s, j, a] = vb[i]
 
 
 def group_blocks(a: np.ndarray, block_rows: np.ndarray) -> np.ndarray:

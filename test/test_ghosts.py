@@ -437,27 +437,32 @@ def test_state_in_kernel_layout_is_seen_and_taken_whenever_touched():
 def test_positions_for_output_keep_the_state_in_the_kernel_layout(monkeypatch):
     """``positions()`` (what the simulator's frames and checks read) shows the current state
     read-only and leaves it with the tracker: the next step does not copy the arrays in again,
-    whereas a read of ``ghosts.x`` (which the caller may write into) makes it."""
+    whereas a read of ``ghosts.x`` (which the caller may write into) makes it.  Output needs
+    only the positions: the velocities are written back when ``ghosts.v`` is read."""
     import hair_tracking.ghosts as ghosts_module
     copies = []
     real = ghosts_module.copy_blocks
 
     def counting(*args):
-        copies.append(args[-1])            # into_blocks
+        copies.append(args[6] if args[7] else (args[6], 'x only'))   # into_blocks, with_v
         return real(*args)
     monkeypatch.setattr(ghosts_module, 'copy_blocks', counting)
     guides, ghosts = comb([(0.0, 0.0, 0.0), (0.02, 0.0, 0.0)], 4, seed=5)
     tracker = GhostTracker(ghosts, guides, scene_with())
     old = guides.x.copy()
     guides.x[:, 2:, 0] += 0.003
+    v_before = ghosts._v.copy()
     tracker.step(DT, old, pose())
     seen = tracker.positions()
-    assert copies == [True, False]
+    assert copies == [True, (False, 'x only')]
+    np.testing.assert_array_equal(ghosts._v, v_before)   # not written back for output
     with pytest.raises(ValueError):
         seen[0, 0, 0] = 1.0                 # read-only
-    assert np.array_equal(tracker.positions(), seen) and copies == [True, False]
+    assert np.array_equal(tracker.positions(), seen) and copies == [True, (False, 'x only')]
     tracker.step(DT, guides.x.copy(), pose())
-    assert copies == [True, False]          # no copy back in: the tracker kept the state
+    assert copies == [True, (False, 'x only')]   # no copy back in: the tracker kept the state
     np.testing.assert_array_equal(ghosts.x, tracker.positions())
+    assert copies[-1] is False              # the read of ghosts.x handed x and v back
+    assert np.abs(ghosts._v - v_before).max() > 0.0
     tracker.step(DT, guides.x.copy(), pose())
-    assert copies == [True, False, False, True]   # ghosts.x was read: taken again
+    assert copies == [True, (False, 'x only'), False, True]   # ghosts.x was read: taken again
