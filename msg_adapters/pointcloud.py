@@ -5,7 +5,8 @@ Layout: ``height = S`` rows (one per strand), ``width = N`` points, little-endia
 the ids given), and, when colours are given, ``rgb`` float32 (offset 16) holding the packed
 ``0x00RRGGBB`` bits as rviz/PCL expect. ``point_step`` 16 or 20, ``row_step = N * point_step``,
 ``is_dense`` true when every coordinate is finite (NaN points are allowed in clouds).
-Built through a numpy structured array and one buffer copy, no per-point Python.
+Built through a numpy structured array (or straight into the CDR bytes) by one compiled pass
+(:mod:`msg_adapters.point_fill`), no per-point Python.
 """
 import array
 
@@ -16,6 +17,7 @@ from std_msgs.msg import Header
 from msg_adapters.arrays import as_colors, as_strands
 from msg_adapters.cdr import CdrWriter, MessageBuffer, put_pieces
 from msg_adapters.marker_spec import check_frame_id
+from msg_adapters.point_fill import fill_records
 from msg_adapters.stamps import split_ns, time_msg
 
 _NP_OF_DATATYPE = {PointField.INT8: 'i1', PointField.UINT8: 'u1', PointField.INT16: 'i2',
@@ -65,16 +67,6 @@ def _check_inputs(strands, colors, strand_ids):
     return x, None if cols is None else pack_rgb(cols), ids
 
 
-def _fill(words, x, rgb, ids):
-    """Write points into ``words``, the (S, N, 4|5) little-endian float32 view of the data
-    (possibly unaligned); returns is_dense."""
-    words[..., :3] = x
-    words[..., 3:4].view('<u4')[..., 0] = ids[:, None]
-    if rgb is not None:
-        words[..., 4] = rgb
-    return bool(np.isfinite(x).all())
-
-
 def strands_to_points(strands, colors=None, strand_ids=None):
     """Structured point array (S, N) of :func:`cloud_dtype` and ``is_dense``.
 
@@ -85,7 +77,7 @@ def strands_to_points(strands, colors=None, strand_ids=None):
     x, rgb, ids = _check_inputs(strands, colors, strand_ids)
     pts = np.empty(x.shape[:2], dtype=cloud_dtype(rgb is not None))
     words = pts.view('<f4').reshape(x.shape[:2] + (pts.dtype.itemsize // 4,))
-    return pts, _fill(words, x, rgb, ids)
+    return pts, fill_records(words, x, rgb, ids)
 
 
 def strands_to_pointcloud2(strands, *, frame_id, stamp_ns=0, colors=None, strand_ids=None):
@@ -136,7 +128,7 @@ def strands_to_pointcloud2_cdr(strands, *, frame_id, stamp_ns=0, colors=None, st
     buf = MessageBuffer(w.offset)
     put_pieces(buf.body, w.pieces())
     words = buf.body[at_data:at_data + nbytes].view('<f4').reshape(n_strands, n_points, step // 4)
-    buf.body[at_dense] = _fill(words, x, rgb, ids)
+    buf.body[at_dense] = fill_records(words, x, rgb, ids)
     return buf.finish()
 
 
