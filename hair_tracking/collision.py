@@ -37,7 +37,7 @@ from typing import Optional
 import numpy as np
 from numba import njit, prange
 
-from hair_tracking.integrate import FASTMATH
+from hair_tracking.integrate import FASTMATH, runs_parallel, serial_twin
 
 #: Normal-line refinements of the ellipsoid projection in :meth:`Collider.apply`.
 ELLIPSOID_REFINEMENTS = 2
@@ -237,11 +237,13 @@ class Collider:
         rot, pos = _pose(head)
         return self.project(x, x_prev, inv_mass, rot, pos)
 
-    def project(self, x, x_prev, inv_mass, rot, pos) -> int:
+    def project(self, x, x_prev, inv_mass, rot, pos, parallel: bool = True) -> int:
         """:meth:`apply` without input checks, the head pose given as ``rot`` (3, 3) and ``pos``
-        (3,) C-contiguous float64 arrays: for callers that validated their arrays once."""
-        return int(project_ellipsoid(x, x_prev, inv_mass, rot, pos, self.center, self.radii,
-                                     self.margin, self.friction, self.refine))
+        (3,) C-contiguous float64 arrays: for callers that validated their arrays once.
+        ``parallel`` false runs the serial twin of the kernel (small problems)."""
+        kernel = project_ellipsoid if parallel else project_ellipsoid_serial
+        return int(kernel(x, x_prev, inv_mass, rot, pos, self.center, self.radii,
+                          self.margin, self.friction, self.refine))
 
     def penetration(self, x: np.ndarray, head, inv_mass: Optional[np.ndarray] = None) -> float:
         """Deepest distance [m] of a point of ``x`` (S, N, 3) inside the bare surface; 0 if none.
@@ -258,8 +260,9 @@ class Collider:
                 raise ValueError(f'inv_mass {mass.shape} must match x {x.shape}')
         rot, pos = _pose(head)
         out = np.zeros(x.shape[0])
-        penetration_ellipsoid(x, mass, use, rot, pos, self.center, self.radii,
-                              self._pen_refine, out)
+        kernel = penetration_ellipsoid if runs_parallel(x.shape[0] * x.shape[1]) else \
+            penetration_ellipsoid_serial
+        kernel(x, mass, use, rot, pos, self.center, self.radii, self._pen_refine, out)
         return float(out.max()) if out.size else 0.0
 
 
@@ -299,3 +302,7 @@ def make_collider(spec) -> Optional[Collider]:
     else:
         raise ValueError(f'collider.shape: {spec.shape!r} is not one of none, sphere, ellipsoid')
     return Collider(spec.shape, spec.center, radii, spec.margin, spec.friction)
+
+
+project_ellipsoid_serial = serial_twin(project_ellipsoid)
+penetration_ellipsoid_serial = serial_twin(penetration_ellipsoid)

@@ -29,7 +29,7 @@ from numba import njit, prange
 
 from hair_tracking.collision import surface_point, to_head, world_center
 from hair_tracking.integrate import (BLOCK, FASTMATH, finalize_block, NO_REFCOUNT,
-                                     predict_block)
+                                     predict_block, serial_twin)
 from hair_tracking.pbd_constraints import pbd_sweep_block
 
 #: Below this squared segment length [m²] the current direction is unreliable.
@@ -143,10 +143,20 @@ def ftl_restore(x, rest, rest_length, rot, pos, center, axes, refine, corr):
     node is *added* to ``corr`` (the velocity update damps it like the first pass's).  No
     friction here: the collider applied it.
     """
-    ax, ay, az = axes[0], axes[1], axes[2]
     cx, cy, cz = world_center(rot, pos, center)
-    n = x.shape[1]
     for s in prange(x.shape[0]):
+        ftl_restore_block(x, rest, rest_length, rot, cx, cy, cz, axes, refine, corr, s, s + 1)
+
+
+@njit(cache=True, fastmath=FASTMATH, error_model='numpy', **NO_REFCOUNT)
+def ftl_restore_block(x, rest, rest_length, rot, cx, cy, cz, axes, refine, corr, s0, s1):
+    """:func:`ftl_restore` on the strands ``s0 <= s < s1`` (``c`` the ellipsoid's world
+    centre).  A function of its own, so the kernel and its serial twin run the same compiled
+    code (inlined into each, LLVM contracted the arithmetic differently: results differed in
+    the last bits)."""
+    ax, ay, az = axes[0], axes[1], axes[2]
+    n = x.shape[1]
+    for s in range(s0, s1):
         for i in range(2, n):
             ox, oy, oz = x[s, i, 0], x[s, i, 1], x[s, i, 2]
             px, py, pz = restore_node(
@@ -186,3 +196,7 @@ def ftl_step(x, v, x_old, corr, rest, inv_mass, rest_length, bend_rest, bend_w,
         if do_finalize:
             clamped += finalize_block(x, v, x_old, inv_mass, corr, s0, s1, dt, max_disp, s_damp)
     return clamped
+
+
+ftl_step_serial = serial_twin(ftl_step)
+ftl_restore_serial = serial_twin(ftl_restore)

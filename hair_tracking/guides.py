@@ -106,10 +106,11 @@ class GuideSolver:
 
     def step(self, dt: float, head_prev: HeadPose, head: HeadPose) -> None:
         """Advance one substep ``dt`` [s] while the head moves from ``head_prev`` to ``head``."""
-        with integrate.threads_for(self.strands.x.shape[0] * self.strands.x.shape[1]):
-            self._step(dt, head_prev, head)
+        nodes = self.strands.x.shape[0] * self.strands.x.shape[1]
+        with integrate.threads_for(nodes):
+            self._step(dt, head_prev, head, integrate.runs_parallel(nodes))
 
-    def _step(self, dt: float, head_prev: HeadPose, head: HeadPose) -> None:
+    def _step(self, dt: float, head_prev: HeadPose, head: HeadPose, parallel: bool) -> None:
         dt = float(dt)
         if not (math.isfinite(dt) and dt > 0.0):
             raise ValueError(f'dt: must be a positive finite number of seconds, got {dt!r}')
@@ -125,24 +126,28 @@ class GuideSolver:
         damp = math.exp(-self._damping * dt)
         fused = self.collider is None
         if self._x_ref is not None:
-            integrate.carry_rigid(st.x, rot_rel, pos_prev, pos, self._x_ref)
+            carry = integrate.carry_rigid if parallel else integrate.carry_rigid_serial
+            carry(st.x, rot_rel, pos_prev, pos, self._x_ref)
         if self.kind == 'pbd':
             sv = self.scene.solver
-            clamped = pbd_constraints.pbd_step(
+            kernel = pbd_constraints.pbd_step if parallel else pbd_constraints.pbd_step_serial
+            clamped = kernel(
                 st.x, st.v, self._x_old, st.rest, st.inv_mass, st.rest_length, self._bend_rest,
                 self._stretch_w, self._bend_w, rot, pos, rot_rel, pos_prev, self._gravity, damp,
                 dt, self._shock, self._iterations, float(sv.stiffness), float(sv.bend_stiffness),
                 self._max_disp, fused)
         elif self.kind == 'xpbd':
             a_stretch, a_bend = self._xpbd_factors(dt)
-            clamped = pbd_constraints.xpbd_step(
+            kernel = pbd_constraints.xpbd_step if parallel else pbd_constraints.xpbd_step_serial
+            clamped = kernel(
                 st.x, st.v, self._x_old, st.rest, st.inv_mass, st.rest_length, self._bend_rest,
                 self._stretch_gain, self._bend_gain, self._lam_stretch, self._lam_bend,
                 rot, pos, rot_rel, pos_prev, self._gravity, damp, dt, self._shock,
                 self._iterations, a_stretch, a_bend, self._max_disp, fused)
         else:
             sv = self.scene.solver
-            clamped = ftl.ftl_step(
+            kernel = ftl.ftl_step if parallel else ftl.ftl_step_serial
+            clamped = kernel(
                 st.x, st.v, self._x_old, self._corr, st.rest, st.inv_mass, st.rest_length,
                 self._bend_rest, self._bend_w, rot, pos, rot_rel, pos_prev, self._gravity, damp,
                 dt, self._shock, FTL_BEND_PASSES, ftl_bend_stiffness(sv.bend_stiffness, dt),
@@ -150,17 +155,19 @@ class GuideSolver:
         contacts = 0
         if not fused:
             ref = self._x_ref if self._x_ref is not None else self._x_old
-            contacts = self.collider.project(st.x, ref, st.inv_mass, rot, pos)
+            contacts = self.collider.project(st.x, ref, st.inv_mass, rot, pos, parallel)
             corr, s_damp = self._x_old, 0.0
             if self.kind == 'ftl':
                 corr, s_damp = self._corr, float(self.scene.solver.ftl_damping)
                 if contacts:
                     # restore the lengths the collider's push broke, staying outside it
                     c = self.collider
-                    ftl.ftl_restore(st.x, st.rest, st.rest_length, rot, pos, c.center,
-                                    c.radii + c.margin, c.refine, self._corr)
-            clamped = integrate.finalize(st.x, st.v, self._x_old, st.inv_mass, corr, dt,
-                                         self._max_disp, s_damp)
+                    restore = ftl.ftl_restore if parallel else ftl.ftl_restore_serial
+                    restore(st.x, st.rest, st.rest_length, rot, pos, c.center,
+                            c.radii + c.margin, c.refine, self._corr)
+            finalize = integrate.finalize if parallel else integrate.finalize_serial
+            clamped = finalize(st.x, st.v, self._x_old, st.inv_mass, corr, dt,
+                               self._max_disp, s_damp)
         c = self._counters
         c['substeps'] += 1
         c['clamped'] = int(clamped)

@@ -33,7 +33,7 @@ import numpy as np
 from numba import njit, prange
 
 from hair_tracking.integrate import (BLOCK, FASTMATH, finalize_block, NO_REFCOUNT,
-                                     predict_block)
+                                     predict_block, serial_twin)
 
 #: Floor of ``|p_j - p_i|²`` [m²] when inverting a distance (zero-length segments).
 TINY_SQ = 1e-30
@@ -188,3 +188,7 @@ def xpbd_step(x, v, x_old, rest, inv_mass, rest_length, bend_rest, stretch_gain,
         if do_finalize:
             clamped += finalize_block(x, v, x_old, inv_mass, x_old, s0, s1, dt, max_disp, 0.0)
     return clamped
+
+
+pbd_step_serial = serial_twin(pbd_step)
+xpbd_step_serial = serial_twin(xpbd_step)

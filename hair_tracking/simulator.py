@@ -42,7 +42,7 @@ from .ghosts import GhostTracker
 from .groom import make_groom
 from .guides import GuideSolver
 from .head_track import HeadTrack, IDENTITY, PoseResult
-from .integrate import threads_for
+from .integrate import parallel_from, runs_parallel, threads_for
 from .metrics import max_stretch
 from .model import HeadPose, StrandSet
 from .scene import Scene
@@ -329,8 +329,10 @@ def warm_up(scene: Scene) -> HairSimulator:
 
     Runs a tiny copy of the scene (same solver, collider, tracking and output options, at most
     two guides with two ghosts each) through a moving, turning head, a frame in both frames and
-    the stretch and penetration checks, so the first real steps are not late.  Returns the tiny
-    simulator (callers may warm their own output code on its frames).
+    the stretch and penetration checks, so the first real steps are not late: through the
+    serial kernels the tiny copy uses, and through the parallel ones too when the full scene is
+    large enough to run them (:func:`~hair_tracking.integrate.runs_parallel`).  Returns the
+    tiny simulator (callers may warm their own output code on its frames).
     """
     g = scene.groom
     small = scene.with_changes(groom__guides=min(g.guides, 2),
@@ -343,6 +345,14 @@ def warm_up(scene: Scene) -> HairSimulator:
     sim.advance_to(1 + 4 * dt_ns)
     sim.max_stretch()
     sim.penetration()
+    nodes = g.guides * g.guide_nodes + g.guides * g.ghosts_per_guide * g.ghost_nodes
+    if runs_parallel(nodes):
+        # the full scene runs the parallel kernels (the tiny copy ran their serial twins)
+        with parallel_from(0):
+            sim.push_pose(1 + 8 * dt_ns, [0.0, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0])
+            sim.advance_to(1 + 8 * dt_ns)
+            sim.max_stretch()
+            sim.penetration()
     return sim
 
 

@@ -296,13 +296,15 @@ def test_deterministic():
 
 # ---------------------------------------------------------------------- kernel selection
 def spy_on(monkeypatch, module, name, calls):
-    real = getattr(module, name)
+    """Record ``name`` whenever the kernel or its serial twin (small problems) runs."""
+    for variant in (name, name + '_serial'):
+        real = getattr(module, variant)
 
-    def spy(*args):
-        calls.append(name)
-        return real(*args)
+        def spy(*args, real=real):
+            calls.append(name)
+            return real(*args)
 
-    monkeypatch.setattr(module, name, spy)
+        monkeypatch.setattr(module, variant, spy)
 
 
 @pytest.mark.parametrize('kind, kernel', [('pbd', 'pbd_step'), ('xpbd', 'xpbd_step'),
@@ -319,6 +321,56 @@ def test_only_the_chosen_solver_kernel_runs(monkeypatch, kind, kernel):
     for _ in range(3):
         g.step(1.0 / 240.0, head, head)
     assert calls == [kernel] * 3
+
+
+@pytest.mark.parametrize('kind', SOLVERS)
+def test_serial_twins_run_small_problems_with_the_same_results(monkeypatch, kind):
+    """Below PARALLEL_MIN_NODES the guide kernels run as serial twins (no parallel region to
+    launch); above it the parallel kernels.  Both give bit-identical hair, with the head
+    collider (collision, FTL restore, finalize and the friction reference) in play."""
+    sc = scene(kind, collider__shape='ellipsoid', solver__shock_propagation=0.5)
+    runs = {}
+    for label, threshold in (('serial', 1 << 40), ('parallel', 0)):
+        calls = []
+        for module, name in ((pbd_constraints, 'pbd_step'), (pbd_constraints, 'xpbd_step'),
+                             (ftl, 'ftl_step'), (integrate, 'finalize')):
+            for variant in (name, name + '_serial'):
+                real = getattr(module, variant)
+
+                def spy(*args, real=real, variant=variant):
+                    calls.append(variant)
+                    return real(*args)
+                monkeypatch.setattr(module, variant, spy)
+        monkeypatch.setattr(integrate, 'PARALLEL_MIN_NODES', threshold)
+        monkeypatch.setattr(integrate.numba, 'get_num_threads', lambda: 2)
+        rest = np.zeros((6, 12, 3))
+        rest[:, :, 0] = np.linspace(-0.05, 0.05, 6)[:, None]
+        rest[:, :, 2] = 0.11 - 0.02 * np.arange(12)[None, :]
+        st = StrandSet.from_rest(rest)
+        g = GuideSolver(st, sc)
+        h_prev = pose([0, 0, 0])
+        g.reset(h_prev)
+        for k in range(1, 60):
+            head = pose([0.03 * np.sin(0.3 * k), 0.0, 0.0],
+                        quat_from_axis_angle([0, 0, 1], 0.4 * np.sin(0.2 * k)))
+            g.step(1.0 / 240.0, h_prev, head)
+            h_prev = head
+        assert g.stats['contacts_total'] > 0
+        runs[label] = (st.x.copy(), st.v.copy(), set(calls))
+    kernel = {'pbd': 'pbd_step', 'xpbd': 'xpbd_step', 'ftl': 'ftl_step'}[kind]
+    assert runs['serial'][2] == {kernel + '_serial', 'finalize_serial'}
+    assert runs['parallel'][2] == {kernel, 'finalize'}
+    np.testing.assert_array_equal(runs['serial'][0], runs['parallel'][0])
+    np.testing.assert_array_equal(runs['serial'][1], runs['parallel'][1])
+
+
+def test_serial_twin_is_cached_apart_from_its_kernel():
+    """The twin is a separate numba function (own name, hence own cache index), not parallel."""
+    twin = ftl.ftl_step_serial
+    assert twin.py_func.__qualname__ == 'ftl_step_serial'
+    assert twin.py_func.__code__ is ftl.ftl_step.py_func.__code__
+    assert not twin.targetoptions.get('parallel') and ftl.ftl_step.targetoptions['parallel']
+    assert twin.targetoptions['fastmath'] == ftl.ftl_step.targetoptions['fastmath']
 
 
 # ------------------------------------------------------------------------ API and errors

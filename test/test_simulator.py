@@ -93,13 +93,17 @@ def test_rejected_pose_changes_nothing():
 
 
 def _spy(monkeypatch, module, name):
+    """Calls of ``module.name`` and of its serial twin ``name_serial`` if there is one."""
     calls = []
-    real = getattr(module, name)
+    for variant in (name, name + '_serial'):
+        if not hasattr(module, variant):
+            continue
+        real = getattr(module, variant)
 
-    def spy(*a, **k):
-        calls.append(1)
-        return real(*a, **k)
-    monkeypatch.setattr(module, name, spy)
+        def spy(*a, real=real, **k):
+            calls.append(1)
+            return real(*a, **k)
+        monkeypatch.setattr(module, variant, spy)
     return calls
 
 
@@ -192,3 +196,29 @@ print('ok')
                          timeout=120)
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip() == 'ok'
+
+
+@pytest.mark.parametrize('guides, per_guide, parallel', [(64, 16, False), (128, 78, True)])
+def test_warm_up_loads_the_kernels_the_full_scene_runs(monkeypatch, guides, per_guide, parallel):
+    """A small groom runs the serial twins, a large one (>= PARALLEL_MIN_NODES nodes) the
+    parallel kernels: warm-up (a tiny copy of the scene) goes through the ones the full scene
+    will call, so none is compiled or loaded from disk on the first real frame."""
+    from hair_tracking import ftl, integrate, simulator
+    monkeypatch.setattr(integrate.numba, 'get_num_threads', lambda: 2)
+    calls = set()
+    for module, names in ((ftl, ('ftl_step', 'ftl_step_serial')),
+                          (ghosts_mod, ('track_groups', 'track_groups_serial'))):
+        for name in names:
+            real = getattr(module, name)
+
+            def spy(*a, real=real, name=name):
+                calls.add(name)
+                return real(*a)
+            monkeypatch.setattr(module, name, spy)
+    scene = Scene().with_changes(groom__guides=guides, groom__ghosts_per_guide=per_guide)
+    nodes = guides * 16 * (1 + per_guide)
+    assert integrate.runs_parallel(nodes) == parallel
+    simulator.warm_up(scene)
+    assert {'ftl_step_serial', 'track_groups_serial'} <= calls
+    assert ({'ftl_step', 'track_groups'} <= calls) == parallel
+    assert integrate.PARALLEL_MIN_NODES == 1 << 17          # restored after warm-up

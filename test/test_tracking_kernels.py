@@ -358,7 +358,8 @@ def test_kernel_bodies_compile_without_reference_counting():
         pytest.skip('this numba has no _nrt option: kernels keep reference counting')
     assert integrate.NO_REFCOUNT == {'_nrt': False}
     bodies = (tk._track_chunk, tk.copy_blocks, integrate.head_motion, integrate.predict_block,
-              integrate.finalize_block, ftl.ftl_pass_block, pbd_constraints.pbd_sweep_block,
+              integrate.finalize_block, ftl.ftl_pass_block, ftl.ftl_restore_block,
+              pbd_constraints.pbd_sweep_block,
               pbd_constraints.xpbd_sweep_block)
     for body in bodies:
         assert body.targetoptions.get('_nrt') is False, body.__name__
