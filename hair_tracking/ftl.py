@@ -100,17 +100,26 @@ RESTORE_TOLERANCE = 1e-5
 
 
 @njit(cache=True, inline='always', fastmath=FASTMATH, error_model='numpy')
-def restore_node(px, py, pz, bx, by, bz, r, ex, ey, ez, rot, cx, cy, cz, ax, ay, az, refine):
+def restore_f_ok(ax, ay, az):
+    """``F(q)`` from which :func:`restore_node` accepts a placement (see RESTORE_TOLERANCE)."""
+    f_ok = 1.0 - RESTORE_TOLERANCE / max(ax, ay, az)
+    return f_ok * f_ok
+
+
+@njit(cache=True, inline='always', fastmath=FASTMATH, error_model='numpy')
+def restore_node(px, py, pz, bx, by, bz, r, ex, ey, ez, rot, cx, cy, cz, ax, ay, az, refine,
+                 first):
     """One node of the collision-aware FTL pass (see :func:`ftl_restore`): ``p`` put at the rest
     distance ``r`` from its predecessor ``b`` and out of the ellipsoid (semi-axes ``a``, world
     centre ``c``, head rotation ``rot``), at most :data:`RESTORE_ITERATIONS` times: it stops as
     soon as a placement lies outside or less than :data:`RESTORE_TOLERANCE` inside (``F(q) >=
     (1 - tol / a_max)^2``, which bounds the depth by ``tol``).  ``e`` is the rest segment in the
-    head frame, the direction used when ``p`` and ``b`` coincide.  World [m]."""
+    head frame, the direction used when ``p`` and ``b`` coincide.  World [m].  ``first`` (0
+    normally): the placements already made, for a caller that made the first ones itself
+    (``p`` is then the surface point the next placement starts from)."""
     ix, iy, iz = 1.0 / (ax * ax), 1.0 / (ay * ay), 1.0 / (az * az)
-    f_ok = 1.0 - RESTORE_TOLERANCE / max(ax, ay, az)
-    f_ok *= f_ok
-    for k in range(RESTORE_ITERATIONS + 1):
+    f_ok = restore_f_ok(ax, ay, az)
+    for k in range(first, RESTORE_ITERATIONS + 1):
         dx, dy, dz, f = ftl_direction(px - bx, py - by, pz - bz, r, ex, ey, ez, rot)
         px, py, pz = bx + f * dx, by + f * dy, bz + f * dz
         if k == RESTORE_ITERATIONS:
@@ -162,7 +171,7 @@ def ftl_restore_block(x, rest, rest_length, rot, cx, cy, cz, axes, refine, corr,
             px, py, pz = restore_node(
                 ox, oy, oz, x[s, i - 1, 0], x[s, i - 1, 1], x[s, i - 1, 2], rest_length[s, i - 1],
                 rest[s, i, 0] - rest[s, i - 1, 0], rest[s, i, 1] - rest[s, i - 1, 1],
-                rest[s, i, 2] - rest[s, i - 1, 2], rot, cx, cy, cz, ax, ay, az, refine)
+                rest[s, i, 2] - rest[s, i - 1, 2], rot, cx, cy, cz, ax, ay, az, refine, 0)
             corr[s, i, 0] += px - ox
             corr[s, i, 1] += py - oy
             corr[s, i, 2] += pz - oz

@@ -137,6 +137,7 @@ class GhostTracker:
         self._block_rows = np.ascontiguousarray(self.group_start[self.block_group])
         self._rest_off_blocks = group_blocks(self._rest_off, self._block_rows)
         self._seg_len_blocks = group_blocks(ghosts.rest_length[o], self._block_rows)
+        self._root_blocks = group_blocks(ghosts.rest[o][:, :min(2, n_nodes)], self._block_rows)
         frac = arc_fractions(ghosts.rest_length)[o]
         # per-node data (guide parameter, w_tip) as a table of distinct rows: ghosts with the
         # same arc-length layout share one row
@@ -278,8 +279,8 @@ class GhostTracker:
         kernel = track_groups if runs_parallel(nodes) else track_groups_serial
         kernel(self._xb, self._vb, self.ghosts.rest, self._seg_len_blocks, self.order,
                self.group_start, self.block_group, self.group_guide, self._group_row,
-               self._node_table, self._node_row, self._rest_off_blocks, self._inv_len,
-               self._var_target, _f64(gx), _f64(guide_x_old), self._tan_rest,
+               self._node_table, self._node_row, self._rest_off_blocks, self._root_blocks,
+               self._inv_len, self._var_target, _f64(gx), _f64(guide_x_old), self._tan_rest,
                _f64(head.rotation), _f64(head.position), float(dt),
                self._elastic, tr.tip_weight > 0.0, tr.com_weight, tr.max_weight,
                _per(tr.offset_strength, substeps), _per(tr.com_strength, substeps),

@@ -36,8 +36,8 @@ import math
 from numba import njit, prange, uint64
 import numpy as np
 
-from .collision import push_out, to_head, world_center
-from .ftl import restore_node
+from .collision import world_center
+from .ghost_contacts import collide_lanes, CONTACT_ROWS
 from .integrate import NO_REFCOUNT
 from .weights import clamp_weight, com_weight, direction_cos, ELASTIC_OFF, elastic_sign
 
@@ -130,7 +130,9 @@ TRACK_FASTMATH = {'contract', 'reassoc'}
 
 #: Rows of the per-chunk work space ``tmp`` of :func:`track_groups` (per lane of a block).
 _DX, _DY, _DZ, _QX, _QY, _QZ, _TW, _FLAG, _C0, _C1, _C2, _CW = range(12)
-TMP_ROWS = 12
+_KERNEL_ROWS = 12
+#: ... followed by the rows of the head contact stage (:mod:`hair_tracking.ghost_contacts`).
+TMP_ROWS = _KERNEL_ROWS + CONTACT_ROWS
 
 #: Lanes (ghosts) a block of consecutive groups holds at most (a larger group is a block of its
 #: own).  Every loop has a fixed cost (set-up, runtime alias checks, remainder), which groups of
@@ -161,9 +163,9 @@ def block_groups(group_start: np.ndarray, lanes: int = BLOCK_LANES) -> np.ndarra
 
 @njit(cache=True, nogil=True, parallel=True, fastmath=TRACK_FASTMATH, error_model='numpy')
 def track_groups(xb, vb, rest, seg_len, order, group_start, block_group, group_guide,
-                 group_row, node_table, node_row, rest_off, inv_len, var_target, guide_x,
-                 guide_x_old, tan_rest, R, pos, dt, elastic_mode, use_tip, com_w, max_weight,
-                 k_off, k_com, spread, ftl, collide, center, axes, friction, refine,
+                 group_row, node_table, node_row, rest_off, root_rest, inv_len, var_target,
+                 guide_x, guide_x_old, tan_rest, R, pos, dt, elastic_mode, use_tip, com_w,
+                 max_weight, k_off, k_com, spread, ftl, collide, center, axes, friction, refine,
                  q_buf, buf, tmp, clamped, contacts):
     """One tracking substep of all ghosts, in place on ``xb`` and ``vb`` (see the module doc).
 
@@ -186,6 +188,8 @@ def track_groups(xb, vb, rest, seg_len, order, group_start, block_group, group_g
       rest_off (S * N * 3,)   target offset from the guide point, head frame [m], stored block
                               by block, inside a block as [node][axis][ghost] (see
                               :func:`group_blocks`)
+      root_rest (S * R * 3,)  rest positions of the R = min(2, N) pinned root nodes, head frame
+                              [m], in the layout of ``rest_off``
       inv_len (S,)            1 / ghost length [1/m] (group order)
       var_target (K, N)       target group variance (sum of squares) [m^2] for spread control
       guide_x, guide_x_old    (G, M, 3) guides after / before this substep, world [m]
@@ -216,7 +220,7 @@ def track_groups(xb, vb, rest, seg_len, order, group_start, block_group, group_g
     n_chunks = buf.shape[0]
     for c in prange(n_chunks):
         _track_chunk(c, n_chunks, xb, vb, rest, seg_len, order, group_start, block_group,
-                     group_guide, group_row, node_table, node_row, rest_off, inv_len,
+                     group_guide, group_row, node_table, node_row, rest_off, root_rest, inv_len,
                      var_target, guide_x, guide_x_old, tan_rest, R, pos, dt, elastic_mode,
                      use_tip, com_w, max_weight, k_off, k_com, spread, ftl, collide, center,
                      axes, friction, refine, q_buf, buf, tmp, clamped, contacts)
@@ -224,7 +228,7 @@ def track_groups(xb, vb, rest, seg_len, order, group_start, block_group, group_g
 
 @njit(cache=True, nogil=True, fastmath=TRACK_FASTMATH, error_model='numpy')
 def track_groups_serial(xb, vb, rest, seg_len, order, group_start, block_group, group_guide,
-                        group_row, node_table, node_row, rest_off, inv_len, var_target,
+                        group_row, node_table, node_row, rest_off, root_rest, inv_len, var_target,
                         guide_x, guide_x_old, tan_rest, R, pos, dt, elastic_mode, use_tip,
                         com_w, max_weight, k_off, k_com, spread, ftl, collide, center, axes,
                         friction, refine, q_buf, buf, tmp, clamped, contacts):
@@ -234,7 +238,7 @@ def track_groups_serial(xb, vb, rest, seg_len, order, group_start, block_group, 
     n_chunks = buf.shape[0]
     for c in range(n_chunks):
         _track_chunk(c, n_chunks, xb, vb, rest, seg_len, order, group_start, block_group,
-                     group_guide, group_row, node_table, node_row, rest_off, inv_len,
+                     group_guide, group_row, node_table, node_row, rest_off, root_rest, inv_len,
                      var_target, guide_x, guide_x_old, tan_rest, R, pos, dt, elastic_mode,
                      use_tip, com_w, max_weight, k_off, k_com, spread, ftl, collide, center,
                      axes, friction, refine, q_buf, buf, tmp, clamped, contacts)
@@ -242,7 +246,8 @@ def track_groups_serial(xb, vb, rest, seg_len, order, group_start, block_group, 
 
 @njit(cache=True, fastmath=TRACK_FASTMATH, error_model='numpy', **NO_REFCOUNT)
 def _track_chunk(c, n_chunks, xb, vb, rest, seg_len, order, group_start, block_group,
-                 group_guide, group_row, node_table, node_row, rest_off, inv_len, var_target,
+                 group_guide, group_row, node_table, node_row, rest_off, root_rest, inv_len,
+                 var_target,
                  guide_x, guide_x_old, tan_rest, R, pos, dt, elastic_mode, use_tip, com_w,
                  max_weight, k_off, k_com, spread, ftl, collide, center, axes, friction, refine,
                  q_buf, buf, tmp, clamped, contacts):
@@ -256,7 +261,6 @@ def _track_chunk(c, n_chunks, xb, vb, rest, seg_len, order, group_start, block_g
     need_target = k_off > 0.0 or k_com > 0.0
     group_level = k_com > 0.0 or spread > 0.0
     ax, ay, az = axes[0], axes[1], axes[2]
-    ix, iy, iz = 1.0 / (ax * ax), 1.0 / (ay * ay), 1.0 / (az * az)
     cx, cy, cz = world_center(R, pos, center)
     W = buf[c]
     Tc = tmp[c]
@@ -282,12 +286,14 @@ def _track_chunk(c, n_chunks, xb, vb, rest, seg_len, order, group_start, block_g
         V0 = vb[b0:b1].reshape((n_nodes, 3, n))
         XN = W[:3 * n_nodes * n].reshape((n_nodes, 3, n))
         T = Tc[:TMP_ROWS * n].reshape((TMP_ROWS, n))
-        for kk in range(n):
-            s = order[r0 + kk]
-            for j in range(min(2, n_nodes)):
-                for a in range(3):
-                    XN[j, a, kk] = pos[a] + R[a, 0] * rest[s, j, 0] + \
-                        R[a, 1] * rest[s, j, 1] + R[a, 2] * rest[s, j, 2]
+        n_roots = min(2, n_nodes)
+        RB = root_rest[r0 * n_roots * 3:(r0 + n) * n_roots * 3].reshape((n_roots, 3, n))
+        for j in range(n_roots):
+            for a in range(3):      # contiguous loops over the block's ghosts (vectorise)
+                ra0, ra1, ra2, pa = R[a, 0], R[a, 1], R[a, 2], pos[a]
+                for kk in range(n):
+                    XN[j, a, kk] = pa + ra0 * RB[j, 0, kk] + ra1 * RB[j, 1, kk] + \
+                        ra2 * RB[j, 2, kk]
         n_clamped = 0
         # the block's rest offsets (N, 3, n) and segment lengths (N-1, n)
         off_b = rest_off[b0:b1].reshape((n_nodes, 3, n))
@@ -314,9 +320,9 @@ def _track_chunk(c, n_chunks, xb, vb, rest, seg_len, order, group_start, block_g
             if ftl:
                 _follow(XN[j - 1], XN[j], T, n, r0, order, len_b[j - 1], rest, R, j)
             if collide:
-                n_contacts += _collide(X0j, XN[j - 1], XN[j], T, n, r0, order, len_b[j - 1],
-                                       rest, R, j, ftl, cx, cy, cz, ax, ay, az, ix, iy, iz,
-                                       friction, refine)
+                n_contacts += collide_lanes(X0j, XN[j - 1], XN[j], T[_KERNEL_ROWS:], n, r0,
+                                            order, len_b[j - 1], rest, R, j, ftl, cx, cy, cz,
+                                            ax, ay, az, friction, refine)
         clamped[b] = n_clamped
         # the new state: v = (x_new - x_old) / dt, then x = x_new (one contiguous loop)
         xg = xb[b0:b1]
@@ -560,39 +566,6 @@ def _follow(B, P, T, n, k0, order, seg_len, rest, R, j):
         P[0, kk] = B[0, kk] + R[0, 0] * r0 + R[0, 1] * r1 + R[0, 2] * r2
         P[1, kk] = B[1, kk] + R[1, 0] * r0 + R[1, 1] * r1 + R[1, 2] * r2
         P[2, kk] = B[2, kk] + R[2, 0] * r0 + R[2, 1] * r1 + R[2, 2] * r2
-
-
-@njit(cache=True, inline='always', fastmath=TRACK_FASTMATH, error_model='numpy')
-def _collide(X0, B, P, T, n, k0, order, seg_len, rest, R, j, ftl, cx, cy, cz,
-             ax, ay, az, ix, iy, iz, friction, refine):
-    """(h) node ``j`` of the block's lanes (``P`` (3, n)) pushed out of the head ellipsoid with
-    friction relative to its start-of-substep position (``X0`` (3, n)); with ``ftl`` then put
-    back at its rest distance from node ``j - 1`` (``B`` (3, n)) outside the surface.  Returns
-    the number of pushed nodes."""
-    n_in = 0
-    for kk in range(n):     # inside test for the whole group (vectorises); few nodes are in
-        q0, q1, q2 = to_head(P[0, kk], P[1, kk], P[2, kk], R, cx, cy, cz)
-        inside = q0 * q0 * ix + q1 * q1 * iy + q2 * q2 * iz < 1.0
-        T[_FLAG, kk] = 1.0 if inside else 0.0
-        n_in += 1 if inside else 0
-    if n_in == 0:
-        return 0
-    for kk in range(n):
-        if T[_FLAG, kk] == 0.0:
-            continue
-        moved, y0, y1, y2 = push_out(P[0, kk], P[1, kk], P[2, kk],
-                                     X0[0, kk], X0[1, kk], X0[2, kk],
-                                     R, cx, cy, cz, ax, ay, az, friction, refine)
-        if moved and ftl:
-            s = order[k0 + kk]
-            y0, y1, y2 = restore_node(
-                y0, y1, y2, B[0, kk], B[1, kk], B[2, kk], seg_len[kk],
-                rest[s, j, 0] - rest[s, j - 1, 0], rest[s, j, 1] - rest[s, j - 1, 1],
-                rest[s, j, 2] - rest[s, j - 1, 2], R, cx, cy, cz, ax, ay, az, refine)
-        P[0, kk] = y0
-        P[1, kk] = y1
-        P[2, kk] = y2
-    return n_in
 
 
 @njit(cache=True, nogil=True, **NO_REFCOUNT)

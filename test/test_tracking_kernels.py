@@ -139,7 +139,7 @@ def _collide_reference(p, start, prev, seg_len, rest_seg, head, collider, restor
                                      collider.refine)
         if moved and restore:
             y0, y1, y2 = restore_node(y0, y1, y2, *prev[k], seg_len[k], *rest_seg[k], R, *c,
-                                      *a, collider.refine)
+                                      *a, collider.refine, 0)
         out[k] = (y0, y1, y2)
     return out
 

@@ -1,0 +1,79 @@
+"""The ghost kernel's head-contact stage (pushed nodes side by side) against the scalar
+one-node functions it reorganises."""
+import numpy as np
+import pytest
+
+from hair_tracking import ghost_contacts
+from hair_tracking.collision import push_out
+from hair_tracking.ftl import restore_node
+from hair_tracking.transforms import quat_from_axis_angle, quat_to_matrix
+
+
+def lanes(rng, n, axes):
+    """Nodes of one node index: outside, just inside, deep inside, at the centre, and
+    predecessors outside the surface (so the restore has something to do)."""
+    u = rng.normal(size=(n, 3))
+    u /= np.linalg.norm(u / axes, axis=1)[:, None]          # on the surface
+    depth = rng.choice([1.3, 1.05, 0.999, 0.98, 0.6, 0.2], size=n)
+    q = u * depth[:, None]
+    q[::17] = 0.0                                            # the degenerate centre point
+    start = q + rng.normal(scale=0.003, size=q.shape)
+    prev = u * 1.12 + rng.normal(scale=0.004, size=q.shape)
+    prev[5] = q[5]                                           # a collapsed segment
+    return q, start, prev
+
+
+@pytest.mark.parametrize('refine', [0, 1, 2, 4])
+@pytest.mark.parametrize('ftl', [True, False])
+@pytest.mark.parametrize('friction', [0.0, 0.3])
+@pytest.mark.parametrize('axes', [(0.099, 0.084, 0.109), (0.08, 0.1, 0.11), (0.11, 0.1, 0.09)])
+def test_contact_lanes_match_node_by_node(refine, ftl, friction, axes):
+    """Same positions as push_out + restore_node node by node: radial projection and
+    refinements, friction, a node at the centre (pushed along the shortest semi-axis, each axis
+    shortest once), collapsed and zero rest segments, placements that need more than one
+    restore iteration, and more refinements than the vectorised pass unrolls."""
+    rng = np.random.default_rng(refine * 10 + ftl * 2 + int(friction > 0))
+    n, j = 70, 3
+    ax, ay, az = axes
+    R = quat_to_matrix(quat_from_axis_angle([0.3, 1.0, 0.2], 0.7))
+    c = np.array([0.01, -0.02, 0.03])
+    q, start, prev = lanes(rng, n, np.array([ax, ay, az]))
+    world = lambda p: p @ R.T + c                          # noqa: E731
+    P = np.ascontiguousarray(world(q).T)
+    X0 = np.ascontiguousarray(world(start).T)
+    B = np.ascontiguousarray(world(prev).T)
+    order = rng.permutation(n + 5)[:n].astype(np.int64)
+    rest = rng.normal(scale=0.01, size=(n + 5, 6, 3))
+    rest[order[7], j] = rest[order[7], j - 1]                # a zero rest segment
+    seg_len = rng.uniform(0.005, 0.03, size=n)
+    seg_len[5] = 0.0 if ftl else seg_len[5]
+    want = P.copy()
+    pushed = 0
+    for kk in range(n):
+        moved, y0, y1, y2 = push_out(*P[:, kk], *X0[:, kk], R, *c, ax, ay, az, friction, refine)
+        pushed += moved
+        if moved and ftl:
+            s = order[kk]
+            y0, y1, y2 = restore_node(y0, y1, y2, *B[:, kk], seg_len[kk],
+                                      *(rest[s, j] - rest[s, j - 1]), R, *c, ax, ay, az,
+                                      refine, 0)
+        want[:, kk] = (y0, y1, y2)
+    got = P.copy()
+    W = np.full((ghost_contacts.CONTACT_ROWS, n), np.nan)
+    m = ghost_contacts.collide_lanes(X0, B, got, W, n, 0, order, seg_len, rest, R, j, ftl,
+                                     *c, ax, ay, az, friction, refine)
+    assert m == pushed > n // 3
+    np.testing.assert_allclose(got, want, rtol=0, atol=1e-13)
+    assert np.isfinite(got).all()
+
+
+def test_no_contact_changes_nothing():
+    rng = np.random.default_rng(3)
+    n = 20
+    P = rng.normal(size=(3, n)) + 1.0                        # far outside
+    before = P.copy()
+    W = np.zeros((ghost_contacts.CONTACT_ROWS, n))
+    m = ghost_contacts.collide_lanes(P, P, P, W, n, 0, np.arange(n), np.ones(n),
+                                     np.zeros((n, 4, 3)), np.eye(3), 2, True, 0.0, 0.0, 0.0,
+                                     0.1, 0.1, 0.1, 0.3, 2)
+    assert m == 0 and np.array_equal(P, before)
