@@ -94,6 +94,22 @@ def to_head(x0, x1, x2, rot, cx, cy, cz):
 
 
 @njit(cache=True, inline='always', fastmath=FASTMATH, error_model='numpy')
+def apply_friction(yx, yy, yz, px, py, pz, ix, iy, iz, friction):
+    """The friction of the module docstring: ``y`` (a surface point, head axes relative to the
+    centre; ``i`` the inverse squared semi-axes) moved back toward the reference ``p`` by
+    ``friction`` times the tangential part of ``y - p``."""
+    nx, ny, nz = yx * ix, yy * iy, yz * iz
+    nn = 1.0 / math.sqrt(nx * nx + ny * ny + nz * nz)
+    nx *= nn
+    ny *= nn
+    nz *= nn
+    mx, my, mz = yx - px, yy - py, yz - pz
+    dn = mx * nx + my * ny + mz * nz
+    return (yx - friction * (mx - dn * nx), yy - friction * (my - dn * ny),
+            yz - friction * (mz - dn * nz))
+
+
+@njit(cache=True, inline='always', fastmath=FASTMATH, error_model='numpy')
 def push_out(x0, x1, x2, r0, r1, r2, rot, cx, cy, cz, ax, ay, az, friction, refine):
     """One node ``x`` (world [m]) pushed out of the ellipsoid with semi-axes ``a`` around the
     world point ``c`` (axes turned by the head rotation ``rot``), then the friction of the module
@@ -106,16 +122,7 @@ def push_out(x0, x1, x2, r0, r1, r2, rot, cx, cy, cz, ax, ay, az, friction, refi
     yx, yy, yz = surface_point(qx, qy, qz, ax, ay, az, refine)
     if friction > 0.0:
         px, py, pz = to_head(r0, r1, r2, rot, cx, cy, cz)
-        nx, ny, nz = yx * ix, yy * iy, yz * iz
-        nn = 1.0 / math.sqrt(nx * nx + ny * ny + nz * nz)
-        nx *= nn
-        ny *= nn
-        nz *= nn
-        mx, my, mz = yx - px, yy - py, yz - pz
-        dn = mx * nx + my * ny + mz * nz
-        yx -= friction * (mx - dn * nx)
-        yy -= friction * (my - dn * ny)
-        yz -= friction * (mz - dn * nz)
+        yx, yy, yz = apply_friction(yx, yy, yz, px, py, pz, ix, iy, iz, friction)
     return (True,
             rot[0, 0] * yx + rot[0, 1] * yy + rot[0, 2] * yz + cx,
             rot[1, 0] * yx + rot[1, 1] * yy + rot[1, 2] * yz + cy,

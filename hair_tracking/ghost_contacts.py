@@ -29,7 +29,7 @@ import math
 
 from numba import njit
 
-from .collision import push_out, surface_point, to_head
+from .collision import apply_friction, push_out, surface_point, to_head
 from .ftl import FTL_TINY_SQ, restore_f_ok, restore_node
 
 #: Normal-line refinements the vectorised pass unrolls (the ellipsoid default is 2).
@@ -119,16 +119,7 @@ def collide_lanes(X0, B, P, W, n, k0, order, seg_len, rest, R, j, ftl, cx, cy, c
         yz = dz0 if deg else yz
         if friction > 0.0:
             px, py, pz = to_head(W[_SX, c], W[_SY, c], W[_SZ, c], R, cx, cy, cz)
-            nx, ny, nz = yx * ix, yy * iy, yz * iz
-            nn = 1.0 / math.sqrt(nx * nx + ny * ny + nz * nz)
-            nx *= nn
-            ny *= nn
-            nz *= nn
-            mx, my, mz = yx - px, yy - py, yz - pz
-            dn = mx * nx + my * ny + mz * nz
-            yx -= friction * (mx - dn * nx)
-            yy -= friction * (my - dn * ny)
-            yz -= friction * (mz - dn * nz)
+            yx, yy, yz = apply_friction(yx, yy, yz, px, py, pz, ix, iy, iz, friction)
         wx = R[0, 0] * yx + R[0, 1] * yy + R[0, 2] * yz + cx
         wy = R[1, 0] * yx + R[1, 1] * yy + R[1, 2] * yz + cy
         wz = R[2, 0] * yx + R[2, 1] * yy + R[2, 2] * yz + cz
