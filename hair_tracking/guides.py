@@ -107,8 +107,7 @@ class GuideSolver:
     def step(self, dt: float, head_prev: HeadPose, head: HeadPose) -> None:
         """Advance one substep ``dt`` [s] while the head moves from ``head_prev`` to ``head``."""
         nodes = self.strands.x.shape[0] * self.strands.x.shape[1]
-        with integrate.threads_for(nodes):
-            self._step(dt, head_prev, head, integrate.runs_parallel(nodes))
+        self._step(dt, head_prev, head, integrate.runs_parallel(nodes))
 
     def _step(self, dt: float, head_prev: HeadPose, head: HeadPose, parallel: bool) -> None:
         dt = float(dt)

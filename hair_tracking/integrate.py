@@ -270,6 +270,23 @@ def finalize_block(x, v, x_old, inv_mass, corr, s0, s1, dt, max_disp, s_damp):
     return clamped
 
 
+@njit(cache=True, error_model='numpy', **NO_REFCOUNT)
+def max_step_sq(x, x_old):
+    """Largest squared displacement ``|x - x_old|^2`` of a node [m^2] (the simulator's speed
+    estimate for splitting substeps); one serial pass, no temporary arrays.  NaN if any
+    displacement is NaN."""
+    best = 0.0
+    for s in range(x.shape[0]):
+        for i in range(x.shape[1]):
+            d0 = x[s, i, 0] - x_old[s, i, 0]
+            d1 = x[s, i, 1] - x_old[s, i, 1]
+            d2 = x[s, i, 2] - x_old[s, i, 2]
+            d = d0 * d0 + d1 * d1 + d2 * d2
+            if d > best or d != d:
+                best = d
+    return best
+
+
 @njit(cache=True, nogil=True, parallel=True, fastmath=FASTMATH, error_model='numpy')
 def finalize(x, v, x_old, inv_mass, corr, dt, max_disp, s_damp):
     """Kernel: :func:`finalize_block` over all strands (used when a collider runs in between)."""

@@ -42,7 +42,7 @@ from .ghosts import GhostTracker
 from .groom import make_groom
 from .guides import GuideSolver
 from .head_track import HeadTrack, IDENTITY, PoseResult
-from .integrate import parallel_from, runs_parallel, threads_for
+from .integrate import max_step_sq, parallel_from, runs_parallel
 from .metrics import max_stretch
 from .model import HeadPose, StrandSet
 from .scene import Scene
@@ -123,6 +123,7 @@ class HairSimulator:
                          self.ghosts.strand_length)
         self._reach = float(max(r.max() for r in reach))
         self._last_speed = 0.0
+        self._gravity_norm = float(np.linalg.norm(scene.gravity))
         self.dt_ns = max(1, int(round(scene.solver.dt * 1e9)))
         self.head = head
         self._rest_at(head)
@@ -147,6 +148,7 @@ class HairSimulator:
                     self.ghosts, self.guides, scene,
                     self.collider if scene.tracking.collide else None, keep_state=True)
         self.dt_ns = max(1, int(round(scene.solver.dt * 1e9)))
+        self._gravity_norm = float(np.linalg.norm(scene.gravity))
         return False
 
     # ---------------------------------------------------------------- input
@@ -227,10 +229,9 @@ class HairSimulator:
         """Deepest hair node inside the head collider [m]; 0 without a collider."""
         if self.collider is None:
             return 0.0
-        with threads_for(self._nodes):
-            d = self.collider.penetration(self.guides.x, self.head)
-            if self.ghosts is not None:
-                d = max(d, self.collider.penetration(self._ghost_x(), self.head))
+        d = self.collider.penetration(self.guides.x, self.head)
+        if self.ghosts is not None:
+            d = max(d, self.collider.penetration(self._ghost_x(), self.head))
         return d
 
     # ------------------------------------------------------------ internals
@@ -266,10 +267,10 @@ class HairSimulator:
         limit = SPLIT_FRACTION * sv.max_displacement if sv.max_displacement > 0 else \
             SPLIT_DISTANCE
         angle = quat_angle(head_prev.quaternion, head.quaternion)
-        rigid = float(np.linalg.norm(head.position - head_prev.position)) + \
+        dx, dy, dz = (head.position - head_prev.position).tolist()
+        rigid = math.sqrt(dx * dx + dy * dy + dz * dz) + \
             2.0 * math.sin(0.5 * angle) * self._reach
-        g = float(np.linalg.norm(self.scene.gravity))
-        motion = max(rigid, self._last_speed * dt) + g * dt * dt
+        motion = max(rigid, self._last_speed * dt) + self._gravity_norm * dt * dt
         if not motion > limit:          # also False for NaN: never split on bad numbers
             return 1
         floor = max(1, int(dt / MIN_SPLIT_DT + 1e-9))
@@ -280,8 +281,7 @@ class HairSimulator:
         self.guide_solver.step(dt, head_prev, head)
         if self.ghost_tracker is not None and self.scene.tracking.every_substep:
             self.ghost_tracker.step(dt, self._x_old, head)
-        d = self.guides.x - self._x_old
-        self._last_speed = math.sqrt(float(np.max(np.einsum('snk,snk->sn', d, d)))) / dt
+        self._last_speed = math.sqrt(max_step_sq(self.guides.x, self._x_old)) / dt
 
     # Ghost tracking schedule.  With ``tracking.every_substep: false`` the ghosts are tracked
     # once per advance_to() call (one head pose), over all the guide substeps of that call, with

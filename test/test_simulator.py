@@ -222,3 +222,20 @@ def test_warm_up_loads_the_kernels_the_full_scene_runs(monkeypatch, guides, per_
     assert {'ftl_step_serial', 'track_groups_serial'} <= calls
     assert ({'ftl_step', 'track_groups'} <= calls) == parallel
     assert integrate.PARALLEL_MIN_NODES == 1 << 17          # restored after warm-up
+
+
+def test_max_step_sq_is_the_largest_squared_displacement():
+    """The substep splitter's speed estimate: the numpy expression it replaced (to the last
+    bit or two: summation order), and NaN when any displacement is NaN (so that no split is
+    made on bad numbers)."""
+    from hair_tracking.integrate import max_step_sq
+    rng = np.random.default_rng(8)
+    x, x_old = rng.normal(size=(2, 9, 7, 3))
+    d = x - x_old
+    assert max_step_sq(x, x_old) == pytest.approx(float(np.max(np.einsum('snk,snk->sn', d, d))),
+                                                  rel=1e-15)
+    assert max_step_sq(x, x) == 0.0
+    x[4, 2, 1] = np.nan
+    assert np.isnan(max_step_sq(x, x_old))
+    x[0, 0, 0] = 1e300                      # a larger value after the NaN does not hide it
+    assert np.isnan(max_step_sq(x, x_old))

@@ -44,3 +44,17 @@ def test_rotation_between():
         assert np.allclose(r @ a, b) and np.allclose(r @ r.T, np.eye(3))
     r = rotation_between(np.array([1.0, 0, 0]), np.array([-1.0, 0, 0]))
     assert np.allclose(r @ [1, 0, 0], [-1, 0, 0]) and np.isclose(np.linalg.det(r), 1.0)
+
+
+def test_quat_to_matrix_one_quaternion_equals_the_stacked_path():
+    """The scalar path for one quaternion (used every substep) gives the very bits of the
+    vectorised path for stacks."""
+    rng = np.random.default_rng(4)
+    qs = rng.normal(size=(50, 4))
+    qs /= np.linalg.norm(qs, axis=1, keepdims=True)
+    stacked = quat_to_matrix(qs)
+    for q, m in zip(qs, stacked):
+        one = quat_to_matrix(q)
+        assert one.shape == (3, 3) and one.dtype == np.float64
+        assert np.array_equal(one, m)
+    assert np.array_equal(quat_to_matrix([0, 0, 0, 1]), np.eye(3))
