@@ -25,7 +25,7 @@ lifetime of a few publishing periods), optionally ``hair/guides/points`` and
 ``hair/guides/markers``, and ``/diagnostics``.  Both hair outputs are serialized straight to CDR
 bytes with numpy (:mod:`msg_adapters.pointcloud`, :mod:`msg_adapters.marker_cdr`).  Publishing
 runs on its own timer (``publish_rate_hz``); ``publish_on_pose`` additionally publishes right
-after a simulated pose when a period has passed, for the lowest latency.
+after a simulated pose when a period of stream time has passed, for the lowest latency.
 
 Service ``~/reset`` (std_srvs/Trigger): hair back to its rest shape at the current head pose.
 
@@ -183,6 +183,7 @@ class HairSimNode(Node):
         self._has_pose = False
         self._dirty = False              # the hair changed since the last encoding
         self._last_publish = -math.inf   # time.monotonic() of the last publication
+        self._pose_published_ns = None   # sim time of the last frame publish_on_pose sent
         self._tf_child: Optional[str] = None
         self._tf_seen_ns = 0
         self._color_cache = StrandColorCache()
@@ -360,8 +361,7 @@ class HairSimNode(Node):
         self._last_arrival_ns = now_ns
         self._last_stamp_ns = t_ns
         self._step(t_ns + offset)
-        if self._settings.publish_on_pose and \
-                time.monotonic() - self._last_publish >= 0.9 * self._settings.publish_period:
+        if self._settings.publish_on_pose and self._pose_frame_due():
             self._publish()
 
     def _on_tf(self, msg) -> None:
@@ -394,6 +394,20 @@ class HairSimNode(Node):
         self.step_ms.append((time.perf_counter() - start) * 1e3)
         self._has_pose = True
         self._dirty = True
+
+    def _pose_frame_due(self) -> bool:
+        """``publish_on_pose``: is this pose's frame due?  Once 0.9 publishing periods of
+        *stream* time (the stamps) have passed since the last frame sent this way, or time went
+        back.  Counting stamps rather than wall-clock time makes the set of frames a function of
+        the input alone, as in ``hair_sim_bag run``: poses that DDS delivers in a burst (1 ms
+        apart on the wall clock, 8 ms apart in their stamps) each get their frame, where a
+        wall-clock cap skipped one and the next pose overwrote it before the timer sent it."""
+        t = self.sim.time_ns
+        last = self._pose_published_ns
+        if last is not None and 0 <= t - last < 0.9e9 * self._settings.publish_period:
+            return False
+        self._pose_published_ns = t
+        return True
 
     def _on_idle_timer(self) -> None:
         """A stale stream: hold the last pose and let the hair settle on the node clock."""

@@ -338,8 +338,9 @@ NODE_PARAMS: Tuple[Param, ...] = (
           'rate of the hair/points and hair/markers outputs (a timer of its own, independent '
           'of the pose rate)', unit='Hz', lo=0.5, hi=1000.0),
     Param('publish_on_pose', 'bool', False,
-          'also publish right after a pose was simulated when a publishing period has passed '
-          '(lower latency; the rate stays capped at publish_rate_hz)'),
+          'also publish right after a pose was simulated when a publishing period of stream '
+          'time (pose stamps) has passed (lower latency; at most publish_rate_hz frames per '
+          'second of stream time)'),
     Param('publish_guides', 'bool', False,
           'also publish the guide strands on hair/guides/points and hair/guides/markers'),
     Param('marker_style', 'string', 'line_list',

@@ -276,6 +276,20 @@ def test_publishing_has_its_own_rate_and_resends_an_unchanged_frame(harness):
 
 
 # ====================================================================== time
+def test_publish_on_pose_counts_stream_time_not_the_wall_clock(harness):
+    """``publish_on_pose`` sends a pose's frame once 0.9 publishing periods of *stamps* have
+    passed, however close together the poses were handled (a burst from DDS must not lose a
+    frame, as a wall-clock cap did); time going back makes the next frame due."""
+    h = harness(**{'publish_on_pose': True, 'publish_rate_hz': 100.0})
+    sim = h.node.sim
+    due = []
+    for step_ms in (0, 5, 5, 9, 1, 20, -100):       # handled back to back, microseconds apart
+        sim.time_ns = (sim.time_ns or 10 ** 9) + step_ms * 1_000_000
+        due.append(h.node._pose_frame_due())
+    # 9 ms of stamps is the 0.9-period threshold at 100 Hz
+    assert due == [True, False, True, True, False, True, True]
+
+
 def test_nan_poses_are_dropped_and_counted(harness):
     h = harness()
     pub = h.pose_publisher()
