@@ -65,10 +65,13 @@ def threads_for(nodes: int):
 
 def serial_twin(kernel):
     """The parallel numba ``kernel`` compiled without ``parallel``: its ``prange`` loops run as
-    plain loops on the calling thread, with the same results (the loop bodies are the same
-    code).  For problems below :data:`PARALLEL_MIN_NODES`: even on one thread a parallel
-    region costs a launch through the threading layer, which at 64 guides of 16 nodes was a
-    third of a guide substep (0.16 -> 0.11 ms measured with twins of the five guide kernels).
+    plain loops on the calling thread.  The results are bit-identical where the loop body is a
+    compiled function of its own (``*_block``); a body inlined into both variants may be
+    contracted differently by LLVM (it was in ``ftl_restore``: last-bit differences, hence
+    ``ftl_restore_block``).  For problems below :data:`PARALLEL_MIN_NODES`: even on one
+    thread a parallel region costs a launch through the threading layer, which at 64 guides of
+    16 nodes was a third of a guide substep (0.16 -> 0.11 ms measured with twins of the five
+    guide kernels).
 
     The twin is a copy of the Python function named ``<name>_serial``, so numba's on-disk cache
     (whose index is keyed by the function's qualified name and line, not by its options) keeps

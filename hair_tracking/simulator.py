@@ -113,8 +113,6 @@ class HairSimulator:
                 self.ghosts, self.guides, scene,
                 self.collider if scene.tracking.collide else None)
         self._x_old = np.empty_like(self.guides.x)
-        self._nodes = self.guides.x.shape[0] * self.guides.x.shape[1] + (
-            0 if self.ghosts is None else self.ghosts.x.shape[0] * self.ghosts.x.shape[1])
         self._ghost_guide_x = np.empty_like(self.guides.x)   # guides at the last ghost step
         # farthest any hair node can be from the head origin [m]: root distance + strand length
         reach = [np.linalg.norm(self.guides.rest[:, 0], axis=1) + self.guides.strand_length]
@@ -345,9 +343,11 @@ def warm_up(scene: Scene) -> HairSimulator:
     sim.advance_to(1 + 4 * dt_ns)
     sim.max_stretch()
     sim.penetration()
-    nodes = g.guides * g.guide_nodes + g.guides * g.ghosts_per_guide * g.ghost_nodes
-    if runs_parallel(nodes):
-        # the full scene runs the parallel kernels (the tiny copy ran their serial twins)
+    guide_nodes = g.guides * g.guide_nodes
+    ghost_nodes = g.guides * g.ghosts_per_guide * g.ghost_nodes
+    if runs_parallel(guide_nodes) or runs_parallel(ghost_nodes):
+        # the full scene runs parallel kernels (the tiny copy ran their serial twins); each
+        # stage decides on its own node count, as GuideSolver and GhostTracker do
         with parallel_from(0):
             sim.push_pose(1 + 8 * dt_ns, [0.0, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0])
             sim.advance_to(1 + 8 * dt_ns)

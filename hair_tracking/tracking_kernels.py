@@ -247,10 +247,9 @@ def track_groups_serial(xb, vb, rest, seg_len, order, group_start, block_group, 
 @njit(cache=True, fastmath=TRACK_FASTMATH, error_model='numpy', **NO_REFCOUNT)
 def _track_chunk(c, n_chunks, xb, vb, rest, seg_len, order, group_start, block_group,
                  group_guide, group_row, node_table, node_row, rest_off, root_rest, inv_len,
-                 var_target,
-                 guide_x, guide_x_old, tan_rest, R, pos, dt, elastic_mode, use_tip, com_w,
-                 max_weight, k_off, k_com, spread, ftl, collide, center, axes, friction, refine,
-                 q_buf, buf, tmp, clamped, contacts):
+                 var_target, guide_x, guide_x_old, tan_rest, R, pos, dt, elastic_mode, use_tip,
+                 com_w, max_weight, k_off, k_com, spread, ftl, collide, center, axes, friction,
+                 refine, q_buf, buf, tmp, clamped, contacts):
     """Chunk ``c`` of :func:`track_groups` (its blocks ``c B / C .. (c+1) B / C - 1``).  A
     function of its own so that the parallel loop's body stays small (numba's parfor lowering
     copies the body's IR, which took most of the compile time when everything was inlined)."""
