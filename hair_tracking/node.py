@@ -68,7 +68,8 @@ from . import params as P
 from .head_track import PoseResult
 from .resources import config_path
 from .scene import Scene, SceneError
-from .simulator import freeze_heap, HairSimulator, warm_up as warm_up_simulator
+from .process_tuning import freeze_heap, retain_freed_memory
+from .simulator import HairSimulator, warm_up as warm_up_simulator
 from .strand_colors import StrandColorCache
 
 try:                                    # optional: /tf input
@@ -168,6 +169,8 @@ class HairSimNode(Node):
         self._declare_all()
         settings = self._settings
         self._apply_threads(settings.numba_threads)
+        self.memory_setting = retain_freed_memory(settings.malloc_retain_mb)
+        self.get_logger().info(self.memory_setting)
         self.sim = HairSimulator(settings.scene)
         if settings.warmup:
             secs = warm_up(settings.scene)

@@ -316,7 +316,8 @@ def run_bag(input_path: str, output_path: str, settings: Settings,
     output path then).  ``progress(done, total)`` is called as poses are processed.
     """
     from .head_track import PoseResult
-    from .simulator import freeze_heap, HairSimulator
+    from .process_tuning import freeze_heap, retain_freed_memory
+    from .simulator import HairSimulator
 
     opt = options or RunOptions()
     scene = settings.scene
@@ -341,6 +342,7 @@ def run_bag(input_path: str, output_path: str, settings: Settings,
         raise BagError('the output frame is empty (set fixed_frame / head_frame)', EXIT_CONTENT)
 
     t_setup = time.perf_counter()
+    retain_freed_memory(settings.malloc_retain_mb)
     sim = HairSimulator(scene)
     enc = FrameEncoder(settings)
     if opt.points:      # load (or compile) the cloud's compiled point writer outside the loop

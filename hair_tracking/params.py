@@ -364,6 +364,13 @@ NODE_PARAMS: Tuple[Param, ...] = (
     Param('numba_threads', 'int', 0,
           'threads of the parallel numba kernels; 0 = all cores (NUMBA_NUM_THREADS). On a '
           'busy machine fewer threads than cores are often faster', lo=0, hi=1024),
+    Param('malloc_retain_mb', 'int', 256,
+          'freed memory glibc keeps mapped for reuse (process-wide mallopt: trim threshold, '
+          'and buffers up to 32 MB from the heap). Large clouds are copied into fresh buffers '
+          'several times on their way to DDS; returning those to the system makes every copy '
+          'fault in its pages again (10 k ghosts: latency 33 -> 12 ms). 0 = glibc defaults; '
+          'ignored when GLIBC_TUNABLES sets malloc tunables', unit='MB', lo=0, hi=2047,
+          read_only=True),
 )
 
 

@@ -29,7 +29,6 @@ Time handling
   stay deterministic; ``counters.extra['split_substeps']`` counts the extra substeps.
 """
 from dataclasses import dataclass, field
-import gc
 import math
 import time
 from typing import Dict, Optional
@@ -354,16 +353,3 @@ def warm_up(scene: Scene) -> HairSimulator:
             sim.max_stretch()
             sim.penetration()
     return sim
-
-
-def freeze_heap() -> None:
-    """Take every object alive now out of the cyclic garbage collector's reach (``gc.freeze``).
-
-    Call it once the process is set up (modules imported, kernels loaded, the hair built).  A
-    full collection walks every tracked object: with rclpy and numba loaded (about 120 k
-    objects) that is 67 ms on this machine, a pause that lands on whatever frame triggers it.
-    Frozen objects are never examined again; what the loop allocates later is collected as
-    usual.  Garbage made before the call is collected first.
-    """
-    gc.collect()
-    gc.freeze()

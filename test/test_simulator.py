@@ -168,36 +168,6 @@ def test_update_scene_rebuilds_only_for_groom_changes():
     assert np.all(np.isfinite(sim.frame().ghosts))
 
 
-def test_freeze_heap_collects_then_freezes_the_start_up_objects():
-    """In a fresh interpreter: garbage made before the call is collected, every live object is
-    frozen (so later full collections no longer walk them), and new garbage is still collected."""
-    import subprocess
-    import sys
-    code = '''
-import gc, weakref
-from hair_tracking.simulator import freeze_heap
-class Cycle:
-    pass
-def make():
-    a, b = Cycle(), Cycle()
-    a.b, b.a = b, a
-    return weakref.ref(a)
-assert gc.get_freeze_count() == 0
-before = make()
-freeze_heap()
-assert before() is None, 'garbage from before the freeze was not collected'
-assert gc.get_freeze_count() > 1000, gc.get_freeze_count()
-after = make()
-gc.collect()
-assert after() is None, 'garbage made after the freeze is not collected'
-print('ok')
-'''
-    out = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True,
-                         timeout=120)
-    assert out.returncode == 0, out.stderr
-    assert out.stdout.strip() == 'ok'
-
-
 @pytest.mark.parametrize('guides, per_guide, parallel', [(64, 16, False), (128, 78, True)])
 def test_warm_up_loads_the_kernels_the_full_scene_runs(monkeypatch, guides, per_guide, parallel):
     """A small groom runs the serial twins, a large one (>= PARALLEL_MIN_NODES nodes) the
