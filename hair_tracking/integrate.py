@@ -37,10 +37,15 @@ from numba import njit, prange
 #: Strands one thread processes together. The constraint sweeps interleave the strands of a
 #: block (strand index innermost), so the CPU overlaps their independent dependency chains;
 #: measured on the 2-core Xeon here: about 2.5x faster than one strand at a time.
-#: Below this many nodes a kernel runs on one thread: the work (about 1 ms or less) is then
-#: smaller than what a busy second core costs to join a parallel region (measured 3-15x slower
-#: on the shared 2-core machine).  Results do not depend on the thread count (tested).
-PARALLEL_MIN_NODES = 1 << 17
+#: Below this many nodes a kernel runs on one thread (its serial twin): the work is then
+#: smaller than a parallel region's launch.  The default groom's 64 guides (1 k nodes) stay
+#: serial, its 512 ghosts (8 k nodes) run on all threads.  Measured in the sixth session, after
+#: malloc_retain_mb removed the page-fault storms that had made parallel regions look 3-15x
+#: slower (the fifth session's threshold was 2^17): offline run of the walk sample, loop 2.01
+#: -> 1.66 s (in-process A/B, five runs each; 1 k nodes: 1.85 s); node step at 1 k ghosts
+#: 5.2 -> 3.8 ms, at 512 ghosts and 120 Hz poses 2.0 -> 1.6 ms.  Results do not depend on the
+#: thread count (tested).
+PARALLEL_MIN_NODES = 1 << 12
 
 
 def runs_parallel(nodes: int) -> bool:

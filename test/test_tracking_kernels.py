@@ -298,7 +298,7 @@ def test_tip_weights_follow_arc_length():
 
 
 def test_parallel_and_serial_kernels_agree_bit_for_bit(monkeypatch):
-    """Below 2^17 nodes the tracker calls the serial kernel; forcing the parallel one (any
+    """Below PARALLEL_MIN_NODES the tracker calls the serial kernel; forcing the parallel one (any
     thread count) gives the same bits, with the fused collider on."""
     import hair_tracking.integrate as integrate_module
     from hair_tracking.collision import make_collider
