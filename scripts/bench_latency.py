@@ -74,9 +74,11 @@ def _setting(text):
 def stats(values):
     a = np.asarray(values, dtype=float)
     if a.size == 0:
-        return {'n': 0, 'median_ms': None, 'p99_ms': None, 'max_ms': None}
+        return {'n': 0, 'median_ms': None, 'p90_ms': None, 'p99_ms': None, 'max_ms': None,
+                'share_within_frame': None}
     return {'n': int(a.size), 'median_ms': float(np.median(a)),
-            'p99_ms': float(np.percentile(a, 99)), 'max_ms': float(a.max())}
+            'p90_ms': float(np.percentile(a, 90)), 'p99_ms': float(np.percentile(a, 99)),
+            'max_ms': float(a.max()), 'share_within_frame': float(np.mean(a < FRAME_MS))}
 
 
 def stamp_of(raw):
@@ -236,9 +238,13 @@ def main(argv=None):
         for mode in args.modes:
             r = run_case(ghosts, mode, args, args.domain_id)
             results.append(r)
-            print(f"{r['ghosts']:>7} {mode:>8} | {fmt(r['latency']):>20} | "
+            lat = r['latency']
+            within = '' if lat['n'] == 0 else \
+                f"; latency p90 {lat['p90_ms']:.1f} ms, {100 * lat['share_within_frame']:.0f} % " \
+                f'within {FRAME_MS:.1f} ms'
+            print(f"{r['ghosts']:>7} {mode:>8} | {fmt(lat):>20} | "
                   f"{fmt(r['step']):>17} | {fmt(r['publish']):>20} | "
-                  f"{r['substeps_dropped']} substeps, {r['poses_without_cloud']} poses",
+                  f"{r['substeps_dropped']} substeps, {r['poses_without_cloud']} poses{within}",
                   flush=True)
     if args.json:
         os.makedirs(os.path.dirname(os.path.abspath(args.json)), exist_ok=True)
