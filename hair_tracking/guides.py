@@ -35,6 +35,7 @@ from typing import Any, Dict
 import numpy as np
 
 from hair_tracking import collision, ftl, integrate, pbd_constraints
+from hair_tracking.metrics import max_stretch
 from hair_tracking.model import HeadPose, StrandSet
 
 #: PBD sweeps of the second-neighbour (bending) constraints per FTL substep, before the FTL pass.
@@ -237,15 +238,6 @@ def ftl_bend_stiffness(k: float, dt: float) -> float:
     if dt == BEND_REFERENCE_DT or k <= 0.0 or k >= 1.0:
         return k
     return 1.0 - (1.0 - k) ** (dt / BEND_REFERENCE_DT)
-
-
-def max_stretch(x: np.ndarray, rest_length: np.ndarray) -> float:
-    """``max |l / l0 - 1|`` over the segments of ``x`` (S, N, 3) with ``l0 > 0``; 0 if none."""
-    seg = np.linalg.norm(np.diff(x, axis=1), axis=2)
-    ok = rest_length > 0
-    if not np.any(ok):
-        return 0.0
-    return float(np.max(np.abs(seg[ok] / rest_length[ok] - 1.0)))
 
 
 def _pose(name, head):

@@ -1,10 +1,12 @@
-"""Figures of merit of strand arrays (numpy; cheap enough to run per published frame).
+"""Figures of merit of strand arrays (numpy, and one compiled pass for the per-frame stretch
+check).
 
 Stretch is ``max |l / l0 - 1|`` over segments (the metric of research.md, section A); errors of an
 approximation against a reference are normalised by strand length, as in the reduced-hair
 literature (Chai et al. 2014).
 """
 import numpy as np
+from numba import njit
 
 
 def segment_lengths(x: np.ndarray) -> np.ndarray:
@@ -14,13 +16,38 @@ def segment_lengths(x: np.ndarray) -> np.ndarray:
 
 
 def max_stretch(x: np.ndarray, rest_length: np.ndarray) -> float:
-    """Largest relative length error of any segment (0 means exact)."""
-    if x.size == 0:
-        return 0.0
-    with np.errstate(divide='ignore', invalid='ignore'):
-        r = np.abs(segment_lengths(x) / rest_length - 1.0)
-    r = r[np.isfinite(r)]
-    return float(r.max()) if r.size else 0.0
+    """Largest relative length error ``|l / l0 - 1|`` of any segment of ``x`` (S, N, 3) whose
+    rest length ``l0`` (S, N-1) is positive; 0 when there is none or the lengths are exact, NaN
+    when a measured segment has a NaN length (a check must not hide broken hair).
+
+    One compiled pass without temporaries: run on every published frame (and by the node's
+    diagnostics), where the numpy expression (segment differences, norms, ratios, a mask: five
+    arrays the size of the hair) took 0.19 ms a frame at 512 strands and several ms at 10 k."""
+    x = np.asarray(x, dtype=np.float64)
+    rest_length = np.asarray(rest_length, dtype=np.float64)
+    if x.ndim != 3 or x.shape[2] != 3 or rest_length.shape != (x.shape[0], x.shape[1] - 1):
+        raise ValueError(f'max_stretch: x must be (S, N, 3) and rest_length (S, N-1), got '
+                         f'{x.shape} and {rest_length.shape}')
+    return float(_max_stretch(x, rest_length))
+
+
+@njit(cache=True, error_model='numpy')
+def _max_stretch(x, rest_length):
+    worst = 0.0
+    for s in range(x.shape[0]):
+        for i in range(x.shape[1] - 1):
+            l0 = rest_length[s, i]
+            if not l0 > 0.0:
+                continue
+            d0 = x[s, i + 1, 0] - x[s, i, 0]
+            d1 = x[s, i + 1, 1] - x[s, i, 1]
+            d2 = x[s, i + 1, 2] - x[s, i, 2]
+            r = abs(np.sqrt(d0 * d0 + d1 * d1 + d2 * d2) / l0 - 1.0)
+            if r > worst or r != r:
+                worst = r
+                if r != r:
+                    return r
+    return worst
 
 
 def kinetic_energy(v: np.ndarray) -> float:

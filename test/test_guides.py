@@ -435,3 +435,26 @@ def test_max_stretch_helper():
     x = np.array([[[0, 0, 0], [0, 0, 1.1], [0, 0, 1.1]]], float)
     assert guides.max_stretch(x, np.array([[1.0, 0.0]])) == pytest.approx(0.1)
     assert guides.max_stretch(x, np.array([[0.0, 0.0]])) == 0.0
+
+
+def test_max_stretch_agrees_with_numpy_and_never_hides_nan():
+    """The compiled per-frame stretch check against the plain numpy expression on random hair
+    (some rest lengths zero: those segments are not measured; a strided view as input), and
+    NaN in a measured segment gives NaN, not the largest finite value."""
+    rng = np.random.default_rng(11)
+    x = rng.normal(size=(37, 9, 3))
+    rest = np.abs(rng.normal(size=(37, 8))) + 0.1
+    rest[rng.random(rest.shape) < 0.2] = 0.0
+    seg = np.linalg.norm(np.diff(x, axis=1), axis=2)
+    ok = rest > 0
+    expected = np.max(np.abs(seg[ok] / rest[ok] - 1.0))
+    assert max_stretch(x, rest) == pytest.approx(expected, rel=1e-14)
+    assert max_stretch(x[::2], rest[::2]) == pytest.approx(
+        np.max(np.abs(seg[::2][ok[::2]] / rest[::2][ok[::2]] - 1.0)), rel=1e-14)
+    bad = x.copy()
+    s, i = np.argwhere(ok)[3]
+    bad[s, i + 1, 1] = np.nan
+    assert np.isnan(max_stretch(bad, rest))
+    assert max_stretch(x, np.zeros_like(rest)) == 0.0
+    with pytest.raises(ValueError, match='rest_length'):
+        max_stretch(x, rest[:, 1:])
