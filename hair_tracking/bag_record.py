@@ -21,6 +21,7 @@ from typing import Callable, Dict, List, Optional, Sequence
 from . import bag_io
 from .bag_io import BagError, EXIT_OK, EXIT_USAGE
 from .bag_play import check_topic_name, message_class
+from .process_tuning import DEFAULT_RETAIN_MB, retain_freed_memory
 
 #: never recorded with --all (rosout is noise; parameter events are per node)
 _SKIP_ALL = ('/rosout', '/parameter_events')
@@ -188,6 +189,7 @@ def main_record(args) -> int:
     def on_term(signum, frame):
         raise KeyboardInterrupt
     previous = signal.signal(signal.SIGTERM, on_term)
+    retain_freed_memory(DEFAULT_RETAIN_MB)     # each recorded cloud is a fresh large buffer
     kwargs = {} if args.domain_id is None else {'domain_id': args.domain_id}
     rclpy.init(args=None, **kwargs)
     node = rec = None

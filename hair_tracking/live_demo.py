@@ -31,6 +31,7 @@ import numpy as np
 
 from . import bag_io
 from .bag_io import BagError
+from .process_tuning import DEFAULT_RETAIN_MB, retain_freed_memory
 
 DEFAULT_DOMAIN = 88
 NODE_READY_TIMEOUT_S = 120.0      # first start may compile every numba kernel
@@ -114,6 +115,7 @@ def run_demo(args) -> int:
     from .bag_render import render
 
     os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+    retain_freed_memory(DEFAULT_RETAIN_MB)     # the player and the recorder run in this process
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     bag = args.bag or bag_io.bundled_bag()

@@ -25,6 +25,7 @@ from typing import Any, Dict, Iterable, Mapping, Optional, Tuple
 
 import yaml
 
+from .process_tuning import DEFAULT_RETAIN_MB
 from .scene import RULES, Scene, SceneError
 
 NODE_NAME = 'hair_sim'
@@ -364,7 +365,7 @@ NODE_PARAMS: Tuple[Param, ...] = (
     Param('numba_threads', 'int', 0,
           'threads of the parallel numba kernels; 0 = all cores (NUMBA_NUM_THREADS). On a '
           'busy machine fewer threads than cores are often faster', lo=0, hi=1024),
-    Param('malloc_retain_mb', 'int', 256,
+    Param('malloc_retain_mb', 'int', DEFAULT_RETAIN_MB,
           'freed memory glibc keeps mapped for reuse (process-wide mallopt: trim threshold, '
           'and buffers up to 32 MB from the heap). Large clouds are copied into fresh buffers '
           'several times on their way to DDS; returning those to the system makes every copy '

@@ -22,6 +22,9 @@ import gc
 import os
 from typing import Optional
 
+#: Default of the node's ``malloc_retain_mb`` and what the bag tools (record, play, the live
+#: demo) use: a few clouds' worth of copies, small next to a desktop's memory.
+DEFAULT_RETAIN_MB = 256
 # mallopt(3) parameter numbers (glibc malloc.h)
 M_TRIM_THRESHOLD = -1
 M_MMAP_THRESHOLD = -3
