@@ -66,6 +66,7 @@ from msg_adapters.pose import pose_from_msg, PoseError
 
 from . import params as P
 from .head_track import PoseResult
+from .load_shedding import LoadShedder
 from .resources import config_path
 from .scene import Scene, SceneError
 from .process_tuning import freeze_heap, retain_freed_memory
@@ -170,6 +171,7 @@ class HairSimNode(Node):
         settings = self._settings
         self._apply_threads(settings.numba_threads)
         self.memory_setting = retain_freed_memory(settings.malloc_retain_mb)
+        self.shedder = LoadShedder(settings.load_shedding_budget)
         self.get_logger().info(self.memory_setting)
         self.sim = HairSimulator(settings.scene)
         if settings.warmup:
@@ -195,6 +197,7 @@ class HairSimNode(Node):
         self.frames_built = 0            # sim.frame() calls made for publishing
         self.step_ms = collections.deque(maxlen=1000)
         self.publish_ms = collections.deque(maxlen=1000)
+        self._publish_ms_since_pose = 0.0    # publishing time since the last pose (shedding)
         self._diag_marks = (0, 0)        # (dropped substeps, rejected) at the last report
 
         depth = settings.output_queue_depth
@@ -315,6 +318,7 @@ class HairSimNode(Node):
         old, self._settings = self._settings, new
         if new.scene != old.scene:
             if self.sim.update_scene(new.scene):
+                self.shedder.reset()
                 self.rebuilds += 1
                 self.get_logger().info(
                     f'groom changed: hair rebuilt ({self.sim.guides.count} guides, '
@@ -363,9 +367,12 @@ class HairSimNode(Node):
         self._pose_child = sample.child_frame_id
         self._last_arrival_ns = now_ns
         self._last_stamp_ns = t_ns
+        if result.is_reset:
+            self.shedder.reset()
         self._step(t_ns + offset)
         if self._settings.publish_on_pose and self._pose_frame_due():
             self._publish()
+        self._shed_load(t_ns)
 
     def _on_tf(self, msg) -> None:
         """Pick the head transform out of a TFMessage (``head_frame`` or the prefix)."""
@@ -397,6 +404,25 @@ class HairSimNode(Node):
         self.step_ms.append((time.perf_counter() - start) * 1e3)
         self._has_pose = True
         self._dirty = True
+
+    def _shed_load(self, stamp_ns: int) -> None:
+        """Track the ghosts once per pose while the steps do not fit the pose period
+        (``load_shedding``; the policy is :class:`~hair_tracking.load_shedding.LoadShedder`)."""
+        s, sim = self._settings, self.sim
+        if not s.load_shedding:
+            sim.track_once_per_call = False
+            return
+        self.shedder.budget = s.load_shedding_budget
+        c = sim.counters
+        work = self.step_ms[-1] + self._publish_ms_since_pose   # this thread's time per pose
+        self._publish_ms_since_pose = 0.0
+        shed = self.shedder.update(stamp_ns, work, c.last_track_ms, c.last_substeps)
+        if shed != sim.track_once_per_call:
+            sim.track_once_per_call = shed
+            self.get_logger().info(
+                'load shedding: ghosts tracked once per pose (simulating and publishing took '
+                f'more than {s.load_shedding_budget:g} of the pose period)' if shed else
+                'load shedding ended: ghosts tracked as the scene says again')
 
     def _pose_frame_due(self) -> bool:
         """``publish_on_pose``: is this pose's frame due?  Once 0.9 publishing periods of
@@ -505,7 +531,9 @@ class HairSimNode(Node):
             o.pub.publish(data)
             o.published += 1
         self._dirty = False
-        self.publish_ms.append((time.perf_counter() - start) * 1e3)
+        took = (time.perf_counter() - start) * 1e3
+        self.publish_ms.append(took)
+        self._publish_ms_since_pose += took
 
     def _colors(self, ns: str, n: int, rgba) -> np.ndarray:
         return self._color_cache.get(ns, n, rgba)
@@ -532,6 +560,9 @@ class HairSimNode(Node):
             level = DiagnosticStatus.WARN
             problems.append(f'{self.rejected - rejected_before} head poses rejected')
         self._diag_marks = (c.substeps_dropped, self.rejected)
+        if sim.track_once_per_call:
+            level = DiagnosticStatus.WARN
+            problems.append('load shedding: ghosts tracked once per pose to keep up')
         step = list(self.step_ms)[-100:]
         pub = list(self.publish_ms)[-100:]
 
@@ -555,6 +586,9 @@ class HairSimNode(Node):
             kv('sim_time_ns', sim.time_ns if sim.time_ns is not None else 'n/a'),
             kv('stream_offset_ms', f'{self._offset_ns * 1e-6:.3f}'),
             kv('numba_threads', self.numba_threads),
+            kv('load_shedding', 'active' if sim.track_once_per_call else
+               ('ready' if self._settings.load_shedding else 'off')),
+            kv('load_shedding_switches', self.shedder.switches),
             kv('output_frame', self.output_frame_id()),
         ]
         return DiagnosticStatus(level=level, name=f'{self.get_name()}: hair simulation',

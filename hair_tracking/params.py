@@ -365,6 +365,15 @@ NODE_PARAMS: Tuple[Param, ...] = (
     Param('numba_threads', 'int', 0,
           'threads of the parallel numba kernels; 0 = all cores (NUMBA_NUM_THREADS). On a '
           'busy machine fewer threads than cores are often faster', lo=0, hi=1024),
+    Param('load_shedding', 'bool', True,
+          'when simulating and publishing a pose take longer than load_shedding_budget of the '
+          'pose period (median of 8 poses), track the ghosts once per pose instead of every '
+          'substep until the full schedule fits again; keeps a live stream from queueing up '
+          '(10 k ghosts on 2 cores: 200-330 ms latency without). Never used by hair_sim_bag '
+          'run'),
+    Param('load_shedding_budget', 'double', 0.7,
+          'share of the pose period that simulating and publishing a pose may take before load '
+          'shedding starts (it ends below 2/3 of that)', lo=0.05, hi=10.0),
     Param('malloc_retain_mb', 'int', DEFAULT_RETAIN_MB,
           'freed memory glibc keeps mapped for reuse (process-wide mallopt: trim threshold, '
           'and buffers up to 32 MB from the heap). Large clouds are copied into fresh buffers '

@@ -15,8 +15,9 @@ Time handling
 * Time going backwards or a teleport carries the hair rigidly to the new head pose with zero
   velocity (no whip); an explicit :meth:`reset` puts the hair back in its rest shape and lets it
   settle.
-* Ghosts are tracked after every guide substep, or - with ``tracking.every_substep: false`` -
-  once per ``advance_to`` call (one head pose) over all its substeps, 2-4x cheaper.
+* Ghosts are tracked after every guide substep, or - with ``tracking.every_substep: false`` or
+  while ``track_once_per_call`` is set (the live node's load shedding) - once per
+  ``advance_to`` call (one head pose) over all its substeps, 2-4x cheaper.
 * A substep in which a hair node would move farther than half the per-substep displacement clamp
   (``solver.max_displacement``; 2.5 cm when the clamp is off) is *split* into equal shorter
   substeps, at most :data:`MAX_SPLIT` and none shorter than :data:`MIN_SPLIT_DT`, with the head
@@ -82,6 +83,7 @@ class Counters:
     substeps_dropped: int = 0
     resets: int = 0
     last_advance_ms: float = 0.0
+    last_track_ms: float = 0.0       # ghost tracking inside the last advance_to
     last_substeps: int = 0
     extra: Dict[str, int] = field(default_factory=dict)
 
@@ -95,6 +97,9 @@ class HairSimulator:
         self.track = HeadTrack(scene.head_track)
         self.counters = Counters()
         self.time_ns: Optional[int] = None
+        #: Track the ghosts once per advance_to call even when the scene says every substep
+        #: (load shedding, set by the live node when it falls behind; see load_shedding.py).
+        self.track_once_per_call = False
         self._build()
 
     # ------------------------------------------------------------- assembly
@@ -181,6 +186,7 @@ class HairSimulator:
             times = [self.time_ns + self.dt_ns * (k + 1) for k in range(due)]
             self.time_ns += self.dt_ns * int(due)
         dt = self.scene.solver.dt
+        self.counters.last_track_ms = 0.0
         self._begin_ghosts()
         for t in times:
             head = self.track.sample(t)
@@ -276,8 +282,10 @@ class HairSimulator:
     def _step(self, dt: float, head_prev: HeadPose, head: HeadPose) -> None:
         np.copyto(self._x_old, self.guides.x)
         self.guide_solver.step(dt, head_prev, head)
-        if self.ghost_tracker is not None and self.scene.tracking.every_substep:
+        if self.ghost_tracker is not None and self._every_substep():
+            start = time.perf_counter()
             self.ghost_tracker.step(dt, self._x_old, head)
+            self.counters.last_track_ms += (time.perf_counter() - start) * 1e3
         self._last_speed = math.sqrt(max_step_sq(self.guides.x, self._x_old)) / dt
 
     # Ghost tracking schedule.  With ``tracking.every_substep: false`` the ghosts are tracked
@@ -288,24 +296,33 @@ class HairSimulator:
     # segment 100 mm') the energy measured over the still tail rises by 1.46 J/kg (bound 1.39;
     # 0.57 every substep), with centre-of-mass tracking on whatever its strength, while the
     # hair still swings there (see docs/ghosts.md and the session notes).
+    def _every_substep(self) -> bool:
+        return self.scene.tracking.every_substep and not self.track_once_per_call
+
     def _begin_ghosts(self) -> None:
-        if self.ghost_tracker is not None and not self.scene.tracking.every_substep:
+        if self.ghost_tracker is not None and not self._every_substep():
             np.copyto(self._ghost_guide_x, self.guides.x)
 
     def _track_ghosts(self, dt: float, substeps: int) -> None:
-        if self.ghost_tracker is None or self.scene.tracking.every_substep or substeps == 0:
+        if self.ghost_tracker is None or self._every_substep() or substeps == 0:
             return
+        start = time.perf_counter()
         self.ghost_tracker.step(dt, self._ghost_guide_x, self.head, substeps=substeps)
+        self.counters.last_track_ms += (time.perf_counter() - start) * 1e3
 
     def _rest_at(self, head: HeadPose) -> None:
         self.guide_solver.reset(head)
         if self.ghost_tracker is not None:
             self.ghost_tracker.reset(head)
-        self._begin_ghosts()
-        settle = int(round(self.scene.solver.settle_time / self.scene.solver.dt))
-        for _ in range(settle):
-            self._substep(self.scene.solver.dt, head, head)
-        self._track_ghosts(self.scene.solver.dt * settle, settle)
+        once, self.track_once_per_call = self.track_once_per_call, False   # the scene's rest
+        try:
+            self._begin_ghosts()
+            settle = int(round(self.scene.solver.settle_time / self.scene.solver.dt))
+            for _ in range(settle):
+                self._substep(self.scene.solver.dt, head, head)
+            self._track_ghosts(self.scene.solver.dt * settle, settle)
+        finally:
+            self.track_once_per_call = once
         for strands in (self.guides, self.ghosts):
             if strands is not None:
                 strands.v[...] = 0.0

@@ -184,6 +184,8 @@ def run_case(ghosts, mode, args, domain_id):
         'latency': stats(lat), 'poses_without_cloud': missing,
         'step': stats(step_ms), 'publish': stats(pub_ms),
         'substeps_dropped': int(c.substeps_dropped), 'poses_rejected': int(node.rejected),
+        'load_shedding_switches': int(node.shedder.switches),
+        'load_shedding_at_end': bool(node.sim.track_once_per_call),
     }
     node_ex.shutdown(timeout_sec=1.0)
     probe_ex.shutdown(timeout_sec=1.0)
@@ -244,7 +246,9 @@ def main(argv=None):
                 f'within {FRAME_MS:.1f} ms'
             print(f"{r['ghosts']:>7} {mode:>8} | {fmt(lat):>20} | "
                   f"{fmt(r['step']):>17} | {fmt(r['publish']):>20} | "
-                  f"{r['substeps_dropped']} substeps, {r['poses_without_cloud']} poses{within}",
+                  f"{r['substeps_dropped']} substeps, {r['poses_without_cloud']} poses{within}"
+                  f"; load shedding switched {r['load_shedding_switches']}x"
+                  f"{', on at the end' if r['load_shedding_at_end'] else ''}",
                   flush=True)
     if args.json:
         os.makedirs(os.path.dirname(os.path.abspath(args.json)), exist_ok=True)

@@ -37,7 +37,8 @@ SMALL = {'groom.guides': 5, 'groom.ghosts_per_guide': 2, 'groom.guide_nodes': 7,
          'groom.ghost_nodes': 7, 'solver.settle_time': 0.05, 'stale_timeout': 30.0,
          'publish_on_pose': True, 'publish_rate_hz': 1000.0,
          # no pose and no frame may be lost when the test machine is busy
-         'pose_queue_depth': 1000, 'output_queue_depth': 1000}
+         'pose_queue_depth': 1000, 'output_queue_depth': 1000,
+         'load_shedding': False}     # hair_sim_bag run never sheds: the same schedule
 
 
 @pytest.fixture(autouse=True)

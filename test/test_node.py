@@ -448,6 +448,29 @@ def test_tf_input_selects_the_head_by_name_or_prefix(harness):
     assert node.sim.head.position[0] == pytest.approx(0.18)
 
 
+def test_load_shedding_tracks_once_per_pose_while_the_steps_do_not_fit(harness):
+    """Poses one substep (4.2 ms) apart and a budget of 5 % of that: no step of a 1 k-ghost
+    groom fits, so after half a window of poses the ghosts are tracked once per pose, the
+    diagnostics say so (WARN); switching the parameter off goes back to the scene's schedule
+    on the next pose."""
+    h = harness(**{'groom.guides': 64, 'groom.ghosts_per_guide': 16,
+                   'load_shedding_budget': 0.05})
+    pub = h.pose_publisher()
+    times = grid_times(h, 13, step_substeps=1)
+    for k, t in enumerate(times[:12]):
+        h.send(pub, pose_stamped_msg(t, [0.001 * k, 0.0, 0.0], yaw_quat(0.0), 'world'))
+    assert h.node.sim.track_once_per_call and h.node.shedder.switches == 1
+    status = h.node.diagnostics()
+    values = {kv.key: kv.value for kv in status.values}
+    assert values['load_shedding'] == 'active' and status.level == DiagnosticStatus.WARN
+    assert 'load shedding' in status.message
+    assert h.node.set_parameters([Parameter('load_shedding', value=False)])[0].successful
+    h.send(pub, pose_stamped_msg(times[12], [0.012, 0.0, 0.0], yaw_quat(0.0), 'world'))
+    assert not h.node.sim.track_once_per_call
+    values = {kv.key: kv.value for kv in h.node.diagnostics().values}
+    assert values['load_shedding'] == 'off'
+
+
 def test_diagnostics_are_published_with_the_step_numbers(harness):
     h = harness(diagnostics_rate_hz=20.0)
     got = []

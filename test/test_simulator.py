@@ -210,3 +210,29 @@ def test_max_step_sq_is_the_largest_squared_displacement():
     assert np.isnan(max_step_sq(x, x_old))
     x[0, 0, 0] = 1e300                      # a larger value after the NaN does not hide it
     assert np.isnan(max_step_sq(x, x_old))
+
+
+def test_track_once_per_call_is_the_once_per_pose_schedule_bit_for_bit():
+    """The node's load shedding (``track_once_per_call``) runs exactly what a scene with
+    ``tracking.every_substep: false`` runs; switching it mid-stream needs no rebuild, and the
+    ghost tracking time is reported either way."""
+    shed = HairSimulator(scene())
+    full = HairSimulator(scene())
+    drive(shed, 10)
+    drive(full, 10)
+    assert np.array_equal(shed.frame().ghosts, full.frame().ghosts)
+    assert shed.counters.last_track_ms > 0.0
+    shed.track_once_per_call = True
+    drive(shed, 30, start=10)
+    drive(full, 30, start=10)
+    assert not np.array_equal(shed.frame().ghosts, full.frame().ghosts)
+    assert shed.counters.last_track_ms > 0.0
+    # from the same state (no settling at build: that follows the scene's own schedule), the
+    # shed simulator and the once-per-pose scene agree bit for bit
+    a = HairSimulator(scene(solver__settle_time=0.0))
+    b = HairSimulator(scene(solver__settle_time=0.0, tracking__every_substep=False))
+    a.track_once_per_call = True
+    drive(a, 40)
+    drive(b, 40)
+    assert np.array_equal(a.frame().ghosts, b.frame().ghosts)
+    assert np.array_equal(a.frame().guides, b.frame().guides)
