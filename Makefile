@@ -42,7 +42,7 @@ bench: $(STAMP)
 	$(PY) scripts/bench.py --json out/bench.json
 	$(TEST_ENV) $(PY) scripts/bench_msgs.py --json out/bench_msgs.json
 	$(TEST_ENV) $(PY) scripts/bench_latency.py --json out/bench_latency.json
-	$(TEST_ENV) $(PY) scripts/bench_latency.py --ghosts 10000 --modes on_pose --pose-depth 1 \
+	$(TEST_ENV) $(PY) scripts/bench_latency.py --ghosts 10000 --modes on_pose \
 		--set tracking.every_substep=false --json out/bench_latency_10k_once_per_pose.json
 
 # The full matrix of stiff and extreme cases (about 25 min); writes docs/results/stability.*

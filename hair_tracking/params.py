@@ -315,10 +315,12 @@ NODE_PARAMS: Tuple[Param, ...] = (
     Param('use_tf', 'bool', False,
           'also take the head pose from /tf (needs tf2_msgs), selected by head_frame or '
           'head_frame_prefix', read_only=True),
-    Param('pose_queue_depth', 'int', 5,
-          'queue depth of the pose subscriptions (sensor-data QoS keeps the newest ones): 5 '
-          'keeps every pose of a burst, 1 always simulates the newest pose (lowest latency '
-          'when the node falls behind)', lo=1, hi=1000, read_only=True),
+    Param('pose_queue_depth', 'int', 1,
+          'queue depth of the pose subscriptions (sensor-data QoS keeps the newest ones): 1 '
+          'always simulates the newest pose, so a node that falls behind is at most one pose '
+          'late (the head between poses is interpolated, no simulated time is lost); more '
+          'keeps every pose of a burst (the sensor-data default is 5: 92 ms instead of 24 ms '
+          'latency at 10 k ghosts on a busy 2-core machine)', lo=1, hi=1000, read_only=True),
     Param('output_queue_depth', 'int', 2,
           'history depth of the reliable hair outputs: 2 keeps latency low for viewers; a '
           'recorder that must not miss a frame under load wants more', lo=1, hi=1000,

@@ -96,8 +96,9 @@ def run_case(ghosts, mode, args, domain_id):
         'groom.guides': guides, 'groom.ghosts_per_guide': per_guide,
         'publish_rate_hz': float(args.publish_rate), 'publish_on_pose': mode == 'on_pose',
         'stale_timeout': 10.0, 'solver.type': args.solver, 'numba_threads': args.threads,
-        'pose_queue_depth': args.pose_depth,
     }
+    if args.pose_depth is not None:
+        overrides['pose_queue_depth'] = args.pose_depth
     overrides.update(args.set)
     node = HairSimNode(context=ctx, parameter_overrides=[
         Parameter(k, value=v) for k, v in overrides.items()])
@@ -178,7 +179,7 @@ def run_case(ghosts, mode, args, domain_id):
         'nodes_per_strand': int(node.sim.ghosts.nodes), 'mode': mode,
         'solver': args.solver, 'settings': dict(args.set),
         'numba_threads': int(node.numba_threads),
-        'pose_queue_depth': args.pose_depth,
+        'pose_queue_depth': int(node.get_parameter('pose_queue_depth').value),
         'pose_rate_hz': args.pose_rate,
         'publish_rate_hz': args.publish_rate, 'markers_subscribed': bool(args.markers),
         'latency': stats(lat), 'poses_without_cloud': missing,
@@ -211,8 +212,8 @@ def main(argv=None):
     ap.add_argument('--pose-rate', type=float, default=60.0)
     ap.add_argument('--publish-rate', type=float, default=60.0)
     ap.add_argument('--solver', default='ftl', choices=['ftl', 'pbd', 'xpbd'])
-    ap.add_argument('--pose-depth', type=int, default=5,
-                    help='pose_queue_depth of the node (1: always the newest pose)')
+    ap.add_argument('--pose-depth', type=int, default=None,
+                    help="pose_queue_depth of the node (default: the node's own, 1)")
     ap.add_argument('--threads', type=int, default=0,
                     help='numba_threads of the node (0 = all cores)')
     ap.add_argument('--markers', action='store_true',
