@@ -409,8 +409,10 @@ class HairSimNode(Node):
         """Track the ghosts once per pose while the steps do not fit the pose period
         (``load_shedding``; the policy is :class:`~hair_tracking.load_shedding.LoadShedder`)."""
         s, sim = self._settings, self.sim
-        if not s.load_shedding:
+        if not (s.load_shedding and sim.ghost_tracker is not None
+                and sim.scene.tracking.every_substep):    # nothing to shed
             sim.track_once_per_call = False
+            self._publish_ms_since_pose = 0.0
             return
         self.shedder.budget = s.load_shedding_budget
         c = sim.counters

@@ -471,6 +471,18 @@ def test_load_shedding_tracks_once_per_pose_while_the_steps_do_not_fit(harness):
     assert values['load_shedding'] == 'off'
 
 
+def test_load_shedding_stays_off_when_the_scene_already_tracks_once_per_pose(harness):
+    """Nothing to shed (the scene tracks once per pose): however slow the steps, the flag stays
+    off and the diagnostics do not warn about shedding."""
+    h = harness(**{'groom.guides': 64, 'groom.ghosts_per_guide': 16,
+                   'tracking.every_substep': False, 'load_shedding_budget': 0.05})
+    pub = h.pose_publisher()
+    for k, t in enumerate(grid_times(h, 12, step_substeps=1)):
+        h.send(pub, pose_stamped_msg(t, [0.001 * k, 0.0, 0.0], yaw_quat(0.0), 'world'))
+    assert not h.node.sim.track_once_per_call and h.node.shedder.switches == 0
+    assert 'load shedding' not in h.node.diagnostics().message
+
+
 def test_diagnostics_are_published_with_the_step_numbers(harness):
     h = harness(diagnostics_rate_hz=20.0)
     got = []
