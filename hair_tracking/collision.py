@@ -233,7 +233,8 @@ class Collider:
         ``x_prev`` (S, N, 3) is the friction reference (e.g. the start-of-substep positions carried
         with the head, so friction acts on the slip relative to the head); ``inv_mass`` (S, N):
         only nodes with ``inv_mass > 0`` move; ``head`` a :class:`~hair_tracking.model.HeadPose`.
-        Returns the number of contacts (nodes moved).
+        Returns the number of contacts (nodes moved).  Small problems run the serial twin of
+        the kernel (:func:`~hair_tracking.integrate.runs_parallel`).
         """
         _points('x', x)
         _points('x_prev', x_prev)
@@ -242,7 +243,8 @@ class Collider:
             raise ValueError(f'x_prev {x_prev.shape} and inv_mass {inv_mass.shape} must match '
                              f'x {x.shape}')
         rot, pos = _pose(head)
-        return self.project(x, x_prev, inv_mass, rot, pos)
+        return self.project(x, x_prev, inv_mass, rot, pos,
+                            runs_parallel(x.shape[0] * x.shape[1]))
 
     def project(self, x, x_prev, inv_mass, rot, pos, parallel: bool = True) -> int:
         """:meth:`apply` without input checks, the head pose given as ``rot`` (3, 3) and ``pos``

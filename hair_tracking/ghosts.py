@@ -35,7 +35,7 @@ import numpy as np
 
 from .collision import Collider
 from .correspondence import assign_guides, node_correspondence
-from .integrate import runs_parallel, threads_for
+from .integrate import runs_parallel
 from .model import HeadPose, StrandSet
 from .scene import Scene
 from .tracking_kernels import (block_groups, chunk_count, copy_blocks, group_blocks,
@@ -295,9 +295,8 @@ class GhostTracker:
             self.stats['contacts'] = int(self._contacts.sum())
         elif self._collide_after:
             x, v = self.ghosts.x, self.ghosts.v          # written back from the blocks
-            with threads_for(nodes):
-                self.stats['contacts'] = int(
-                    self.collider.apply(x, self._x_prev, self.ghosts.inv_mass, head))
+            self.stats['contacts'] = int(
+                self.collider.apply(x, self._x_prev, self.ghosts.inv_mass, head))
             np.subtract(x, self._x_prev, out=v)
             v *= 1.0 / dt
 

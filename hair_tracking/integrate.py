@@ -54,20 +54,6 @@ def runs_parallel(nodes: int) -> bool:
     return nodes >= PARALLEL_MIN_NODES and numba.get_num_threads() > 1
 
 
-@contextmanager
-def threads_for(nodes: int):
-    """Run the enclosed numba calls on one thread unless :func:`runs_parallel` (``nodes``)."""
-    threads = numba.get_num_threads()
-    if threads == 1 or runs_parallel(nodes):
-        yield
-        return
-    numba.set_num_threads(1)
-    try:
-        yield
-    finally:
-        numba.set_num_threads(threads)
-
-
 def serial_twin(kernel):
     """The parallel numba ``kernel`` compiled without ``parallel``: its ``prange`` loops run as
     plain loops on the calling thread.  The results are bit-identical where the loop body is a
