@@ -9,12 +9,6 @@ import numpy as np
 from numba import njit
 
 
-def segment_lengths(x: np.ndarray) -> np.ndarray:
-    """(S, N, 3) -> (S, N-1) segment lengths [m]."""
-    d = np.diff(x, axis=1)
-    return np.sqrt(np.einsum('snk,snk->sn', d, d))
-
-
 def max_stretch(x: np.ndarray, rest_length: np.ndarray) -> float:
     """Largest relative length error ``|l / l0 - 1|`` of any segment of ``x`` (S, N, 3) whose
     rest length ``l0`` (S, N-1) is positive; 0 when there is none or the lengths are exact, NaN
@@ -43,10 +37,9 @@ def _max_stretch(x, rest_length):
             d1 = x[s, i + 1, 1] - x[s, i, 1]
             d2 = x[s, i + 1, 2] - x[s, i, 2]
             r = abs(np.sqrt(d0 * d0 + d1 * d1 + d2 * d2) / l0 - 1.0)
-            if r > worst or r != r:
-                worst = r
-                if r != r:
-                    return r
+            if r != r:          # NaN: broken hair, reported as such
+                return r
+            worst = max(worst, r)
     return worst
 
 
