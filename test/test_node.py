@@ -292,6 +292,33 @@ def test_publish_on_pose_counts_stream_time_not_the_wall_clock(harness):
     assert due == [True, False, True, True, False, True, True]
 
 
+def test_publish_on_pose_timer_does_not_repeat_the_poses_frames(harness):
+    """With ``publish_on_pose``, the publishing timer stays quiet while the poses' own frames
+    keep its rate (a resend would only repeat them) and takes over once they stop."""
+    h = harness(**{'publish_on_pose': True, 'publish_rate_hz': 20.0})
+    h.listen(markers=False)
+    pub = h.pose_publisher()
+    t = grid_times(h, 1)[0]
+    h.send(pub, pose_stamped_msg(t, [0.0, 0.0, 0.0], yaw_quat(0.0), 'world'))
+    h.cloud_at(t)
+    node, out = h.node, h.node.outputs['points']
+    period = node._settings.publish_period
+    sent = out.published
+    # the timer's tick 0.6 periods after the pose's frame: not repeated
+    node._last_publish = node._pose_publish_at = time.monotonic() - 0.6 * period
+    node._on_publish_timer()
+    assert out.published == sent
+    # no pose frame for 1.1 periods: the timer resends the frame (from the cache)
+    node._last_publish = node._pose_publish_at = time.monotonic() - 1.1 * period
+    node._on_publish_timer()
+    assert out.published == sent + 1 and out.encoded == 1
+    # without publish_on_pose the timer keeps the rate itself, 0.6 periods after a frame
+    node.set_parameters([Parameter('publish_on_pose', value=False)])
+    node._last_publish = node._pose_publish_at = time.monotonic() - 0.6 * period
+    node._on_publish_timer()
+    assert out.published == sent + 2
+
+
 def test_nan_poses_are_dropped_and_counted(harness):
     h = harness()
     pub = h.pose_publisher()
