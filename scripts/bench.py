@@ -11,7 +11,11 @@ PositionBasedDynamics (PyPI ``pypbd``: the same particles, the same constraints 
 median ms per step and ns per node-iteration (ms / (S * 16 * iterations)), and the ratio to pypbd.
 
 Ghosts: one tracking substep of 10 k and 100 k ghost strands x 16 nodes (16 ghosts per guide,
-default tracking options): median ms and million ghost nodes per second.
+default tracking options) on every core (``--ghost-threads``): median ms and million ghost nodes
+per second.
+
+Machine reference: one thread's copy bandwidth and numpy's square root, at the start and the
+end (this shared machine's speed drifts by phases; see :func:`machine_reference`).
 
 Compile: first use of every kernel of the default scene in a fresh process with an empty numba
 cache (compile), and again with that cache filled (cache load).
@@ -23,16 +27,18 @@ import json
 import os
 import sys
 
-# Threads for both libraries (numba and pypbd's OpenMP) must be fixed before they load:
-# --threads N (default 1, the fairest comparison on a shared 2-core machine).
+# Threads of the guide comparison (numba and pypbd's OpenMP, fixed before they load): --threads N
+# (default 1, the fairest comparison on a shared 2-core machine).  The ghost figures use every
+# core (--ghost-threads, default 0 = all): their goal is a throughput of this machine.
 _THREADS = sys.argv[sys.argv.index('--threads') + 1] if '--threads' in sys.argv else '1'
-os.environ['NUMBA_NUM_THREADS'] = _THREADS
+os.environ['NUMBA_NUM_THREADS'] = str(max(int(_THREADS), os.cpu_count() or 1))
 os.environ['OMP_NUM_THREADS'] = _THREADS
 import platform  # noqa: E402
 import subprocess  # noqa: E402
 import tempfile  # noqa: E402
 import time  # noqa: E402
 
+import numba  # noqa: E402
 import numpy as np  # noqa: E402
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -68,6 +74,45 @@ def hanging_rest(strands, nodes=NODES, length=0.25):
     rest[:, :, 0] = (np.arange(strands) * 0.003)[:, None]
     rest[:, :, 2] = -seg * np.arange(nodes)[None, :]
     return rest
+
+
+def machine_reference(repeats=7):
+    """Two numbers that follow this shared machine's phases (its timings swing 1.5-2x within an
+    hour): one thread's copy bandwidth over 64 MB arrays [GB/s, read + write] and numpy's
+    square root over 1 M doubles [ns per element].  Printed at the start and the end of a run so
+    that figures from different runs can be told apart by phase."""
+    a = np.ones(8_000_000)
+    b = np.empty_like(a)
+    c = np.random.default_rng(0).random(1_000_000)
+    d = np.empty_like(c)
+    copy = median_ms(lambda: np.copyto(b, a), repeats, warmup=1)
+    root = median_ms(lambda: np.sqrt(c, out=d), repeats, warmup=1)
+    return {'copy_gb_per_s': 2 * a.nbytes / (copy * 1e-3) / 1e9,
+            'sqrt_ns_per_element': root * 1e6 / c.size}
+
+
+def cpu_times():
+    """(steal, total) jiffies of all CPUs from /proc/stat, or None off Linux.  Steal is the
+    time the hypervisor ran someone else while this VM had work: on this shared machine the
+    slow phases are steal (18-23 % of the CPU time measured in one, against 0.2 % idle)."""
+    try:
+        with open('/proc/stat') as f:
+            values = [int(v) for v in f.readline().split()[1:]]
+    except (OSError, ValueError):
+        return None
+    return (values[7] if len(values) > 7 else 0), sum(values)
+
+
+def steal_share(before, after):
+    """Share of CPU time stolen between two :func:`cpu_times` readings (None if unknown)."""
+    if before is None or after is None or after[1] <= before[1]:
+        return None
+    return (after[0] - before[0]) / (after[1] - before[1])
+
+
+def print_reference(label, ref):
+    print(f'machine reference ({label}): copy {ref["copy_gb_per_s"]:.1f} GB/s, sqrt '
+          f'{ref["sqrt_ns_per_element"]:.2f} ns/element')
 
 
 def bench_ours(solver, strands, repeats):
@@ -161,8 +206,13 @@ def main():
     ap.add_argument('--json', help='write the figures to this JSON file')
     ap.add_argument('--quick', action='store_true', help='fewer repeats and sizes')
     ap.add_argument('--threads', default='1',
-                    help='threads for numba and for pypbd (OpenMP); read before import')
+                    help='threads of the guide comparison, numba and pypbd (OpenMP); read '
+                    'before import')
+    ap.add_argument('--ghost-threads', type=int, default=0,
+                    help='numba threads of the ghost figures (0: every core)')
     args = ap.parse_args()
+    guide_threads = int(_THREADS)
+    ghost_threads = args.ghost_threads or numba.config.NUMBA_NUM_THREADS
     reps = 5 if args.quick else 20
     try:
         import pypbd  # noqa: F401
@@ -172,9 +222,14 @@ def main():
         print('pypbd not installed: `pip install pypbd` (make bench does) for the peer column')
 
     result = {'machine': {'cpus': os.cpu_count(), 'python': platform.python_version(),
-                          'threads': int(_THREADS),
+                          'threads': guide_threads, 'ghost_threads': ghost_threads,
                           'load_average': os.getloadavg()},
               'guides': [], 'ghosts': [], 'compile': {}}
+    result['machine']['reference_start'] = ref = machine_reference()
+    print_reference('start', ref)
+    numba.set_num_threads(guide_threads)
+    stolen = result['machine']['cpu_steal_share'] = {}
+    cpu_mark = cpu_times()
     print(f'guides: {NODES} nodes, {ITERATIONS} iterations, dt {DT * 1e3:.3f} ms, median of '
           f'{reps} steps')
     print(f'{"strands":>8} {"solver":>7} {"ms/step":>9} {"ns/node-it":>11} {"vs pypbd":>9}')
@@ -190,14 +245,23 @@ def main():
             rs = f'{ratio:8.1f}x' if ratio else '        -'
             print(f'{strands:8d} {solver:>7} {ms:9.3f} {ns:11.2f} {rs}')
 
-    print('ghosts: 16 nodes, 16 ghosts per guide, default tracking, one substep')
+    stolen['guides'] = steal_share(cpu_mark, cpu_times())
+    cpu_mark = cpu_times()
+    numba.set_num_threads(ghost_threads)
+    print(f'ghosts: 16 nodes, 16 ghosts per guide, default tracking, one substep, '
+          f'{ghost_threads} thread(s)')
     print(f'{"ghosts":>8} {"ms/step":>9} {"M nodes/s":>10}')
     for ghosts in ((10_000,) if args.quick else (10_000, 100_000)):
         ms = bench_ghosts(ghosts, max(5, reps // 2))
         mnps = ghosts * NODES / (ms * 1e-3) / 1e6
         result['ghosts'].append({'ghosts': ghosts, 'ms_per_step': ms, 'mnodes_per_s': mnps})
         print(f'{ghosts:8d} {ms:9.3f} {mnps:10.1f}')
+    stolen['ghosts'] = steal_share(cpu_mark, cpu_times())
 
+    result['machine']['reference_end'] = ref = machine_reference()
+    print_reference('end', ref)
+    print('CPU time stolen by the hypervisor: ' + ', '.join(
+        f'{k} {"unknown" if v is None else f"{v * 100:.1f} %"}' for k, v in stolen.items()))
     comp = bench_compile()
     result['compile'] = comp
     print(f'numba compile, default scene kernels: empty cache {comp["cold_cache_s"]:.1f} s, '
