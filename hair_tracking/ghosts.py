@@ -37,6 +37,7 @@ from .collision import Collider
 from .correspondence import assign_guides, node_correspondence
 from .integrate import runs_parallel
 from .model import HeadPose, StrandSet
+from .parallel_choice import ParallelChooser
 from .scene import Scene
 from .tracking_kernels import (block_groups, chunk_count, copy_blocks, group_blocks,
                                guide_frames, TMP_ROWS, track_groups, track_groups_serial)
@@ -195,8 +196,11 @@ class GhostTracker:
         self.stats: Dict[str, int] = {
             'ghosts': int(s_count), 'groups': int(n_groups),
             'largest_group': int(group_size.max()) if n_groups else 0,
-            'steps': 0, 'clamped': 0, 'contacts': 0,
+            'steps': 0, 'clamped': 0, 'contacts': 0, 'parallel': 0, 'thread_switches': 0,
         }
+        #: parallel kernel or serial twin, whichever the timings favour (see
+        #: :mod:`hair_tracking.parallel_choice`; same results either way)
+        self.threads = ParallelChooser()
 
     # ------------------------------------------------------------------ API
     def release(self) -> None:
@@ -276,20 +280,23 @@ class GhostTracker:
             np.copyto(self._x_prev, self.positions())
         self._take()
         nodes = self._xb.size // 3
-        kernel = track_groups if runs_parallel(nodes) else track_groups_serial
-        kernel(self._xb, self._vb, self.ghosts.rest, self._seg_len_blocks, self.order,
-               self.group_start, self.block_group, self.group_guide, self._group_row,
-               self._node_table, self._node_row, self._rest_off_blocks, self._root_blocks,
-               self._inv_len, self._var_target, _f64(gx), _f64(guide_x_old), self._tan_rest,
-               _f64(head.rotation), _f64(head.position), float(dt),
-               self._elastic, tr.tip_weight > 0.0, tr.com_weight, tr.max_weight,
-               _per(tr.offset_strength, substeps), _per(tr.com_strength, substeps),
-               _per(tr.spread, substeps), tr.length_restore,
-               self._fused_collider, self._center, self._axes, self._friction,
-               self._refine, self._q_buf, self._buf, self._tmp, self._clamped,
-               self._contacts)
+        self.threads.timed(
+            runs_parallel(nodes), track_groups, track_groups_serial,
+            self._xb, self._vb, self.ghosts.rest, self._seg_len_blocks, self.order,
+            self.group_start, self.block_group, self.group_guide, self._group_row,
+            self._node_table, self._node_row, self._rest_off_blocks, self._root_blocks,
+            self._inv_len, self._var_target, _f64(gx), _f64(guide_x_old), self._tan_rest,
+            _f64(head.rotation), _f64(head.position), float(dt),
+            self._elastic, tr.tip_weight > 0.0, tr.com_weight, tr.max_weight,
+            _per(tr.offset_strength, substeps), _per(tr.com_strength, substeps),
+            _per(tr.spread, substeps), tr.length_restore,
+            self._fused_collider, self._center, self._axes, self._friction,
+            self._refine, self._q_buf, self._buf, self._tmp, self._clamped,
+            self._contacts)
         self._synced_x = self._synced_v = False
         self.stats['steps'] += 1
+        self.stats['parallel'] = int(self.threads.in_use)
+        self.stats['thread_switches'] = self.threads.switches
         self.stats['clamped'] = int(self._clamped.sum())
         if self._fused_collider:
             self.stats['contacts'] = int(self._contacts.sum())

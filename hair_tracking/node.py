@@ -601,6 +601,10 @@ class HairSimNode(Node):
             kv('load_shedding', 'active' if sim.track_once_per_call else
                ('ready' if self._settings.load_shedding else 'off')),
             kv('load_shedding_switches', self.shedder.switches),
+            kv('ghost_kernel', 'none' if sim.ghost_tracker is None else
+               ('parallel' if sim.ghost_tracker.threads.in_use else 'serial')),
+            kv('ghost_kernel_switches', 0 if sim.ghost_tracker is None else
+               sim.ghost_tracker.threads.switches),
             kv('output_frame', self.output_frame_id()),
         ]
         return DiagnosticStatus(level=level, name=f'{self.get_name()}: hair simulation',

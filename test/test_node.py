@@ -532,6 +532,9 @@ def test_diagnostics_are_published_with_the_step_numbers(harness):
         assert key in values
     assert int(values['substeps']) > 0
     assert float(values['step_ms_last']) > 0.0
+    tracker = h.node.sim.ghost_tracker
+    assert values['ghost_kernel'] == ('parallel' if tracker.threads.in_use else 'serial')
+    assert values['ghost_kernel_switches'] == str(tracker.threads.switches)
 
 
 # ====================================================================== executable

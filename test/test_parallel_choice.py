@@ -1,0 +1,112 @@
+"""The run-time choice between a parallel kernel and its serial twin."""
+import numpy as np
+import pytest
+
+from hair_tracking.ghosts import GhostTracker
+from hair_tracking.groom import make_groom
+from hair_tracking.head_track import IDENTITY
+from hair_tracking.model import StrandSet
+from hair_tracking.parallel_choice import ParallelChooser
+from hair_tracking.scene import Scene
+from hair_tracking import ghosts as ghosts_module
+
+
+def drive(chooser, calls, parallel_s, serial_s, static=True):
+    """Run ``calls`` calls with fixed durations per variant; returns the variants used."""
+    used = []
+    for _ in range(calls):
+        par = chooser.choose(static)
+        used.append(par)
+        chooser.record(parallel_s if par else serial_s)
+    return used
+
+
+def test_keeps_the_static_choice_until_it_has_settled_then_tries_the_other():
+    c = ParallelChooser(window=4, settle=10, reprobe=20)
+    used = drive(c, 10, 1.0, 2.0)
+    assert used == [True] * 10                        # settling on the static rule's choice
+    used = drive(c, 4, 1.0, 2.0)
+    assert used == [False] * 4 and c.trials == 1      # a trial of the serial twin ...
+    assert c.parallel and c.switches == 0             # ... slower: parallel kept
+    assert drive(c, 20, 1.0, 2.0) == [True] * 20      # no trial before reprobe calls
+    assert drive(c, 4, 1.0, 2.0) == [False] * 4 and c.trials == 2
+
+
+def test_switches_to_the_faster_variant_and_back_when_the_machine_changes():
+    c = ParallelChooser(window=4, settle=8, reprobe=16)
+    drive(c, 8 + 4, 3.0, 2.0)                         # steal: parallel 3 s, serial 2 s
+    assert not c.parallel and c.switches == 1 and not c.in_use
+    assert drive(c, 16, 3.0, 2.0) == [False] * 16     # serial kept between trials
+    used = drive(c, 4 + 16, 1.0, 2.0)                 # quiet again: parallel 1 s
+    assert used[:4] == [True] * 4 and c.parallel and c.switches == 2 and c.in_use
+
+
+def test_a_difference_within_the_margin_does_not_switch():
+    c = ParallelChooser(window=4, settle=8, reprobe=8, margin=0.9)
+    drive(c, 8 + 4 * 10, 1.0, 0.95)                   # serial only 5 % faster
+    assert c.parallel and c.switches == 0 and c.trials >= 4
+
+
+def test_a_problem_the_static_rule_keeps_serial_is_never_tried_in_parallel():
+    c = ParallelChooser(window=2, settle=2, reprobe=2)
+    assert drive(c, 50, 0.1, 5.0, static=False) == [False] * 50
+    assert c.trials == 0 and not c.in_use
+    # allowed again (more threads, a larger scene): starts over from parallel and settles
+    assert drive(c, 2, 0.1, 5.0) == [True, True]
+
+
+def test_bad_settings_are_rejected():
+    with pytest.raises(ValueError, match='window'):
+        ParallelChooser(window=0)
+    with pytest.raises(ValueError, match='margin'):
+        ParallelChooser(margin=1.5)
+
+
+def test_timed_runs_the_chosen_function_and_returns_its_result():
+    c = ParallelChooser(window=1, settle=1, reprobe=1)
+    calls = []
+    out = c.timed(True, lambda a: calls.append(('par', a)) or 1,
+                  lambda a: calls.append(('ser', a)) or 2, 7)
+    assert out == 1 and calls == [('par', 7)]
+    out = c.timed(True, lambda a: 1, lambda a: calls.append(('ser', a)) or 2, 8)
+    assert out == 2 and calls[-1] == ('ser', 8)        # the trial of the serial twin
+
+
+def test_ghost_tracker_gives_the_same_hair_whichever_variant_the_timings_pick(monkeypatch):
+    """A tracker large enough for the parallel kernel, stepped with the serial twin made to
+    look faster (a fake clock), switches to it; its hair equals a tracker that stays
+    parallel, bit for bit."""
+    scene = Scene().with_changes(groom__guides=24, groom__ghosts_per_guide=16,
+                                 groom__guide_nodes=16, groom__ghost_nodes=16)
+    groom = make_groom(scene.groom)
+
+    def tracker():
+        guides = StrandSet.from_rest(groom.guide_rest)
+        t = GhostTracker(StrandSet.from_rest(groom.ghost_rest), guides, scene, None)
+        t.reset(IDENTITY)
+        guides.place_at(IDENTITY)
+        return t, guides
+
+    monkeypatch.setattr(ghosts_module, 'runs_parallel', lambda nodes: True)
+    a, ga = tracker()
+    b, gb = tracker()
+    a.threads = ParallelChooser(window=2, settle=4, reprobe=4)
+    b.threads = ParallelChooser(window=2, settle=10 ** 9)          # never tries the other
+    ticks = {True: 10.0, False: 1.0}       # fake durations: the serial twin looks faster
+
+    def fake_timed(chooser):
+        def timed(static, par_fn, ser_fn, *args):
+            par = chooser.choose(static)
+            (par_fn if par else ser_fn)(*args)
+            chooser.record(ticks[par])
+        return timed
+    a.threads.timed = fake_timed(a.threads)
+    for k in range(30):
+        for t, g in ((a, ga), (b, gb)):
+            old = g.x.copy()
+            g.x[:, 2:, 0] = groom.guide_rest[:, 2:, 0] + 0.01 * np.sin(0.3 * k)
+            t.step(1.0 / 240.0, old, IDENTITY)
+    assert a.stats['thread_switches'] == 1 and a.stats['parallel'] == 0
+    assert b.stats['thread_switches'] == 0 and b.stats['parallel'] == 1
+    np.testing.assert_array_equal(a.positions(), b.positions())
+    np.testing.assert_array_equal(a.ghosts.v, b.ghosts.v)
