@@ -4,11 +4,13 @@ import pytest
 
 from hair_tracking.ghosts import GhostTracker
 from hair_tracking.groom import make_groom
+from hair_tracking.guides import GuideSolver
 from hair_tracking.head_track import IDENTITY
-from hair_tracking.model import StrandSet
+from hair_tracking.model import HeadPose, StrandSet
 from hair_tracking.parallel_choice import ParallelChooser
 from hair_tracking.scene import Scene
-from hair_tracking import ghosts as ghosts_module
+from hair_tracking import ghosts as ghosts_module, integrate
+from hair_tracking.transforms import quat_to_matrix
 
 
 def drive(chooser, calls, parallel_s, serial_s, static=True):
@@ -19,6 +21,16 @@ def drive(chooser, calls, parallel_s, serial_s, static=True):
         used.append(par)
         chooser.record(parallel_s if par else serial_s)
     return used
+
+
+def fake_timed(chooser, seconds):
+    """``chooser.timed`` with made-up durations ``seconds[parallel]`` instead of the clock."""
+    def timed(static, par_fn, ser_fn, *args):
+        par = chooser.choose(static)
+        out = (par_fn if par else ser_fn)(*args)
+        chooser.record(seconds[par])
+        return out
+    return timed
 
 
 def test_keeps_the_static_choice_until_it_has_settled_then_tries_the_other():
@@ -92,15 +104,7 @@ def test_ghost_tracker_gives_the_same_hair_whichever_variant_the_timings_pick(mo
     b, gb = tracker()
     a.threads = ParallelChooser(window=2, settle=4, reprobe=4)
     b.threads = ParallelChooser(window=2, settle=10 ** 9)          # never tries the other
-    ticks = {True: 10.0, False: 1.0}       # fake durations: the serial twin looks faster
-
-    def fake_timed(chooser):
-        def timed(static, par_fn, ser_fn, *args):
-            par = chooser.choose(static)
-            (par_fn if par else ser_fn)(*args)
-            chooser.record(ticks[par])
-        return timed
-    a.threads.timed = fake_timed(a.threads)
+    a.threads.timed = fake_timed(a.threads, {True: 10.0, False: 1.0})   # serial looks faster
     for k in range(30):
         for t, g in ((a, ga), (b, gb)):
             old = g.x.copy()
@@ -110,3 +114,31 @@ def test_ghost_tracker_gives_the_same_hair_whichever_variant_the_timings_pick(mo
     assert b.stats['thread_switches'] == 0 and b.stats['parallel'] == 1
     np.testing.assert_array_equal(a.positions(), b.positions())
     np.testing.assert_array_equal(a.ghosts.v, b.ghosts.v)
+
+
+@pytest.mark.parametrize('solver', ['pbd', 'xpbd', 'ftl'])
+def test_guide_solver_gives_the_same_hair_whichever_variant_the_timings_pick(monkeypatch,
+                                                                             solver):
+    """The guide solvers choose the same way; a solver switched to the serial twins moves its
+    strands exactly as one that stays on the parallel kernels."""
+    monkeypatch.setattr(integrate, 'runs_parallel', lambda nodes: True)
+    scene = Scene().with_changes(groom__guides=64, solver__type=solver)
+    groom = make_groom(scene.groom)
+    a = GuideSolver(StrandSet.from_rest(groom.guide_rest), scene)
+    b = GuideSolver(StrandSet.from_rest(groom.guide_rest), scene)
+    a.threads = ParallelChooser(window=2, settle=4, reprobe=4)
+    a.threads.timed = fake_timed(a.threads, {True: 10.0, False: 1.0})
+    b.threads = ParallelChooser(window=2, settle=10 ** 9)
+    head_prev = IDENTITY
+    for s in (a, b):
+        s.reset(IDENTITY)
+    for k in range(40):
+        yaw = 0.4 * np.sin(0.2 * k)
+        q = np.array([0.0, 0.0, np.sin(yaw / 2), np.cos(yaw / 2)])
+        head = HeadPose(np.array([0.02 * np.sin(0.3 * k), 0.0, 0.0]), q, quat_to_matrix(q))
+        for s in (a, b):
+            s.step(1.0 / 240.0, head_prev, head)
+        head_prev = head
+    assert a.threads.switches == 1 and not a.threads.in_use and b.threads.in_use
+    np.testing.assert_array_equal(a.strands.x, b.strands.x)
+    np.testing.assert_array_equal(a.strands.v, b.strands.v)
