@@ -65,6 +65,7 @@ from msg_adapters.pointcloud import strands_to_pointcloud2_cdr
 from msg_adapters.pose import pose_from_msg, PoseError
 
 from . import params as P
+from .cpu_steal import format_share, StealMeter
 from .head_track import PoseResult
 from .load_shedding import LoadShedder
 from .resources import config_path
@@ -172,6 +173,7 @@ class HairSimNode(Node):
         self._apply_threads(settings.numba_threads)
         self.memory_setting = retain_freed_memory(settings.malloc_retain_mb)
         self.shedder = LoadShedder(settings.load_shedding_budget)
+        self._steal = StealMeter()       # CPU share the hypervisor took since the last report
         self.get_logger().info(self.memory_setting)
         self.sim = HairSimulator(settings.scene)
         if settings.warmup:
@@ -605,6 +607,7 @@ class HairSimNode(Node):
                ('parallel' if sim.ghost_tracker.threads.in_use else 'serial')),
             kv('ghost_kernel_switches', 0 if sim.ghost_tracker is None else
                sim.ghost_tracker.threads.switches),
+            kv('cpu_steal_recent', format_share(self._steal.share())),
             kv('output_frame', self.output_frame_id()),
         ]
         return DiagnosticStatus(level=level, name=f'{self.get_name()}: hair simulation',

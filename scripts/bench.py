@@ -44,6 +44,7 @@ import numpy as np  # noqa: E402
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, ROOT)
 
+from hair_tracking.cpu_steal import cpu_times, format_share, steal_share  # noqa: E402
 from hair_tracking.ghosts import GhostTracker  # noqa: E402
 from hair_tracking.groom import make_groom  # noqa: E402
 from hair_tracking.guides import GuideSolver  # noqa: E402
@@ -89,25 +90,6 @@ def machine_reference(repeats=7):
     root = median_ms(lambda: np.sqrt(c, out=d), repeats, warmup=1)
     return {'copy_gb_per_s': 2 * a.nbytes / (copy * 1e-3) / 1e9,
             'sqrt_ns_per_element': root * 1e6 / c.size}
-
-
-def cpu_times():
-    """(steal, total) jiffies of all CPUs from /proc/stat, or None off Linux.  Steal is the
-    time the hypervisor ran someone else while this VM had work: on this shared machine the
-    slow phases are steal (18-23 % of the CPU time measured in one, against 0.2 % idle)."""
-    try:
-        with open('/proc/stat') as f:
-            values = [int(v) for v in f.readline().split()[1:]]
-    except (OSError, ValueError):
-        return None
-    return (values[7] if len(values) > 7 else 0), sum(values)
-
-
-def steal_share(before, after):
-    """Share of CPU time stolen between two :func:`cpu_times` readings (None if unknown)."""
-    if before is None or after is None or after[1] <= before[1]:
-        return None
-    return (after[0] - before[0]) / (after[1] - before[1])
 
 
 def print_reference(label, ref):
@@ -261,7 +243,7 @@ def main():
     result['machine']['reference_end'] = ref = machine_reference()
     print_reference('end', ref)
     print('CPU time stolen by the hypervisor: ' + ', '.join(
-        f'{k} {"unknown" if v is None else f"{v * 100:.1f} %"}' for k, v in stolen.items()))
+        f'{k} {format_share(v)}' for k, v in stolen.items()))
     comp = bench_compile()
     result['compile'] = comp
     print(f'numba compile, default scene kernels: empty cache {comp["cold_cache_s"]:.1f} s, '

@@ -120,6 +120,7 @@ def test_import_run_read_back(walk_bag, tmp_path, name, capsys):
     assert main(['run', str(walk_bag), '-o', str(out), '-q'] + _small_args() + extra) == 0
     text = capsys.readouterr().out
     assert 'real-time factor' in text and 'max stretch' in text and 'poses rejected: 0' in text
+    assert 'stolen by the hypervisor meanwhile: ' in text
     if name.endswith('_sqlite'):
         assert any(p.suffix == '.db3' for p in out.iterdir())
     settings = _settings()
@@ -161,6 +162,7 @@ def test_deterministic_output(walk_bag, tmp_path):
     sa = run_bag(walk_bag, a, settings, RunOptions(duration_s=0.8))
     sb = run_bag(walk_bag, b, settings, RunOptions(duration_s=0.8, storage='sqlite3'))
     assert sa.frames == sb.frames > 0
+    assert all(s.cpu_steal is None or 0.0 <= s.cpu_steal <= 1.0 for s in (sa, sb))
     for topic in ('/hair/points', '/hair/markers', '/diagnostics', '/head_pose'):
         ma, mb = _messages(a, topic), _messages(b, topic)
         assert len(ma) == len(mb) > 0

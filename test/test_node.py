@@ -535,6 +535,8 @@ def test_diagnostics_are_published_with_the_step_numbers(harness):
     tracker = h.node.sim.ghost_tracker
     assert values['ghost_kernel'] == ('parallel' if tracker.threads.in_use else 'serial')
     assert values['ghost_kernel_switches'] == str(tracker.threads.switches)
+    steal = values['cpu_steal_recent']
+    assert steal == 'n/a' or 0.0 <= float(steal.rstrip(' %')) <= 100.0
 
 
 # ====================================================================== executable
