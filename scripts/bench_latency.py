@@ -39,6 +39,7 @@ from visualization_msgs.msg import MarkerArray
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
+from hair_tracking.cpu_steal import format_share, StealMeter  # noqa: E402
 from hair_tracking.node import HairSimNode  # noqa: E402
 from hair_tracking import params as P  # noqa: E402
 from msg_adapters.pose import pose_stamped_msg  # noqa: E402
@@ -239,7 +240,9 @@ def main(argv=None):
           f"{'step med':>8} {'p99':>8} | {'publish med':>11} {'p99':>8} | dropped / no cloud")
     for ghosts in args.ghosts:
         for mode in args.modes:
+            steal = StealMeter()
             r = run_case(ghosts, mode, args, args.domain_id)
+            r['cpu_steal_share'] = steal.share()
             results.append(r)
             lat = r['latency']
             within = '' if lat['n'] == 0 else \
@@ -249,7 +252,8 @@ def main(argv=None):
                   f"{fmt(r['step']):>17} | {fmt(r['publish']):>20} | "
                   f"{r['substeps_dropped']} substeps, {r['poses_without_cloud']} poses{within}"
                   f"; load shedding switched {r['load_shedding_switches']}x"
-                  f"{', on at the end' if r['load_shedding_at_end'] else ''}",
+                  f"{', on at the end' if r['load_shedding_at_end'] else ''}"
+                  f"; CPU stolen {format_share(r['cpu_steal_share'])}",
                   flush=True)
     if args.json:
         os.makedirs(os.path.dirname(os.path.abspath(args.json)), exist_ok=True)
