@@ -44,7 +44,7 @@ import numpy as np  # noqa: E402
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, ROOT)
 
-from hair_tracking.cpu_steal import cpu_times, format_share, steal_share  # noqa: E402
+from hair_tracking.cpu_steal import format_share, StealMeter  # noqa: E402
 from hair_tracking.ghosts import GhostTracker  # noqa: E402
 from hair_tracking.groom import make_groom  # noqa: E402
 from hair_tracking.guides import GuideSolver  # noqa: E402
@@ -211,7 +211,7 @@ def main():
     print_reference('start', ref)
     numba.set_num_threads(guide_threads)
     stolen = result['machine']['cpu_steal_share'] = {}
-    cpu_mark = cpu_times()
+    steal = StealMeter()
     print(f'guides: {NODES} nodes, {ITERATIONS} iterations, dt {DT * 1e3:.3f} ms, median of '
           f'{reps} steps')
     print(f'{"strands":>8} {"solver":>7} {"ms/step":>9} {"ns/node-it":>11} {"vs pypbd":>9}')
@@ -227,8 +227,7 @@ def main():
             rs = f'{ratio:8.1f}x' if ratio else '        -'
             print(f'{strands:8d} {solver:>7} {ms:9.3f} {ns:11.2f} {rs}')
 
-    stolen['guides'] = steal_share(cpu_mark, cpu_times())
-    cpu_mark = cpu_times()
+    stolen['guides'] = steal.share()
     numba.set_num_threads(ghost_threads)
     print(f'ghosts: 16 nodes, 16 ghosts per guide, default tracking, one substep, '
           f'{ghost_threads} thread(s)')
@@ -238,7 +237,7 @@ def main():
         mnps = ghosts * NODES / (ms * 1e-3) / 1e6
         result['ghosts'].append({'ghosts': ghosts, 'ms_per_step': ms, 'mnodes_per_s': mnps})
         print(f'{ghosts:8d} {ms:9.3f} {mnps:10.1f}')
-    stolen['ghosts'] = steal_share(cpu_mark, cpu_times())
+    stolen['ghosts'] = steal.share()
 
     result['machine']['reference_end'] = ref = machine_reference()
     print_reference('end', ref)
