@@ -60,8 +60,7 @@ class ParallelChooser:
                 self._reset()
             self._running = False
             return False
-        if not self._allowed:
-            self._allowed = True
+        self._allowed = True
         trying = self._until_trial <= 0 and len(self._recent) >= self.window
         self._running = (not self.parallel) if trying else self.parallel
         return self._running
