@@ -222,3 +222,53 @@ def test_compiled_fill_matches_numpy_fill(rgb_mode):
     assert odd.tobytes() == ref.tobytes()
     with pytest.raises(ValueError, match='rgb must be shaped'):
         point_fill.fill_records(fast, x, np.zeros((s, n + 1), dtype='<f4'), ids)
+
+
+def test_compiled_fill_other_record_sizes():
+    """Records wider than the cloud's own (the compiled writer's generic path) get the same
+    words as the numpy writer and keep the extra words; colours need 5-word records."""
+    from msg_adapters import point_fill
+    rng = np.random.default_rng(8)
+    s, n = 11, 3
+    x = rng.normal(size=(s, n, 3))
+    x[4, 1, 2] = np.nan
+    ids = np.arange(s, dtype='<u4') * 3
+    for record in (5, 7):
+        fast = np.full((s, n, record), 9.0, dtype='<f4')
+        slow = fast.copy()
+        assert not point_fill.fill_records(fast, x, None, ids)
+        assert not point_fill._fill_numpy(slow, x, None, ids)
+        assert fast.tobytes() == slow.tobytes()
+        assert np.all(fast[..., 4:] == 9.0)
+    with pytest.raises(ValueError, match='5 words'):
+        point_fill.fill_records(np.zeros((s, n, 4), dtype='<f4'), x,
+                                np.zeros((s, 1), dtype='<f4'), ids)
+
+
+@pytest.mark.parametrize('per_point', [False, True])
+def test_packed_rgb_gives_the_same_cloud_as_colors(per_point):
+    """Colours packed once (``pack_rgb_u32``, what the node caches) and passed as
+    ``packed_rgb`` give the same bytes as ``colors`` on both paths; wrong shapes or types and
+    both arguments at once are rejected with what was expected."""
+    from msg_adapters.pointcloud import pack_rgb_u32
+    rng = np.random.default_rng(9)
+    s, n = 255, 4
+    x = rng.normal(size=(s, n, 3))
+    cols = rng.random((s, n, 4) if per_point else (s, 4))
+    edge = (np.arange(s) + 0.5) / 255.0     # halfway between two 8-bit levels: float32 or
+    cols[..., 1] = edge[:, None] if per_point else edge     # float64 rounding decides
+    packed = pack_rgb_u32(cols)
+    assert packed.dtype == np.uint32 and packed.shape == cols.shape[:-1]
+    kw = dict(frame_id='map', stamp_ns=1_500_000_000)
+    assert strands_to_pointcloud2_cdr(x, packed_rgb=packed, **kw) == \
+        strands_to_pointcloud2_cdr(x, colors=cols, **kw)
+    a = strands_to_pointcloud2(x, packed_rgb=packed, **kw)
+    b = strands_to_pointcloud2(x, colors=cols, **kw)
+    assert bytes(a.data) == bytes(b.data) and a.fields == b.fields
+    with pytest.raises(ValueError, match='not both'):
+        strands_to_pointcloud2_cdr(x, colors=cols, packed_rgb=packed, **kw)
+    for bad in (packed.astype(np.int32), packed[:-1], packed.astype(np.uint64)):
+        with pytest.raises(ValueError, match='packed_rgb must be uint32'):
+            strands_to_pointcloud2_cdr(x, packed_rgb=bad, **kw)
+    with pytest.raises(ValueError, match=r'\[0, 1\]'):
+        pack_rgb_u32(np.full((2, 3), 1.5))
