@@ -61,7 +61,7 @@ from std_srvs.srv import Trigger
 from visualization_msgs.msg import MarkerArray
 
 from msg_adapters.marker_cdr import strands_to_marker_array_cdr
-from msg_adapters.pointcloud import strands_to_pointcloud2_cdr
+from msg_adapters.pointcloud import pack_rgb_u32, strands_to_pointcloud2_cdr
 from msg_adapters.pose import pose_from_msg, PoseError
 
 from . import params as P
@@ -194,7 +194,7 @@ class HairSimNode(Node):
         self._pose_published_ns = None   # sim time of the last frame publish_on_pose sent
         self._tf_child: Optional[str] = None
         self._tf_seen_ns = 0
-        self._color_cache = StrandColorCache()
+        self._color_cache = StrandColorCache(pack_rgb_u32)
         self.rejected = 0                # poses dropped (malformed, NaN, zero quaternion ...)
         self.rebuilds = 0
         self.frames_built = 0            # sim.frame() calls made for publishing
@@ -530,7 +530,7 @@ class HairSimNode(Node):
             if key.endswith('points'):
                 data = strands_to_pointcloud2_cdr(
                     strands, frame_id=frame_id, stamp_ns=stamp,
-                    colors=self._colors(ns, strands.shape[0], color))
+                    packed_rgb=self._colors(ns, strands.shape[0], color))
                 o.cached = data
             else:
                 shape = (strands.shape[0], s.marker_style)
@@ -550,6 +550,7 @@ class HairSimNode(Node):
         self._publish_ms_since_pose += took
 
     def _colors(self, ns: str, n: int, rgba) -> np.ndarray:
+        """(n,) uint32 packed per-strand colours of the cloud (cached)."""
         return self._color_cache.get(ns, n, rgba)
 
     # ================================================================ diagnostics

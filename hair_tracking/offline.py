@@ -126,18 +126,21 @@ class FrameEncoder:
 
     def __init__(self, settings: Settings):
         self.settings = settings
-        self._colors = StrandColorCache()
+        from msg_adapters.pointcloud import pack_rgb_u32
+        self._colors = StrandColorCache(pack_rgb_u32)
         self._shapes: Dict[str, tuple] = {}
         self.lifetime_ns = int(round(settings.marker_lifetime * 1e9))
 
     def colors(self, ns: str, n: int, rgba) -> np.ndarray:
+        """(n,) uint32 packed per-strand colours of the cloud (cached)."""
         return self._colors.get(ns, n, rgba)
 
     def points(self, strands, frame_id, stamp_ns, ns='hair', rgba=None) -> bytes:
         from msg_adapters.pointcloud import strands_to_pointcloud2_cdr
         rgba = rgba or self.settings.marker_color
-        return strands_to_pointcloud2_cdr(strands, frame_id=frame_id, stamp_ns=stamp_ns,
-                                          colors=self.colors(ns, strands.shape[0], rgba))
+        return strands_to_pointcloud2_cdr(
+            strands, frame_id=frame_id, stamp_ns=stamp_ns,
+            packed_rgb=self.colors(ns, strands.shape[0], rgba))
 
     def markers(self, strands, frame_id, stamp_ns, ns='hair', rgba=None) -> bytes:
         from msg_adapters.marker_cdr import strands_to_marker_array_cdr
