@@ -11,10 +11,10 @@ brought); in a quiet phase 3.4 ms against 6 ms.
 
 :class:`ParallelChooser` therefore times the call site and keeps whichever variant was faster:
 the static rule's choice first, and after ``settle`` calls a short trial of the other one
-(``window`` calls) compared with the median of the current one's last ``window`` calls, again
-every ``reprobe`` calls.  The variants give bit-identical results (the serial twins are the
-same code, see :func:`hair_tracking.integrate.serial_twin`), so the choice changes speed only,
-never the output.  Standard library only.
+(``window`` calls, fewer when it has lost already) compared with the median of the current
+one's last ``window`` calls, again every ``reprobe`` calls.  The variants give bit-identical
+results (the serial twins are the same code, see :func:`hair_tracking.integrate.serial_twin`),
+so the choice changes speed only, never the output.  Standard library only.
 """
 import statistics
 import time
@@ -75,10 +75,15 @@ class ParallelChooser:
             self._until_trial -= 1
             return
         self._trial.append(seconds)
-        if len(self._trial) < self.window:
+        bar = self.margin * statistics.median(self._recent)
+        # A trial whose median can no longer beat the bar ends at once: with more than half of
+        # its window at or above the bar, the median is too (the losing variant is often
+        # twice as slow, and every call of a trial is a slow frame).
+        lost = sum(1 for t in self._trial if t >= bar) > self.window // 2
+        if len(self._trial) < self.window and not lost:
             return
         self.trials += 1
-        if statistics.median(self._trial) < self.margin * statistics.median(self._recent):
+        if not lost and statistics.median(self._trial) < bar:
             self.parallel = not self.parallel
             self.switches += 1
             self._recent = self._trial[-self.window:]

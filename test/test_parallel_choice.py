@@ -37,11 +37,33 @@ def test_keeps_the_static_choice_until_it_has_settled_then_tries_the_other():
     c = ParallelChooser(window=4, settle=10, reprobe=20)
     used = drive(c, 10, 1.0, 2.0)
     assert used == [True] * 10                        # settling on the static rule's choice
-    used = drive(c, 4, 1.0, 2.0)
-    assert used == [False] * 4 and c.trials == 1      # a trial of the serial twin ...
+    used = drive(c, 3, 1.0, 2.0)
+    assert used == [False] * 3 and c.trials == 1      # a trial of the serial twin ...
     assert c.parallel and c.switches == 0             # ... slower: parallel kept
     assert drive(c, 20, 1.0, 2.0) == [True] * 20      # no trial before reprobe calls
-    assert drive(c, 4, 1.0, 2.0) == [False] * 4 and c.trials == 2
+    assert drive(c, 3, 1.0, 2.0) == [False] * 3 and c.trials == 2
+
+
+@pytest.mark.parametrize('window', [1, 4, 5, 8])
+def test_a_trial_ends_as_soon_as_it_cannot_win(window):
+    """More than half of a trial's window at or above the bar (margin x the current median)
+    decides it: it stops there; a trial that is winning runs its whole window."""
+    c = ParallelChooser(window=window, settle=window, reprobe=100)
+    drive(c, window, 1.0, 2.0)
+    used = drive(c, window, 1.0, 2.0)                 # serial twice as slow
+    need = window // 2 + 1
+    assert used == [False] * need + [True] * (window - need)
+    assert c.trials == 1 and c.parallel
+    # slow calls mixed with fast ones: still undecided until the window is full
+    c = ParallelChooser(window=window, settle=window, reprobe=100)
+    drive(c, window, 1.0, 2.0)
+    times = [2.0 if k % 2 else 0.5 for k in range(window)]     # median 0.5 or 1.25
+    used = []
+    for t in times:
+        used.append(c.choose(True))
+        c.record(t)
+    assert used == [False] * window and c.trials == 1
+    assert c.switches == (1 if window % 2 else 0)
 
 
 def test_switches_to_the_faster_variant_and_back_when_the_machine_changes():
