@@ -92,8 +92,18 @@ def fill_records(words, x, rgb, ids):
         if stride != 5:
             raise ValueError(f'records with rgb are 5 words (x y z strand rgb), got {stride}')
     ids = np.ascontiguousarray(ids, dtype='<u4').view('<f4')
-    return bool(_fill_records(words.reshape(-1), x.reshape(-1), rgb.reshape(-1), ids, n_points,
-                              stride, per_point))
+    return bool(_fill_records(words.reshape(-1), _read_only(x), _read_only(rgb),
+                              _read_only(ids), n_points, stride, per_point))
+
+
+def _read_only(a):
+    """A flat read-only view of ``a``: numba compiles one specialisation per argument type and
+    read-only is part of the type, so the inputs always go in read-only (the node's frames are
+    read-only views, its cached colours too, warm-up data is not: a second specialisation
+    compiled in the middle of the first published frame, 1.5 s with an empty cache)."""
+    v = a.reshape(-1)
+    v.flags.writeable = False
+    return v
 
 
 def _fill_numpy(words, x, rgb, ids):

@@ -272,3 +272,23 @@ def test_packed_rgb_gives_the_same_cloud_as_colors(per_point):
             strands_to_pointcloud2_cdr(x, packed_rgb=bad, **kw)
     with pytest.raises(ValueError, match=r'\[0, 1\]'):
         pack_rgb_u32(np.full((2, 3), 1.5))
+
+
+def test_compiled_fill_has_one_specialisation_for_read_only_and_writable_inputs():
+    """Read-only inputs (the node's frames are read-only views, its cached colours too) and
+    writable ones (warm-up data) use the same compiled code: a second specialisation would be
+    compiled in the middle of the first published frame."""
+    from msg_adapters import point_fill
+    rng = np.random.default_rng(10)
+    s, n = 6, 4
+    words = np.zeros((s, n, 5), dtype='<f4')
+    ids = np.arange(s, dtype='<u4')
+    seen = set()
+    for writable in (True, False):
+        x = rng.normal(size=(s, n, 3))
+        rgb = rng.random((s, 1)).astype('<f4')
+        for a in (x, rgb, ids):
+            a.flags.writeable = writable
+        assert point_fill.fill_records(words, x, rgb, ids)
+        seen.add(len(point_fill._fill_records.signatures))
+    assert len(seen) == 1
