@@ -16,7 +16,12 @@ one slow pose does not flip it) against the pose period (median interval of thei
 * shed when the work, tracking every substep, takes more than ``budget`` of the period;
 * restore when the work it *would* take tracking every substep, estimated as the shed work
   plus ``substeps - 1`` more tracking steps, is below ``RESTORE_FRACTION * budget`` of the
-  period (the gap keeps it from switching back and forth).
+  period (the gap keeps it from switching back and forth);
+* shed at once, without waiting for half a window, when :data:`URGENT_POSES` poses in a row
+  took longer than :data:`URGENT` pose periods each: the node then falls further behind with
+  every pose (each next call has more substeps due); waiting for the medians cost the node at
+  10 k ghosts a start of 39, 58, 85, 114 and 166 ms poses before it shed.  One slow pose
+  alone still does not decide.
 
 This module imports no ROS package; the node feeds it (:mod:`hair_tracking.node`).  Offline runs
 (``hair_sim_bag run``) never shed: their output must be a function of the input alone.
@@ -29,6 +34,10 @@ from typing import Optional
 WINDOW = 8
 #: Restore only when the full schedule is estimated below this fraction of the budget.
 RESTORE_FRACTION = 2.0 / 3.0
+#: Work above this many pose periods on URGENT_POSES poses in a row sheds at once (with two
+#: periods, 10 k ghosts started with 28, 35 and 37 ms poses at 60 Hz before the fourth shed).
+URGENT = 1.0
+URGENT_POSES = 2
 
 
 class LoadShedder:
@@ -69,6 +78,10 @@ class LoadShedder:
             self._estimate.append(step_ms + (substeps - 1) * track_ms)
         else:
             self._full.append(step_ms)
+        if not self.shedding and self._periods and len(self._full) >= URGENT_POSES and \
+                min(list(self._full)[-URGENT_POSES:]) > URGENT * median(self._periods):
+            self._switch(True)
+            return True
         if len(self._periods) < WINDOW // 2:
             return self.shedding
         allowed = self.budget * median(self._periods)

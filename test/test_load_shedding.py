@@ -1,7 +1,8 @@
 """The live node's load-shedding policy (hair_tracking.load_shedding), without ROS."""
 import pytest
 
-from hair_tracking.load_shedding import LoadShedder, RESTORE_FRACTION, WINDOW
+from hair_tracking.load_shedding import LoadShedder, RESTORE_FRACTION, URGENT, \
+    URGENT_POSES, WINDOW
 
 PERIOD_NS = 16_666_667          # 60 Hz poses
 SUBSTEPS = 4                    # 240 Hz substeps
@@ -52,11 +53,30 @@ def test_one_slow_pose_does_not_shed_and_reset_forgets_the_timings():
     s = LoadShedder(0.6)
     feed(s, WINDOW, step_ms=5.0, track_ms=1.0)
     assert s.update(WINDOW * PERIOD_NS, 40.0, 10.0, SUBSTEPS) is False     # median, not max
+    assert s.update((WINDOW + 1) * PERIOD_NS, 5.0, 1.0, SUBSTEPS) is False
     s.reset()
-    # after a reset the periods are unknown again: no decision for half a window
-    assert feed(s, WINDOW // 2, step_ms=40.0, track_ms=10.0, start=100) == \
+    # after a reset the periods are unknown again: no decision for half a window (over the
+    # budget, 14 ms > 0.6 x 16.7 ms, but under two periods: not urgent)
+    assert feed(s, WINDOW // 2, step_ms=14.0, track_ms=3.0, start=100) == \
         [False] * (WINDOW // 2)
-    assert feed(s, 1, step_ms=40.0, track_ms=10.0, start=100 + WINDOW // 2) == [True]
+    assert feed(s, 1, step_ms=14.0, track_ms=3.0, start=100 + WINDOW // 2) == [True]
+
+
+def test_poses_far_over_the_period_shed_after_two():
+    """Two poses in a row that each took more than URGENT pose periods shed at once (the
+    node falls further behind with every such pose), also right after a start or reset."""
+    s = LoadShedder(0.6)
+    slow = URGENT * PERIOD_NS * 1e-6 + 1.0
+    assert feed(s, URGENT_POSES, step_ms=slow, track_ms=8.0) == \
+        [False] * (URGENT_POSES - 1) + [True]   # the second pose gives the first period
+    s = LoadShedder(0.6)
+    feed(s, WINDOW, step_ms=5.0, track_ms=1.0)
+    assert feed(s, URGENT_POSES, step_ms=slow, track_ms=8.0, start=WINDOW) == \
+        [False] * (URGENT_POSES - 1) + [True]
+    s = LoadShedder(0.6)
+    feed(s, WINDOW, step_ms=5.0, track_ms=1.0)          # alternating: never two in a row
+    for k in range(WINDOW // 2):                        # (and the median stays low)
+        assert not s.update((WINDOW + k) * PERIOD_NS, slow if k % 2 else 5.0, 1.0, SUBSTEPS)
 
 
 def test_poses_without_substeps_do_not_count_and_the_budget_is_checked():
