@@ -7,7 +7,8 @@ Guides: one substep of S strands x 16 nodes (S = 100, 1000, 4000) with stretch c
 neighbours and bending as second-neighbour distance constraints, 4 iterations, dt = 1/240 s, no
 collider, roots pinned, gravity on — our PBD, XPBD and FTL solvers side by side with Jan Bender's
 PositionBasedDynamics (PyPI ``pypbd``: the same particles, the same constraints as
-``addDistanceConstraint``, NUM_SUB_STEPS 1, MAX_ITERATIONS 4, the same time step).  Reported:
+``addDistanceConstraint``, NUM_SUB_STEPS 1, MAX_ITERATIONS 4, the same time step), timed in
+turns (:func:`interleaved_ms`) so that a change of the machine's phase hits all alike.  Reported:
 median ms per step and ns per node-iteration (ms / (S * 16 * iterations)), and the ratio to pypbd.
 
 Ghosts: one tracking substep of 10 k and 100 k ghost strands x 16 nodes (16 ghosts per guide,
@@ -97,17 +98,39 @@ def print_reference(label, ref):
           f'{ref["sqrt_ns_per_element"]:.2f} ns/element')
 
 
-def bench_ours(solver, strands, repeats):
+def interleaved_ms(fns, repeats, rounds=5, warmup=3):
+    """Median ms per call of each function in ``fns``, measured in ``rounds`` rounds that take
+    turns (``repeats`` calls of each per round; the median over the rounds' medians): a phase
+    change of this shared machine then hits every function alike, and their ratios hold (one
+    run timed pypbd and then ours and got 3.0x at 100 strands, 5.3x minutes later)."""
+    for fn in fns:
+        for _ in range(warmup):
+            fn()
+    per_round = [[] for _ in fns]
+    for _ in range(rounds):
+        for i, fn in enumerate(fns):
+            samples = []
+            for _ in range(repeats):
+                start = time.perf_counter()
+                fn()
+                samples.append(time.perf_counter() - start)
+            per_round[i].append(float(np.median(samples)))
+    return [float(np.median(r) * 1e3) for r in per_round]
+
+
+def ours_step(solver, strands):
+    """One substep of our guide solver ``solver`` on ``strands`` hanging strands (a function)."""
     scene = Scene().with_changes(solver__type=solver, solver__iterations=ITERATIONS,
                                  solver__dt=DT, collider__shape='none',
                                  solver__shock_propagation=0.0, solver__bend_stiffness=0.3)
     s = StrandSet.from_rest(hanging_rest(strands))
     gs = GuideSolver(s, scene)
     gs.reset(IDENTITY)
-    return median_ms(lambda: gs.step(DT, IDENTITY, IDENTITY), repeats)
+    return lambda: gs.step(DT, IDENTITY, IDENTITY)
 
 
-def bench_pypbd(strands, repeats):
+def pypbd_step(strands):
+    """(one time step of pypbd on the same strands, its clean-up): a function each."""
     import pypbd as pbd
     sim = pbd.Simulation.getCurrent()
     sim.initDefault()
@@ -128,10 +151,11 @@ def bench_pypbd(strands, repeats):
             model.addDistanceConstraint(b + k, b + k + 1, 1.0)
         for k in range(NODES - 2):
             model.addDistanceConstraint(b + k, b + k + 2, 0.3)
-    ms = median_ms(lambda: ts.step(model), repeats)
-    sim.reset()
-    model.cleanup()
-    return ms
+
+    def cleanup():
+        sim.reset()
+        model.cleanup()
+    return (lambda: ts.step(model)), cleanup
 
 
 def bench_ghosts(ghosts, repeats):
@@ -212,14 +236,25 @@ def main():
     numba.set_num_threads(guide_threads)
     stolen = result['machine']['cpu_steal_share'] = {}
     steal = StealMeter()
-    print(f'guides: {NODES} nodes, {ITERATIONS} iterations, dt {DT * 1e3:.3f} ms, median of '
-          f'{reps} steps')
+    rounds = 3 if args.quick else 5
+    print(f'guides: {NODES} nodes, {ITERATIONS} iterations, dt {DT * 1e3:.3f} ms; pypbd and '
+          f'ours take turns, {rounds} rounds of {reps} steps each (median of the round medians)')
     print(f'{"strands":>8} {"solver":>7} {"ms/step":>9} {"ns/node-it":>11} {"vs pypbd":>9}')
     for strands in ((100, 1000) if args.quick else (100, 1000, 4000)):
-        peer = bench_pypbd(strands, reps) if have_pypbd else None
-        rows = [('pypbd', peer)] if peer is not None else []
-        rows += [(s, bench_ours(s, strands, reps)) for s in ('pbd', 'xpbd', 'ftl')]
-        for solver, ms in rows:
+        names = ['pbd', 'xpbd', 'ftl']
+        fns = [ours_step(s, strands) for s in names]
+        cleanup = None
+        if have_pypbd:
+            peer_fn, cleanup = pypbd_step(strands)
+            names.insert(0, 'pypbd')
+            fns.insert(0, peer_fn)
+        try:
+            times = interleaved_ms(fns, reps, rounds)
+        finally:
+            if cleanup is not None:
+                cleanup()
+        peer = times[0] if have_pypbd else None
+        for solver, ms in zip(names, times):
             ns = ms * 1e6 / (strands * NODES * ITERATIONS)
             ratio = peer / ms if peer else None
             result['guides'].append({'strands': strands, 'solver': solver, 'ms_per_step': ms,
