@@ -25,8 +25,8 @@ class StrandColorCache:
     or the colour changes (the node and ``FrameEncoder`` ask once per published frame).
 
     ``pack``: a function applied to the colours before they are cached (the publishers pass
-    ``msg_adapters.pointcloud.pack_rgb`` viewed as uint32: packing 10 k colours took 0.5 ms a
-    frame); None keeps the (n, 4) floats."""
+    ``msg_adapters.pointcloud.pack_rgb_u32``: packing 10 k colours took 0.5 ms a frame); None
+    keeps the (n, 4) floats.  The cached arrays are read-only (every frame shares them)."""
 
     def __init__(self, pack: Optional[Callable[[np.ndarray], np.ndarray]] = None):
         self._pack = pack

@@ -63,8 +63,8 @@ def pack_rgb_u32(colors):
 
 def as_packed_rgb(packed, n_strands, n_points):
     """Packed colours ``(S,)`` (per strand) or ``(S, N)`` (per point) of unsigned 32-bit
-    ``0x00RRGGBB`` values, as :func:`pack_rgb` makes them (``.view('<u4')``) -> the float32
-    words of the ``rgb`` field, ``(S, 1|N)``."""
+    ``0x00RRGGBB`` values, as :func:`pack_rgb_u32` makes them -> the float32 words of the
+    ``rgb`` field, ``(S, 1|N)``."""
     a = np.asarray(packed)
     if a.dtype.kind != 'u' or a.dtype.itemsize != 4 or \
             a.shape not in ((n_strands,), (n_strands, n_points)):
@@ -103,7 +103,7 @@ def strands_to_points(strands, colors=None, strand_ids=None, packed_rgb=None):
 
     ``strands`` (S, N >= 1, 3) [m], NaN allowed; ``colors`` per strand (S, 3|4) or per point
     (S, N, 3|4) in [0, 1], or instead ``packed_rgb`` (the same packed once with
-    :func:`pack_rgb`, see :func:`as_packed_rgb`: a publisher sending the same colours every
+    :func:`pack_rgb_u32`, see :func:`as_packed_rgb`: a publisher sending the same colours every
     frame saves the packing, 0.5 ms for 10 k strands); ``strand_ids`` (S,) uint32 values for
     the ``strand`` field (default 0..S-1).
     """
