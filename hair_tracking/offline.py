@@ -263,7 +263,9 @@ class RunSummary:
             f'{self.bag_duration_s:.2f} s)',
             f'output: {self.output}',
             '  ' + ', '.join(f'{t}: {n}' for t, n in self.topics.items()),
-            f'hair: {self.strands} strands x {self.nodes} points; frames written: {self.frames}',
+            f'hair: {self.strands} strands x {self.nodes} points; frames written: {self.frames}'
+            + (f' ({self.loop_s * 1e3 / self.frames:.2f} ms of the loop per frame)'
+               if self.frames else ''),
             f'time: setup {self.setup_s:.2f} s (build + kernels); loop {self.loop_s:.2f} s = '
             f'{self.ms_per_pose:.2f} ms per pose (simulation median {np.median(sim):.2f} ms, '
             f'p95 {np.percentile(sim, 95):.2f} ms)',

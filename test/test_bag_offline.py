@@ -1,6 +1,7 @@
 """hair_sim_bag run: import -> run -> read back (MCAP and sqlite3), the hair in the bag equals
 the simulator driven directly, determinism, settings files, TF input, and every bad input."""
 import os
+import re
 from pathlib import Path
 import subprocess
 import sys
@@ -121,6 +122,8 @@ def test_import_run_read_back(walk_bag, tmp_path, name, capsys):
     text = capsys.readouterr().out
     assert 'real-time factor' in text and 'max stretch' in text and 'poses rejected: 0' in text
     assert 'stolen by the hypervisor meanwhile: ' in text
+    assert re.search(r'frames written: [1-9]\d* \([0-9.]+ ms of the loop per frame\)', text)
+    assert re.search(r'= [0-9.]+ ms per pose', text)
     if name.endswith('_sqlite'):
         assert any(p.suffix == '.db3' for p in out.iterdir())
     settings = _settings()
