@@ -109,13 +109,8 @@ def interleaved_ms(fns, repeats, rounds=5, warmup=3):
     per_round = [[] for _ in fns]
     for _ in range(rounds):
         for i, fn in enumerate(fns):
-            samples = []
-            for _ in range(repeats):
-                start = time.perf_counter()
-                fn()
-                samples.append(time.perf_counter() - start)
-            per_round[i].append(float(np.median(samples)))
-    return [float(np.median(r) * 1e3) for r in per_round]
+            per_round[i].append(median_ms(fn, repeats, warmup=0))
+    return [float(np.median(r)) for r in per_round]
 
 
 def ours_step(solver, strands):
