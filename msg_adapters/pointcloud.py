@@ -50,15 +50,14 @@ def pack_rgb(colors):
 
 
 def pack_rgb_u32(colors):
-    """RGB(A) in [0, 1], shape (..., 3|4) -> uint32 (...) ``0x00RRGGBB``: what ``packed_rgb``
-    takes (checked like ``colors``: finite, in [0, 1])."""
+    """Per-strand ``(S, 3|4)`` or per-point ``(S, N, 3|4)`` RGB(A) in [0, 1] -> uint32 ``(S,)``
+    or ``(S, N)`` ``0x00RRGGBB``: what ``packed_rgb`` takes.  Checked and converted by
+    :func:`~msg_adapters.arrays.as_colors`, as ``colors`` are, so both give the same bytes."""
     c = np.asarray(colors)
-    if c.ndim < 1 or c.shape[-1] not in (3, 4):
-        raise ValueError(f'colors must be shaped (..., 3|4), got {c.shape}')
-    if not (np.isfinite(c).all() and (c >= 0.0).all() and (c <= 1.0).all()):
-        raise ValueError('colour components must be finite and in [0, 1]')
-    # through float32 like ``colors`` (as_colors), so that both give the same bytes
-    return pack_rgb(c.astype('<f4')).view('<u4')
+    if c.ndim not in (2, 3):
+        raise ValueError(f'colors must be shaped (S, 3|4) or (S, N, 3|4), got {c.shape}')
+    cols = as_colors(c, c.shape[0], c.shape[1] if c.ndim == 3 else 1)
+    return pack_rgb(cols).view('<u4').reshape(c.shape[:-1])
 
 
 def as_packed_rgb(packed, n_strands, n_points):
