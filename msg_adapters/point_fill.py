@@ -29,11 +29,11 @@ def _put_point(words, o, x, p, sid):
 
 
 @njit(cache=True, nogil=True)
-def _fill_records(words, x, rgb, ids, n_points, stride, per_point_rgb):
-    """``words`` (S * N * stride,) float32, ``stride`` 4 or 5 words a record; ``x`` (S * N * 3,)
-    float64; ``rgb`` (S,) or with ``per_point_rgb`` (S * N,) float32 packed colours (or empty:
-    none); ``ids`` (S,) the uint32 strand ids *viewed as float32*.  Returns True when every
-    coordinate is finite.
+def _fill_records(words, x, rgb, ids, n_points, per_point_rgb):
+    """``words`` (S * N * 4|5,) float32, records of 4 words (x y z strand) without colours and
+    of 5 (... rgb) with; ``x`` (S * N * 3,) float64; ``rgb`` (S,) or with ``per_point_rgb``
+    (S * N,) float32 packed colours (or empty: none); ``ids`` (S,) the uint32 strand ids
+    *viewed as float32*.  Returns True when every coordinate is finite.
 
     Ids and colours are bit patterns: they are copied as float32 words, which moves their bits
     unchanged (no arithmetic touches them).  One float32 output array and a finiteness test
@@ -50,12 +50,9 @@ def _fill_records(words, x, rgb, ids, n_points, stride, per_point_rgb):
         p0 = s * n_points
         # one loop per layout with the record size a constant: a branch, or the size as a
         # variable, inside the point loop halved its speed
-        if not with_rgb and stride == 4:
+        if not with_rgb:
             for j in range(n_points):
                 bad += _put_point(words, (p0 + j) * 4, x, p0 + j, sid)
-        elif not with_rgb:
-            for j in range(n_points):
-                bad += _put_point(words, (p0 + j) * stride, x, p0 + j, sid)
         elif per_point_rgb:
             for j in range(n_points):
                 p = p0 + j
@@ -74,26 +71,27 @@ def fill_records(words, x, rgb, ids):
     """Write points into ``words``, the (S, N, 4|5) little-endian float32 view of a cloud's
     data; ``x`` (S, N, 3) float64 C-contiguous, ``rgb`` (S, 1|N) packed float32 or None,
     ``ids`` (S,) uint32.  Returns ``is_dense`` (every coordinate finite).  Falls back to numpy
-    for memory numba cannot take as float32 (not 4-byte aligned, or big-endian)."""
+    for memory numba cannot take as float32 (not 4-byte aligned, or big-endian) and for
+    records wider than the cloud's own."""
     n_strands, n_points = words.shape[:2]
     if rgb is not None and rgb.shape != (n_strands, 1) and rgb.shape != (n_strands, n_points):
         raise ValueError(f'rgb must be shaped ({n_strands}, 1 or {n_points}), got {rgb.shape}')
+    stride = words.shape[2]
+    if rgb is not None and stride != 5:
+        raise ValueError(f'records with rgb are 5 words (x y z strand rgb), got {stride}')
     if not (words.flags.aligned and words.flags.c_contiguous and
             words.dtype == np.dtype('<f4') and x.dtype == np.dtype('<f8') and
-            x.flags.c_contiguous):
-        return _fill_numpy(words, x, rgb, ids)
-    stride = words.shape[2]
+            x.flags.c_contiguous) or (rgb is None and stride != 4):
+        return _fill_numpy(words, x, rgb, ids)      # any alignment, any record size
     if rgb is None:
         rgb = np.empty(0, dtype=np.float32)
         per_point = False
     else:
         per_point = rgb.shape[1] == n_points and n_points > 1
         rgb = np.ascontiguousarray(rgb if per_point else rgb[:, :1], dtype=np.float32)
-        if stride != 5:
-            raise ValueError(f'records with rgb are 5 words (x y z strand rgb), got {stride}')
     ids = np.ascontiguousarray(ids, dtype='<u4').view('<f4')
     return bool(_fill_records(words.reshape(-1), _read_only(x), _read_only(rgb),
-                              _read_only(ids), n_points, stride, per_point))
+                              _read_only(ids), n_points, per_point))
 
 
 def _read_only(a):

@@ -225,8 +225,8 @@ def test_compiled_fill_matches_numpy_fill(rgb_mode):
 
 
 def test_compiled_fill_other_record_sizes():
-    """Records wider than the cloud's own (the compiled writer's generic path) get the same
-    words as the numpy writer and keep the extra words; colours need 5-word records."""
+    """Records wider than the cloud's own (written by the numpy writer) get the same words as
+    ever and keep the extra words; colours need 5-word records."""
     from msg_adapters import point_fill
     rng = np.random.default_rng(8)
     s, n = 11, 3
