@@ -83,17 +83,25 @@ class GuideSolver:
         self._x_old = np.empty_like(strands.x)
         self._rot_rel = np.empty((3, 3))
         self._bend_rest = pbd_constraints.second_neighbour_rest(strands.rest)
-        if self.kind == 'pbd':
-            self._stretch_w = pbd_constraints.pair_weights(im, 1)
-            self._bend_w = pbd_constraints.pair_weights(im, 2)
-        elif self.kind == 'ftl':
+        if self.kind == 'ftl':
             self._bend_w = pbd_constraints.pair_weights(im, 2)
             self._corr = np.zeros_like(strands.x)
         else:
+            # the PBD and XPBD kernels read their per-constraint data block by block, strands
+            # side by side (pbd_constraints.lane_major), and project in a work space
+            lanes = pbd_constraints.lane_major
             s, n = im.shape
-            self._lam_stretch = np.zeros((s, n - 1))
-            self._lam_bend = np.zeros((s, n - 2))
-            self._xpbd_dt = None
+            self._work = pbd_constraints.lane_work(s, n)
+            self._rest_length_l = lanes(strands.rest_length)
+            self._bend_rest_l = lanes(self._bend_rest)
+            if self.kind == 'pbd':
+                self._stretch_w = lanes(pbd_constraints.pair_weights(im, 1))
+                self._bend_w = lanes(pbd_constraints.pair_weights(im, 2))
+            else:
+                self._inv_mass_l = lanes(im)
+                self._lam_stretch = lanes(np.zeros((s, n - 1)))
+                self._lam_bend = lanes(np.zeros((s, n - 2)))
+                self._xpbd_dt = None
         need_ref = self.collider is not None and self.collider.friction > 0.0
         self._x_ref = np.empty_like(strands.x) if need_ref else None
         self._counters = {'substeps': 0, 'clamped': 0, 'clamped_total': 0,
@@ -143,18 +151,19 @@ class GuideSolver:
             sv = self.scene.solver
             kernel = pbd_constraints.pbd_step if parallel else pbd_constraints.pbd_step_serial
             clamped = kernel(
-                st.x, st.v, self._x_old, st.rest, st.inv_mass, st.rest_length, self._bend_rest,
-                self._stretch_w, self._bend_w, rot, pos, rot_rel, pos_prev, self._gravity, damp,
-                dt, self._shock, self._iterations, float(sv.stiffness), float(sv.bend_stiffness),
-                self._max_disp, fused)
+                st.x, st.v, self._x_old, st.rest, st.inv_mass, self._rest_length_l,
+                self._bend_rest_l, self._stretch_w, self._bend_w, self._work, rot, pos, rot_rel,
+                pos_prev, self._gravity, damp, dt, self._shock, self._iterations,
+                float(sv.stiffness), float(sv.bend_stiffness), self._max_disp, fused)
         elif self.kind == 'xpbd':
             a_stretch, a_bend = self._xpbd_factors(dt)
             kernel = pbd_constraints.xpbd_step if parallel else pbd_constraints.xpbd_step_serial
             clamped = kernel(
-                st.x, st.v, self._x_old, st.rest, st.inv_mass, st.rest_length, self._bend_rest,
-                self._stretch_gain, self._bend_gain, self._lam_stretch, self._lam_bend,
-                rot, pos, rot_rel, pos_prev, self._gravity, damp, dt, self._shock,
-                self._iterations, a_stretch, a_bend, self._max_disp, fused)
+                st.x, st.v, self._x_old, st.rest, st.inv_mass, self._inv_mass_l,
+                self._rest_length_l, self._bend_rest_l, self._stretch_gain, self._bend_gain,
+                self._lam_stretch, self._lam_bend, self._work, rot, pos, rot_rel, pos_prev,
+                self._gravity, damp, dt, self._shock, self._iterations, a_stretch, a_bend,
+                self._max_disp, fused)
         else:
             sv = self.scene.solver
             kernel = ftl.ftl_step if parallel else ftl.ftl_step_serial
@@ -228,8 +237,10 @@ class GuideSolver:
         a_bend = float(sv.bend_compliance) / (dt * dt)
         if self._xpbd_dt != dt:
             im = self.strands.inv_mass
-            self._stretch_gain = pbd_constraints.xpbd_gain(im, 1, a_stretch)
-            self._bend_gain = pbd_constraints.xpbd_gain(im, 2, a_bend)
+            self._stretch_gain = pbd_constraints.lane_major(
+                pbd_constraints.xpbd_gain(im, 1, a_stretch))
+            self._bend_gain = pbd_constraints.lane_major(
+                pbd_constraints.xpbd_gain(im, 2, a_bend))
             self._xpbd_dt = dt
         return a_stretch, a_bend
 

@@ -4,6 +4,8 @@ The references below are written independently of the kernels' loop structure: v
 strands, Gauss–Seidel along the strand, masses used directly (not through ``pair_weights``).
 Kernels use fused multiply-add (``integrate.FASTMATH``), so agreement is to ~1e-12, not bitwise.
 """
+import re
+
 import numba
 import numpy as np
 import pytest
@@ -121,6 +123,15 @@ def random_case(seed, s=13, n=7, all_free=False):
                 damping=2.0, dt=1.0 / 240.0, shock=0.6)
 
 
+def pbd_lane_data(inv_mass, rest_length, bend_rest):
+    """The lane-layout arguments of pbd_step after inv_mass: rest lengths, bending rest
+    distances, both pair weights, work space."""
+    lanes = pbd_constraints.lane_major
+    return (lanes(rest_length), lanes(bend_rest), lanes(pbd_constraints.pair_weights(inv_mass, 1)),
+            lanes(pbd_constraints.pair_weights(inv_mass, 2)),
+            pbd_constraints.lane_work(*inv_mass.shape))
+
+
 def kernel_common(c):
     rot_rel = integrate.relative_rotation(c['rot_prev'], c['rot'])
     return (c['rot'], c['pos'], rot_rel, c['pos_prev'], c['gravity'],
@@ -167,10 +178,9 @@ def test_pbd_step_matches_reference(seed, finalize):
         ref_pbd_sweep(p, bend_rest, c['inv_mass'], 2, kb)
     x, v, x_old = c['x'].copy(), c['v'].copy(), np.zeros_like(c['x'])
     clamped = pbd_constraints.pbd_step(
-        x, v, x_old, c['rest'], c['inv_mass'], c['rest_length'], bend_rest,
-        pbd_constraints.pair_weights(c['inv_mass'], 1),
-        pbd_constraints.pair_weights(c['inv_mass'], 2), *kernel_common(c),
-        iterations, k, kb, max_disp, finalize)
+        x, v, x_old, c['rest'], c['inv_mass'],
+        *pbd_lane_data(c['inv_mass'], c['rest_length'], bend_rest),
+        *kernel_common(c), iterations, k, kb, max_disp, finalize)
     assert np.allclose(x_old, xc, rtol=0, atol=ATOL)
     if finalize:
         p_ref, v_ref, clamped_ref = ref_finalize(p, xc, c['inv_mass'], None, c['dt'], max_disp,
@@ -197,16 +207,20 @@ def test_xpbd_step_matches_reference(finalize):
         ref_xpbd_sweep(p, c['rest_length'], c['inv_mass'], lam_s, 1, a_s)
         ref_xpbd_sweep(p, bend_rest, c['inv_mass'], lam_b, 2, a_b)
     x, v, x_old = c['x'].copy(), c['v'].copy(), np.zeros_like(c['x'])
-    k_lam_s = np.full(lam_s.shape, 123.0)        # the kernel must reset the multipliers
-    k_lam_b = np.full(lam_b.shape, -7.0)
+    lanes = pbd_constraints.lane_major
+    k_lam_s = lanes(np.full(lam_s.shape, 123.0))    # the kernel must reset the multipliers
+    k_lam_b = lanes(np.full(lam_b.shape, -7.0))
+    im = c['inv_mass']
     clamped = pbd_constraints.xpbd_step(
-        x, v, x_old, c['rest'], c['inv_mass'], c['rest_length'], bend_rest,
-        pbd_constraints.xpbd_gain(c['inv_mass'], 1, a_s),
-        pbd_constraints.xpbd_gain(c['inv_mass'], 2, a_b), k_lam_s, k_lam_b,
+        x, v, x_old, c['rest'], im, lanes(im), lanes(c['rest_length']), lanes(bend_rest),
+        lanes(pbd_constraints.xpbd_gain(im, 1, a_s)), lanes(pbd_constraints.xpbd_gain(im, 2, a_b)),
+        k_lam_s, k_lam_b, pbd_constraints.lane_work(*im.shape),
         *kernel_common(c), iterations, a_s, a_b, max_disp, finalize)
     assert clamped == 0
-    assert np.allclose(k_lam_s, lam_s, rtol=1e-9, atol=1e-9)
-    assert np.allclose(k_lam_b, lam_b, rtol=1e-9, atol=1e-9)
+    assert np.allclose(pbd_constraints.from_lane_major(k_lam_s, lam_s.shape), lam_s,
+                       rtol=1e-9, atol=1e-9)
+    assert np.allclose(pbd_constraints.from_lane_major(k_lam_b, lam_b.shape), lam_b,
+                       rtol=1e-9, atol=1e-9)
     if finalize:
         p_ref, v_ref, _ = ref_finalize(p, xc, c['inv_mass'], None, c['dt'], max_disp, 0.0)
         assert np.allclose(x, p_ref, rtol=0, atol=ATOL)
@@ -299,8 +313,6 @@ def test_pair_weights_and_gain():
 def test_kernels_deterministic_across_threads_and_blocks():
     c = random_case(8, s=21, n=9)
     bend_rest = pbd_constraints.second_neighbour_rest(c['rest'])
-    sw = pbd_constraints.pair_weights(c['inv_mass'], 1)
-    bw = pbd_constraints.pair_weights(c['inv_mass'], 2)
 
     def run(sl, threads):
         old = numba.get_num_threads()
@@ -308,8 +320,9 @@ def test_kernels_deterministic_across_threads_and_blocks():
         try:
             x, v = c['x'][sl].copy(), c['v'][sl].copy()
             pbd_constraints.pbd_step(x, v, np.zeros_like(x), c['rest'][sl].copy(),
-                                     c['inv_mass'][sl].copy(), c['rest_length'][sl].copy(),
-                                     bend_rest[sl].copy(), sw[sl].copy(), bw[sl].copy(),
+                                     c['inv_mass'][sl].copy(),
+                                     *pbd_lane_data(c['inv_mass'][sl], c['rest_length'][sl],
+                                                    bend_rest[sl]),
                                      *kernel_common(c), 4, 1.0, 0.3, 0.05, True)
         finally:
             numba.set_num_threads(old)
@@ -321,3 +334,66 @@ def test_kernels_deterministic_across_threads_and_blocks():
     # a strand's result does not depend on the block it is processed in
     sub = run(slice(3, 6), 1)
     assert np.array_equal(sub[0], a[0][3:6]) and np.array_equal(sub[1], a[1][3:6])
+
+
+@pytest.mark.parametrize('strands', [1, 13, 16, 21, 40])
+def test_lane_sweep_equals_strand_by_strand_sweep(strands):
+    """The side-by-side sweep of the PBD kernel (blocks of LANES strands, padding lanes for the
+    rest) moves every strand exactly as the strand-by-strand sweep does, bit for bit."""
+    c = random_case(5, s=strands, n=9)
+    im, n, lanes = c['inv_mass'], c['x'].shape[1], pbd_constraints.LANES
+    for gap, k, rest_dist in ((1, 0.9, c['rest_length']),
+                              (2, 0.4, pbd_constraints.second_neighbour_rest(c['rest']))):
+        w = pbd_constraints.pair_weights(im, gap)
+        ref = c['x'].copy()
+        pbd_constraints.pbd_sweep_block(ref, rest_dist, w, gap, k, 0, strands)
+        assert not np.array_equal(ref, c['x'])
+        out = c['x'].copy()
+        work = pbd_constraints.lane_work(strands, n)
+        rd_l, w_l = pbd_constraints.lane_major(rest_dist), pbd_constraints.lane_major(w)
+        for b in range(work.shape[0]):
+            s0, s1 = b * lanes, min((b + 1) * lanes, strands)
+            pbd_constraints.lanes_in(out, s0, s1, work[b])
+            pbd_constraints.pbd_sweep_lanes(work[b], rd_l[b], w_l[b], n, gap, k)
+            pbd_constraints.lanes_out(work[b], out, s0, s1)
+        assert np.array_equal(out, ref)
+        used = strands - (work.shape[0] - 1) * lanes      # lanes of the last block
+        assert np.all(work[-1].reshape(n, 3, lanes)[:, :, used:] == 0.0)   # padding stays 0
+
+
+def test_lane_major_layout_round_trip():
+    a = np.arange(21 * 5 * 2, dtype=float).reshape(21, 5, 2)
+    lm = pbd_constraints.lane_major(a)
+    lanes = pbd_constraints.LANES
+    assert lm.shape == (2, 5 * 2 * lanes)
+    assert lm[1, (3 * 2 + 1) * lanes + 4] == a[lanes + 4, 3, 1]     # [m][k][lane]
+    assert np.all(lm[1].reshape(5, 2, lanes)[:, :, 21 - lanes:] == 0.0)   # padding
+    assert np.array_equal(pbd_constraints.from_lane_major(lm, a.shape), a)
+    b = np.arange(3 * 4, dtype=float).reshape(3, 4)
+    assert np.array_equal(pbd_constraints.from_lane_major(pbd_constraints.lane_major(b), b.shape),
+                          b)
+
+
+@pytest.mark.parametrize('name', ['pbd_sweep_lanes', 'xpbd_sweep_lanes'])
+def test_lane_sweeps_compile_to_simd(name):
+    """LLVM turns the loop over a block's strands into vector instructions (a vector square root
+    in the IR).  The sweeps ran scalar, three times slower, with signed indices or a run-time
+    lane count; this guards the layout and the index types.  Compiled afresh (numba shows no IR
+    of cached code), called as the kernels call them: the gap a literal, the node count not."""
+    fn = getattr(pbd_constraints, name)
+    options = {k: v for k, v in fn.targetoptions.items() if k not in ('nopython', 'cache')}
+    fresh = numba.njit(**options)(fn.py_func)
+    n, lanes = 6, pbd_constraints.LANES
+    p = np.random.default_rng(0).normal(size=n * 3 * lanes)
+    rd, w = np.full((n - 1) * lanes, 0.1), np.full((n - 1) * 2 * lanes, 0.5)
+    if name == 'pbd_sweep_lanes':
+        @numba.njit
+        def call(p, rd, w, n):
+            fresh(p, rd, w, n, 1, 0.9)
+    else:
+        @numba.njit
+        def call(p, rd, w, n):
+            fresh(p, w[:n * lanes], rd, rd, np.zeros_like(rd), n, 1, 0.5)
+    call(p, rd, w, n)                    # n a run-time value, as x.shape[1] in the kernels
+    ir = '\n'.join(fresh.inspect_llvm(sig) for sig in fresh.signatures)
+    assert re.search(r'llvm\.sqrt\.v\d+f64', ir), f'{name}: no vector square root in the IR'

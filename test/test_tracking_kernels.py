@@ -359,7 +359,8 @@ def test_kernel_bodies_compile_without_reference_counting():
     assert integrate.NO_REFCOUNT == {'_nrt': False}
     bodies = (tk._track_chunk, tk.copy_blocks, integrate.head_motion, integrate.predict_block,
               integrate.finalize_block, ftl.ftl_pass_block, ftl.ftl_restore_block,
-              pbd_constraints.pbd_sweep_block,
-              pbd_constraints.xpbd_sweep_block)
+              pbd_constraints.pbd_sweep_block, pbd_constraints.pbd_sweep_lanes,
+              pbd_constraints.xpbd_sweep_lanes, pbd_constraints._pbd_block,
+              pbd_constraints._xpbd_block, pbd_constraints.lanes_in, pbd_constraints.lanes_out)
     for body in bodies:
         assert body.targetoptions.get('_nrt') is False, body.__name__
