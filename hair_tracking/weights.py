@@ -51,7 +51,10 @@ def direction_cos(vx, vy, vz, v0x, v0y, v0z):
     nn = (vx * vx + vy * vy + vz * vz) * (v0x * v0x + v0y * v0y + v0z * v0z)
     ok = nn > 1e-300
     cos = (vx * v0x + vy * v0y + vz * v0z) / math.sqrt(nn if ok else 1.0)
-    cos = min(max(cos, -1.0), 1.0)
+    # comparisons, not min/max: numba's builtins compile to a switch that stops LLVM from
+    # vectorising the calling loop (a NaN passes both tests and is caught below)
+    cos = -1.0 if cos < -1.0 else cos
+    cos = 1.0 if cos > 1.0 else cos
     return cos if ok and cos == cos else 0.0
 
 
