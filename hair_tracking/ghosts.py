@@ -286,7 +286,7 @@ class GhostTracker:
             self.group_start, self.block_group, self.group_guide, self._group_row,
             self._node_table, self._node_row, self._rest_off_blocks, self._root_blocks,
             self._inv_len, self._var_target, _f64(gx), _f64(guide_x_old), self._tan_rest,
-            _f64(head.rotation), _f64(head.position), float(dt),
+            _f64(head.rotation), _f64(head.position), 1.0 / float(dt),
             self._elastic, tr.tip_weight > 0.0, tr.com_weight, tr.max_weight,
             _per(tr.offset_strength, substeps), _per(tr.com_strength, substeps),
             _per(tr.spread, substeps), tr.length_restore,

@@ -164,7 +164,7 @@ def block_groups(group_start: np.ndarray, lanes: int = BLOCK_LANES) -> np.ndarra
 @njit(cache=True, nogil=True, parallel=True, fastmath=TRACK_FASTMATH, error_model='numpy')
 def track_groups(xb, vb, rest, seg_len, order, group_start, block_group, group_guide,
                  group_row, node_table, node_row, rest_off, root_rest, inv_len, var_target,
-                 guide_x, guide_x_old, tan_rest, R, pos, dt, elastic_mode, use_tip, com_w,
+                 guide_x, guide_x_old, tan_rest, R, pos, inv_dt, elastic_mode, use_tip, com_w,
                  max_weight, k_off, k_com, spread, ftl, collide, center, axes, friction, refine,
                  q_buf, buf, tmp, clamped, contacts):
     """One tracking substep of all ghosts, in place on ``xb`` and ``vb`` (see the module doc).
@@ -194,7 +194,12 @@ def track_groups(xb, vb, rest, seg_len, order, group_start, block_group, group_g
       var_target (K, N)       target group variance (sum of squares) [m^2] for spread control
       guide_x, guide_x_old    (G, M, 3) guides after / before this substep, world [m]
       tan_rest (G, M-1, 3)    unit rest tangents of the guides, head frame
-      R (3, 3), pos (3,)      head pose;  dt [s]
+      R (3, 3), pos (3,)      head pose
+      inv_dt                  1 / dt [1/s], the substep's inverse, computed by the caller:
+                              computed in here, LLVM's reassociation (``TRACK_FASTMATH``)
+                              turned every ``(x_new - x_old) * (1 / dt)`` back into a division,
+                              three vector divisions a node (11 % of the kernel's perf samples
+                              at 100 k ghosts)
       elastic_mode            weights.ELASTIC_OFF / KEPT / CHANGED
       use_tip, com_w, max_weight, k_off, k_com, spread, ftl   switches and strengths
       collide                 (h) fused: push nodes out of the ellipsoid with semi-axes ``axes``
@@ -221,7 +226,7 @@ def track_groups(xb, vb, rest, seg_len, order, group_start, block_group, group_g
     for c in prange(n_chunks):
         _track_chunk(c, n_chunks, xb, vb, rest, seg_len, order, group_start, block_group,
                      group_guide, group_row, node_table, node_row, rest_off, root_rest, inv_len,
-                     var_target, guide_x, guide_x_old, tan_rest, R, pos, dt, elastic_mode,
+                     var_target, guide_x, guide_x_old, tan_rest, R, pos, inv_dt, elastic_mode,
                      use_tip, com_w, max_weight, k_off, k_com, spread, ftl, collide, center,
                      axes, friction, refine, q_buf, buf, tmp, clamped, contacts)
 
@@ -229,7 +234,7 @@ def track_groups(xb, vb, rest, seg_len, order, group_start, block_group, group_g
 @njit(cache=True, nogil=True, fastmath=TRACK_FASTMATH, error_model='numpy')
 def track_groups_serial(xb, vb, rest, seg_len, order, group_start, block_group, group_guide,
                         group_row, node_table, node_row, rest_off, root_rest, inv_len, var_target,
-                        guide_x, guide_x_old, tan_rest, R, pos, dt, elastic_mode, use_tip,
+                        guide_x, guide_x_old, tan_rest, R, pos, inv_dt, elastic_mode, use_tip,
                         com_w, max_weight, k_off, k_com, spread, ftl, collide, center, axes,
                         friction, refine, q_buf, buf, tmp, clamped, contacts):
     """:func:`track_groups` on the calling thread, for small problems: no parallel region to
@@ -239,7 +244,7 @@ def track_groups_serial(xb, vb, rest, seg_len, order, group_start, block_group, 
     for c in range(n_chunks):
         _track_chunk(c, n_chunks, xb, vb, rest, seg_len, order, group_start, block_group,
                      group_guide, group_row, node_table, node_row, rest_off, root_rest, inv_len,
-                     var_target, guide_x, guide_x_old, tan_rest, R, pos, dt, elastic_mode,
+                     var_target, guide_x, guide_x_old, tan_rest, R, pos, inv_dt, elastic_mode,
                      use_tip, com_w, max_weight, k_off, k_com, spread, ftl, collide, center,
                      axes, friction, refine, q_buf, buf, tmp, clamped, contacts)
 
@@ -247,7 +252,7 @@ def track_groups_serial(xb, vb, rest, seg_len, order, group_start, block_group, 
 @njit(cache=True, fastmath=TRACK_FASTMATH, error_model='numpy', **NO_REFCOUNT)
 def _track_chunk(c, n_chunks, xb, vb, rest, seg_len, order, group_start, block_group,
                  group_guide, group_row, node_table, node_row, rest_off, root_rest, inv_len,
-                 var_target, guide_x, guide_x_old, tan_rest, R, pos, dt, elastic_mode, use_tip,
+                 var_target, guide_x, guide_x_old, tan_rest, R, pos, inv_dt, elastic_mode, use_tip,
                  com_w, max_weight, k_off, k_com, spread, ftl, collide, center, axes, friction,
                  refine, q_buf, buf, tmp, clamped, contacts):
     """Chunk ``c`` of :func:`track_groups` (its blocks ``c B / C .. (c+1) B / C - 1``).  A
@@ -256,7 +261,6 @@ def _track_chunk(c, n_chunks, xb, vb, rest, seg_len, order, group_start, block_g
     n_nodes = rest.shape[1]
     m_last = guide_x.shape[1] - 2
     n_blocks = block_group.shape[0] - 1
-    inv_dt = 1.0 / dt
     need_target = k_off > 0.0 or k_com > 0.0
     group_level = k_com > 0.0 or spread > 0.0
     ax, ay, az = axes[0], axes[1], axes[2]
