@@ -13,8 +13,17 @@ from hair_tracking.weights import (arc_fractions, clamp_weight, com_weight, ELAS
 
 
 # ------------------------------------------------------------------ helpers
-def random_strands(rng, count, nodes, seg=0.02, spread=0.1):
-    """Random-walk strands (count, nodes, 3) [m] hanging roughly along -z."""
+def random_strands(rng, count, nodes, seg=0.02, spread=0.1, even=False):
+    """Random-walk strands (count, nodes, 3) [m] hanging roughly along -z.  With ``even`` every
+    segment is one of four steps of exactly the same length on a dyadic grid (no rounding), so
+    that every ghost has the same arc-length layout and the kernel takes its shared-layout path
+    (:func:`tracking_kernels._predict_group`)."""
+    if even:
+        roots = np.round(rng.normal(scale=spread, size=(count, 1, 3)) * 1024.0) / 1024.0
+        a, b = 2.0 ** -7, 2.0 ** -6
+        choices = np.array([[a, 0.0, -b], [-a, 0.0, -b], [0.0, a, -b], [0.0, -a, -b]])
+        steps = choices[rng.integers(0, 4, size=(count, nodes - 1))]
+        return np.concatenate([roots, roots + np.cumsum(steps, axis=1)], axis=1)
     roots = rng.normal(scale=spread, size=(count, 1, 3))
     steps = rng.normal(scale=0.3, size=(count, nodes - 1, 3)) + np.array([0.0, 0.0, -1.0])
     steps *= seg / np.linalg.norm(steps, axis=2, keepdims=True)
@@ -157,14 +166,17 @@ OPTION_SETS = [
 
 
 @pytest.mark.parametrize('options', OPTION_SETS)
-@pytest.mark.parametrize('regroup', [True, False])
-def test_kernel_matches_numpy_reference(options, regroup):
+@pytest.mark.parametrize('regroup, even', [(True, False), (False, False), (True, True)])
+def test_kernel_matches_numpy_reference(options, regroup, even):
     rng = np.random.default_rng(7)
     guides = StrandSet.from_rest(random_strands(rng, 4, 6))
-    ghost_rest = random_strands(rng, 17, 9, seg=0.013)
+    ghost_rest = random_strands(rng, 17, 9, seg=0.013, even=even)
     ghosts = StrandSet.from_rest(ghost_rest)
     scene = scene_with(**options)
     tracker = GhostTracker(ghosts, guides, scene, regroup=regroup)
+    # both paths of the kernel: groups sharing one arc-length layout, and mixed groups
+    shared = tracker._group_row >= 0
+    assert shared.all() if even else not shared.all()
     dt = 1.0 / 240.0
     head = head_pose(rng)
     guides.place_at(head)
