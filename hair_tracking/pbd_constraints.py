@@ -142,6 +142,13 @@ def pbd_sweep_block(x, rest_dist, weights, gap, k, s0, s1):
             x[s, j, 2] -= c * dz
 
 
+@njit(cache=True, inline='always')
+def _pair_offsets(i, gap):
+    """Offsets in a block's arrays of the constraint ``(i, i+gap)``: node ``i``'s x row and node
+    ``i+gap``'s in the positions, the constraint's row in per-constraint data (unsigned)."""
+    return uint64(i * 3 * LANES), uint64((i + gap) * 3 * LANES), uint64(i * LANES)
+
+
 @njit(cache=True, fastmath=FASTMATH, error_model='numpy', **NO_REFCOUNT)
 def pbd_sweep_lanes(p, rest_dist, weights, n, gap, k):
     """One PBD Gauss–Seidel sweep over the constraints ``(i, i+gap)`` of the :data:`LANES` strands
@@ -158,9 +165,7 @@ def pbd_sweep_lanes(p, rest_dist, weights, n, gap, k):
     u1 = uint64(LANES)
     u2 = uint64(2 * LANES)
     for i in range(n - gap):
-        b = uint64(i * 3 * LANES)
-        e = uint64((i + gap) * 3 * LANES)
-        r = uint64(i * LANES)
+        b, e, r = _pair_offsets(i, gap)
         w = uint64(2 * i * LANES)
         for m in range(u1):
             a = k * weights[w + m]
@@ -193,9 +198,7 @@ def xpbd_sweep_lanes(p, inv_mass, rest_dist, gain, lam, n, gap, alpha_tilde):
     u1 = uint64(LANES)
     u2 = uint64(2 * LANES)
     for i in range(n - gap):
-        b = uint64(i * 3 * LANES)
-        e = uint64((i + gap) * 3 * LANES)
-        r = uint64(i * LANES)
+        b, e, r = _pair_offsets(i, gap)
         rj = uint64((i + gap) * LANES)
         for m in range(u1):
             g = gain[r + m]
@@ -239,27 +242,44 @@ def lanes_out(p, x, s0, s1):
                 x[s0 + j, i, a] = p[(i * 3 + a) * LANES + j]
 
 
+@njit(cache=True, inline='always', fastmath=FASTMATH, error_model='numpy')
+def _lanes_predicted(blk, x, v, x_old, rest, inv_mass, work, rot, pos, rot_rel, pos_prev,
+                     gravity, damp, dt, shock):
+    """Step 1 for the strands of block ``blk`` (:func:`integrate.predict_block`), their
+    predicted positions into the block's row of ``work``; returns the strand range (s0, s1)."""
+    s0 = blk * LANES
+    s1 = min(s0 + LANES, x.shape[0])
+    predict_block(x, v, x_old, rest, inv_mass, s0, s1, rot, pos, rot_rel, pos_prev, gravity,
+                  damp, dt, shock)
+    lanes_in(x, s0, s1, work[blk])
+    return s0, s1
+
+
+@njit(cache=True, inline='always', fastmath=FASTMATH, error_model='numpy')
+def _lanes_finished(p, x, v, x_old, inv_mass, s0, s1, dt, max_disp, do_finalize):
+    """The block's projected positions ``p`` back into ``x``, then (if ``do_finalize``) the
+    clamp and velocity update of its strands; returns the clamped count."""
+    lanes_out(p, x, s0, s1)
+    if do_finalize:
+        return finalize_block(x, v, x_old, inv_mass, x_old, s0, s1, dt, max_disp, 0.0)
+    return 0
+
+
 @njit(cache=True, fastmath=FASTMATH, error_model='numpy', **NO_REFCOUNT)
 def _pbd_block(blk, x, v, x_old, rest, inv_mass, rest_length, bend_rest, stretch_w, bend_w,
                work, rot, pos, rot_rel, pos_prev, gravity, damp, dt, shock, iterations,
                stiffness, bend_stiffness, max_disp, do_finalize):
     """Block ``blk`` of :func:`pbd_step` (a compiled body of its own: the serial twin runs the
     same code, see :func:`hair_tracking.integrate.serial_twin`)."""
-    s0 = blk * LANES
-    s1 = min(s0 + LANES, x.shape[0])
+    s0, s1 = _lanes_predicted(blk, x, v, x_old, rest, inv_mass, work, rot, pos, rot_rel,
+                              pos_prev, gravity, damp, dt, shock)
     n = x.shape[1]
     p = work[blk]
-    predict_block(x, v, x_old, rest, inv_mass, s0, s1, rot, pos, rot_rel, pos_prev, gravity,
-                  damp, dt, shock)
-    lanes_in(x, s0, s1, p)
     for _ in range(iterations):
         pbd_sweep_lanes(p, rest_length[blk], stretch_w[blk], n, 1, stiffness)
         if bend_stiffness > 0.0:
             pbd_sweep_lanes(p, bend_rest[blk], bend_w[blk], n, 2, bend_stiffness)
-    lanes_out(p, x, s0, s1)
-    if do_finalize:
-        return finalize_block(x, v, x_old, inv_mass, x_old, s0, s1, dt, max_disp, 0.0)
-    return 0
+    return _lanes_finished(p, x, v, x_old, inv_mass, s0, s1, dt, max_disp, do_finalize)
 
 
 @njit(cache=True, fastmath=FASTMATH, error_model='numpy', **NO_REFCOUNT)
@@ -268,13 +288,10 @@ def _xpbd_block(blk, x, v, x_old, rest, inv_mass, inv_mass_l, rest_length, bend_
                 pos_prev, gravity, damp, dt, shock, iterations, alpha_stretch, alpha_bend,
                 max_disp, do_finalize):
     """Block ``blk`` of :func:`xpbd_step` (see :func:`_pbd_block`)."""
-    s0 = blk * LANES
-    s1 = min(s0 + LANES, x.shape[0])
+    s0, s1 = _lanes_predicted(blk, x, v, x_old, rest, inv_mass, work, rot, pos, rot_rel,
+                              pos_prev, gravity, damp, dt, shock)
     n = x.shape[1]
     p = work[blk]
-    predict_block(x, v, x_old, rest, inv_mass, s0, s1, rot, pos, rot_rel, pos_prev, gravity,
-                  damp, dt, shock)
-    lanes_in(x, s0, s1, p)
     lam_stretch[blk, :] = 0.0
     lam_bend[blk, :] = 0.0
     for _ in range(iterations):
@@ -283,10 +300,7 @@ def _xpbd_block(blk, x, v, x_old, rest, inv_mass, inv_mass_l, rest_length, bend_
         if alpha_bend >= 0.0:
             xpbd_sweep_lanes(p, inv_mass_l[blk], bend_rest[blk], bend_gain[blk], lam_bend[blk],
                              n, 2, alpha_bend)
-    lanes_out(p, x, s0, s1)
-    if do_finalize:
-        return finalize_block(x, v, x_old, inv_mass, x_old, s0, s1, dt, max_disp, 0.0)
-    return 0
+    return _lanes_finished(p, x, v, x_old, inv_mass, s0, s1, dt, max_disp, do_finalize)
 
 
 @njit(cache=True, nogil=True, parallel=True, fastmath=FASTMATH, error_model='numpy')

@@ -349,12 +349,9 @@ def _track_chunk(c, n_chunks, xb, vb, rest, seg_len, order, group_start, block_g
 
 
 @njit(cache=True, inline='always', fastmath=TRACK_FASTMATH, error_model='numpy')
-def _group_point(gi, j, row, node_table, guide_x, guide_x_old, frames, fg, m_last, need_target):
-    """The guide point ``P`` of node ``j`` for a group sharing node_table row ``row``, its
-    displacement ``u dt`` over the substep, w_tip and the segment frame ``Q`` (zero unless
-    ``need_target``): (px, py, pz, dx, dy, dz, tw, q00 .. q22)."""
-    gp = node_table[row, j, 0]
-    tw = node_table[row, j, 1]
+def _guide_point(gi, gp, guide_x, guide_x_old, m_last):
+    """Guide ``gi`` at parameter ``gp`` (segment + fraction): (segment, point P [m],
+    displacement ``u dt`` of that point over the substep [m])."""
     sg = min(int(gp), m_last)
     t = gp - sg
     u = 1.0 - t
@@ -364,6 +361,17 @@ def _group_point(gi, j, row, node_table, guide_x, guide_x_old, frames, fg, m_las
     dx = px - (u * guide_x_old[gi, sg, 0] + t * guide_x_old[gi, sg + 1, 0])
     dy = py - (u * guide_x_old[gi, sg, 1] + t * guide_x_old[gi, sg + 1, 1])
     dz = pz - (u * guide_x_old[gi, sg, 2] + t * guide_x_old[gi, sg + 1, 2])
+    return sg, px, py, pz, dx, dy, dz
+
+
+@njit(cache=True, inline='always', fastmath=TRACK_FASTMATH, error_model='numpy')
+def _group_point(gi, j, row, node_table, guide_x, guide_x_old, frames, fg, m_last, need_target):
+    """The guide point ``P`` of node ``j`` for a group sharing node_table row ``row``, its
+    displacement ``u dt`` over the substep, w_tip and the segment frame ``Q`` (zero unless
+    ``need_target``): (px, py, pz, dx, dy, dz, tw, q00 .. q22)."""
+    tw = node_table[row, j, 1]
+    sg, px, py, pz, dx, dy, dz = _guide_point(gi, node_table[row, j, 0], guide_x, guide_x_old,
+                                              m_last)
     q00 = q01 = q02 = q10 = q11 = q12 = q20 = q21 = q22 = 0.0
     if need_target:
         q00, q01, q02 = frames[fg, sg, 0, 0], frames[fg, sg, 0, 1], frames[fg, sg, 0, 2]
@@ -478,17 +486,12 @@ def _targets(T, l0, l1, k0, gi, j, node_table, node_row, off, guide_x, guide_x_o
     for kk in range(n):
         i = u0 + kk
         r = node_row[uint64(k0) + kk]
-        gp = node_table[r, j, 0]
         T[_TW, i] = node_table[r, j, 1]
-        sg = min(int(gp), m_last)
-        t = gp - sg
-        u = 1.0 - t
-        px = u * guide_x[gi, sg, 0] + t * guide_x[gi, sg + 1, 0]
-        py = u * guide_x[gi, sg, 1] + t * guide_x[gi, sg + 1, 1]
-        pz = u * guide_x[gi, sg, 2] + t * guide_x[gi, sg + 1, 2]
-        T[_DX, i] = px - (u * guide_x_old[gi, sg, 0] + t * guide_x_old[gi, sg + 1, 0])
-        T[_DY, i] = py - (u * guide_x_old[gi, sg, 1] + t * guide_x_old[gi, sg + 1, 1])
-        T[_DZ, i] = pz - (u * guide_x_old[gi, sg, 2] + t * guide_x_old[gi, sg + 1, 2])
+        sg, px, py, pz, dx, dy, dz = _guide_point(gi, node_table[r, j, 0], guide_x, guide_x_old,
+                                                  m_last)
+        T[_DX, i] = dx
+        T[_DY, i] = dy
+        T[_DZ, i] = dz
         if need_target:
             o0 = off[0, i]
             o1 = off[1, i]
