@@ -432,27 +432,15 @@ def _predict_group(X0, V0, P, off, inv_len, l0, l1, gi, j, row, node_table, guid
         w = 0.0
         if elastic:
             w = 0.5 + sign * direction_cos(dx, dy, dz, V0[0, i], V0[1, i], V0[2, i])
-        xo0 = X0[0, i]
-        xo1 = X0[1, i]
-        xo2 = X0[2, i]
-        e0 = xo0 - c0
-        e1 = xo1 - c1
-        e2 = xo2 - c2
-        w += tip + com_weight(math.sqrt(e0 * e0 + e1 * e1 + e2 * e2), inv_len[i], cw)
-        n_clamped += 1 if w > max_weight else 0
-        w = 1.0 + clamp_weight(w, max_weight)
         o0 = off[0, i]
         o1 = off[1, i]
         o2 = off[2, i]
         t0 = px + q00 * o0 + q01 * o1 + q02 * o2
         t1 = py + q10 * o0 + q11 * o1 + q12 * o2
         t2 = pz + q20 * o0 + q21 * o1 + q22 * o2
-        x0 = xo0 + dx * w
-        x1 = xo1 + dy * w
-        x2 = xo2 + dz * w
-        y0 = x0 + k_off * (t0 - x0)
-        y1 = x1 + k_off * (t1 - x1)
-        y2 = x2 + k_off * (t2 - x2)
+        y0, y1, y2, clamped = _moved(X0[0, i], X0[1, i], X0[2, i], w, tip, c0, c1, c2, cw,
+                                     inv_len[i], dx, dy, dz, t0, t1, t2, max_weight, k_off)
+        n_clamped += clamped
         P[0, i] = y0
         P[1, i] = y1
         P[2, i] = y2
@@ -547,26 +535,33 @@ def _predict(X0, V0, P, T, l0, l1, inv_len, elastic_mode, use_tip, max_weight, k
 
 
 @njit(cache=True, inline='always', fastmath=TRACK_FASTMATH, error_model='numpy')
-def _advance(X0, P, T, kk, w, tip_f, inv_len, max_weight, k_off):
-    """Lane ``kk`` of :func:`_predict` given its elastic weight ``w``: adds w_tip and w_com
-    (centre and weight per length from T[_C0.._CW]), clamps (b), moves by ``u dt (1 + W)`` (a)
-    and pulls toward the target (c); 1 if clamped."""
-    xo0 = X0[0, kk]
-    xo1 = X0[1, kk]
-    xo2 = X0[2, kk]
-    e0 = xo0 - T[_C0, kk]
-    e1 = xo1 - T[_C1, kk]
-    e2 = xo2 - T[_C2, kk]
-    w += tip_f * T[_TW, kk] + com_weight(math.sqrt(e0 * e0 + e1 * e1 + e2 * e2), inv_len[kk],
-                                         T[_CW, kk])
+def _moved(xo0, xo1, xo2, w, tip, c0, c1, c2, cw, ilen, dx, dy, dz, t0, t1, t2, max_weight,
+           k_off):
+    """(a)-(c) for one node at ``xo`` given its elastic weight ``w``: adds w_tip ``tip`` and
+    w_com (group centre ``c``, weight per length ``cw``, 1 / strand length ``ilen``), clamps
+    (b), moves by the guide displacement ``d`` times (1 + W) (a) and pulls toward the target
+    ``t`` (c).  Returns the new position and 1 if the weight sum was clamped.  The one
+    per-node formula of both paths (:func:`_predict_group`, :func:`_advance`)."""
+    e0 = xo0 - c0
+    e1 = xo1 - c1
+    e2 = xo2 - c2
+    w += tip + com_weight(math.sqrt(e0 * e0 + e1 * e1 + e2 * e2), ilen, cw)
     clamped = 1 if w > max_weight else 0
     w = 1.0 + clamp_weight(w, max_weight)
-    x0 = xo0 + T[_DX, kk] * w
-    x1 = xo1 + T[_DY, kk] * w
-    x2 = xo2 + T[_DZ, kk] * w
-    P[0, kk] = x0 + k_off * (T[_QX, kk] - x0)
-    P[1, kk] = x1 + k_off * (T[_QY, kk] - x1)
-    P[2, kk] = x2 + k_off * (T[_QZ, kk] - x2)
+    x0 = xo0 + dx * w
+    x1 = xo1 + dy * w
+    x2 = xo2 + dz * w
+    return (x0 + k_off * (t0 - x0), x1 + k_off * (t1 - x1), x2 + k_off * (t2 - x2), clamped)
+
+
+@njit(cache=True, inline='always', fastmath=TRACK_FASTMATH, error_model='numpy')
+def _advance(X0, P, T, kk, w, tip_f, inv_len, max_weight, k_off):
+    """Lane ``kk`` of :func:`_predict`: :func:`_moved` with the per-lane values of ``T``
+    (w_tip, centre, weight per length, displacement, target) into ``P``; 1 if clamped."""
+    P[0, kk], P[1, kk], P[2, kk], clamped = _moved(
+        X0[0, kk], X0[1, kk], X0[2, kk], w, tip_f * T[_TW, kk], T[_C0, kk], T[_C1, kk],
+        T[_C2, kk], T[_CW, kk], inv_len[kk], T[_DX, kk], T[_DY, kk], T[_DZ, kk], T[_QX, kk],
+        T[_QY, kk], T[_QZ, kk], max_weight, k_off)
     return clamped
 
 
