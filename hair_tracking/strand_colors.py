@@ -1,5 +1,5 @@
 """Per-strand colours of the published hair (ROS-free: shared by the node and offline runs)."""
-from typing import Callable, Dict, Optional, Tuple
+from typing import Callable, Dict, Tuple
 
 import numpy as np
 
@@ -24,11 +24,11 @@ class StrandColorCache:
     """The last :func:`strand_colors` of each namespace, recomputed only when the strand count
     or the colour changes (the node and ``FrameEncoder`` ask once per published frame).
 
-    ``pack``: a function applied to the colours before they are cached (the publishers pass
-    ``msg_adapters.pointcloud.pack_rgb_u32``: packing 10 k colours took 0.5 ms a frame); None
-    keeps the (n, 4) floats.  The cached arrays are read-only (every frame shares them)."""
+    ``pack``: the function applied to the colours before they are cached (the publishers pass
+    ``msg_adapters.pointcloud.pack_rgb_u32``: packing 10 k colours took 0.5 ms a frame).  The
+    cached arrays are read-only (every frame shares them)."""
 
-    def __init__(self, pack: Optional[Callable[[np.ndarray], np.ndarray]] = None):
+    def __init__(self, pack: Callable[[np.ndarray], np.ndarray]):
         self._pack = pack
         self._cache: Dict[str, Tuple[tuple, np.ndarray]] = {}
 
@@ -36,9 +36,7 @@ class StrandColorCache:
         key = (n, tuple(rgba))
         c = self._cache.get(ns)
         if c is None or c[0] != key:
-            colors = strand_colors(n, rgba)
-            if self._pack is not None:
-                colors = self._pack(colors)
+            colors = self._pack(strand_colors(n, rgba))
             colors.flags.writeable = False      # shared by every frame that uses it
             c = self._cache[ns] = (key, colors)
         return c[1]
