@@ -38,6 +38,7 @@ from .correspondence import assign_guides, node_correspondence
 from .integrate import runs_parallel
 from .model import HeadPose, StrandSet
 from .parallel_choice import ParallelChooser
+from .point_records import blocks_to_records, points_to_records
 from .scene import Scene
 from .tracking_kernels import (block_groups, chunk_count, copy_blocks, group_blocks,
                                guide_frames, TMP_ROWS, track_groups, track_groups_serial)
@@ -237,6 +238,19 @@ class GhostTracker:
         view = x.view()
         view.flags.writeable = False
         return view
+
+    def write_records(self, words: np.ndarray, stride: int, rot=None, origin=None) -> bool:
+        """The ghosts' positions as float32 x y z at the start of ``words``' records (S * N
+        of ``stride`` words, ghost ``s``'s node ``j`` at record ``s * N + j``), transformed
+        to ``rot (x - origin)`` if given; True when all are finite.  Read straight from the
+        kernel's layout while the tracker holds the state (no write-back into ``ghosts.x``:
+        at 10 k ghosts x 16 nodes that pass and the float32 encoding of its result took about
+        3 ms, this one 1.5), else from ``ghosts.x``."""
+        ghosts = self.ghosts
+        if ghosts._holder is self and self._held:
+            return blocks_to_records(words, stride, self._xb, self.order, self._block_rows,
+                                     ghosts.rest.shape[1], rot, origin)
+        return points_to_records(words, stride, ghosts.x, rot, origin)
 
     def _take(self) -> None:
         """Copy ``ghosts.x`` and ``ghosts.v`` into the kernel's layout and keep them there."""

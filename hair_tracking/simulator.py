@@ -45,6 +45,7 @@ from .head_track import HeadTrack, IDENTITY, PoseResult
 from .integrate import max_step_sq, parallel_from, runs_parallel
 from .metrics import max_stretch
 from .model import HeadPose, StrandSet
+from .point_records import points_to_records
 from .scene import Scene
 from .transforms import quat_angle, quat_to_matrix, slerp
 
@@ -220,6 +221,26 @@ class HairSimulator:
             src = s if s is not None else g
             smooth = curves.resample(src, out.points_per_strand, out.curve)
         return Frame(t_ns=self.time_ns or 0, head=self.head, guides=g, ghosts=s, curves=smooth)
+
+    def record_writer(self, guides: bool = False, head_frame: bool = False):
+        """``(S, N, write)`` for an output format with one record per point: the shape of the
+        strands a :meth:`frame` shows (``frame.strands``; ``frame.guides`` with ``guides``)
+        and ``write(words, stride) -> bool``, which puts their positions now as float32 x y z
+        at the start of ``words``' S * N records of ``stride`` float32 words (strand ``s``'s
+        point ``j`` at record ``s * N + j``; in the head frame with ``head_frame``) and says
+        whether all are finite (:mod:`~hair_tracking.point_records`).  The ghosts are read
+        straight from the tracker's layout, without the write-back a frame makes."""
+        rot = origin = None
+        if head_frame:
+            rot, origin = self.head.rotation.T, self.head.position
+        tracker = self.ghost_tracker
+        if not guides and tracker is not None and self.scene.output.curve == 'none':
+            s, n = self.ghosts.rest.shape[:2]
+            return s, n, lambda words, stride: tracker.write_records(words, stride, rot, origin)
+        fr = self.frame(copy=False)
+        x = fr.guides if guides else fr.strands
+        return x.shape[0], x.shape[1], \
+            lambda words, stride: points_to_records(words, stride, x, rot, origin)
 
     def max_stretch(self) -> float:
         """max |l/l0 - 1| over guide and ghost segments (0 = exact lengths)."""
