@@ -10,8 +10,8 @@ from rclpy.serialization import deserialize_message, serialize_message
 from rosbags.typesys import get_typestore, Stores
 from sensor_msgs.msg import PointCloud2, PointField
 
-from msg_adapters.pointcloud import (pack_rgb, pointcloud2_to_strands, strands_to_pointcloud2,
-                                     strands_to_pointcloud2_cdr)
+from msg_adapters.pointcloud import (CloudBuffer, pack_rgb, pack_rgb_u32, pointcloud2_to_strands,
+                                     strands_to_pointcloud2, strands_to_pointcloud2_cdr)
 
 TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
 CLOUD = 'sensor_msgs/msg/PointCloud2'
@@ -292,3 +292,58 @@ def test_compiled_fill_has_one_specialisation_for_read_only_and_writable_inputs(
         assert point_fill.fill_records(words, x, rgb, ids)
         seen.add(len(point_fill._fill_records.signatures))
     assert len(seen) == 1
+
+
+def _xyz_writer(x):
+    """A CloudBuffer ``write_xyz`` for (S, N, 3) float64 ``x``."""
+    def write(words, stride):
+        rec = words.reshape(-1, stride)
+        rec[:, :3] = x.reshape(-1, 3)
+        return bool(np.isfinite(rec[:, :3]).all())
+    return write
+
+
+def test_cloud_buffer_gives_the_bytes_of_the_cdr_path_frame_after_frame():
+    rng = np.random.default_rng(21)
+    buf = CloudBuffer()
+    seen = set()
+    # (strands, points, frame_id, colour mode, ids): reuse the layout, then change each part
+    frames = [(4, 6, 'odom', 'strand', None), (4, 6, 'odom', 'strand', None),
+              (4, 6, 'odom', 'strand', None), (4, 6, 'map', 'strand', None),
+              (4, 6, 'map', 'point', None), (4, 6, 'map', None, None),
+              (4, 6, 'map', 'strand', [7, 3, 2 ** 32 - 1, 0]), (5, 6, 'map', 'strand', None),
+              (5, 3, 'map', 'strand', None), (0, 3, 'map', 'strand', None),
+              (2, 1, 'hé', 'strand', None)]
+    colours = rng.random((4, 3))
+    for k, (s, n, frame_id, mode, ids) in enumerate(frames):
+        x = rng.normal(size=(s, n, 3))
+        if k == 2:
+            x[1, 2, 0] = np.nan                         # is_dense false, then true again
+        if k == 3:
+            colours = rng.random((4, 3))                # same layout, new colours
+        cols = {None: None, 'strand': colours[:s] if s <= 4 else rng.random((s, 3)),
+                'point': rng.random((s, n, 3))}[mode]
+        packed = None if cols is None else pack_rgb_u32(cols)
+        stamp = 1_000_000_000 * k + 17 * k
+        data = buf.encode(s, n, _xyz_writer(x), frame_id=frame_id, stamp_ns=stamp,
+                          packed_rgb=packed, strand_ids=ids)
+        ref = strands_to_pointcloud2_cdr(x, frame_id=frame_id, stamp_ns=stamp, colors=cols,
+                                         strand_ids=ids)
+        assert isinstance(data, np.ndarray) and data.dtype == np.uint8
+        assert data.tobytes() == ref, f'frame {k}'
+        seen.add(data.ctypes.data)
+        assert deserialize_message(data.tobytes(), PointCloud2).is_dense == (k != 2)
+    assert len(seen) < len(frames)          # the buffer was reused while the layout held
+
+
+def test_cloud_buffer_checks_its_inputs():
+    buf = CloudBuffer()
+    write = _xyz_writer(np.zeros((2, 3, 3)))
+    with pytest.raises(ValueError, match='packed_rgb'):
+        buf.encode(2, 3, write, frame_id='w', packed_rgb=np.zeros(3, np.uint32))
+    with pytest.raises(ValueError, match='strand_ids'):
+        buf.encode(2, 3, write, frame_id='w', strand_ids=[1])
+    with pytest.raises(ValueError, match='N >= 1'):
+        buf.encode(2, 0, write, frame_id='w')
+    with pytest.raises(ValueError, match='stamp_ns'):
+        buf.encode(2, 3, write, frame_id='w', stamp_ns=-1)
