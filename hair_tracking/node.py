@@ -61,8 +61,9 @@ from std_srvs.srv import Trigger
 from visualization_msgs.msg import MarkerArray
 
 from msg_adapters.marker_cdr import strands_to_marker_array_cdr
-from msg_adapters.pointcloud import pack_rgb_u32, strands_to_pointcloud2_cdr
+from msg_adapters.pointcloud import CloudBuffer, pack_rgb_u32
 from msg_adapters.pose import pose_from_msg, PoseError
+from msg_adapters.rcl_serialized import available as rcl_available, SerializedPublisher
 
 from . import params as P
 from .cpu_steal import format_share, StealMeter
@@ -131,9 +132,10 @@ def warm_up(scene: Scene) -> float:
     sim = warm_up_simulator(scene)
     for head_frame in (False, True):
         f = sim.frame(head_frame=head_frame, copy=False)
-        for strands in (f.strands, f.guides):
-            strands_to_pointcloud2_cdr(strands, frame_id='warmup', stamp_ns=1,
-                                       colors=np.ones((strands.shape[0], 4)))
+        for guides, strands in ((False, f.strands), (True, f.guides)):
+            n_strands, n_points, write = sim.record_writer(guides, head_frame)
+            CloudBuffer().encode(n_strands, n_points, write, frame_id='warmup', stamp_ns=1,
+                                 packed_rgb=pack_rgb_u32(np.ones((n_strands, 4))))
             for style in P.MARKER_STYLES:
                 strands_to_marker_array_cdr(strands, frame_id='warmup', style=style,
                                             delete_all_first=True)
@@ -145,7 +147,9 @@ class _Output:
 
     def __init__(self, node: Node, topic: str, msg_type, depth: int = 2):
         self.pub = node.create_publisher(msg_type, topic, output_qos(depth))
-        self.cached: Optional[bytes] = None
+        self.raw = SerializedPublisher(self.pub)     # publish_through_rcl
+        self.cloud = CloudBuffer()       # the message a cloud output rewrites each frame
+        self.cached = None               # the last message sent (bytes or a uint8 array)
         self.encoded = 0             # messages built (encoded) so far
         self.published = 0
         self.shape = None            # (strands, style) of the last marker array sent
@@ -506,33 +510,42 @@ class HairSimNode(Node):
         if not any(wanted.values()):
             return
         start = time.perf_counter()
+        for o in outs.values():
+            o.raw.direct = s.publish_through_rcl and rcl_available()
         if not self._dirty:              # same hair: resend the bytes (keeps markers alive)
             for k, o in outs.items():
                 if wanted[k] and o.cached is not None:
-                    o.pub.publish(o.cached)
+                    o.raw.publish(o.cached)
                     o.published += 1
                     wanted[k] = False
             if not any(wanted.values()):
                 return
-        frame = self.sim.frame(head_frame=s.output_frame == 'head', copy=False)
-        self.frames_built += 1
+        head_frame = s.output_frame == 'head'
+        # the clouds are written from the simulator's state (the ghosts from the tracker's
+        # own layout) into buffers kept per output; a frame is built only for markers
+        frame = None
+        if wanted['markers'] or wanted['guide_markers']:
+            frame = self.sim.frame(head_frame=head_frame, copy=False)
+            self.frames_built += 1
         frame_id = self.output_frame_id()
-        stamp = max(0, frame.t_ns - self._offset_ns)      # in the stream's time base
+        stamp = max(0, (self.sim.time_ns or 0) - self._offset_ns)   # the stream's time base
         lifetime_ns = int(round(s.marker_lifetime * 1e9))
-        for key, strands, ns, color in (
-                ('points', frame.strands, 'hair', s.marker_color),
-                ('markers', frame.strands, 'hair', s.marker_color),
-                ('guide_points', frame.guides, 'guides', s.guide_color),
-                ('guide_markers', frame.guides, 'guides', s.guide_color)):
+        for key, guides, ns, color in (
+                ('points', False, 'hair', s.marker_color),
+                ('markers', False, 'hair', s.marker_color),
+                ('guide_points', True, 'guides', s.guide_color),
+                ('guide_markers', True, 'guides', s.guide_color)):
             if not wanted[key]:
                 continue
             o = outs[key]
             if key.endswith('points'):
-                data = strands_to_pointcloud2_cdr(
-                    strands, frame_id=frame_id, stamp_ns=stamp,
-                    packed_rgb=self._colors(ns, strands.shape[0], color))
+                n_strands, n_points, write = self.sim.record_writer(guides, head_frame)
+                data = o.cloud.encode(n_strands, n_points, write, frame_id=frame_id,
+                                      stamp_ns=stamp,
+                                      packed_rgb=self._colors(ns, n_strands, color))
                 o.cached = data
             else:
+                strands = frame.guides if guides else frame.strands
                 shape = (strands.shape[0], s.marker_style)
                 fresh = o.shape != shape
                 data = strands_to_marker_array_cdr(
@@ -542,7 +555,7 @@ class HairSimNode(Node):
                 o.shape = shape
                 o.cached = None if fresh else data     # never resend a DELETEALL
             o.encoded += 1
-            o.pub.publish(data)
+            o.raw.publish(data)
             o.published += 1
         self._dirty = False
         took = (time.perf_counter() - start) * 1e3

@@ -344,6 +344,11 @@ NODE_PARAMS: Tuple[Param, ...] = (
           'also publish right after a pose was simulated when a publishing period of stream '
           'time (pose stamps) has passed (lower latency; at most publish_rate_hz frames per '
           'second of stream time)'),
+    Param('publish_through_rcl', 'bool', True,
+          "hand the encoded outputs to rcl's serialized publish directly (ctypes, the GIL "
+          "released, no extra copy) instead of rclpy's Publisher.publish, which copies them "
+          'once more and holds the GIL while the middleware copies them; same bytes either '
+          'way. Falls back to rclpy when librcl is not found in the process'),
     Param('publish_guides', 'bool', False,
           'also publish the guide strands on hair/guides/points and hair/guides/markers'),
     Param('marker_style', 'string', 'line_list',

@@ -228,6 +228,41 @@ def test_best_effort_and_reliable_pose_publishers_both_connect(harness, reliabil
     assert h.cloud_at(t1).header.frame_id == 'odom'
 
 
+@pytest.mark.parametrize('output_frame', ['fixed', 'head'])
+def test_clouds_carry_the_simulated_ghosts_through_rcl_or_rclpy_alike(harness, output_frame):
+    """The cloud is written from the tracker's own layout into a buffer the node keeps, and
+    published through rcl (publish_through_rcl, the default) or rclpy: either way it holds
+    exactly the ghosts of the simulator's frame, as float32."""
+    h = harness(output_frame=output_frame, publish_guides=True)
+    h.listen(markers=False)
+    guides = []
+    h.probe.create_subscription(PointCloud2, 'hair/guides/points', guides.append, 10)
+    h.spin_until(lambda: h.node.outputs['guide_points'].wanted(), what='the guide cloud match')
+    pub = h.pose_publisher()
+    buffers = set()
+    for k, t in enumerate(grid_times(h, 6)):
+        through_rcl = k % 2 == 0
+        assert h.node.set_parameters([Parameter('publish_through_rcl',
+                                                value=through_rcl)])[0].successful
+        h.send(pub, pose_stamped_msg(t, [0.03 * k, 0.01, 0.0], yaw_quat(0.4 * k), 'odom'))
+        cloud = h.cloud_at(t)
+        assert h.node.outputs['points'].raw.direct == through_rcl
+        frame = h.node.sim.frame(head_frame=output_frame == 'head')
+        pts, ids = pointcloud2_to_strands(cloud, dtype=np.float32)
+        if output_frame == 'fixed':
+            np.testing.assert_array_equal(pts, frame.strands.astype(np.float32))
+        else:          # R^T (x - p) against numpy's (x - p) @ R: rounding apart
+            np.testing.assert_allclose(pts, frame.strands, rtol=1e-6, atol=1e-7)
+        assert ids.tolist() == list(range(12)) and cloud.is_dense
+        h.spin_until(lambda: any(time_to_ns(g.header.stamp) == t for g in guides),
+                     what='the guide cloud')
+        g = next(g for g in guides if time_to_ns(g.header.stamp) == t)
+        np.testing.assert_allclose(pointcloud2_to_strands(g)[0], frame.guides, atol=1e-6)
+        buffers.add(h.node.outputs['points'].cloud._msg.ctypes.data)
+    assert len(buffers) == 1                     # one buffer, rewritten frame after frame
+    assert h.node.frames_built == 0              # no markers wanted: no frame was built
+
+
 def test_head_output_frame_uses_the_child_frame_and_keeps_roots_still(harness):
     h = harness(output_frame='head')
     h.listen(markers=False)
