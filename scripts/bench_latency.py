@@ -43,6 +43,7 @@ from hair_tracking.cpu_steal import format_share, StealMeter  # noqa: E402
 from hair_tracking.node import HairSimNode  # noqa: E402
 from hair_tracking import params as P  # noqa: E402
 from msg_adapters.pose import pose_stamped_msg  # noqa: E402
+from msg_adapters.rcl_serialized import SerializedTaker, SerializedWaiter  # noqa: E402
 
 FRAME_MS = 1000.0 / 60.0
 
@@ -84,8 +85,8 @@ def stats(values):
 
 def stamp_of(raw):
     """Header stamp [ns] of a serialized PointCloud2 (CDR: 4-byte header, int32 sec, uint32)."""
-    sec = int.from_bytes(raw[4:8], 'little', signed=True)
-    nsec = int.from_bytes(raw[8:12], 'little')
+    sec = int.from_bytes(bytes(raw[4:8]), 'little', signed=True)
+    nsec = int.from_bytes(bytes(raw[8:12]), 'little')
     return sec * 1_000_000_000 + nsec
 
 
@@ -113,19 +114,32 @@ def run_case(ghosts, mode, args, domain_id):
         with lock:
             received.setdefault(t, now)
     qos = QoSProfile(depth=5, reliability=ReliabilityPolicy.RELIABLE)
-    probe.create_subscription(PointCloud2, 'hair/points', on_cloud, qos, raw=True)
+    subs = {probe.create_subscription(PointCloud2, 'hair/points', on_cloud, qos, raw=True):
+            on_cloud}
     if args.markers:
-        probe.create_subscription(MarkerArray, 'hair/markers', lambda raw: None, qos, raw=True)
+        subs[probe.create_subscription(MarkerArray, 'hair/markers', lambda raw: None, qos,
+                                       raw=True)] = lambda raw: None
     pub = probe.create_publisher(PoseStamped, 'head_pose', qos)
     node_ex = SingleThreadedExecutor(context=ctx)
     node_ex.add_node(node)
     probe_ex = SingleThreadedExecutor(context=ctx)
-    probe_ex.add_node(probe)
     stop = threading.Event()
+    takers = {}
+    if args.probe == 'rcl':
+        takers = {sub: SerializedTaker(sub, 4 << 20) for sub in subs}
+        waiter = SerializedWaiter(ctx, subs)
 
-    def spin_probe():
-        while not stop.is_set() and ctx.ok():
-            probe_ex.spin_once(timeout_sec=0.05)
+        def spin_probe():
+            while not stop.is_set() and ctx.ok():
+                for sub in waiter.wait(0.05):
+                    while (raw := takers[sub].take()) is not None:
+                        subs[sub](raw)
+    else:
+        probe_ex.add_node(probe)
+
+        def spin_probe():
+            while not stop.is_set() and ctx.ok():
+                probe_ex.spin_once(timeout_sec=0.05)
     probe_thread = threading.Thread(target=spin_probe, daemon=True)
     probe_thread.start()
     deadline = time.monotonic() + 20.0
@@ -169,6 +183,8 @@ def run_case(ghosts, mode, args, domain_id):
         node_ex.spin_once(timeout_sec=0.05)
     stop.set()
     probe_thread.join(2.0)
+    for taker in takers.values():
+        taker.close()
 
     skip = int(args.warmup_s * args.pose_rate)
     with lock:
@@ -186,6 +202,8 @@ def run_case(ghosts, mode, args, domain_id):
         'pose_queue_depth': int(node.get_parameter('pose_queue_depth').value),
         'pose_rate_hz': args.pose_rate,
         'publish_rate_hz': args.publish_rate, 'markers_subscribed': bool(args.markers),
+        'probe': args.probe,
+        'publish_through_rcl': bool(node.get_parameter('publish_through_rcl').value),
         'latency': stats(lat), 'poses_without_cloud': missing,
         'step': stats(step_ms), 'publish': stats(pub_ms),
         'substeps_dropped': int(c.substeps_dropped), 'poses_rejected': int(node.rejected),
@@ -224,6 +242,11 @@ def main(argv=None):
                     help='also subscribe to hair/markers (the node then encodes both)')
     ap.add_argument('--set', nargs='+', default=[], type=_setting, metavar='NAME=VALUE',
                     help='more node parameters, e.g. tracking.every_substep=false')
+    ap.add_argument('--probe', choices=['rcl', 'rclpy'], default='rcl',
+                    help="how the probe takes the clouds: rcl = rcl's serialized take called "
+                         'directly, the GIL released, into one reused buffer (as a C++ '
+                         "subscriber would); rclpy = rclpy's raw take, which holds the GIL "
+                         'for two copies of each cloud and so stalls the node it measures')
     ap.add_argument('--domain-id', type=int, default=48)
     ap.add_argument('--json', metavar='PATH', help='write the results as JSON')
     ap.add_argument('--switch-interval', type=float, default=0.0005,
@@ -238,7 +261,8 @@ def main(argv=None):
     print(f'pose -> hair/points latency through DDS, one process ({os.cpu_count()} CPUs, '
           f'load average {os.getloadavg()[0]:.1f} at start); '
           f'poses at {args.pose_rate:g} Hz, publish_rate_hz {args.publish_rate:g}, '
-          f'numba_threads {args.threads}, goal {FRAME_MS:.1f} ms')
+          f'numba_threads {args.threads}, probe takes through {args.probe}, '
+          f'goal {FRAME_MS:.1f} ms')
     print(f"{'ghosts':>7} {'mode':>8} | {'latency med':>11} {'p99':>8} | "
           f"{'step med':>8} {'p99':>8} | {'publish med':>11} {'p99':>8} | dropped / no cloud")
     for ghosts in args.ghosts:
