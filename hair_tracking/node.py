@@ -71,7 +71,7 @@ from .head_track import PoseResult
 from .load_shedding import LoadShedder
 from .resources import config_path
 from .scene import Scene, SceneError
-from .process_tuning import freeze_heap, retain_freed_memory
+from .process_tuning import freeze_heap, retain_freed_memory, set_omp_wait_policy
 from .simulator import HairSimulator, warm_up as warm_up_simulator
 from .strand_colors import StrandColorCache
 
@@ -174,11 +174,13 @@ class HairSimNode(Node):
                          parameter_overrides=parameter_overrides)
         self._declare_all()
         settings = self._settings
+        self.thread_wait_setting = set_omp_wait_policy(settings.omp_wait_policy)
         self._apply_threads(settings.numba_threads)
         self.memory_setting = retain_freed_memory(settings.malloc_retain_mb)
         self.shedder = LoadShedder(settings.load_shedding_budget)
         self._steal = StealMeter()       # CPU share the hypervisor took since the last report
         self.get_logger().info(self.memory_setting)
+        self.get_logger().info(self.thread_wait_setting)
         self.sim = HairSimulator(settings.scene)
         if settings.warmup:
             secs = warm_up(settings.scene)

@@ -607,6 +607,10 @@ def test_executable_reads_the_params_file_and_overrides_and_exits_cleanly_on_ctr
     text = ''.join(lines) + out
     assert proc.returncode == 0, text
     assert 'Traceback' not in text
+    # omp_wait_policy (default passive) is applied before numba starts its threads
+    wanted = os.environ.get('OMP_WAIT_POLICY')
+    assert (f'OMP_WAIT_POLICY={wanted} from the environment kept' if wanted else
+            'OpenMP worker threads wait passive (OMP_WAIT_POLICY=PASSIVE)') in text, text
 
 
 def test_executable_rejects_a_bad_parameter_with_its_name():

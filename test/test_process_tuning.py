@@ -85,3 +85,51 @@ def test_retain_freed_memory_leaves_user_choices_alone(monkeypatch):
     assert 'defaults kept' in process_tuning.retain_freed_memory(0)
     monkeypatch.setenv('GLIBC_TUNABLES', 'glibc.malloc.trim_threshold=1000')
     assert 'left as they are' in process_tuning.retain_freed_memory(64)
+
+
+def test_passive_wait_policy_stops_idle_openmp_workers_from_spinning(monkeypatch):
+    """In fresh interpreters: set before numba's threads start, passive makes a parallel loop
+    followed by a sleep cost far less CPU than libgomp's spinning default; after the start,
+    or against the environment, nothing changes and the message says so."""
+    code = '''
+import os, resource, sys, time
+from hair_tracking.process_tuning import set_omp_wait_policy
+policy = sys.argv[1]
+print(set_omp_wait_policy(policy))
+import numpy as np
+from numba import njit, prange
+@njit(parallel=True)
+def bump(a):
+    for i in prange(a.size):
+        a[i] += 1.0
+a = np.zeros(10000)
+bump(a)
+os.environ.pop('OMP_WAIT_POLICY')
+print(set_omp_wait_policy('passive'))
+def cpu():
+    r = resource.getrusage(resource.RUSAGE_SELF)
+    return r.ru_utime + r.ru_stime
+c0 = cpu()
+for _ in range(100):
+    bump(a)
+    time.sleep(0.002)
+print((cpu() - c0) / 100 * 1e3)
+'''
+    env = {k: v for k, v in os.environ.items() if k != 'OMP_WAIT_POLICY'}
+    runs = {}
+    for policy in ('active', 'passive'):
+        out = subprocess.run([sys.executable, '-c', code, policy], capture_output=True,
+                             text=True, timeout=300, env=env)
+        assert out.returncode == 0, out.stderr
+        first, late, ms = out.stdout.strip().split('\n')
+        assert first == f'OpenMP worker threads wait {policy} (OMP_WAIT_POLICY={policy.upper()})'
+        assert late == 'OpenMP threads already started: wait policy passive not applied'
+        runs[policy] = float(ms)
+    # spinning fills most of each 2 ms sleep with a worker's CPU time; passive does not
+    assert runs['passive'] < 0.5 * runs['active'], runs
+    assert process_tuning.set_omp_wait_policy('environment').startswith('OpenMP wait policy')
+    monkeypatch.setenv('OMP_WAIT_POLICY', 'ACTIVE')
+    assert process_tuning.set_omp_wait_policy('passive') == \
+        'OMP_WAIT_POLICY=ACTIVE from the environment kept'
+    with pytest.raises(ValueError, match='omp_wait_policy must be one of'):
+        process_tuning.set_omp_wait_policy('spin')
