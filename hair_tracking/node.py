@@ -63,7 +63,7 @@ from visualization_msgs.msg import MarkerArray
 from msg_adapters.marker_cdr import strands_to_marker_array_cdr
 from msg_adapters.pointcloud import CloudBuffer, pack_rgb_u32
 from msg_adapters.pose import pose_from_msg, PoseError
-from msg_adapters.rcl_serialized import available as rcl_available, SerializedPublisher
+from msg_adapters.rcl_serialized import SerializedPublisher
 
 from . import params as P
 from .cpu_steal import format_share, StealMeter
@@ -513,7 +513,7 @@ class HairSimNode(Node):
             return
         start = time.perf_counter()
         for o in outs.values():
-            o.raw.direct = s.publish_through_rcl and rcl_available()
+            o.raw.direct = s.publish_through_rcl     # stays False where rcl is not usable
         if not self._dirty:              # same hair: resend the bytes (keeps markers alive)
             for k, o in outs.items():
                 if wanted[k] and o.cached is not None:

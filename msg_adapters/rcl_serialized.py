@@ -150,13 +150,27 @@ class SerializedPublisher:
         """``direct``: None = through rcl when :func:`available`, False = always rclpy's own
         ``publish`` (for comparison), True = through rcl or raise."""
         self.publisher = publisher
-        if direct and not available():
-            raise RuntimeError('librcl / librcutils are not loaded in this process')
-        self.direct = available() if direct is None else bool(direct)
+        # rclpy's handle must expose the rcl pointer (it does since Humble's pybind11 port)
+        usable = available() and hasattr(publisher.handle, 'pointer')
+        if direct and not usable:
+            raise RuntimeError('rcl cannot be called directly here: librcl / librcutils not '
+                               'loaded, or the rclpy publisher does not expose its rcl pointer')
+        self._usable = usable
+        self._direct = usable if direct is None else bool(direct)
+
+    @property
+    def direct(self) -> bool:
+        """Whether :meth:`publish` goes through rcl directly (else rclpy's ``publish``)."""
+        return self._direct
+
+    @direct.setter
+    def direct(self, value: bool) -> None:
+        """Asking for rcl where it cannot be used keeps rclpy's path."""
+        self._direct = bool(value) and self._usable
 
     def publish(self, data) -> None:
         """Publish ``data``, the CDR bytes of one message of the publisher's type."""
-        if not self.direct:
+        if not self._direct:
             self.publisher.publish(data if isinstance(data, bytes) else bytes(data))
             return
         view = _byte_view(data)

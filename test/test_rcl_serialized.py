@@ -147,3 +147,33 @@ def test_a_destroyed_publisher_raises_instead_of_crashing(ros):
     node.destroy_publisher(pub)
     with pytest.raises(Exception):
         direct.publish(serialize_message(String(data='late')))
+
+
+class _HandleWithoutPointer:
+    """A real rclpy publisher seen through a handle that does not expose its rcl pointer (as
+    an rclpy without it would): the direct path must not be taken."""
+
+    def __init__(self, pub):
+        self._pub = pub
+        self.handle = object()
+        self.topic_name = pub.topic_name
+
+    def publish(self, data):
+        self._pub.publish(data)
+
+
+def test_without_the_rcl_pointer_publishing_stays_on_rclpy(ros):
+    ctx, node, executor = ros
+    got = []
+    node.create_subscription(String, 'plain', got.append, QOS)
+    pub = node.create_publisher(String, 'plain', QOS)
+    spin_until(executor, lambda: pub.get_subscription_count() > 0, 'the match')
+    plain = rs.SerializedPublisher(_HandleWithoutPointer(pub))
+    assert plain.direct is False
+    plain.direct = True                     # what the node's publish_through_rcl does
+    assert plain.direct is False
+    plain.publish(bytearray(serialize_message(String(data='via rclpy'))))
+    spin_until(executor, lambda: got, 'the message')
+    assert got[0].data == 'via rclpy'
+    with pytest.raises(RuntimeError, match='rcl pointer'):
+        rs.SerializedPublisher(_HandleWithoutPointer(pub), direct=True)
