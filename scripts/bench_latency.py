@@ -90,6 +90,76 @@ def stamp_of(raw):
     return sec * 1_000_000_000 + nsec
 
 
+class StageClock:
+    """Per-pose timestamps (``time.perf_counter``) of the stages a pose goes through, keyed
+    by its stamp: ``sent`` (the probe publishes it), ``callback`` / ``returned`` (the node's
+    pose callback starts / ends), ``stepped`` (its simulation ends), ``encoded`` /
+    ``published`` (the cloud written / handed to DDS, on pose), ``woken`` (the probe's wait
+    returned), ``taken`` (the probe's take returned) and ``received`` (the probe's callback)."""
+
+    def __init__(self):
+        self.marks = {}
+        self.current = None          # stamp of the pose the node's callback is handling
+
+    def mark(self, stamp, stage, when=None):
+        if stamp is not None:
+            self.marks.setdefault(stamp, {}).setdefault(stage, when or time.perf_counter())
+
+    def stages(self, stamps):
+        """{stage: stats of its duration [ms]} over ``stamps``: pickup (sent -> callback),
+        step, cloud (writing it), publish (the node's call), delivery (from the start of that
+        call until the probe's take returned: DDS and the probe's wake-up and copy), probe_take
+        (the take alone) and probe_callback; ``wait_after_busy`` is the time from the end of
+        the previous pose's callback to the start of this one's when this pose arrived while
+        the node was busy."""
+        chain = [('pickup', 'sent', 'callback'), ('step', 'callback', 'stepped'),
+                 ('cloud', 'stepped', 'encoded'), ('publish', 'encoded', 'published'),
+                 # the probe wakes while the node's publish call still runs (the GIL is free
+                 # then), so its part is timed from the start of that call
+                 ('delivery', 'encoded', 'taken'), ('probe_take', 'woken', 'taken'),
+                 ('probe_callback', 'taken', 'received')]
+        out = {}
+        for name, a, b in chain:
+            out[name] = stats([(self.marks[t][b] - self.marks[t][a]) * 1e3 for t in stamps
+                               if a in self.marks.get(t, {}) and b in self.marks[t]])
+        busy = []
+        for prev, t in zip(stamps, stamps[1:]):
+            m0, m1 = self.marks.get(prev, {}), self.marks.get(t, {})
+            if 'returned' in m0 and 'sent' in m1 and 'callback' in m1 and \
+                    m0['returned'] > m1['sent']:
+                busy.append((m1['callback'] - m0['returned']) * 1e3)
+        out['wait_after_busy'] = stats(busy)
+        out['share_arriving_busy'] = len(busy) / max(1, len(stamps) - 1)
+        return out
+
+
+def timed_node(clock):
+    """A :class:`HairSimNode` subclass that marks its stages on ``clock``."""
+    class TimedNode(HairSimNode):
+        def _on_pose(self, msg):
+            stamp = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+            clock.current = stamp
+            clock.mark(stamp, 'callback')
+            try:
+                super()._on_pose(msg)
+            finally:
+                clock.mark(stamp, 'returned')
+                clock.current = None
+
+        def _step(self, t_ns):
+            super()._step(t_ns)
+            clock.mark(clock.current, 'stepped')
+    return TimedNode
+
+
+def _marking(fn, clock, stage):
+    def wrapped(*a, **k):
+        out = fn(*a, **k)
+        clock.mark(clock.current, stage)
+        return out
+    return wrapped
+
+
 def run_case(ghosts, mode, args, domain_id):
     guides, per_guide = groom_for(ghosts)
     ctx = Context()
@@ -102,7 +172,9 @@ def run_case(ghosts, mode, args, domain_id):
     if args.pose_depth is not None:
         overrides['pose_queue_depth'] = args.pose_depth
     overrides.update(args.set)
-    node = HairSimNode(context=ctx, parameter_overrides=[
+    clock = StageClock()
+    node_type = timed_node(clock) if args.stages else HairSimNode
+    node = node_type(context=ctx, parameter_overrides=[
         Parameter(k, value=v) for k, v in overrides.items()])
     probe = rclpy.create_node('bench_probe', context=ctx)
     sent, received = {}, {}
@@ -113,6 +185,8 @@ def run_case(ghosts, mode, args, domain_id):
         t = stamp_of(raw)
         with lock:
             received.setdefault(t, now)
+        if args.stages:
+            clock.mark(t, 'received', now)
     qos = QoSProfile(depth=5, reliability=ReliabilityPolicy.RELIABLE)
     subs = {probe.create_subscription(PointCloud2, 'hair/points', on_cloud, qos, raw=True):
             on_cloud}
@@ -132,7 +206,12 @@ def run_case(ghosts, mode, args, domain_id):
         def spin_probe():
             while not stop.is_set() and ctx.ok():
                 for sub in waiter.wait(0.05):
+                    woken = time.perf_counter()
                     while (raw := takers[sub].take()) is not None:
+                        if args.stages and sub.topic_name.endswith('hair/points'):
+                            t = stamp_of(raw)
+                            clock.mark(t, 'woken', woken)
+                            clock.mark(t, 'taken')
                         subs[sub](raw)
     else:
         probe_ex.add_node(probe)
@@ -140,6 +219,10 @@ def run_case(ghosts, mode, args, domain_id):
         def spin_probe():
             while not stop.is_set() and ctx.ok():
                 probe_ex.spin_once(timeout_sec=0.05)
+    if args.stages:
+        points = node.outputs['points']
+        points.cloud.encode = _marking(points.cloud.encode, clock, 'encoded')
+        points.raw.publish = _marking(points.raw.publish, clock, 'published')
     probe_thread = threading.Thread(target=spin_probe, daemon=True)
     probe_thread.start()
     deadline = time.monotonic() + 20.0
@@ -170,6 +253,7 @@ def run_case(ghosts, mode, args, domain_id):
             msg = pose_stamped_msg(t, p, q, 'world')
             with lock:
                 sent[t] = time.perf_counter()
+            clock.mark(t, 'sent', sent[t])
             pub.publish(msg)
     pose_thread = threading.Thread(target=publish_poses, daemon=True)
     pose_thread.start()
@@ -210,6 +294,8 @@ def run_case(ghosts, mode, args, domain_id):
         'load_shedding_switches': int(node.shedder.switches),
         'load_shedding_at_end': bool(node.sim.track_once_per_call),
     }
+    if args.stages:
+        result['stages'] = clock.stages(stamps)
     node_ex.shutdown(timeout_sec=1.0)
     probe_ex.shutdown(timeout_sec=1.0)
     node.destroy_node()
@@ -247,6 +333,9 @@ def main(argv=None):
                          'directly, the GIL released, into one reused buffer (as a C++ '
                          "subscriber would); rclpy = rclpy's raw take, which holds the GIL "
                          'for two copies of each cloud and so stalls the node it measures')
+    ap.add_argument('--stages', action='store_true',
+                    help='also time each stage of each pose (pickup, step, cloud, publish, the '
+                         "probe's wake and take; see StageClock) and print their medians / p99")
     ap.add_argument('--domain-id', type=int, default=48)
     ap.add_argument('--json', metavar='PATH', help='write the results as JSON')
     ap.add_argument('--switch-interval', type=float, default=0.0005,
@@ -282,6 +371,13 @@ def main(argv=None):
                   f"{', on at the end' if r['load_shedding_at_end'] else ''}"
                   f"; CPU stolen {format_share(r['cpu_steal_share'])}",
                   flush=True)
+            if 'stages' in r:
+                st = r['stages']
+                parts = [f"{k} {v['median_ms']:.2f} / {v['p99_ms']:.2f}"
+                         for k, v in st.items() if isinstance(v, dict) and v['n']]
+                print(f"{'':>17}stages, median / p99 ms: " + ', '.join(parts) +
+                      f"; {100 * st['share_arriving_busy']:.0f} % of poses arrived while the "
+                      'node was busy', flush=True)
     if args.json:
         os.makedirs(os.path.dirname(os.path.abspath(args.json)), exist_ok=True)
         with open(args.json, 'w', encoding='utf-8') as f:

@@ -1,0 +1,33 @@
+"""scripts/bench_latency.py end to end on a small groom: it runs, every pose gets its cloud,
+and with --stages every stage of the chain is timed (a smoke test of the benchmark itself; the
+numbers it prints are not checked here: speed is measured by running it, not in tests)."""
+import json
+import os
+import subprocess
+import sys
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+
+def test_latency_benchmark_times_every_stage_of_a_short_stream(tmp_path):
+    out = tmp_path / 'lat.json'
+    proc = subprocess.run(
+        [sys.executable, os.path.join(ROOT, 'scripts', 'bench_latency.py'), '--ghosts', '128',
+         '--modes', 'on_pose', '--seconds', '2', '--warmup-s', '0.5', '--stages',
+         '--domain-id', '74', '--json', str(out)],
+        capture_output=True, text=True, timeout=300,
+        env=dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST'))
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert 'stages, median / p99 ms: pickup' in proc.stdout
+    (r,) = json.loads(out.read_text())['results']
+    assert r['probe'] == 'rcl' and r['publish_through_rcl'] is True
+    assert r['ghosts'] == 128 and r['latency']['n'] >= 80          # 90 poses counted
+    assert r['poses_without_cloud'] <= 5
+    stages = r['stages']
+    for name in ('pickup', 'step', 'cloud', 'publish', 'delivery', 'probe_take'):
+        s = stages[name]
+        assert s['n'] >= 0.8 * r['latency']['n'], name
+        assert 0.0 <= s['median_ms'] <= s['p99_ms'], name
+    # the stages lie inside the latency they make up
+    assert stages['step']['median_ms'] < r['latency']['median_ms']
+    assert 0.0 <= stages['share_arriving_busy'] <= 1.0
