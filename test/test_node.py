@@ -263,6 +263,25 @@ def test_clouds_carry_the_simulated_ghosts_through_rcl_or_rclpy_alike(harness, o
     assert h.node.frames_built == 0              # no markers wanted: no frame was built
 
 
+@pytest.mark.parametrize('overrides, shape', [
+    ({'groom.ghosts_per_guide': 0}, (4, 6)),                    # the guides are the hair
+    ({'output.curve': 'catmull_rom', 'output.points_per_strand': 9}, (12, 9)),   # curves
+])
+def test_clouds_without_the_tracker_layout_are_written_from_the_frame(harness, overrides,
+                                                                      shape):
+    h = harness(output_frame='head', **overrides)
+    h.listen(markers=False)
+    pub = h.pose_publisher()
+    for k, t in enumerate(grid_times(h, 3)):
+        h.send(pub, pose_stamped_msg(t, [0.02 * k, 0.0, 0.01], yaw_quat(0.3 * k), 'odom'))
+        cloud = h.cloud_at(t)
+        assert (cloud.height, cloud.width) == shape
+        pts, ids = pointcloud2_to_strands(cloud)
+        np.testing.assert_allclose(pts, h.node.sim.frame(head_frame=True).strands,
+                                   rtol=1e-6, atol=1e-6)
+        assert ids.tolist() == list(range(shape[0]))
+
+
 def test_head_output_frame_uses_the_child_frame_and_keeps_roots_still(harness):
     h = harness(output_frame='head')
     h.listen(markers=False)
