@@ -237,8 +237,8 @@ class HairSimulator:
         if not guides and tracker is not None and self.scene.output.curve == 'none':
             s, n = self.ghosts.rest.shape[:2]
             return s, n, lambda words, stride: tracker.write_records(words, stride, rot, origin)
-        fr = self.frame(copy=False)
-        x = fr.guides if guides else fr.strands
+        # the guides as a frame holds them, without the frame's write-back of the ghosts
+        x = self.guides.x if guides else self.frame(copy=False).strands
         return x.shape[0], x.shape[1], \
             lambda words, stride: points_to_records(words, stride, x, rot, origin)
 

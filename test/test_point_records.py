@@ -82,6 +82,10 @@ def test_simulator_writes_the_ghosts_from_the_tracker_layout_as_a_frame_shows_th
     sim = moved_sim()
     tracker = sim.ghost_tracker
     assert tracker is not None and tracker._held           # the state lives in its blocks
+    # the guides' writer does not make the tracker write the ghosts back
+    g_writer = sim.record_writer(guides=True, head_frame=head_frame)
+    assert g_writer[2](records(g_writer[0] * g_writer[1], 4), 4) is True
+    assert not tracker._synced_x
     n_strands, n_points, write = sim.record_writer(head_frame=head_frame)
     assert (n_strands, n_points) == (35, 9)
     words = records(n_strands * n_points, 5)
