@@ -44,6 +44,7 @@ from hair_tracking.node import HairSimNode  # noqa: E402
 from hair_tracking import params as P  # noqa: E402
 from msg_adapters.pose import pose_stamped_msg  # noqa: E402
 from msg_adapters.rcl_serialized import SerializedTaker, SerializedWaiter  # noqa: E402
+from msg_adapters.stamps import time_to_ns  # noqa: E402
 
 FRAME_MS = 1000.0 / 60.0
 
@@ -137,7 +138,7 @@ def timed_node(clock):
     """A :class:`HairSimNode` subclass that marks its stages on ``clock``."""
     class TimedNode(HairSimNode):
         def _on_pose(self, msg):
-            stamp = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+            stamp = time_to_ns(msg.header.stamp)
             clock.current = stamp
             clock.mark(stamp, 'callback')
             try:
