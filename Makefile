@@ -31,11 +31,11 @@ lint: $(STAMP)
 # The main job: the node, the bundled head-pose bag played into it with /clock, its output
 # recorded to a bag and rendered (see docs/bags.md).
 demo: $(STAMP)
-	$(TEST_ENV) $(PY) -m hair_tracking.live_demo --out out/demo
+	$(TEST_ENV) $(PY) -m hair_tracking.ros.live_demo --out out/demo
 
 # The offline core demo: simulator only, numbers and a picture (no DDS).
 demo-core: $(STAMP)
-	$(TEST_ENV) $(PY) -m hair_tracking.demo --out out/demo-core
+	$(TEST_ENV) $(PY) -m hair_tracking.evaluation.demo --out out/demo-core
 
 bench: $(STAMP)
 	$(PY) -m pip install -q pypbd
@@ -47,13 +47,13 @@ bench: $(STAMP)
 
 # The full matrix of stiff and extreme cases (about 25 min); writes docs/results/stability.*
 stability: $(STAMP)
-	$(PY) -m hair_tracking.eval_cli stability
+	$(PY) -m hair_tracking.evaluation.cli stability
 
 # Error against run time of every method (installs the peer pypbd); writes docs/results and
 # docs/figures
 eval: $(STAMP)
 	$(PY) -m pip install -q pypbd
-	$(PY) -m hair_tracking.eval_cli accuracy
+	$(PY) -m hair_tracking.evaluation.cli accuracy
 
 clean:
 	rm -rf $(VENV) out build *.egg-info hair_tracking/__pycache__/numba-*

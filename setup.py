@@ -5,14 +5,14 @@ installation they come from the distribution, here they are installed by the Mak
 """
 from glob import glob
 
-from setuptools import setup
+from setuptools import find_packages, setup
 
 package_name = 'hair_tracking'
 
 setup(
     name=package_name,
     version='0.1.0',
-    packages=[package_name, 'msg_adapters'],
+    packages=find_packages(exclude=['test', 'test.*']),
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         ('share/' + package_name, ['package.xml']),
@@ -28,10 +28,10 @@ setup(
     tests_require=['pytest'],
     entry_points={
         'console_scripts': [
-            'hair_sim_node = hair_tracking.node:main',
-            'hair_sim_bag = hair_tracking.bag_cli:main',
-            'hair_sim_eval = hair_tracking.eval_cli:main',
-            'hair_sim_demo = hair_tracking.demo:main',
+            'hair_sim_node = hair_tracking.ros.node:main',
+            'hair_sim_bag = hair_tracking.bags.cli:main',
+            'hair_sim_eval = hair_tracking.evaluation.cli:main',
+            'hair_sim_demo = hair_tracking.evaluation.demo:main',
         ],
     },
 )

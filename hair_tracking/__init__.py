@@ -5,8 +5,9 @@ Guide (target) strands are simulated with position-based dynamics; many ghost st
 The core modules of this package import numpy, numba and yaml only.
 
 numba's on-disk cache (``cache=True``) checks only the timestamp of the file that defines a
-kernel, not of the files whose jitted functions the kernel inlines (the ghost kernel inlines
-functions of ``collision``, ``ftl`` and ``weights``), so editing one module could leave a stale
+kernel, not of the files whose jitted functions the kernel inlines (the ghost kernels inline
+functions of ``guides.collision``, ``guides.ftl`` and ``ghosts.weights``), so editing one module
+could leave a stale
 compiled caller behind.  Unless ``NUMBA_CACHE_DIR`` is set, the package therefore points numba's
 cache at a directory keyed by a hash of its own sources (:func:`numba_cache_dir`): any edit
 starts from a fresh cache, unchanged sources reuse the compiled kernels.
@@ -20,10 +21,13 @@ _HERE = os.path.dirname(os.path.abspath(__file__))
 
 
 def source_hash() -> str:
-    """12 hex digits of the SHA-1 of every ``hair_tracking/*.py`` (sorted by name)."""
+    """12 hex digits of the SHA-1 of every ``hair_tracking/**/*.py`` (paths relative to the
+    package and contents, sorted by path), so an edit in any subpackage changes it."""
     h = hashlib.sha1()
-    for path in sorted(glob.glob(os.path.join(_HERE, '*.py'))):
-        with open(path, 'rb') as f:
+    paths = glob.glob(os.path.join(_HERE, '**', '*.py'), recursive=True)
+    for path in sorted(os.path.relpath(p, _HERE) for p in paths):
+        h.update(path.encode())
+        with open(os.path.join(_HERE, path), 'rb') as f:
             h.update(f.read())
     return h.hexdigest()[:12]
 

@@ -1,6 +1,7 @@
 """Run a kernel on all threads or on one, whichever this machine makes faster right now.
 
-The static rule (:func:`hair_tracking.integrate.runs_parallel`: enough nodes and more than one
+The static rule (:func:`hair_tracking.guides.integrate.runs_parallel`: enough nodes and more than
+one
 numba thread) assumes that every thread gets a core.  On a shared virtual machine it does not
 always: while the hypervisor runs other guests on one of this VM's two vCPUs (steal time,
 ``/proc/stat``), a parallel region waits at its end for the thread that was taken away, and the
@@ -13,7 +14,8 @@ brought); in a quiet phase 3.4 ms against 6 ms.
 the static rule's choice first, and after ``settle`` calls a short trial of the other one
 (``window`` calls, fewer when it has lost already) compared with the median of the current
 one's last ``window`` calls, again every ``reprobe`` calls.  The variants give bit-identical
-results (the serial twins are the same code, see :func:`hair_tracking.integrate.serial_twin`),
+results (the serial twins are the same code, see
+:func:`hair_tracking.guides.integrate.serial_twin`),
 so the choice changes speed only, never the output.  Standard library only.
 """
 import statistics

@@ -36,18 +36,18 @@ from typing import Dict, Optional
 
 import numpy as np
 
-from . import curves
-from .collision import make_collider
-from .ghosts import GhostTracker
-from .groom import make_groom
-from .guides import GuideSolver
-from .head_track import HeadTrack, IDENTITY, PoseResult
-from .integrate import max_step_sq, parallel_from, runs_parallel
-from .metrics import max_stretch
-from .model import HeadPose, StrandSet
-from .point_records import points_to_records
-from .scene import Scene
-from .transforms import quat_angle, quat_to_matrix, slerp
+from hair_tracking.core import curves
+from hair_tracking.core.groom import make_groom
+from hair_tracking.core.head_track import HeadTrack, IDENTITY, PoseResult
+from hair_tracking.core.metrics import max_stretch
+from hair_tracking.core.model import HeadPose, StrandSet
+from hair_tracking.core.point_records import points_to_records
+from hair_tracking.core.scene import Scene
+from hair_tracking.core.transforms import quat_angle, quat_to_matrix, slerp
+from hair_tracking.ghosts.tracker import GhostTracker
+from hair_tracking.guides.collision import make_collider
+from hair_tracking.guides.integrate import max_step_sq, parallel_from, runs_parallel
+from hair_tracking.guides.solver import GuideSolver
 
 #: Most parts one substep is split into when the hair moves fast (see the module docstring).
 MAX_SPLIT = 16
@@ -228,7 +228,7 @@ class HairSimulator:
         and ``write(words, stride) -> bool``, which puts their positions now as float32 x y z
         at the start of ``words``' S * N records of ``stride`` float32 words (strand ``s``'s
         point ``j`` at record ``s * N + j``; in the head frame with ``head_frame``) and says
-        whether all are finite (:mod:`~hair_tracking.point_records`).  The ghosts are read
+        whether all are finite (:mod:`~hair_tracking.core.point_records`).  The ghosts are read
         straight from the tracker's layout, without the write-back a frame makes."""
         rot = origin = None
         if head_frame:
@@ -366,7 +366,7 @@ def warm_up(scene: Scene) -> HairSimulator:
     two guides with two ghosts each) through a moving, turning head, a frame in both frames and
     the stretch and penetration checks, so the first real steps are not late: through the
     serial kernels the tiny copy uses, and through the parallel ones too when the full scene is
-    large enough to run them (:func:`~hair_tracking.integrate.runs_parallel`).  Returns the
+    large enough to run them (:func:`~hair_tracking.guides.integrate.runs_parallel`).  Returns the
     tiny simulator (callers may warm their own output code on its frames).
     """
     g = scene.groom

@@ -45,13 +45,13 @@ import numpy as np  # noqa: E402
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, ROOT)
 
+from hair_tracking.core.groom import make_groom  # noqa: E402
+from hair_tracking.core.head_track import IDENTITY  # noqa: E402
+from hair_tracking.core.model import StrandSet  # noqa: E402
+from hair_tracking.core.scene import Scene  # noqa: E402
 from hair_tracking.cpu_steal import format_share, StealMeter  # noqa: E402
-from hair_tracking.ghosts import GhostTracker  # noqa: E402
-from hair_tracking.groom import make_groom  # noqa: E402
-from hair_tracking.guides import GuideSolver  # noqa: E402
-from hair_tracking.head_track import IDENTITY  # noqa: E402
-from hair_tracking.model import StrandSet  # noqa: E402
-from hair_tracking.scene import Scene  # noqa: E402
+from hair_tracking.ghosts.tracker import GhostTracker  # noqa: E402
+from hair_tracking.guides.solver import GuideSolver  # noqa: E402
 
 NODES = 16
 ITERATIONS = 4
@@ -179,9 +179,9 @@ COMPILE_SNIPPET = r'''
 import sys, time
 sys.path.insert(0, {root!r})
 start = time.perf_counter()
-from hair_tracking.scene import Scene
+from hair_tracking.core.scene import Scene
+from hair_tracking.evaluation.demo import warm_up
 from hair_tracking.resources import config_path
-from hair_tracking.demo import warm_up
 scene = Scene.from_yaml(config_path('default'))
 warm_up(scene)
 print(time.perf_counter() - start)

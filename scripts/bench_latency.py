@@ -39,9 +39,9 @@ from visualization_msgs.msg import MarkerArray
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
-from hair_tracking.cpu_steal import format_share, StealMeter  # noqa: E402
-from hair_tracking.node import HairSimNode  # noqa: E402
 from hair_tracking import params as P  # noqa: E402
+from hair_tracking.cpu_steal import format_share, StealMeter  # noqa: E402
+from hair_tracking.ros.node import HairSimNode  # noqa: E402
 from msg_adapters.pose import pose_stamped_msg  # noqa: E402
 from msg_adapters.rcl_serialized import SerializedTaker, SerializedWaiter  # noqa: E402
 from msg_adapters.stamps import time_to_ns  # noqa: E402

@@ -23,7 +23,7 @@ from visualization_msgs.msg import MarkerArray  # noqa: E402
 
 from msg_adapters.marker_cdr import strands_to_marker_array_cdr  # noqa: E402
 from msg_adapters.markers import strands_to_marker_array  # noqa: E402
-from hair_tracking.point_records import points_to_records  # noqa: E402
+from hair_tracking.core.point_records import points_to_records  # noqa: E402
 from msg_adapters.pointcloud import (CloudBuffer, pack_rgb_u32,  # noqa: E402
                                      strands_to_pointcloud2, strands_to_pointcloud2_cdr)
 

@@ -3,7 +3,7 @@
 
 Usage: python scripts/make_head_motion_data.py [path/to/cmu_131_01_walk.bvh] [--out CSV]
 
-Reads the BVH with hair_tracking.head_motion.load_bvh_head_motion (Head joint, head-centre
+Reads the BVH with hair_tracking.bags.head_motion.load_bvh_head_motion (Head joint, head-centre
 origin, CMU scale 0.056444 m/unit, REP-103 frames) and writes all 994 frames as
 ``t_s,px,py,pz,qx,qy,qz,qw`` (7 significant digits) with an attribution header.  The source is the
 CMU Graphics Lab Motion Capture Database (mocap.cs.cmu.edu), subject 131 trial 01, as converted

@@ -7,9 +7,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from hair_tracking import bag_io, head_motion as hm
-from hair_tracking.bag_cli import DEFAULT_START_TIME_S, main
-from hair_tracking.transforms import quat_multiply, quat_to_matrix
+from hair_tracking.bags import io as bag_io
+
+from hair_tracking.bags import head_motion as hm
+from hair_tracking.bags.cli import DEFAULT_START_TIME_S, main
+from hair_tracking.core.transforms import quat_multiply, quat_to_matrix
 
 DATA = Path(__file__).resolve().parents[1].parent / 'shared' / 'data' / 'head_motion'
 BVH = DATA / 'cmu_131_01_walk.bvh'

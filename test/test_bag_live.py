@@ -23,12 +23,12 @@ from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
 
-from hair_tracking import bag_io
-from hair_tracking.bag_play import BagPlayer
-from hair_tracking.bag_record import BagRecorder
-from hair_tracking.node import HairSimNode
-from hair_tracking.offline import run_bag, RunOptions
-from hair_tracking.params import make_settings
+from hair_tracking.bags import io as bag_io
+from hair_tracking.bags.offline import run_bag, RunOptions
+from hair_tracking.bags.play import BagPlayer
+from hair_tracking.bags.record import BagRecorder
+from hair_tracking.core.params import make_settings
+from hair_tracking.ros.node import HairSimNode
 
 DOMAIN = 55
 WAIT_S = 30.0
@@ -147,7 +147,7 @@ def test_live_demo_runs_end_to_end_and_ends_by_itself(tmp_path):
     env = dict(os.environ, PYTHONPATH=str(root), ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')
     out = tmp_path / 'demo'
     proc = subprocess.run(
-        [sys.executable, '-m', 'hair_tracking.live_demo', '--out', str(out), '--domain-id',
+        [sys.executable, '-m', 'hair_tracking.ros.live_demo', '--out', str(out), '--domain-id',
          '57', '--duration', '1.0', '--max-frames', '6', '--param', 'groom.guides:=6',
          '--param', 'groom.ghosts_per_guide:=2', '--param', 'solver.settle_time:=0.05'],
         capture_output=True, text=True, timeout=300, cwd=root, env=env)

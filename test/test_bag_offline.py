@@ -9,9 +9,9 @@ import sys
 import numpy as np
 import pytest
 
-from hair_tracking import bag_io
-from hair_tracking.bag_cli import main
-from hair_tracking.offline import load_settings, Progress, run_bag, RunOptions, Schedule
+from hair_tracking.bags import io as bag_io
+from hair_tracking.bags.cli import main
+from hair_tracking.bags.offline import load_settings, Progress, run_bag, RunOptions, Schedule
 from hair_tracking.simulator import HairSimulator
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -28,7 +28,7 @@ def _small_args():
 
 
 def _settings(**extra):
-    from hair_tracking.offline import parse_overrides
+    from hair_tracking.bags.offline import parse_overrides
     values = parse_overrides(SMALL)
     values.update(extra)
     return load_settings(overrides=values)
@@ -286,7 +286,7 @@ def test_console_errors_have_no_traceback(tmp_path):
     for args, code in ((['run', str(tmp_path / 'nope.mcap'), '-o', str(tmp_path / 'o')], 3),
                        (['import', str(tmp_path / 'nope.bvh'), '-o', str(tmp_path / 'o')], 3),
                        (['run', '-o'], 2)):
-        proc = subprocess.run([sys.executable, '-m', 'hair_tracking.bag_cli'] + args,
+        proc = subprocess.run([sys.executable, '-m', 'hair_tracking.bags.cli'] + args,
                               capture_output=True, text=True, timeout=120, env=env, cwd=ROOT)
         assert proc.returncode == code, proc.stderr
         assert 'Traceback' not in proc.stderr and 'error' in proc.stderr
@@ -295,7 +295,7 @@ def test_console_errors_have_no_traceback(tmp_path):
 
 def test_offline_runs_need_no_rclpy():
     """`hair_sim_bag run` works without a ROS installation: its modules never import rclpy."""
-    code = ('import sys, hair_tracking.offline, hair_tracking.strand_colors; '
+    code = ('import sys, hair_tracking.bags.offline, hair_tracking.core.strand_colors; '
             'sys.exit(1 if "rclpy" in sys.modules else 0)')
     assert subprocess.run([sys.executable, '-c', code], timeout=120).returncode == 0
 
@@ -305,7 +305,7 @@ def test_pose_stamped_bytes_match_the_rosbags_serializer(frame_id):
     """The direct CDR writer of the head-pose copies gives the bytes rosbags' own serializer
     gives (every frame-name length mod 8, so each padding case is covered), and they read
     back to the same pose."""
-    from hair_tracking.offline import pose_stamped_bytes
+    from hair_tracking.bags.offline import pose_stamped_bytes
     rng = np.random.default_rng(len(frame_id))
     t = 1_700_000_123_456_789_012 // 1000
     p, q = rng.normal(size=3), rng.normal(size=4)

@@ -11,10 +11,10 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
 from rclpy.qos import qos_profile_sensor_data
 
-from hair_tracking import bag_io
-from hair_tracking.bag_cli import main
-from hair_tracking.bag_play import BagPlayer
-from hair_tracking.bag_record import BagRecorder
+from hair_tracking.bags import io as bag_io
+from hair_tracking.bags.cli import main
+from hair_tracking.bags.play import BagPlayer
+from hair_tracking.bags.record import BagRecorder
 
 DOMAIN_ROUNDTRIP = 51
 DOMAIN_LOOP = 53

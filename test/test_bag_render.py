@@ -4,10 +4,10 @@ import numpy as np
 from PIL import Image
 import pytest
 
-from hair_tracking import bag_io
-from hair_tracking.bag_cli import main
-from hair_tracking.bag_render import load_diagnostics, load_hair, render
-from hair_tracking.offline import diagnostics_bytes, pose_stamped_bytes
+from hair_tracking.bags import io as bag_io
+from hair_tracking.bags.cli import main
+from hair_tracking.bags.offline import diagnostics_bytes, pose_stamped_bytes
+from hair_tracking.bags.render import load_diagnostics, load_hair, render
 from msg_adapters.marker_cdr import strands_to_marker_array_cdr
 from msg_adapters.pointcloud import strands_to_pointcloud2_cdr
 

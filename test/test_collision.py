@@ -5,12 +5,14 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from hair_tracking import collision, integrate
-from hair_tracking.collision import Collider, make_collider
-from hair_tracking.guides import GuideSolver
-from hair_tracking.model import HeadPose, StrandSet
-from hair_tracking.scene import ColliderSpec, Scene
-from hair_tracking.transforms import quat_from_axis_angle, quat_normalize, quat_to_matrix
+from hair_tracking.guides import collision
+
+from hair_tracking.core.model import HeadPose, StrandSet
+from hair_tracking.core.scene import ColliderSpec, Scene
+from hair_tracking.core.transforms import quat_from_axis_angle, quat_normalize, quat_to_matrix
+from hair_tracking.guides import integrate
+from hair_tracking.guides.collision import Collider, make_collider
+from hair_tracking.guides.solver import GuideSolver
 
 RADII = np.array([0.095, 0.08, 0.105])
 

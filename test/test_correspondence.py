@@ -2,8 +2,8 @@
 import numpy as np
 import pytest
 
-from hair_tracking.correspondence import (assign_guides, equation1_kernel, nearest_roots,
-                                          node_correspondence)
+from hair_tracking.ghosts.correspondence import (assign_guides, equation1_kernel, nearest_roots,
+                                                 node_correspondence)
 
 
 def random_strands(rng, count, nodes, spread=0.1, seg=0.015):

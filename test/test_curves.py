@@ -4,7 +4,7 @@ from math import comb
 import numpy as np
 import pytest
 
-from hair_tracking.curves import bezier, bezier_stencil, catmull_rom, resample
+from hair_tracking.core.curves import bezier, bezier_stencil, catmull_rom, resample
 
 
 def random_strands(rng, count, nodes):

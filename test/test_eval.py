@@ -6,18 +6,18 @@ import os
 import numpy as np
 import pytest
 
-from hair_tracking import eval_accuracy as ea
-from hair_tracking import eval_cli
-from hair_tracking import synthetic_motion as sm
-from hair_tracking.eval_methods import (FullSim, GhostTracking, PyPBD, RigidOffset,
-                                        make_workload, pypbd_available)
-from hair_tracking.head_motion import (HeadMotion, angular_speed, linear_speed,
-                                       load_bundled_walk)
-from hair_tracking.head_track import IDENTITY
-from hair_tracking.metrics import max_stretch, position_error
-from hair_tracking.model import HeadPose
-from hair_tracking.scene import Scene
-from hair_tracking.transforms import quat_from_axis_angle, quat_to_matrix, slerp
+from hair_tracking.bags.head_motion import (HeadMotion, angular_speed, linear_speed,
+                                            load_bundled_walk)
+from hair_tracking.core.head_track import IDENTITY
+from hair_tracking.core.metrics import max_stretch, position_error
+from hair_tracking.core.model import HeadPose
+from hair_tracking.core.scene import Scene
+from hair_tracking.core.transforms import quat_from_axis_angle, quat_to_matrix, slerp
+from hair_tracking.evaluation import accuracy as ea
+from hair_tracking.evaluation import cli as eval_cli
+from hair_tracking.evaluation import synthetic_motion as sm
+from hair_tracking.evaluation.methods import (FullSim, GhostTracking, PyPBD, RigidOffset,
+                                              make_workload, pypbd_available)
 
 VR = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), '..', 'shared',
                   'data', 'head_motion', 'vr360_user1_quaternion.txt')

@@ -3,10 +3,10 @@ one-node functions it reorganises."""
 import numpy as np
 import pytest
 
-from hair_tracking import ghost_contacts
-from hair_tracking.collision import push_out
-from hair_tracking.ftl import restore_node
-from hair_tracking.transforms import quat_from_axis_angle, quat_to_matrix
+from hair_tracking.core.transforms import quat_from_axis_angle, quat_to_matrix
+from hair_tracking.ghosts import contacts as ghost_contacts
+from hair_tracking.guides.collision import push_out
+from hair_tracking.guides.ftl import restore_node
 
 
 def lanes(rng, n, axes):

@@ -2,10 +2,10 @@
 import numpy as np
 import pytest
 
-from hair_tracking.ghosts import GhostTracker
-from hair_tracking.model import HeadPose, StrandSet
-from hair_tracking.scene import Scene
-from hair_tracking.transforms import quat_from_axis_angle, quat_multiply, quat_to_matrix
+from hair_tracking.core.model import HeadPose, StrandSet
+from hair_tracking.core.scene import Scene
+from hair_tracking.core.transforms import quat_from_axis_angle, quat_multiply, quat_to_matrix
+from hair_tracking.ghosts.tracker import GhostTracker
 
 DT = 1.0 / 240.0
 WEIGHTS_OFF = dict(elastic_weight=False, tip_weight=0.0, com_weight=0.0, spread=0.0,
@@ -329,7 +329,7 @@ def test_fused_ellipsoid_collision_pushes_ghosts_out(length_restore):
     """The project's Collider runs inside the kernel: after a step that drives the ghosts into a
     sphere, no free node is inside it; with length restoration the segments keep their rest
     lengths; velocities stay the displacement over dt; with collision off they stay inside."""
-    from hair_tracking.collision import Collider
+    from hair_tracking.guides.collision import Collider
     guides, ghosts = comb([(0.0, 0.0, 0.0), (0.03, 0.0, 0.0)], 8)
     radius, margin = 0.05, 0.004
     collider = Collider('sphere', (0.02, 0.0, -0.15), (radius,) * 3, margin, 0.3)
@@ -439,7 +439,7 @@ def test_positions_for_output_keep_the_state_in_the_kernel_layout(monkeypatch):
     read-only and leaves it with the tracker: the next step does not copy the arrays in again,
     whereas a read of ``ghosts.x`` (which the caller may write into) makes it.  Output needs
     only the positions: the velocities are written back when ``ghosts.v`` is read."""
-    import hair_tracking.ghosts as ghosts_module
+    import hair_tracking.ghosts.tracker as ghosts_module
     copies = []
     real = ghosts_module.copy_blocks
 

@@ -1,8 +1,8 @@
 """Groom generation: counts, scalp region, rest lengths, determinism."""
 import numpy as np
 
-from hair_tracking.groom import in_scalp, make_groom
-from hair_tracking.scene import GroomSpec
+from hair_tracking.core.groom import in_scalp, make_groom
+from hair_tracking.core.scene import GroomSpec
 
 
 def test_counts_shapes_and_lengths():

@@ -10,8 +10,12 @@ import numba
 import numpy as np
 import pytest
 
-from hair_tracking import ftl, integrate, pbd_constraints
-from hair_tracking.transforms import quat_normalize, quat_to_matrix
+from hair_tracking.guides import ftl
+
+from hair_tracking.guides import integrate
+
+from hair_tracking.core.transforms import quat_normalize, quat_to_matrix
+from hair_tracking.guides import pbd_constraints
 
 ATOL = 1e-12
 

@@ -7,11 +7,17 @@ Numbers quoted in docstrings were measured with this code (dt = 1/240 s, 4 stran
 import numpy as np
 import pytest
 
-from hair_tracking import ftl, guides, integrate, pbd_constraints
-from hair_tracking.guides import GuideSolver, max_stretch
-from hair_tracking.model import HeadPose, StrandSet
-from hair_tracking.scene import Scene
-from hair_tracking.transforms import quat_from_axis_angle, quat_multiply, quat_to_matrix
+from hair_tracking.guides import ftl
+
+from hair_tracking.guides import solver as guides
+
+from hair_tracking.guides import integrate
+
+from hair_tracking.core.model import HeadPose, StrandSet
+from hair_tracking.core.scene import Scene
+from hair_tracking.core.transforms import quat_from_axis_angle, quat_multiply, quat_to_matrix
+from hair_tracking.guides import pbd_constraints
+from hair_tracking.guides.solver import GuideSolver, max_stretch
 
 SOLVERS = ('pbd', 'xpbd', 'ftl')
 

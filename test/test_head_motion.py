@@ -9,9 +9,9 @@ import os
 import numpy as np
 import pytest
 
-from hair_tracking import head_motion as hm
-from hair_tracking.transforms import (matrix_to_quat, quat_angle, quat_from_axis_angle,
-                                      quat_to_matrix)
+from hair_tracking.bags import head_motion as hm
+from hair_tracking.core.transforms import (matrix_to_quat, quat_angle, quat_from_axis_angle,
+                                           quat_to_matrix)
 
 DATA = os.environ.get('HEAD_MOTION_DATA', '/work/shared/data/head_motion')
 WALK_BVH = os.path.join(DATA, 'cmu_131_01_walk.bvh')

@@ -4,9 +4,9 @@ import math
 import numpy as np
 import pytest
 
-from hair_tracking.head_track import HeadTrack, PoseResult
-from hair_tracking.scene import HeadTrackSpec
-from hair_tracking.transforms import quat_angle, quat_from_axis_angle, quat_to_matrix
+from hair_tracking.core.head_track import HeadTrack, PoseResult
+from hair_tracking.core.scene import HeadTrackSpec
+from hair_tracking.core.transforms import quat_angle, quat_from_axis_angle, quat_to_matrix
 
 MS = 1_000_000
 

@@ -1,7 +1,7 @@
-"""The live node's load-shedding policy (hair_tracking.load_shedding), without ROS."""
+"""The live node's load-shedding policy (hair_tracking.ros.load_shedding), without ROS."""
 import pytest
 
-from hair_tracking.load_shedding import LoadShedder, RESTORE_FRACTION, URGENT, \
+from hair_tracking.ros.load_shedding import LoadShedder, RESTORE_FRACTION, URGENT, \
     URGENT_POSES, WINDOW
 
 PERIOD_NS = 16_666_667          # 60 Hz poses

@@ -28,10 +28,10 @@ from sensor_msgs.msg import PointCloud2
 from std_srvs.srv import Trigger
 from visualization_msgs.msg import Marker, MarkerArray
 
-from hair_tracking.node import HairSimNode
-from hair_tracking.strand_colors import strand_colors
+from hair_tracking.core.strand_colors import strand_colors
+from hair_tracking.core.transforms import quat_to_matrix
+from hair_tracking.ros.node import HairSimNode
 from hair_tracking.simulator import HairSimulator
-from hair_tracking.transforms import quat_to_matrix
 from msg_adapters.pointcloud import pointcloud2_to_strands
 from msg_adapters.pose import pose_stamped_msg, transform_stamped_msg
 from msg_adapters.stamps import time_msg, time_to_ns
@@ -597,7 +597,7 @@ def test_diagnostics_are_published_with_the_step_numbers(harness):
 def _run_node(args, domain_id):
     path = os.pathsep.join(filter(None, [ROOT, os.environ.get('PYTHONPATH')]))
     env = dict(os.environ, ROS_DOMAIN_ID=str(domain_id), PYTHONUNBUFFERED='1', PYTHONPATH=path)
-    return subprocess.Popen([sys.executable, '-m', 'hair_tracking.node', '--ros-args'] + args,
+    return subprocess.Popen([sys.executable, '-m', 'hair_tracking.ros.node', '--ros-args'] + args,
                             env=env, stdout=subprocess.PIPE,
                             stderr=subprocess.STDOUT, text=True)
 

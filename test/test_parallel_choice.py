@@ -2,15 +2,16 @@
 import numpy as np
 import pytest
 
-from hair_tracking.ghosts import GhostTracker
-from hair_tracking.groom import make_groom
-from hair_tracking.guides import GuideSolver
-from hair_tracking.head_track import IDENTITY
-from hair_tracking.model import HeadPose, StrandSet
+from hair_tracking.core.groom import make_groom
+from hair_tracking.core.head_track import IDENTITY
+from hair_tracking.core.model import HeadPose, StrandSet
+from hair_tracking.core.scene import Scene
+from hair_tracking.core.transforms import quat_to_matrix
+from hair_tracking.ghosts import tracker as ghosts_module
+from hair_tracking.ghosts.tracker import GhostTracker
+from hair_tracking.guides import integrate
+from hair_tracking.guides.solver import GuideSolver
 from hair_tracking.parallel_choice import ParallelChooser
-from hair_tracking.scene import Scene
-from hair_tracking import ghosts as ghosts_module, integrate
-from hair_tracking.transforms import quat_to_matrix
 
 
 def drive(chooser, calls, parallel_s, serial_s, static=True):

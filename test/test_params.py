@@ -6,9 +6,9 @@ import os
 import pytest
 import yaml
 
-from hair_tracking import params
-from hair_tracking.params import apply_changes, make_settings, ParamError
-from hair_tracking.scene import RULES, Scene, SceneError
+from hair_tracking.core import params
+from hair_tracking.core.params import apply_changes, make_settings, ParamError
+from hair_tracking.core.scene import RULES, Scene, SceneError
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
@@ -201,7 +201,7 @@ def test_shipped_config_is_the_rendered_table():
     with open(os.path.join(ROOT, 'config', 'hair_sim.yaml'), encoding='utf-8') as f:
         shipped = f.read()
     assert shipped == params.render_yaml(), \
-        'config/hair_sim.yaml is out of date: python -m hair_tracking.params > ' \
+        'config/hair_sim.yaml is out of date: python -m hair_tracking.core.params > ' \
         'config/hair_sim.yaml'
 
 
@@ -209,4 +209,4 @@ def test_docs_carry_the_current_table():
     with open(os.path.join(ROOT, 'docs', 'node.md'), encoding='utf-8') as f:
         doc = f.read()
     assert params.render_markdown() in doc, \
-        'docs/node.md is out of date: paste python -m hair_tracking.params --markdown'
+        'docs/node.md is out of date: paste python -m hair_tracking.core.params --markdown'

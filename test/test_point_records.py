@@ -1,12 +1,12 @@
-"""Strand positions written as float32 records (hair_tracking.point_records) and the
+"""Strand positions written as float32 records (hair_tracking.core.point_records) and the
 simulator's record writer, which reads the ghosts straight from the tracker's layout."""
 import numpy as np
 import pytest
 
-from hair_tracking.point_records import blocks_to_records, points_to_records
-from hair_tracking.scene import Scene
+from hair_tracking.core.point_records import blocks_to_records, points_to_records
+from hair_tracking.core.scene import Scene
+from hair_tracking.core.transforms import quat_from_axis_angle
 from hair_tracking.simulator import HairSimulator
-from hair_tracking.transforms import quat_from_axis_angle
 
 MS = 1_000_000
 SENTINEL = np.uint32(0xA5A5A5A5)

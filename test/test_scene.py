@@ -4,7 +4,7 @@ import os
 
 import pytest
 
-from hair_tracking.scene import Scene, SceneError
+from hair_tracking.core.scene import Scene, SceneError
 
 CONFIG = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), 'config')
 

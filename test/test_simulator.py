@@ -2,11 +2,15 @@
 import numpy as np
 import pytest
 
-from hair_tracking import collision, curves, ghosts as ghosts_mod
-from hair_tracking.head_track import PoseResult
-from hair_tracking.scene import Scene
+from hair_tracking.guides import collision
+
+from hair_tracking.core import curves
+
+from hair_tracking.core.head_track import PoseResult
+from hair_tracking.core.scene import Scene
+from hair_tracking.core.transforms import quat_from_axis_angle
+from hair_tracking.ghosts import tracker as ghosts_mod
 from hair_tracking.simulator import HairSimulator
-from hair_tracking.transforms import quat_from_axis_angle
 
 MS = 1_000_000
 SMALL = dict(groom__guides=6, groom__ghosts_per_guide=3, groom__guide_nodes=8,
@@ -173,7 +177,9 @@ def test_warm_up_loads_the_kernels_the_full_scene_runs(monkeypatch, guides, per_
     """A small groom runs the serial twins, a large one (>= PARALLEL_MIN_NODES nodes) the
     parallel kernels: warm-up (a tiny copy of the scene) goes through the ones the full scene
     will call, so none is compiled or loaded from disk on the first real frame."""
-    from hair_tracking import ftl, integrate, simulator
+    from hair_tracking import simulator
+    from hair_tracking.guides import ftl
+    from hair_tracking.guides import integrate
     threshold = integrate.PARALLEL_MIN_NODES
     monkeypatch.setattr(integrate.numba, 'get_num_threads', lambda: 2)
     calls = set()
@@ -199,7 +205,7 @@ def test_max_step_sq_is_the_largest_squared_displacement():
     """The substep splitter's speed estimate: the numpy expression it replaced (to the last
     bit or two: summation order), and NaN when any displacement is NaN (so that no split is
     made on bad numbers)."""
-    from hair_tracking.integrate import max_step_sq
+    from hair_tracking.guides.integrate import max_step_sq
     rng = np.random.default_rng(8)
     x, x_old = rng.normal(size=(2, 9, 7, 3))
     d = x - x_old

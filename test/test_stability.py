@@ -5,15 +5,19 @@ import math
 import numpy as np
 import pytest
 
-from hair_tracking import ftl, simulator, stability
-from hair_tracking import synthetic_motion as sm
-from hair_tracking.collision import Collider, outside_distance, surface_point
-from hair_tracking.guides import BEND_REFERENCE_DT, GuideSolver, ftl_bend_stiffness
-from hair_tracking.metrics import max_stretch
-from hair_tracking.model import StrandSet
-from hair_tracking.scene import Scene
+from hair_tracking.guides import ftl
+
+from hair_tracking import simulator
+
+from hair_tracking.core.metrics import max_stretch
+from hair_tracking.core.model import StrandSet
+from hair_tracking.core.scene import Scene
+from hair_tracking.core.transforms import quat_from_axis_angle, quat_to_matrix
+from hair_tracking.evaluation import stability
+from hair_tracking.evaluation import synthetic_motion as sm
+from hair_tracking.guides.collision import Collider, outside_distance, surface_point
+from hair_tracking.guides.solver import BEND_REFERENCE_DT, GuideSolver, ftl_bend_stiffness
 from hair_tracking.simulator import HairSimulator
-from hair_tracking.transforms import quat_from_axis_angle, quat_to_matrix
 
 QUICK = stability.matrix(quick=True)
 
@@ -200,7 +204,7 @@ def test_ftl_restore_matches_reference_and_keeps_lengths():
     # the pass really moved nodes out of the ellipsoid (not a no-op on this input): from
     # centimetres inside to a fraction of a millimetre
     probe = Collider('ellipsoid', center, axes, 0.0, 0.0)
-    from hair_tracking.model import HeadPose
+    from hair_tracking.core.model import HeadPose
     head = HeadPose(pos, np.zeros(4), rot)
     assert probe.penetration(x, head, st.inv_mass) > 0.02
     assert probe.penetration(xk, head, st.inv_mass) < 1e-3
@@ -275,7 +279,7 @@ def test_split_never_below_min_dt():
     sim = HairSimulator(stability.BASE)
     head0 = sim.head
     q = quat_from_axis_angle([0, 0, 1], 3.0)
-    from hair_tracking.model import HeadPose
+    from hair_tracking.core.model import HeadPose
     far = HeadPose(np.array([0.5, 0.0, 0.0]), q, quat_to_matrix(q))
     dt = sim.scene.solver.dt
     n = sim._split_count(dt, head0, far)

@@ -2,14 +2,14 @@
 import numpy as np
 import pytest
 
-from hair_tracking.ghosts import GhostTracker
-from hair_tracking.model import HeadPose, StrandSet
-from hair_tracking.scene import Scene
-from hair_tracking.tracking_kernels import guide_frames
-from hair_tracking.transforms import quat_normalize, quat_to_matrix, rotation_between
-from hair_tracking.weights import (arc_fractions, clamp_weight, com_weight, ELASTIC_CHANGED,
-                                   elastic_code, ELASTIC_KEPT, ELASTIC_OFF, elastic_weight,
-                                   tip_weights)
+from hair_tracking.core.model import HeadPose, StrandSet
+from hair_tracking.core.scene import Scene
+from hair_tracking.core.transforms import quat_normalize, quat_to_matrix, rotation_between
+from hair_tracking.ghosts.kernels import guide_frames
+from hair_tracking.ghosts.tracker import GhostTracker
+from hair_tracking.ghosts.weights import (arc_fractions, clamp_weight, com_weight, ELASTIC_CHANGED,
+                                          elastic_code, ELASTIC_KEPT, ELASTIC_OFF, elastic_weight,
+                                          tip_weights)
 
 
 # ------------------------------------------------------------------ helpers
@@ -137,8 +137,8 @@ def reference_step(x, v, ghost_rest, ghost_len, guide_of, seg, t, guide_rest, gx
 
 def _collide_reference(p, start, prev, seg_len, rest_seg, head, collider, restore):
     """(h) for the lanes of one node index, one lane at a time with the scalar functions."""
-    from hair_tracking.collision import push_out
-    from hair_tracking.ftl import restore_node
+    from hair_tracking.guides.collision import push_out
+    from hair_tracking.guides.ftl import restore_node
     R = head.rotation
     c = head.position + R @ collider.center
     a = collider.radii + collider.margin
@@ -225,7 +225,7 @@ def test_kernel_collision_matches_scalar_reference(shape, length_restore):
     """(h) inside the kernel (lane-parallel, all lanes of a group at once) against the scalar
     one-node functions applied node by node: a collider placed where the ghosts hang, so that
     many nodes are pushed each substep."""
-    from hair_tracking.collision import Collider
+    from hair_tracking.guides.collision import Collider
     rng = np.random.default_rng(11)
     guides = StrandSet.from_rest(random_strands(rng, 4, 6))
     ghosts = StrandSet.from_rest(random_strands(rng, 37, 9, seg=0.013))
@@ -312,8 +312,8 @@ def test_tip_weights_follow_arc_length():
 def test_parallel_and_serial_kernels_agree_bit_for_bit(monkeypatch):
     """Below PARALLEL_MIN_NODES the tracker calls the serial kernel; forcing the parallel one (any
     thread count) gives the same bits, with the fused collider on."""
-    import hair_tracking.integrate as integrate_module
-    from hair_tracking.collision import make_collider
+    from hair_tracking.guides.collision import make_collider
+    import hair_tracking.guides.integrate as integrate_module
     scene = scene_with(spread=0.5, spread_target=1.5)
     collider = make_collider(scene.collider)
     runs = []
@@ -337,8 +337,8 @@ def test_blocks_of_groups_large_small_and_single():
     """Blocks pack consecutive groups up to BLOCK_LANES ghosts: a group larger than a block, a
     group of one ghost and a mid-sized one beside it, with the collider on, all agree with the
     plain-numpy reference."""
-    from hair_tracking.collision import Collider
-    from hair_tracking.tracking_kernels import block_groups, BLOCK_LANES
+    from hair_tracking.ghosts.kernels import block_groups, BLOCK_LANES
+    from hair_tracking.guides.collision import Collider
     rng = np.random.default_rng(23)
     roots = np.array([[0.0, 0.0, 0.0], [0.3, 0.0, 0.0], [0.0, 0.3, 0.0]])[:, None]
     guide_rest = random_strands(rng, 3, 7, spread=0.0) + roots
@@ -364,8 +364,10 @@ def test_kernel_bodies_compile_without_reference_counting():
     (``integrate.NO_REFCOUNT``): its atomic counts of array views were a quarter of the ghost
     kernel's time.  A numba without the option is reported as a skip (the kernels then run,
     slower, with reference counting)."""
-    from hair_tracking import ftl, integrate, pbd_constraints
-    from hair_tracking import tracking_kernels as tk
+    from hair_tracking.ghosts import kernels as tk
+    from hair_tracking.guides import ftl
+    from hair_tracking.guides import integrate
+    from hair_tracking.guides import pbd_constraints
     if not integrate.NO_REFCOUNT:
         pytest.skip('this numba has no _nrt option: kernels keep reference counting')
     assert integrate.NO_REFCOUNT == {'_nrt': False}

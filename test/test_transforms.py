@@ -1,8 +1,8 @@
 """Quaternion helpers against independent constructions."""
 import numpy as np
 
-from hair_tracking.transforms import (matrix_to_quat, quat_angle, quat_from_axis_angle,
-                                      quat_multiply, quat_to_matrix, rotation_between, slerp)
+from hair_tracking.core.transforms import (matrix_to_quat, quat_angle, quat_from_axis_angle,
+                                           quat_multiply, quat_to_matrix, rotation_between, slerp)
 
 
 def _rodrigues(axis, angle):

@@ -1,0 +1,115 @@
+"""Groom generation: roots on the scalp and rest shapes of guide and ghost strands (head frame).
+
+Roots lie on an ellipsoid (``scene.groom.scalp``).  The scalp is the cap with polar angle (from +z)
+below a limit that shrinks smoothly toward the face: ``theta_max(phi) = max_polar - (max_polar -
+front_max_polar) * max(0, cos phi)`` with ``phi`` the azimuth from +x (forward, REP-103).
+
+* Guide roots are spread evenly: a spherical Fibonacci lattice (Gonzalez 2010, "Measurement of
+  areas on a sphere using Fibonacci and latitude-longitude lattices") restricted to the cap, evenly
+  sub-sampled to the requested count, with a small seeded jitter.
+* Ghost roots are uniform random on the cap (seeded), ``guides * ghosts_per_guide`` of them.
+* Each strand leaves the scalp along the surface normal (the first segment fixes the root
+  direction) and bends toward -z (head frame) by ``droop``; nodes that would fall inside the scalp
+  are pushed out radially.  Lengths vary uniformly by ``length_variation``.
+"""
+from dataclasses import dataclass
+
+import numpy as np
+
+from hair_tracking.core.scene import GroomSpec, ScalpSpec
+
+
+@dataclass
+class Groom:
+    guide_rest: np.ndarray    # (G, Ng, 3) head frame [m]
+    ghost_rest: np.ndarray    # (S, Ns, 3) head frame [m]
+
+
+def make_groom(spec: GroomSpec) -> Groom:
+    rng = np.random.default_rng(spec.seed)
+    g_dirs = _fibonacci_cap(spec.guides, spec.scalp, rng)
+    s_dirs = _random_cap(spec.guides * spec.ghosts_per_guide, spec.scalp, rng)
+    g_len = _lengths(spec, spec.guides, rng)
+    s_len = _lengths(spec, len(s_dirs), rng)
+    return Groom(guide_rest=strand_shapes(g_dirs, g_len, spec.guide_nodes, spec),
+                 ghost_rest=strand_shapes(s_dirs, s_len, spec.ghost_nodes, spec))
+
+
+def _lengths(spec, n, rng):
+    return spec.length * (1.0 + spec.length_variation * rng.uniform(-1.0, 1.0, n))
+
+
+def in_scalp(u: np.ndarray, scalp: ScalpSpec) -> np.ndarray:
+    """Which unit directions ``u`` (..., 3) fall on the scalp cap."""
+    polar = np.degrees(np.arccos(np.clip(u[..., 2], -1.0, 1.0)))
+    cos_phi = u[..., 0] / np.maximum(np.hypot(u[..., 0], u[..., 1]), 1e-12)
+    limit = scalp.max_polar_deg - (scalp.max_polar_deg - scalp.front_max_polar_deg) * \
+        np.maximum(0.0, cos_phi)
+    return polar <= limit
+
+
+def _fibonacci(m: int) -> np.ndarray:
+    i = np.arange(m) + 0.5
+    z = 1.0 - 2.0 * i / m
+    r = np.sqrt(np.maximum(0.0, 1.0 - z * z))
+    phi = np.pi * (3.0 - np.sqrt(5.0)) * i
+    return np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1)
+
+
+def _fibonacci_cap(n: int, scalp: ScalpSpec, rng) -> np.ndarray:
+    m = max(n, 16)
+    while True:
+        pts = _fibonacci(m)
+        pts = pts[in_scalp(pts, scalp)]
+        if len(pts) >= n:
+            break
+        m = int(m * 1.25) + 8
+    pts = pts[np.linspace(0, len(pts) - 1, n).round().astype(int)]
+    jitter = rng.normal(scale=0.15 * np.sqrt(4.0 / m), size=pts.shape)
+    moved = pts + jitter
+    moved /= np.linalg.norm(moved, axis=1, keepdims=True)
+    keep = in_scalp(moved, scalp)
+    pts[keep] = moved[keep]
+    return pts
+
+
+def _random_cap(n: int, scalp: ScalpSpec, rng) -> np.ndarray:
+    out = np.empty((0, 3))
+    while len(out) < n:
+        v = rng.normal(size=(max(2 * (n - len(out)), 64), 3))
+        v /= np.linalg.norm(v, axis=1, keepdims=True)
+        out = np.concatenate([out, v[in_scalp(v, scalp)]])
+    return out[:n]
+
+
+def strand_shapes(dirs: np.ndarray, lengths: np.ndarray, nodes: int,
+                  spec: GroomSpec) -> np.ndarray:
+    """Rest shapes (S, nodes, 3) of strands rooted at scalp directions ``dirs`` (S, 3)."""
+    radii = np.asarray(spec.scalp.radii)
+    center = np.asarray(spec.scalp.center)
+    roots = center + dirs * radii
+    normals = dirs / radii
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    seg = (lengths / (nodes - 1))[:, None]
+    down = np.array([0.0, 0.0, -1.0])
+    shape = np.empty((len(dirs), nodes, 3))
+    shape[:, 0] = roots
+    shape[:, 1] = roots + normals * seg
+    for k in range(2, nodes):
+        w = spec.droop * min(1.0, (k - 1) / max(1.0, 0.25 * (nodes - 1)))
+        d = (1.0 - w) * normals + w * down
+        norm = np.linalg.norm(d, axis=1, keepdims=True)
+        d = np.where(norm > 1e-9, d / np.maximum(norm, 1e-12), normals)
+        p = shape[:, k - 1] + d * seg
+        # keep the rest shape outside the scalp ellipsoid (pushed out radially, then the
+        # segment is rescaled to its length so rest lengths stay exact)
+        rel = (p - center) / radii
+        r = np.linalg.norm(rel, axis=1)
+        inside = r < 1.05
+        if np.any(inside):
+            p[inside] = center + rel[inside] / r[inside, None] * 1.05 * radii
+            step = p - shape[:, k - 1]
+            step /= np.maximum(np.linalg.norm(step, axis=1, keepdims=True), 1e-12)
+            p = shape[:, k - 1] + step * seg
+        shape[:, k] = p
+    return shape

@@ -1,0 +1,159 @@
+"""Head-pose stream hygiene and interpolation.
+
+``HeadTrack`` takes timestamped poses as they arrive (from a topic, a bag or a file), cleans them
+and answers "where was the head at time t" with linear interpolation of the position and slerp of
+the orientation.  What it checks, and what the simulator does about it:
+
+* NaN/Inf numbers, a zero or non-finite quaternion, wrong shapes -> the pose is rejected and
+  counted (``PoseResult.REJECTED``); nothing else changes.
+* quaternions are normalised and kept sign-continuous (q and -q are the same rotation; the stored
+  stream never flips, so slerp never takes the long way round).
+* time going backwards (a bag played in a loop, a restarted tracker) -> ``RESET_BACKWARDS``:
+  history is dropped and the simulator carries the hair rigidly to the new pose.
+* a jump farther than ``teleport_distance`` or turning more than ``teleport_angle_deg`` between two
+  samples, or a gap longer than ``max_gap`` -> ``RESET_TELEPORT``, handled the same way.
+* times after the newest sample hold the newest pose (a stale stream lets the hair settle).
+"""
+from collections import deque
+import enum
+import math
+
+import numpy as np
+
+from hair_tracking.core.model import HeadPose
+from hair_tracking.core.scene import HeadTrackSpec
+from hair_tracking.core.transforms import quat_angle, quat_to_matrix, slerp
+
+
+class PoseResult(enum.Enum):
+    ACCEPTED = 'accepted'
+    REJECTED = 'rejected'
+    RESET_BACKWARDS = 'reset_backwards'
+    RESET_TELEPORT = 'reset_teleport'
+
+    @property
+    def is_reset(self) -> bool:
+        return self in (PoseResult.RESET_BACKWARDS, PoseResult.RESET_TELEPORT)
+
+
+IDENTITY = HeadPose(np.zeros(3), np.array([0.0, 0.0, 0.0, 1.0]), np.eye(3))
+
+
+class HeadTrack:
+    """Recent head poses with hygiene, reset detection and interpolation (see module doc)."""
+
+    def __init__(self, spec: HeadTrackSpec = HeadTrackSpec(), history: int = 256):
+        self.spec = spec
+        self._t = deque(maxlen=history)      # int ns
+        self._p = deque(maxlen=history)      # (3,)
+        self._q = deque(maxlen=history)      # (4,) unit, sign-continuous
+        self.counters = {'accepted': 0, 'rejected': 0, 'reset_backwards': 0,
+                         'reset_teleport': 0}
+        self.last_rejection = ''
+
+    # ----------------------------------------------------------------- input
+    def push(self, t_ns: int, position, quaternion) -> PoseResult:
+        """Add one pose; returns what happened to it (see module doc)."""
+        reason = _invalid_reason(t_ns, position, quaternion)
+        if reason:
+            self.counters['rejected'] += 1
+            self.last_rejection = reason
+            return PoseResult.REJECTED
+        t_ns = int(t_ns)
+        p = np.asarray(position, dtype=np.float64).reshape(3).copy()
+        q = np.asarray(quaternion, dtype=np.float64).reshape(4)
+        q = q / np.linalg.norm(q)
+        result = PoseResult.ACCEPTED
+        if self._t:
+            if q @ self._q[-1] < 0.0:
+                q = -q
+            t_last = self._t[-1]
+            if t_ns < t_last:
+                result = PoseResult.RESET_BACKWARDS
+            elif (np.linalg.norm(p - self._p[-1]) > self.spec.teleport_distance
+                  or math.degrees(quat_angle(q, self._q[-1])) > self.spec.teleport_angle_deg
+                  or (t_ns - t_last) * 1e-9 > self.spec.max_gap):
+                result = PoseResult.RESET_TELEPORT
+            elif t_ns == t_last:            # a repeated stamp updates the newest sample
+                self._p[-1], self._q[-1] = p, q
+                self.counters['accepted'] += 1
+                return result
+        if result.is_reset:
+            self.counters[result.value] += 1
+            self.clear()
+        else:
+            self.counters['accepted'] += 1
+        self._t.append(t_ns)
+        self._p.append(p)
+        self._q.append(q)
+        return result
+
+    def clear(self) -> None:
+        self._t.clear()
+        self._p.clear()
+        self._q.clear()
+
+    # ---------------------------------------------------------------- output
+    @property
+    def empty(self) -> bool:
+        return not self._t
+
+    @property
+    def first_time(self) -> int:
+        return self._t[0]
+
+    @property
+    def last_time(self) -> int:
+        return self._t[-1]
+
+    def latest(self) -> HeadPose:
+        if not self._t:
+            return IDENTITY
+        return HeadPose(self._p[-1].copy(), self._q[-1].copy(), quat_to_matrix(self._q[-1]))
+
+    def sample(self, t_ns: int) -> HeadPose:
+        """Head pose at ``t_ns``: interpolated between samples, held outside them."""
+        if not self._t:
+            return IDENTITY
+        ts = self._t
+        if t_ns <= ts[0]:
+            p, q = self._p[0], self._q[0]
+        elif t_ns >= ts[-1]:
+            p, q = self._p[-1], self._q[-1]
+        else:
+            i = _bisect(ts, t_ns)           # ts[i-1] <= t < ts[i]
+            u = (t_ns - ts[i - 1]) / (ts[i] - ts[i - 1])
+            p = (1.0 - u) * self._p[i - 1] + u * self._p[i]
+            q = slerp(self._q[i - 1], self._q[i], u)
+        return HeadPose(np.array(p), np.array(q), quat_to_matrix(q))
+
+
+def _bisect(ts, t):
+    lo, hi = 0, len(ts) - 1
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        if ts[mid] <= t:
+            lo = mid
+        else:
+            hi = mid
+    return hi
+
+
+def _invalid_reason(t_ns, position, quaternion) -> str:
+    try:
+        p = np.asarray(position, dtype=np.float64)
+        q = np.asarray(quaternion, dtype=np.float64)
+    except (TypeError, ValueError):
+        return 'position/quaternion are not numbers'
+    if p.size != 3 or q.size != 4:
+        return f'expected 3 position and 4 quaternion values, got {p.size} and {q.size}'
+    if isinstance(t_ns, float) and not math.isfinite(t_ns):
+        return f'timestamp is {t_ns}'
+    if not np.all(np.isfinite(p)):
+        return f'position has non-finite values {p.tolist()}'
+    if not np.all(np.isfinite(q)):
+        return f'quaternion has non-finite values {q.tolist()}'
+    n = float(np.linalg.norm(q))
+    if n < 1e-6:
+        return f'quaternion has (near) zero norm {n:.3g}'
+    return ''

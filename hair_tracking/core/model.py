@@ -1,0 +1,108 @@
+"""Static strand data (built once from the scene) apart from changing state.
+
+All arrays are C-contiguous float64.  ``S`` strands, ``N`` nodes per strand (uniform within a
+strand set; guides and ghosts may differ).  Rest data live in the head frame; state lives in the
+world frame (the fixed frame of the head-pose stream).
+"""
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass
+class HeadPose:
+    """Head transform at one instant: ``p_world = position + rotation @ p_head``."""
+
+    position: np.ndarray      # (3,) metres
+    quaternion: np.ndarray    # (4,) x, y, z, w, unit, sign-continuous
+    rotation: np.ndarray      # (3, 3)
+
+    def to_world(self, points_head):
+        return points_head @ self.rotation.T + self.position
+
+    def to_head(self, points_world):
+        return (points_world - self.position) @ self.rotation
+
+
+class _HeldArray:
+    """A state array of :class:`StrandSet` (``x`` or ``v``): reading or assigning it first lets
+    the registered holder write its state back (see :meth:`StrandSet.hold`)."""
+
+    def __set_name__(self, owner, name):
+        self.attr = '_' + name
+
+    def __get__(self, obj, objtype=None):
+        if obj is None:
+            return self
+        obj._release()
+        return getattr(obj, self.attr)
+
+    def __set__(self, obj, value):
+        obj._release()
+        setattr(obj, self.attr, value)
+
+
+class StrandSet:
+    """Topology and rest shape of a set of strands, plus their dynamic state.
+
+    ``rest`` (S, N, 3) rest node positions, head frame [m]; ``rest_length`` (S, N-1) rest
+    segment lengths [m]; ``inv_mass`` (S, N) inverse masses, 0 for the two attached root nodes;
+    ``x`` (S, N, 3) positions, world frame [m]; ``v`` (S, N, 3) velocities [m/s].
+
+    ``x`` and ``v`` are properties because a solver may keep the state in a layout of its own
+    between its steps (the ghost tracker does, see
+    :class:`hair_tracking.ghosts.tracker.GhostTracker`):
+    it registers itself with :meth:`hold`, and reading or assigning ``x`` or ``v`` first calls
+    its ``release()``, which writes the current state into these arrays and makes them the
+    truth again (the holder reads them back on its next step).  So read ``x`` after stepping
+    rather than keeping an old reference to it.
+    """
+
+    x = _HeldArray()
+    v = _HeldArray()
+
+    def __init__(self, rest: np.ndarray, rest_length: np.ndarray, inv_mass: np.ndarray,
+                 x: np.ndarray, v: np.ndarray):
+        self.rest = rest
+        self.rest_length = rest_length
+        self.inv_mass = inv_mass
+        self._x = x
+        self._v = v
+        self._holder = None
+
+    def hold(self, holder) -> None:
+        """Register ``holder`` (an object with ``release()``) as the keeper of the state; a
+        previous holder releases first."""
+        if self._holder is not None and self._holder is not holder:
+            self._holder.release()
+        self._holder = holder
+
+    def _release(self) -> None:
+        if self._holder is not None:
+            self._holder.release()
+
+    @staticmethod
+    def from_rest(rest: np.ndarray) -> 'StrandSet':
+        rest = np.ascontiguousarray(rest, dtype=np.float64)
+        seg = np.linalg.norm(np.diff(rest, axis=1), axis=2)
+        inv_mass = np.ones(rest.shape[:2])
+        inv_mass[:, :2] = 0.0
+        return StrandSet(rest=rest, rest_length=np.ascontiguousarray(seg),
+                         inv_mass=inv_mass, x=rest.copy(), v=np.zeros_like(rest))
+
+    @property
+    def count(self) -> int:
+        return self.rest.shape[0]
+
+    @property
+    def nodes(self) -> int:
+        return self.rest.shape[1]
+
+    @property
+    def strand_length(self) -> np.ndarray:
+        return self.rest_length.sum(axis=1)
+
+    def place_at(self, head: HeadPose) -> None:
+        """Put every strand in its rest shape carried by ``head``, at rest."""
+        self.x[...] = head.to_world(self.rest)
+        self.v[...] = 0.0

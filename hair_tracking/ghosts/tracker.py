@@ -1,0 +1,390 @@
+"""Ghost strands that follow the simulated guides: the method of Park & Kim.
+
+``GhostTracker`` assigns every ghost strand to a guide (equation (1),
+:mod:`hair_tracking.ghosts.correspondence`),
+precomputes everything static, and then, once per substep after the guides moved, advances all
+ghosts with one fused numba kernel (:func:`hair_tracking.ghosts.kernels.track_groups`):
+
+a. velocity transfer -- each ghost node moves by the displacement of its target point on the guide
+   (the point at the node's arc-length fraction);
+b. individuality weights -- equations (4)-(5) with ``dt`` explicit
+(:mod:`hair_tracking.ghosts.weights`);
+c. offset feedback -- a pull toward ``guide point + Q rest_offset``, ``Q`` the guide segment's
+   frame (head rotation composed with the smallest rotation of the rest tangent onto the current
+   one), so the offsets turn with the head (unlike TressFX follow hairs);
+d. centre-of-mass tracking -- per group and node index the ghosts' centre of mass moves toward the
+   centre of mass of their targets (paper Fig. 1), so ghosts never drift;
+e. optional spread control (HairControl, Milliez et al. 2018);
+f. optional length restoration (one Follow-The-Leader pass, Mueller, Kim & Chentanez 2012);
+g. roots (nodes 0 and 1) pinned at ``head.to_world(rest)``;
+h. optional collision with the head collider: inside the kernel for the project's
+   :class:`hair_tracking.guides.collision.Collider`, node by node after (f) (push out with
+   friction, then, with length
+   restoration on, the collision-aware FTL step of the guides,
+   :func:`hair_tracking.guides.ftl.restore_node`, so a
+   push does not stretch the ghost); any other collider's ``apply`` runs after the kernel on the
+   whole arrays.
+
+See ``docs/ghosts.md`` for the reasoning, the two readings of equation (4) and the energy argument.
+
+Ghost order: the user's ghost order is never changed.  Internally ghosts are visited group by
+group through ``order`` (ghost indices sorted by guide, stable); group ``g`` is
+``order[group_start[g]:group_start[g + 1]]`` and follows guide ``group_guide[g]``.
+"""
+import math
+from typing import Dict
+
+import numba
+import numpy as np
+
+from hair_tracking.core.model import HeadPose, StrandSet
+from hair_tracking.core.point_records import blocks_to_records, points_to_records
+from hair_tracking.core.scene import Scene
+from hair_tracking.ghosts.correspondence import assign_guides, node_correspondence
+from hair_tracking.ghosts.kernels import (block_groups, chunk_count, copy_blocks, group_blocks,
+                                          guide_frames, TMP_ROWS, track_groups,
+                                          track_groups_serial)
+from hair_tracking.ghosts.weights import arc_fractions, elastic_code
+from hair_tracking.guides.collision import Collider
+from hair_tracking.guides.integrate import runs_parallel
+from hair_tracking.parallel_choice import ParallelChooser
+
+
+class GhostTracker:
+    """Moves ``ghosts`` (a :class:`StrandSet`) after ``guides`` each substep.
+
+    ``ghosts.x``/``ghosts.v`` (world frame [m], [m/s]) show the state whenever they are read:
+    between steps the tracker keeps it in its kernel's layout (block by block, [node][axis]
+    [ghost], see :mod:`hair_tracking.ghosts.kernels`) and writes it back into the arrays only when
+    they
+    are read or assigned (:meth:`release`, called by the StrandSet's properties); a write into
+    them is taken by the next step.  So several substeps without a read cost no conversion;
+    :meth:`positions` reads without handing the state back.
+
+    ``collider`` is used only when ``scene.tracking.collide`` is true and it is given; it must
+    then expose ``apply(x, x_prev, inv_mass, head) -> int``.
+
+    ``regroup`` (default true): the ghost StrandSet is reordered **once**, at construction, so
+    that the ghosts of each guide are contiguous in memory (stable order within a group); its
+    arrays are replaced by reordered copies (read ``ghosts.x`` after stepping rather than
+    keeping a reference to it).  The kernel then streams through memory instead of jumping
+    between strands, several times faster for 10^5 ghosts.  ``permutation[i]`` is the index, before
+    construction, of the ghost now in row ``i`` (identity when the set was already grouped, e.g.
+    when a tracker is rebuilt on the same ghosts).  With ``regroup=False`` the rows are left
+    alone and visited through ``order``.
+
+    ``keep_state`` is accepted for the simulator's rebuilds: apart from the reordering, the
+    construction never changes the ghosts' state, so a tracker rebuilt with other tracking
+    options continues from the current positions (``reset`` restarts them).
+    """
+
+    def __init__(self, ghosts: StrandSet, guides: StrandSet, scene: Scene, collider=None,
+                 keep_state: bool = False, regroup: bool = True):
+        tr = scene.tracking
+        self.ghosts = ghosts
+        self.guides = guides
+        self.tracking = tr
+        self.collider = collider
+        self.keep_state = bool(keep_state)
+        _check_strandset('ghosts', ghosts)
+        _check_strandset('guides', guides)
+        if guides.count == 0:
+            raise ValueError('guides: a ghost tracker needs at least one guide strand')
+        # tracking.collide means "collide with the head collider, if the scene has one"
+        self.collide = bool(tr.collide and collider is not None)
+        if self.collide and not callable(getattr(collider, 'apply', None)):
+            raise ValueError('collider must expose apply(x, x_prev, inv_mass, head)')
+        s_count, n_nodes = ghosts.count, ghosts.nodes
+
+        # -- correspondence (equation (1)) and node correspondence by arc length
+        self.guide_of, self.cost = assign_guides(ghosts.rest, guides.rest, tr.candidates)
+        seg, t = node_correspondence(ghosts.rest_length, guides.rest_length, self.guide_of)
+        self.seg, self.t = seg, t
+
+        # -- groups: ghosts sorted by guide (stable), contiguous
+        self.order = np.argsort(self.guide_of, kind='stable').astype(np.int64)
+        self.permutation = np.arange(s_count, dtype=np.int64)
+        if regroup and np.any(self.order != self.permutation):
+            _permute(ghosts, self.order)
+            self.permutation = self.order
+            self.guide_of = np.ascontiguousarray(self.guide_of[self.order])
+            self.cost = np.ascontiguousarray(self.cost[self.order])
+            seg = np.ascontiguousarray(seg[self.order])
+            t = np.ascontiguousarray(t[self.order])
+            self.seg, self.t = seg, t
+            self.order = np.arange(s_count, dtype=np.int64)
+        sorted_guides = self.guide_of[self.order]
+        self.group_guide, first = np.unique(sorted_guides, return_index=True)
+        self.group_guide = self.group_guide.astype(np.int64)
+        self.group_start = np.append(first, s_count).astype(np.int64)
+        n_groups = self.group_guide.size
+        group_size = np.diff(self.group_start)
+
+        # -- static per-ghost data, in group order
+        o = self.order
+        self._gparam = np.ascontiguousarray(seg[o] + t[o])
+        g_of = self.guide_of[o][:, None]
+        gr = guides.rest
+        guide_point_rest = (1.0 - t[o])[..., None] * gr[g_of, seg[o]] + \
+            t[o][..., None] * gr[g_of, seg[o] + 1]                      # (S, N, 3) head frame
+        ghost_rest = ghosts.rest[o]
+        group_of_row = np.repeat(np.arange(n_groups), group_size)
+        rest_com = _group_sum(ghost_rest, self.group_start) / \
+            np.maximum(group_size, 1)[:, None, None]                     # (K, N, 3)
+        dev = ghost_rest - rest_com[group_of_row]
+        var0 = _group_sum(np.einsum('snk,snk->sn', dev, dev), self.group_start)
+        self._var_target = np.ascontiguousarray(tr.spread_target * var0)
+        target_rest = ghost_rest
+        if tr.spread > 0.0 and tr.spread_target != 1.0:
+            # the offset targets carry the requested spread so (c) does not fight (e)
+            target_rest = rest_com[group_of_row] + math.sqrt(tr.spread_target) * dev
+            target_rest[:, :2] = ghost_rest[:, :2]
+        self._rest_off = np.ascontiguousarray(target_rest - guide_point_rest)   # (S, N, 3)
+        # blocks of consecutive groups (the kernel's unit of work and of its per-node layout)
+        self.block_group = block_groups(self.group_start)
+        self._block_rows = np.ascontiguousarray(self.group_start[self.block_group])
+        self._rest_off_blocks = group_blocks(self._rest_off, self._block_rows)
+        self._seg_len_blocks = group_blocks(ghosts.rest_length[o], self._block_rows)
+        self._root_blocks = group_blocks(ghosts.rest[o][:, :min(2, n_nodes)], self._block_rows)
+        frac = arc_fractions(ghosts.rest_length)[o]
+        # per-node data (guide parameter, w_tip) as a table of distinct rows: ghosts with the
+        # same arc-length layout share one row
+        # (fractions rounded to 1e-12 so that rounding noise does not split equal layouts)
+        table = np.stack([self._gparam, tr.tip_weight * np.round(frac, 12)],
+                         axis=-1).reshape(s_count, -1)
+        if s_count == 0 or np.array_equal(table, np.broadcast_to(table[0], table.shape)):
+            rows, inverse = table[:1], np.zeros(s_count, dtype=np.int64)   # the usual case
+        else:
+            rows, inverse = np.unique(table, axis=0, return_inverse=True)
+        self._node_table = np.ascontiguousarray(rows.reshape(-1, n_nodes, 2))
+        self._node_row = np.ascontiguousarray(inverse.reshape(-1).astype(np.int64))
+        # the row shared by all ghosts of a group (-1: the group mixes layouts)
+        self._group_row = np.full(n_groups, -1, dtype=np.int64)
+        for g in range(n_groups):
+            r = self._node_row[self.group_start[g]:self.group_start[g + 1]]
+            if r.size and np.all(r == r[0]):
+                self._group_row[g] = r[0]
+        length = ghosts.strand_length[o]
+        self._inv_len = np.where(length > 0.0, 1.0 / np.where(length > 0.0, length, 1.0), 0.0)
+        tan = np.diff(gr, axis=1)
+        norm = np.linalg.norm(tan, axis=2, keepdims=True)
+        self._tan_rest = np.ascontiguousarray(
+            np.where(norm > 1e-12, tan / np.where(norm > 1e-12, norm, 1.0), 0.0))
+        self._elastic = elastic_code(tr)
+
+        # -- scratch
+        n_blocks = self.block_group.size - 1
+        chunks = chunk_count(n_blocks, numba.config.NUMBA_NUM_THREADS)
+        groups_per_block = int(np.diff(self.block_group).max()) if n_blocks else 1
+        self._q_buf = np.empty((chunks, groups_per_block, guides.nodes - 1, 3, 3))
+        lanes = int(np.diff(self._block_rows).max()) if n_blocks else 1
+        self._buf = np.zeros((chunks, 3 * n_nodes * lanes))
+        # the state between substeps, in the kernel's layout (see StrandSet.hold / release)
+        self._xb = np.empty(s_count * n_nodes * 3)
+        self._vb = np.empty(s_count * n_nodes * 3)
+        self._held = False
+        self._synced_x = False        # ghosts.x equals the kept positions (no step since)
+        self._synced_v = False        # ghosts.v equals the kept velocities
+        self._tmp = np.zeros((chunks, TMP_ROWS * lanes))
+        self._clamped = np.zeros(n_blocks, dtype=np.int64)
+        self._contacts = np.zeros(chunks, dtype=np.int64)
+        # the project's ellipsoid collider runs inside the kernel (h); any other collider object
+        # runs after it on the whole arrays
+        self._fused_collider = self.collide and isinstance(collider, Collider)
+        if self._fused_collider:
+            self._axes = np.ascontiguousarray(collider.radii + collider.margin)
+            self._center = collider.center
+            self._friction, self._refine = collider.friction, collider.refine
+        else:
+            self._axes, self._center = np.ones(3), np.zeros(3)
+            self._friction, self._refine = 0.0, 0
+        self._collide_after = self.collide and not self._fused_collider
+        self._x_prev = np.empty_like(ghosts.x) if self._collide_after else None
+        self.stats: Dict[str, int] = {
+            'ghosts': int(s_count), 'groups': int(n_groups),
+            'largest_group': int(group_size.max()) if n_groups else 0,
+            'steps': 0, 'clamped': 0, 'contacts': 0, 'parallel': 0, 'thread_switches': 0,
+        }
+        #: parallel kernel or serial twin, whichever the timings favour (see
+        #: :mod:`hair_tracking.parallel_choice`; same results either way)
+        self.threads = ParallelChooser()
+
+    # ------------------------------------------------------------------ API
+    def release(self) -> None:
+        """Write the state kept in the kernel's layout back into ``ghosts.x`` and ``ghosts.v``
+        (called by :class:`~hair_tracking.core.model.StrandSet` whenever they are read or
+        assigned); the next step reads them again."""
+        if self._held:
+            self._write_back()
+            self._held = False
+
+    def _write_back(self, with_v: bool = True) -> None:
+        """The kept state into ``ghosts.x`` (and ``ghosts.v`` if ``with_v``), unless they hold
+        it already."""
+        need_v = with_v and not self._synced_v
+        if need_v or not self._synced_x:
+            copy_blocks(self.ghosts._x, self.ghosts._v, self.order, self._block_rows, self._xb,
+                        self._vb, False, need_v)
+            self._synced_x = True
+            self._synced_v = self._synced_v or need_v
+
+    def positions(self) -> np.ndarray:
+        """The ghosts' positions (S, N, 3), world [m], as a read-only view of ``ghosts.x``:
+        written back from the kernel's layout if a step ran since, but *without* handing the
+        state back, so the next step continues from its own copy instead of reading the arrays
+        again (which a read of ``ghosts.x`` must make it do: the caller may write into them).
+        Only the positions are written back (the velocities wait for a read of
+        ``ghosts.v``): at 10 k ghosts x and v together took 2.4 ms here, x alone half."""
+        ghosts = self.ghosts
+        if ghosts._holder is self and self._held:
+            self._write_back(with_v=False)
+            x = ghosts._x
+        else:
+            x = ghosts.x
+        view = x.view()
+        view.flags.writeable = False
+        return view
+
+    def write_records(self, words: np.ndarray, stride: int, rot=None, origin=None) -> bool:
+        """The ghosts' positions as float32 x y z at the start of ``words``' records (S * N
+        of ``stride`` words, ghost ``s``'s node ``j`` at record ``s * N + j``), transformed
+        to ``rot (x - origin)`` if given; True when all are finite.  Read straight from the
+        kernel's layout while the tracker holds the state (no write-back into ``ghosts.x``:
+        at 10 k ghosts x 16 nodes that pass and the float32 encoding of its result took about
+        3 ms, this one 1.5), else from ``ghosts.x``."""
+        ghosts = self.ghosts
+        if ghosts._holder is self and self._held:
+            return blocks_to_records(words, stride, self._xb, self.order, self._block_rows,
+                                     ghosts.rest.shape[1], rot, origin)
+        return points_to_records(words, stride, ghosts.x, rot, origin)
+
+    def _take(self) -> None:
+        """Copy ``ghosts.x`` and ``ghosts.v`` into the kernel's layout and keep them there."""
+        ghosts = self.ghosts
+        if ghosts._holder is not self:
+            ghosts.hold(self)
+        if self._held:
+            return
+        x, v = ghosts._x, ghosts._v
+        if not (isinstance(x, np.ndarray) and isinstance(v, np.ndarray) and
+                x.dtype == np.float64 and v.dtype == np.float64 and
+                x.shape == ghosts.rest.shape and v.shape == x.shape and
+                x.flags.c_contiguous and v.flags.c_contiguous):
+            raise ValueError(f'ghosts.x and ghosts.v must be C-contiguous float64 arrays shaped '
+                             f'{ghosts.rest.shape}')
+        copy_blocks(x, v, self.order, self._block_rows, self._xb, self._vb, True, True)
+        self._held = True
+        self._synced_x = self._synced_v = True
+
+    def reset(self, head: HeadPose) -> None:
+        """Ghosts in their rest shape carried by ``head``, at rest."""
+        self.ghosts.place_at(head)
+
+    def step(self, dt: float, guide_x_old: np.ndarray, head: HeadPose,
+             substeps: int = 1) -> None:
+        """Advance the ghosts by ``dt`` [s] after the guides moved from ``guide_x_old`` to
+        ``guides.x`` (both (G, M, 3), world [m]); ``head`` is the head pose at the end.
+
+        ``substeps`` > 1 covers that many guide substeps in one tracking step: the per-step
+        feedback strengths ``k`` (offset, centre of mass, spread) become ``1 - (1 - k)^substeps``,
+        what ``substeps`` separate steps would have applied to a constant deviation, so the pull
+        per second does not depend on how often the ghosts are tracked."""
+        if not (dt > 0.0 and math.isfinite(dt)):
+            raise ValueError(f'dt must be a finite number > 0 [s], got {dt!r}')
+        gx = self.guides.x
+        if guide_x_old.shape != gx.shape:
+            raise ValueError(f'guide_x_old must be shaped {gx.shape} like guides.x, got '
+                             f'{guide_x_old.shape}')
+        tr = self.tracking
+        if self._collide_after:
+            np.copyto(self._x_prev, self.positions())
+        self._take()
+        nodes = self._xb.size // 3
+        self.threads.timed(
+            runs_parallel(nodes), track_groups, track_groups_serial,
+            self._xb, self._vb, self.ghosts.rest, self._seg_len_blocks, self.order,
+            self.group_start, self.block_group, self.group_guide, self._group_row,
+            self._node_table, self._node_row, self._rest_off_blocks, self._root_blocks,
+            self._inv_len, self._var_target, _f64(gx), _f64(guide_x_old), self._tan_rest,
+            _f64(head.rotation), _f64(head.position), 1.0 / float(dt),
+            self._elastic, tr.tip_weight > 0.0, tr.com_weight, tr.max_weight,
+            _per(tr.offset_strength, substeps), _per(tr.com_strength, substeps),
+            _per(tr.spread, substeps), tr.length_restore,
+            self._fused_collider, self._center, self._axes, self._friction,
+            self._refine, self._q_buf, self._buf, self._tmp, self._clamped,
+            self._contacts)
+        self._synced_x = self._synced_v = False
+        self.stats['steps'] += 1
+        self.stats['parallel'] = int(self.threads.in_use)
+        self.stats['thread_switches'] = self.threads.switches
+        self.stats['clamped'] = int(self._clamped.sum())
+        if self._fused_collider:
+            self.stats['contacts'] = int(self._contacts.sum())
+        elif self._collide_after:
+            x, v = self.ghosts.x, self.ghosts.v          # written back from the blocks
+            self.stats['contacts'] = int(
+                self.collider.apply(x, self._x_prev, self.ghosts.inv_mass, head))
+            np.subtract(x, self._x_prev, out=v)
+            v *= 1.0 / dt
+
+    def targets(self, head: HeadPose, guide_x: np.ndarray = None) -> np.ndarray:
+        """(S, N, 3) where each ghost node is pulled by the offset feedback (c): its guide point
+        plus ``Q`` times its rest offset (world [m], user order; roots: the pinned rest roots).
+        ``guide_x`` defaults to the current guides."""
+        gx = self.guides.x if guide_x is None else _f64(guide_x)
+        frames = guide_frames(gx, self._tan_rest, head.rotation)       # (G, M-1, 3, 3)
+        g_of = self.guide_of[self.order][:, None]
+        gp = self._gparam
+        seg = np.minimum(gp.astype(np.int64), gx.shape[1] - 2)
+        t = (gp - seg)[..., None]
+        p = (1.0 - t) * gx[g_of, seg] + t * gx[g_of, seg + 1]
+        q = p + np.einsum('snab,snb->sna', frames[g_of, seg], self._rest_off)
+        out = np.empty_like(q)
+        out[self.order] = q
+        out[:, :2] = head.to_world(self.ghosts.rest[:, :2])
+        return out
+
+    def group_members(self, g: int) -> np.ndarray:
+        """Ghost indices of group ``g`` (which follows guide ``group_guide[g]``)."""
+        return self.order[self.group_start[g]:self.group_start[g + 1]]
+
+
+def _per(strength: float, substeps: int) -> float:
+    """A per-substep relaxation strength applied over ``substeps`` substeps at once."""
+    return strength if substeps <= 1 else 1.0 - (1.0 - strength) ** substeps
+
+
+def _f64(a):
+    return np.ascontiguousarray(a, dtype=np.float64)
+
+
+def _check_strandset(name, s):
+    for field in ('rest', 'x', 'v'):
+        a = getattr(s, field)
+        if not (isinstance(a, np.ndarray) and a.dtype == np.float64 and a.ndim == 3 and
+                a.shape[2] == 3 and a.flags.c_contiguous):
+            raise ValueError(f'{name}.{field} must be a C-contiguous float64 array (S, N, 3)')
+    if s.x.shape != s.rest.shape or s.v.shape != s.rest.shape:
+        raise ValueError(f'{name}: x, v and rest must have the same shape, got '
+                         f'{s.x.shape}, {s.v.shape}, {s.rest.shape}')
+    if s.rest.shape[1] < 2:
+        raise ValueError(f'{name}: strands need at least 2 nodes, got {s.rest.shape[1]}')
+    if s.rest_length.shape != (s.rest.shape[0], s.rest.shape[1] - 1):
+        raise ValueError(f'{name}.rest_length must be shaped (S, N-1)')
+    if not np.all(np.isfinite(s.rest)):
+        raise ValueError(f'{name}.rest contains NaN or infinite coordinates')
+
+
+def _permute(strands, order):
+    """Reorder the strands of a StrandSet (rows ``order``).  The arrays are replaced by reordered
+    copies: arrays shared with others (``from_rest`` keeps the caller's rest array) are left
+    untouched."""
+    for name in ('rest', 'rest_length', 'inv_mass', 'x', 'v'):
+        setattr(strands, name, np.ascontiguousarray(getattr(strands, name)[order]))
+
+
+def _group_sum(a, group_start):
+    """Sums of the rows of each (non-empty, contiguous) group."""
+    if a.shape[0] == 0:
+        return np.zeros((0,) + a.shape[1:])
+    return np.add.reduceat(a, group_start[:-1], axis=0)

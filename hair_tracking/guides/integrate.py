@@ -1,0 +1,316 @@
+"""Time integration of guide strands: the parts of a substep around the constraint projection.
+
+One substep of a guide solver (see :mod:`hair_tracking.guides.solver`) is
+
+1. **predict** (:func:`predict_block`): the attached roots (nodes 0 and 1) are placed
+   kinematically at ``head.to_world(rest[:, :2])``; the free nodes are optionally carried with the
+   head's rigid motion (velocity shock propagation, TressFX 4.1, AMD 2017), their velocity gets
+   damping and gravity by explicit (symplectic) Euler and the predicted positions are
+   ``p = x + v dt`` (Müller, Heidelberger, Hennix & Ratcliff 2007, "Position Based Dynamics");
+2. constraint projection (:mod:`~hair_tracking.guides.pbd_constraints`,
+   :mod:`~hair_tracking.guides.ftl`);
+3. optional head collision (:mod:`~hair_tracking.guides.collision`);
+4. **finalize** (:func:`finalize_block`, kernel :func:`finalize`): per-substep displacement clamp
+   and the velocity update ``v = (p - x) / dt``, with the Follow-The-Leader damping correction
+   ``v_i -= s_damp d_{i+1} / dt`` (Müller, Kim & Chentanez 2012) when ``s_damp > 0``.
+
+Shock propagation with coefficient ``s`` (0..1) moves every free node by the fraction ``s`` of the
+head's rigid motion ``M(p) = R_rel (p - t_prev) + t`` (``R_rel = R R_prev^T``) and rotates its
+velocity by the same fraction *before* integrating; the old positions are carried too, so the
+carried displacement is not counted as velocity (it would otherwise be applied twice on the next
+substep, as in TressFX, which carries both the current and the previous positions). With ``s > 0``
+the stored ``v`` is therefore the velocity relative to the carried fraction of the head's motion;
+with ``s = 0`` it is the world-frame velocity.
+
+All positions are in the world frame [m], velocities [m/s], ``dt`` [s]; rest shapes in the head
+frame. Arrays are C-contiguous float64 ``(S, N, 3)``. The block helpers work on the strands
+``s0 <= s < s1`` so that a fused solver kernel can run them back to back on a block of strands
+while it is in cache (see :data:`BLOCK`).
+"""
+from contextlib import contextmanager
+import math
+import types
+
+import numpy as np
+import numba
+from numba import njit, prange
+
+#: Strands one thread processes together. The constraint sweeps interleave the strands of a
+#: block (strand index innermost), so the CPU overlaps their independent dependency chains;
+#: measured on the 2-core Xeon here: about 2.5x faster than one strand at a time.
+#: Below this many nodes a kernel runs on one thread (its serial twin): the work is then
+#: smaller than a parallel region's launch.  The default groom's 64 guides (1 k nodes) stay
+#: serial, its 512 ghosts (8 k nodes) run on all threads.  Measured in the sixth session, after
+#: malloc_retain_mb removed the page-fault storms that had made parallel regions look 3-15x
+#: slower (the fifth session's threshold was 2^17): offline run of the walk sample, loop 2.01
+#: -> 1.66 s (in-process A/B, five runs each; 1 k nodes: 1.85 s); node step at 1 k ghosts
+#: 5.2 -> 3.8 ms, at 512 ghosts and 120 Hz poses 2.0 -> 1.6 ms.  Results do not depend on the
+#: thread count (tested).
+PARALLEL_MIN_NODES = 1 << 12
+
+
+def runs_parallel(nodes: int) -> bool:
+    """Whether a problem of ``nodes`` nodes runs its kernels on more than one thread: at least
+    PARALLEL_MIN_NODES nodes and more than one numba thread available."""
+    return nodes >= PARALLEL_MIN_NODES and numba.get_num_threads() > 1
+
+
+def serial_twin(kernel):
+    """The parallel numba ``kernel`` compiled without ``parallel``: its ``prange`` loops run as
+    plain loops on the calling thread.  The results are bit-identical where the loop body is a
+    compiled function of its own (``*_block``); a body inlined into both variants may be
+    contracted differently by LLVM (it was in ``ftl_restore``: last-bit differences, hence
+    ``ftl_restore_block``).  For problems below :data:`PARALLEL_MIN_NODES`: even on one
+    thread a parallel region costs a launch through the threading layer, which at 64 guides of
+    16 nodes was a third of a guide substep (0.16 -> 0.11 ms measured with twins of the five
+    guide kernels).
+
+    The twin is a copy of the Python function named ``<name>_serial``, so numba's on-disk cache
+    (whose index is keyed by the function's qualified name and line, not by its options) keeps
+    the two compilations apart."""
+    f = kernel.py_func
+    twin = types.FunctionType(f.__code__, f.__globals__, f.__name__ + '_serial',
+                              f.__defaults__, f.__closure__)
+    twin.__qualname__ = f.__qualname__ + '_serial'
+    twin.__module__ = f.__module__
+    twin.__doc__ = f':func:`{f.__name__}` on the calling thread (see :func:`serial_twin`).'
+    options = {k: v for k, v in kernel.targetoptions.items()
+               if k not in ('parallel', 'nopython')}
+    return njit(cache=True, **options)(twin)
+
+
+@contextmanager
+def parallel_from(nodes: int):
+    """Temporarily make :func:`runs_parallel` true from ``nodes`` nodes on (warm-up: load the
+    parallel kernels a large scene will use while running a tiny copy of it)."""
+    global PARALLEL_MIN_NODES
+    saved, PARALLEL_MIN_NODES = PARALLEL_MIN_NODES, int(nodes)
+    try:
+        yield
+    finally:
+        PARALLEL_MIN_NODES = saved
+
+
+BLOCK = 8
+
+#: LLVM fast-math flags of every kernel: only ``contract`` (fused multiply-add). Results are
+#: deterministic for a given build, agree with the numpy references to ~1e-15 relative, and NaN /
+#: infinity semantics are kept (no ``nnan``/``ninf``).
+FASTMATH = {'contract'}
+
+#: Compile option of the kernels' inner bodies (those called once per block of strands from a
+#: parallel loop, or per substep): no NRT reference counting.  numba counts references of every
+#: array view it creates (``x[j]``, ``a.reshape(...)``, an array bound as an argument of an
+#: inlined function) with an atomic ``lock`` instruction, 20-40 cycles each on this machine, and
+#: its pruning pass cannot remove the pairs inside loops with branches: in the ghost kernel they
+#: were a quarter of the samples under ``perf``, and without them a default-scene ghost step
+#: (512 ghosts in groups of 8, head contact on) took 0.31 instead of 0.47 ms (medians, old and
+#: new kernels alternated in one process).  Safe for functions that
+#: allocate nothing and return no array: the arrays they see are owned by their caller.  Empty
+#: when this numba has no such option (the kernels then run with reference counting).
+try:
+    from numba.core.cpu import CPUTargetOptions as _CPUOptions
+    NO_REFCOUNT = {'_nrt': False} if hasattr(_CPUOptions, '_nrt') else {}
+except ImportError:         # pragma: no cover - another numba layout
+    NO_REFCOUNT = {}
+
+
+def block_count(strands: int) -> int:
+    """Number of :data:`BLOCK`-sized groups covering ``strands`` strands."""
+    return (strands + BLOCK - 1) // BLOCK
+
+
+def relative_rotation(rot_prev, rot):
+    """``R_rel = R R_prev^T`` (3, 3): the head's rigid motion over a substep is
+    ``M(p) = R_rel (p - t_prev) + t`` for head rotations ``R_prev`` -> ``R`` and positions
+    ``t_prev`` -> ``t``."""
+    out = np.empty((3, 3))
+    head_motion(np.ascontiguousarray(rot_prev, dtype=np.float64), np.zeros(3),
+                np.ascontiguousarray(rot, dtype=np.float64), np.zeros(3), out)
+    return out
+
+
+@njit(cache=True, **NO_REFCOUNT)
+def head_motion(rot_prev, pos_prev, rot, pos, rot_rel):
+    """Write ``R_rel = R R_prev^T`` into ``rot_rel`` (3, 3); True if all four inputs are finite.
+
+    One small compiled call instead of several numpy calls: the per-substep Python overhead of
+    the solver matters at real-time rates.
+    """
+    ok = True
+    for i in range(3):
+        ok = ok and math.isfinite(pos[i]) and math.isfinite(pos_prev[i])
+        for j in range(3):
+            ok = ok and math.isfinite(rot[i, j]) and math.isfinite(rot_prev[i, j])
+            rot_rel[i, j] = (rot[i, 0] * rot_prev[j, 0] + rot[i, 1] * rot_prev[j, 1]
+                             + rot[i, 2] * rot_prev[j, 2])
+    return ok
+
+
+@njit(cache=True, fastmath=FASTMATH, error_model='numpy', **NO_REFCOUNT)
+def predict_block(x, v, x_old, rest, inv_mass, s0, s1, rot, pos, rot_rel, pos_prev, gravity,
+                  damp, dt, shock):
+    """Predict positions of strands ``s0..s1-1`` in place (step 1 of the module docstring).
+
+    On return ``x_old`` holds the (carried) start-of-substep positions and ``x`` the predicted
+    positions (roots at ``rot @ rest + pos``). ``v`` is read, not written: the velocity of the
+    substep is set by :func:`finalize_block` from the displacement (saves a pass over memory).
+
+    Parameters: ``rot``/``pos`` head pose at the end of the substep; ``rot_rel``/``pos_prev`` the
+    head motion (see :func:`relative_rotation`); ``gravity`` (3,) [m/s^2] world frame; ``damp`` the
+    velocity factor ``exp(-damping dt)``; ``shock`` the shock-propagation fraction 0..1. Nodes
+    with ``inv_mass == 0`` beyond the roots are carried but not integrated (static).
+    """
+    n = x.shape[1]
+    r00, r01, r02 = rot[0, 0], rot[0, 1], rot[0, 2]
+    r10, r11, r12 = rot[1, 0], rot[1, 1], rot[1, 2]
+    r20, r21, r22 = rot[2, 0], rot[2, 1], rot[2, 2]
+    q00, q01, q02 = rot_rel[0, 0], rot_rel[0, 1], rot_rel[0, 2]
+    q10, q11, q12 = rot_rel[1, 0], rot_rel[1, 1], rot_rel[1, 2]
+    q20, q21, q22 = rot_rel[2, 0], rot_rel[2, 1], rot_rel[2, 2]
+    tx, ty, tz = pos[0], pos[1], pos[2]
+    ux, uy, uz = pos_prev[0], pos_prev[1], pos_prev[2]
+    gx, gy, gz = gravity[0] * dt, gravity[1] * dt, gravity[2] * dt
+    for s in range(s0, s1):
+        for i in range(n):
+            px, py, pz = x[s, i, 0], x[s, i, 1], x[s, i, 2]
+            vx, vy, vz = v[s, i, 0], v[s, i, 1], v[s, i, 2]
+            if shock > 0.0:
+                # carry by the fraction `shock` of the head's rigid motion M
+                ax, ay, az = px - ux, py - uy, pz - uz
+                mx = q00 * ax + q01 * ay + q02 * az + tx
+                my = q10 * ax + q11 * ay + q12 * az + ty
+                mz = q20 * ax + q21 * ay + q22 * az + tz
+                px += shock * (mx - px)
+                py += shock * (my - py)
+                pz += shock * (mz - pz)
+                wx = q00 * vx + q01 * vy + q02 * vz
+                wy = q10 * vx + q11 * vy + q12 * vz
+                wz = q20 * vx + q21 * vy + q22 * vz
+                vx += shock * (wx - vx)
+                vy += shock * (wy - vy)
+                vz += shock * (wz - vz)
+            x_old[s, i, 0] = px
+            x_old[s, i, 1] = py
+            x_old[s, i, 2] = pz
+            if i < 2:
+                # attached root: kinematic, pins the root position and the root direction
+                bx, by, bz = rest[s, i, 0], rest[s, i, 1], rest[s, i, 2]
+                x[s, i, 0] = r00 * bx + r01 * by + r02 * bz + tx
+                x[s, i, 1] = r10 * bx + r11 * by + r12 * bz + ty
+                x[s, i, 2] = r20 * bx + r21 * by + r22 * bz + tz
+            elif inv_mass[s, i] > 0.0:
+                vx = vx * damp + gx
+                vy = vy * damp + gy
+                vz = vz * damp + gz
+                x[s, i, 0] = px + vx * dt
+                x[s, i, 1] = py + vy * dt
+                x[s, i, 2] = pz + vz * dt
+            else:
+                x[s, i, 0] = px
+                x[s, i, 1] = py
+                x[s, i, 2] = pz
+
+
+@njit(cache=True, fastmath=FASTMATH, error_model='numpy', **NO_REFCOUNT)
+def finalize_block(x, v, x_old, inv_mass, corr, s0, s1, dt, max_disp, s_damp):
+    """Displacement clamp and velocity update of strands ``s0..s1-1``; returns the clamped count.
+
+    For every node with ``inv_mass > 0``: if ``max_disp > 0`` and ``|x - x_old| > max_disp`` [m]
+    the displacement is scaled down to ``max_disp``; then ``v = (x - x_old) / dt``, minus
+    ``s_damp * corr[i+1] / dt`` (Follow-The-Leader damping; ``corr`` is only read when
+    ``s_damp > 0``) and, with the clamp on, ``|v| dt`` is capped at ``max_disp`` as well (so the
+    FTL correction cannot inject more than the clamp allows). A node counts once as clamped.
+    Kinematic nodes (``inv_mass == 0``) only get ``v = (x - x_old) / dt``.
+    """
+    n = x.shape[1]
+    inv_dt = 1.0 / dt
+    lim2 = max_disp * max_disp
+    clamped = 0
+    for s in range(s0, s1):
+        for i in range(n):
+            dx = x[s, i, 0] - x_old[s, i, 0]
+            dy = x[s, i, 1] - x_old[s, i, 1]
+            dz = x[s, i, 2] - x_old[s, i, 2]
+            hit = False
+            if inv_mass[s, i] > 0.0:
+                if max_disp > 0.0:
+                    d2 = dx * dx + dy * dy + dz * dz
+                    if d2 > lim2:
+                        f = max_disp / math.sqrt(d2)
+                        dx *= f
+                        dy *= f
+                        dz *= f
+                        x[s, i, 0] = x_old[s, i, 0] + dx
+                        x[s, i, 1] = x_old[s, i, 1] + dy
+                        x[s, i, 2] = x_old[s, i, 2] + dz
+                        hit = True
+                if s_damp > 0.0 and i + 1 < n:
+                    dx -= s_damp * corr[s, i + 1, 0]
+                    dy -= s_damp * corr[s, i + 1, 1]
+                    dz -= s_damp * corr[s, i + 1, 2]
+                    if max_disp > 0.0:
+                        d2 = dx * dx + dy * dy + dz * dz
+                        if d2 > lim2:
+                            f = max_disp / math.sqrt(d2)
+                            dx *= f
+                            dy *= f
+                            dz *= f
+                            hit = True
+            v[s, i, 0] = dx * inv_dt
+            v[s, i, 1] = dy * inv_dt
+            v[s, i, 2] = dz * inv_dt
+            if hit:
+                clamped += 1
+    return clamped
+
+
+@njit(cache=True, error_model='numpy', **NO_REFCOUNT)
+def max_step_sq(x, x_old):
+    """Largest squared displacement ``|x - x_old|^2`` of a node [m^2] (the simulator's speed
+    estimate for splitting substeps); one serial pass, no temporary arrays.  NaN if any
+    displacement is NaN."""
+    best = 0.0
+    for s in range(x.shape[0]):
+        for i in range(x.shape[1]):
+            d0 = x[s, i, 0] - x_old[s, i, 0]
+            d1 = x[s, i, 1] - x_old[s, i, 1]
+            d2 = x[s, i, 2] - x_old[s, i, 2]
+            d = d0 * d0 + d1 * d1 + d2 * d2
+            if d > best or d != d:
+                best = d
+    return best
+
+
+@njit(cache=True, nogil=True, parallel=True, fastmath=FASTMATH, error_model='numpy')
+def finalize(x, v, x_old, inv_mass, corr, dt, max_disp, s_damp):
+    """Kernel: :func:`finalize_block` over all strands (used when a collider runs in between)."""
+    total = 0
+    for s in prange(x.shape[0]):
+        total += finalize_block(x, v, x_old, inv_mass, corr, s, s + 1, dt, max_disp, s_damp)
+    return total
+
+
+@njit(cache=True, nogil=True, parallel=True, fastmath=FASTMATH, error_model='numpy')
+def carry_rigid(x, rot_rel, pos_prev, pos, out):
+    """Kernel: ``out = R_rel (x - pos_prev) + pos``, the points moved rigidly with the head.
+
+    Used as the friction reference of the collider: where a node would be had it stuck to the
+    head during the substep.
+    """
+    q00, q01, q02 = rot_rel[0, 0], rot_rel[0, 1], rot_rel[0, 2]
+    q10, q11, q12 = rot_rel[1, 0], rot_rel[1, 1], rot_rel[1, 2]
+    q20, q21, q22 = rot_rel[2, 0], rot_rel[2, 1], rot_rel[2, 2]
+    n = x.shape[1]
+    for s in prange(x.shape[0]):
+        for i in range(n):
+            ax = x[s, i, 0] - pos_prev[0]
+            ay = x[s, i, 1] - pos_prev[1]
+            az = x[s, i, 2] - pos_prev[2]
+            out[s, i, 0] = q00 * ax + q01 * ay + q02 * az + pos[0]
+            out[s, i, 1] = q10 * ax + q11 * ay + q12 * az + pos[1]
+            out[s, i, 2] = q20 * ax + q21 * ay + q22 * az + pos[2]
+
+
+finalize_serial = serial_twin(finalize)
+carry_rigid_serial = serial_twin(carry_rigid)

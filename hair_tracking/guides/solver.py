@@ -1,0 +1,314 @@
+"""Guide (target) strands: the few strands simulated with position-based dynamics.
+
+Section 1 of the method (``seed/digest.md``): guides are simulated with PBD (Müller et al. 2007)
+and their roots follow the head. One call of :meth:`GuideSolver.step` is one substep ``dt``:
+
+1. roots follow the head: nodes 0 and 1 of every strand are set kinematically to
+   ``head.to_world(rest[:, :2])`` (inverse mass 0), which pins the root position *and* the root
+   direction (as in AMD TressFX);
+2. optional velocity shock propagation (``scene.solver.shock_propagation`` = s): the free nodes
+   are carried rigidly with the fraction s of the head's motion from ``head_prev`` to ``head``
+   before integrating (TressFX; keeps fast head turns from stretching the hair);
+3. explicit Euler of gravity (``scene.gravity``, world frame) and damping
+   (``v *= exp(-scene.damping dt)``), prediction ``p = x + v dt``;
+4. constraint projection by the solver chosen in ``scene.solver.type``:
+   ``'pbd'`` classic Gauss–Seidel PBD, ``'xpbd'`` XPBD with compliance, ``'ftl'`` Follow-The-Leader
+   (see :mod:`~hair_tracking.guides.pbd_constraints` and :mod:`~hair_tracking.guides.ftl`);
+5. head collision, only if the scene has a collider (:mod:`~hair_tracking.guides.collision`), with
+   friction measured against the start-of-substep positions carried rigidly with the head;
+6. per-substep displacement clamp (``scene.solver.max_displacement``; 0 disables) and the
+   velocity update ``v = (p - x) / dt`` (FTL: minus ``ftl_damping d_{i+1} / dt``) —
+   :mod:`~hair_tracking.guides.integrate`.
+
+Without a collider steps 1–6 run in one fused numba kernel per block of strands (the strands stay
+in cache); with a collider the kernel stops after step 4, the collision kernel runs, then the
+finalize kernel. Kernels are looked up on their modules at call time, so only the ones the scene
+needs are ever called (and compiled), and tests can spy on them.
+
+Masses are uniform (``StrandSet.from_rest``: inverse mass 1 for free nodes, 0 for the two roots);
+general inverse masses are accepted by PBD/XPBD (a free node with 0 is static), FTL needs every
+free node to be movable. ``strands.inv_mass`` is read when the solver is built.
+"""
+import math
+from typing import Any, Dict
+
+import numpy as np
+
+from hair_tracking.guides import collision
+
+from hair_tracking.guides import ftl
+
+from hair_tracking.guides import integrate
+
+from hair_tracking.core.metrics import max_stretch
+from hair_tracking.core.model import HeadPose, StrandSet
+from hair_tracking.guides import pbd_constraints
+from hair_tracking.parallel_choice import ParallelChooser
+
+#: PBD sweeps of the second-neighbour (bending) constraints per FTL substep, before the FTL pass.
+FTL_BEND_PASSES = 1
+#: Substep [s] at which ``solver.bend_stiffness`` applies as given to FTL (the default dt); see
+#: :func:`ftl_bend_stiffness`.
+BEND_REFERENCE_DT = 1.0 / 240.0
+
+
+class GuideSolver:
+    """Advances ``strands.x`` / ``strands.v`` (world frame) one substep at a time.
+
+    ``strands``: a :class:`~hair_tracking.core.model.StrandSet` (changed in place; its ``x`` and
+    ``v``
+    must be C-contiguous float64 ``(S, N, 3)``, ``N >= 3``); ``scene``: a
+    :class:`~hair_tracking.core.scene.Scene` (solver, gravity, damping, collider).
+
+    Attributes: ``collider`` (``None`` when the scene has none; the simulator may hand it to the
+    ghost tracker), ``kind`` (``'pbd'``, ``'xpbd'`` or ``'ftl'``), ``margin`` the collider margin
+    in use [m]: ``scene.collider.margin``, but at most the rest clearance of the closest free node
+    and half the shortest segment (see ``_fit_margin``).
+
+    With FTL and a collider, a substep is predict, bend, FTL pass, collide and, when a node was
+    pushed, a collision-aware second FTL pass (:func:`~hair_tracking.guides.ftl.ftl_restore`):
+    lengths
+    stay exact and nodes outside the bare collider (measured in the stability matrix,
+    ``docs/stability.md``).
+    """
+
+    def __init__(self, strands: StrandSet, scene):
+        self.kind = scene.solver.type
+        if self.kind not in ('pbd', 'xpbd', 'ftl'):
+            raise ValueError(f'solver.type: {self.kind!r} is not one of ftl, pbd, xpbd')
+        _check_strands(strands, self.kind)
+        self.strands = strands
+        self.scene = scene
+        self.collider = collision.make_collider(scene.collider)
+        self.margin = self._fit_margin()
+        sv = scene.solver
+        self._gravity = np.ascontiguousarray(scene.gravity, dtype=np.float64)
+        self._damping = float(scene.damping)
+        self._shock = float(sv.shock_propagation)
+        self._max_disp = float(sv.max_displacement)
+        self._iterations = int(sv.iterations)
+        im = strands.inv_mass
+        self._x_old = np.empty_like(strands.x)
+        self._rot_rel = np.empty((3, 3))
+        self._bend_rest = pbd_constraints.second_neighbour_rest(strands.rest)
+        if self.kind == 'ftl':
+            self._bend_w = pbd_constraints.pair_weights(im, 2)
+            self._corr = np.zeros_like(strands.x)
+        else:
+            # the PBD and XPBD kernels read their per-constraint data block by block, strands
+            # side by side (pbd_constraints.lane_major), and project in a work space
+            lanes = pbd_constraints.lane_major
+            s, n = im.shape
+            self._work = pbd_constraints.lane_work(s, n)
+            self._rest_length_l = lanes(strands.rest_length)
+            self._bend_rest_l = lanes(self._bend_rest)
+            if self.kind == 'pbd':
+                self._stretch_w = lanes(pbd_constraints.pair_weights(im, 1))
+                self._bend_w = lanes(pbd_constraints.pair_weights(im, 2))
+            else:
+                self._inv_mass_l = lanes(im)
+                self._lam_stretch = lanes(np.zeros((s, n - 1)))
+                self._lam_bend = lanes(np.zeros((s, n - 2)))
+                self._xpbd_dt = None
+        need_ref = self.collider is not None and self.collider.friction > 0.0
+        self._x_ref = np.empty_like(strands.x) if need_ref else None
+        self._counters = {'substeps': 0, 'clamped': 0, 'clamped_total': 0,
+                          'contacts': 0, 'contacts_total': 0}
+        #: parallel kernels or their serial twins, whichever the timings favour (see
+        #: :mod:`hair_tracking.parallel_choice`; same results either way)
+        self.threads = ParallelChooser()
+
+    # ------------------------------------------------------------------ API
+    def reset(self, head: HeadPose) -> None:
+        """Put every strand in its rest shape carried by ``head``, at rest; clear counters."""
+        self.strands.place_at(head)
+        for key in self._counters:
+            self._counters[key] = 0
+
+    def step(self, dt: float, head_prev: HeadPose, head: HeadPose) -> None:
+        """Advance one substep ``dt`` [s] while the head moves from ``head_prev`` to ``head``."""
+        nodes = self.strands.x.shape[0] * self.strands.x.shape[1]
+        self.threads.timed(integrate.runs_parallel(nodes), self._step_parallel,
+                           self._step_serial, dt, head_prev, head)
+
+    def _step_parallel(self, dt: float, head_prev: HeadPose, head: HeadPose) -> None:
+        self._step(dt, head_prev, head, True)
+
+    def _step_serial(self, dt: float, head_prev: HeadPose, head: HeadPose) -> None:
+        self._step(dt, head_prev, head, False)
+
+    def _step(self, dt: float, head_prev: HeadPose, head: HeadPose, parallel: bool) -> None:
+        dt = float(dt)
+        if not (math.isfinite(dt) and dt > 0.0):
+            raise ValueError(f'dt: must be a positive finite number of seconds, got {dt!r}')
+        rot_prev, pos_prev = _pose('head_prev', head_prev)
+        rot, pos = _pose('head', head)
+        rot_rel = self._rot_rel
+        if not integrate.head_motion(rot_prev, pos_prev, rot, pos, rot_rel):
+            bad = 'head_prev' if not (np.all(np.isfinite(rot_prev))
+                                      and np.all(np.isfinite(pos_prev))) else 'head'
+            raise ValueError(f'{bad}: pose must be finite, got position '
+                             f'{pos_prev if bad == "head_prev" else pos}')
+        st = self.strands
+        damp = math.exp(-self._damping * dt)
+        fused = self.collider is None
+        if self._x_ref is not None:
+            carry = integrate.carry_rigid if parallel else integrate.carry_rigid_serial
+            carry(st.x, rot_rel, pos_prev, pos, self._x_ref)
+        if self.kind == 'pbd':
+            sv = self.scene.solver
+            kernel = pbd_constraints.pbd_step if parallel else pbd_constraints.pbd_step_serial
+            clamped = kernel(
+                st.x, st.v, self._x_old, st.rest, st.inv_mass, self._rest_length_l,
+                self._bend_rest_l, self._stretch_w, self._bend_w, self._work, rot, pos, rot_rel,
+                pos_prev, self._gravity, damp, dt, self._shock, self._iterations,
+                float(sv.stiffness), float(sv.bend_stiffness), self._max_disp, fused)
+        elif self.kind == 'xpbd':
+            a_stretch, a_bend = self._xpbd_factors(dt)
+            kernel = pbd_constraints.xpbd_step if parallel else pbd_constraints.xpbd_step_serial
+            clamped = kernel(
+                st.x, st.v, self._x_old, st.rest, st.inv_mass, self._inv_mass_l,
+                self._rest_length_l, self._bend_rest_l, self._stretch_gain, self._bend_gain,
+                self._lam_stretch, self._lam_bend, self._work, rot, pos, rot_rel, pos_prev,
+                self._gravity, damp, dt, self._shock, self._iterations, a_stretch, a_bend,
+                self._max_disp, fused)
+        else:
+            sv = self.scene.solver
+            kernel = ftl.ftl_step if parallel else ftl.ftl_step_serial
+            clamped = kernel(
+                st.x, st.v, self._x_old, self._corr, st.rest, st.inv_mass, st.rest_length,
+                self._bend_rest, self._bend_w, rot, pos, rot_rel, pos_prev, self._gravity, damp,
+                dt, self._shock, FTL_BEND_PASSES, ftl_bend_stiffness(sv.bend_stiffness, dt),
+                float(sv.ftl_damping), self._max_disp, fused)
+        contacts = 0
+        if not fused:
+            ref = self._x_ref if self._x_ref is not None else self._x_old
+            contacts = self.collider.project(st.x, ref, st.inv_mass, rot, pos, parallel)
+            corr, s_damp = self._x_old, 0.0
+            if self.kind == 'ftl':
+                corr, s_damp = self._corr, float(self.scene.solver.ftl_damping)
+                if contacts:
+                    # restore the lengths the collider's push broke, staying outside it
+                    c = self.collider
+                    restore = ftl.ftl_restore if parallel else ftl.ftl_restore_serial
+                    restore(st.x, st.rest, st.rest_length, rot, pos, c.center,
+                            c.radii + c.margin, c.refine, self._corr)
+            finalize = integrate.finalize if parallel else integrate.finalize_serial
+            clamped = finalize(st.x, st.v, self._x_old, st.inv_mass, corr, dt,
+                               self._max_disp, s_damp)
+        c = self._counters
+        c['substeps'] += 1
+        c['clamped'] = int(clamped)
+        c['clamped_total'] += int(clamped)
+        c['contacts'] = int(contacts)
+        c['contacts_total'] += int(contacts)
+
+    @property
+    def stats(self) -> Dict[str, Any]:
+        """Counters of the solver (a new dict on each access).
+
+        ``substeps`` run since the last reset; ``clamped`` nodes whose displacement (or velocity)
+        the clamp limited in the last substep, ``clamped_total``; ``contacts`` nodes projected out
+        of the collider in the last substep, ``contacts_total``; ``max_stretch`` = max over
+        segments of ``|l / l0 - 1|`` of the current state, i.e. after the last substep (computed
+        on access, about 0.2 ms for 1000 x 16 nodes); ``margin`` the collider margin in use [m]
+        (see :attr:`margin`).
+        """
+        out = dict(self._counters)
+        out['solver'] = self.kind
+        out['margin'] = self.margin
+        out['max_stretch'] = max_stretch(self.strands.x, self.strands.rest_length)
+        return out
+
+    # ------------------------------------------------------------ internals
+    def _fit_margin(self) -> float:
+        """Collider margin actually used [m]: the scene's, but no more than the rest clearance of
+        the closest free node (the collider must never push a strand out of its own rest shape)
+        and no more than half the shortest segment (a push is resolved by moving a node; pushes
+        longer than its segments tear PBD strands: with 1 mm segments and a 4 mm margin the
+        first segments were stretched by 200 %)."""
+        if self.collider is None:
+            return 0.0
+        c = self.collider
+        st = self.strands
+        free = st.inv_mass > 0
+        if c.margin > 0.0 and np.any(free):
+            clearance = collision.outside_distance(st.rest[free] - c.center, c.radii)
+            positive = st.rest_length[st.rest_length > 0]
+            half_segment = 0.5 * positive.min() if positive.size else c.margin
+            c.margin = float(min(c.margin, clearance.min(), half_segment))
+        return c.margin
+
+    def _xpbd_factors(self, dt):
+        sv = self.scene.solver
+        a_stretch = float(sv.compliance) / (dt * dt)
+        a_bend = float(sv.bend_compliance) / (dt * dt)
+        if self._xpbd_dt != dt:
+            im = self.strands.inv_mass
+            self._stretch_gain = pbd_constraints.lane_major(
+                pbd_constraints.xpbd_gain(im, 1, a_stretch))
+            self._bend_gain = pbd_constraints.lane_major(
+                pbd_constraints.xpbd_gain(im, 2, a_bend))
+            self._xpbd_dt = dt
+        return a_stretch, a_bend
+
+
+def ftl_bend_stiffness(k: float, dt: float) -> float:
+    """Per-substep bending stiffness of the FTL solver for a substep ``dt`` [s].
+
+    ``solver.bend_stiffness`` ``k`` is the fraction of the bending violation removed per substep
+    of :data:`BEND_REFERENCE_DT`; for another ``dt`` it becomes ``1 - (1 - k)^(dt / dt_ref)``,
+    the same fraction per second (Müller et al. 2007, section 3.3, make stiffness independent of
+    the iteration count the same way).  Without it the bending correction per substep does not
+    shrink with ``dt`` while FTL's velocity correction ``s_damp d / dt`` grows as ``1 / dt``:
+    measured, 25 cm strands at dt = 1/4000 s and 1.5 m strands already at 1/480 s never came to
+    rest after a head shake (kinetic energy growing instead of decaying).
+    """
+    k = float(k)
+    if dt == BEND_REFERENCE_DT or k <= 0.0 or k >= 1.0:
+        return k
+    return 1.0 - (1.0 - k) ** (dt / BEND_REFERENCE_DT)
+
+
+def _pose(name, head):
+    """(rotation, position) of a head pose as C-contiguous float64 arrays (no copy if already)."""
+    rot, pos = head.rotation, head.position
+    if not (type(rot) is np.ndarray and rot.dtype == np.float64 and rot.flags.c_contiguous):
+        rot = np.ascontiguousarray(rot, dtype=np.float64)
+    if not (type(pos) is np.ndarray and pos.dtype == np.float64 and pos.flags.c_contiguous):
+        pos = np.ascontiguousarray(pos, dtype=np.float64)
+    if rot.shape != (3, 3) or pos.shape != (3,):
+        raise ValueError(f'{name}: rotation must be (3, 3) and position (3,), got {rot.shape} '
+                         f'and {pos.shape}')
+    return rot, pos
+
+
+def _check_strands(st: StrandSet, kind: str) -> None:
+    rest = st.rest
+    if not isinstance(rest, np.ndarray) or rest.ndim != 3 or rest.shape[2] != 3:
+        raise ValueError(f'strands.rest: must be an (S, N, 3) array, got '
+                         f'{getattr(rest, "shape", type(rest).__name__)}')
+    s, n, _ = rest.shape
+    if s < 1 or n < 3:
+        raise ValueError(f'strands: need at least 1 strand of at least 3 nodes, got {s} x {n}')
+    for name, shape in (('rest', (s, n, 3)), ('x', (s, n, 3)), ('v', (s, n, 3)),
+                        ('rest_length', (s, n - 1)), ('inv_mass', (s, n))):
+        arr = getattr(st, name)
+        if not isinstance(arr, np.ndarray) or arr.shape != shape or arr.dtype != np.float64 \
+                or not arr.flags.c_contiguous:
+            raise ValueError(f'strands.{name}: must be a C-contiguous float64 array shaped '
+                             f'{shape}, got {getattr(arr, "dtype", type(arr).__name__)} '
+                             f'{getattr(arr, "shape", "")}')
+        if not np.all(np.isfinite(arr)):
+            raise ValueError(f'strands.{name}: contains NaN or infinity')
+    if np.any(st.rest_length < 0):
+        raise ValueError('strands.rest_length: must be >= 0 metres')
+    im = st.inv_mass
+    if np.any(im < 0):
+        raise ValueError('strands.inv_mass: must be >= 0')
+    if np.any(im[:, :2] != 0):
+        raise ValueError('strands.inv_mass: nodes 0 and 1 are attached to the head and must have '
+                         'inverse mass 0')
+    if kind == 'ftl' and np.any(im[:, 2:] <= 0):
+        raise ValueError("strands.inv_mass: the 'ftl' solver moves every free node; nodes 2.. "
+                         'must have inverse mass > 0')

@@ -1,0 +1,691 @@
+"""``hair_sim``: the ROS 2 node that makes hair follow a head pose stream.
+
+    ros2 run hair_tracking hair_sim_node --ros-args --params-file config/hair_sim.yaml
+    python -m hair_tracking.ros.node --ros-args -p groom.guides:=32 -r head_pose:=/face/pose
+
+Inputs (all remappable, subscribed with the sensor-data QoS, so reliable and best-effort
+publishers both connect):
+
+* ``head_pose`` (geometry_msgs/PoseStamped) and ``head_transform`` (geometry_msgs/
+  TransformStamped): the head in a fixed frame, ``p_fixed = position + R(q) @ p_head``.
+* ``/tf`` (tf2_msgs/TFMessage) with ``use_tf``, when tf2_msgs is importable: the transform whose
+  child frame is ``head_frame`` or, with ``head_frame_prefix``, the first child frame starting
+  with it (REP-155 face trackers publish ``face_<id>``), kept until it goes stale.
+
+The header stamp drives the simulation (``advance_to(stamp)``); a stamp of 0 means "now" on the
+node clock (so ``use_sim_time`` is honoured); a stamp older than the last one resets the hair
+(a looping bag); NaN/Inf or zero-quaternion poses are dropped, counted and warned about
+(throttled).  Without poses for ``stale_timeout`` the last pose is held and the hair keeps
+settling, stepped from the node clock.
+
+Outputs, built only when somebody subscribes: ``hair/points`` (organized PointCloud2, one row per
+strand, x y z float32, ``strand`` index, packed ``rgb``), ``hair/markers`` (MarkerArray,
+``line_list`` or ``line_strips``, a DELETEALL first whenever the strand count or style changes,
+lifetime of a few publishing periods), optionally ``hair/guides/points`` and
+``hair/guides/markers``, and ``/diagnostics``.  Both hair outputs are serialized straight to CDR
+bytes with numpy (:mod:`msg_adapters.pointcloud`, :mod:`msg_adapters.marker_cdr`).  Publishing
+runs on its own timer (``publish_rate_hz``); ``publish_on_pose`` additionally publishes right
+after a simulated pose when a period of stream time has passed, for the lowest latency.
+
+Service ``~/reset`` (std_srvs/Trigger): hair back to its rest shape at the current head pose.
+
+Parameters: one per entry of the table in :mod:`hair_tracking.core.params` (every scene field plus
+the node's settings), declared with descriptions and ranges; changes are validated in the on-set
+callback (a rejection names the parameter and the allowed values and changes nothing) and
+stored by the post-set callback as a frozen :class:`~hair_tracking.core.params.Settings` snapshot
+that
+the next step applies (a groom change rebuilds the hair at the current head pose).
+
+Everything runs in one thread (a SingleThreadedExecutor), so callbacks never race.
+"""
+import collections
+import math
+import sys
+import time
+from typing import Dict, List, Optional
+
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from geometry_msgs.msg import PoseStamped, TransformStamped
+import numba
+import numpy as np
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, \
+    SetParametersResult
+import rclpy
+from rclpy.exceptions import ParameterException
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.qos import qos_profile_sensor_data
+from sensor_msgs.msg import PointCloud2
+from std_srvs.srv import Trigger
+from visualization_msgs.msg import MarkerArray
+
+from msg_adapters.marker_cdr import strands_to_marker_array_cdr
+from msg_adapters.pointcloud import CloudBuffer, pack_rgb_u32
+from msg_adapters.pose import pose_from_msg, PoseError
+from msg_adapters.rcl_serialized import SerializedPublisher
+
+from hair_tracking.core import params as P
+from hair_tracking.core.head_track import PoseResult
+from hair_tracking.core.scene import Scene, SceneError
+from hair_tracking.core.strand_colors import StrandColorCache
+from hair_tracking.cpu_steal import format_share, StealMeter
+from hair_tracking.process_tuning import freeze_heap, retain_freed_memory, set_omp_wait_policy
+from hair_tracking.resources import config_path
+from hair_tracking.ros.load_shedding import LoadShedder
+from hair_tracking.simulator import HairSimulator, warm_up as warm_up_simulator
+
+try:                                    # optional: /tf input
+    from tf2_msgs.msg import TFMessage
+except ImportError:                     # pragma: no cover - depends on the installation
+    TFMessage = None
+
+_PARAM_TYPES = {
+    'bool': Parameter.Type.BOOL,
+    'int': Parameter.Type.INTEGER,
+    'double': Parameter.Type.DOUBLE,
+    'string': Parameter.Type.STRING,
+    'double_array': Parameter.Type.DOUBLE_ARRAY,
+}
+WARN_THROTTLE_S = 5.0
+
+
+def output_qos(depth: int) -> QoSProfile:
+    """Reliable, volatile, keep-last ``depth`` (parameter ``output_queue_depth``)."""
+    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=depth,
+                      reliability=ReliabilityPolicy.RELIABLE,
+                      durability=DurabilityPolicy.VOLATILE)
+
+
+def descriptor(p: P.Param) -> ParameterDescriptor:
+    """The ROS ParameterDescriptor of a table entry (description, range, read-only)."""
+    d = ParameterDescriptor(name=p.name, type=_PARAM_TYPES[p.kind].value,
+                            description=p.full_description(),
+                            additional_constraints=p.range_text(), read_only=p.read_only)
+    if p.kind == 'int' and p.lo is not None and p.hi is not None:
+        d.integer_range = [IntegerRange(from_value=int(p.lo), to_value=int(p.hi), step=1)]
+    elif p.kind == 'double' and p.lo is not None and p.hi is not None:
+        d.floating_point_range = [FloatingPointRange(from_value=float(p.lo),
+                                                     to_value=float(p.hi), step=0.0)]
+    return d
+
+
+def load_base_scene(scene_file: str) -> Scene:
+    """The scene named by ``scene_file`` (a path or a preset name); ``Scene()`` if empty."""
+    if not scene_file:
+        return Scene()
+    try:
+        path = config_path(scene_file)
+    except FileNotFoundError as e:
+        raise SceneError('scene_file', str(e)) from None
+    return Scene.from_yaml(path)
+
+
+def warm_up(scene: Scene) -> float:
+    """Compile (or load from numba's on-disk cache) the kernels and encoders ``scene`` uses.
+
+    Runs a tiny copy of the scene (same solver, collider, tracking and output options, few
+    strands) through every call the node makes, so the first real frames are not late.
+    Returns the seconds it took.
+    """
+    start = time.perf_counter()
+    sim = warm_up_simulator(scene)
+    for head_frame in (False, True):
+        f = sim.frame(head_frame=head_frame, copy=False)
+        for guides, strands in ((False, f.strands), (True, f.guides)):
+            n_strands, n_points, write = sim.record_writer(guides, head_frame)
+            CloudBuffer().encode(n_strands, n_points, write, frame_id='warmup', stamp_ns=1,
+                                 packed_rgb=pack_rgb_u32(np.ones((n_strands, 4))))
+            for style in P.MARKER_STYLES:
+                strands_to_marker_array_cdr(strands, frame_id='warmup', style=style,
+                                            delete_all_first=True)
+    return time.perf_counter() - start
+
+
+class _Output:
+    """One published strand topic: its two publishers' state and a cache of the last bytes."""
+
+    def __init__(self, node: Node, topic: str, msg_type, depth: int = 2):
+        self.pub = node.create_publisher(msg_type, topic, output_qos(depth))
+        self.raw = SerializedPublisher(self.pub)     # publish_through_rcl
+        self.cloud = CloudBuffer()       # the message a cloud output rewrites each frame
+        self.cached = None               # the last message sent (bytes or a uint8 array)
+        self.encoded = 0             # messages built (encoded) so far
+        self.published = 0
+        self.shape = None            # (strands, style) of the last marker array sent
+
+    def wanted(self) -> bool:
+        return self.pub.get_subscription_count() > 0
+
+
+class HairSimNode(Node):
+    """The ``hair_sim`` node (see the module docstring).
+
+    ``context``, ``parameter_overrides`` and ``cli_args`` are passed to :class:`rclpy.node.Node`
+    so tests and benchmarks can run it in-process.  Construction declares the parameters, builds
+    the simulator, warms up the kernels (``warmup``) and only then subscribes.  Invalid start
+    parameters raise :class:`~hair_tracking.core.params.ParamError` naming the parameter.
+    """
+
+    def __init__(self, node_name: str = P.NODE_NAME, *, context=None,
+                 parameter_overrides: Optional[List[Parameter]] = None,
+                 cli_args: Optional[List[str]] = None, namespace: Optional[str] = None):
+        super().__init__(node_name, context=context, cli_args=cli_args, namespace=namespace,
+                         parameter_overrides=parameter_overrides)
+        self._declare_all()
+        settings = self._settings
+        self.thread_wait_setting = set_omp_wait_policy(settings.omp_wait_policy)
+        self._apply_threads(settings.numba_threads)
+        self.memory_setting = retain_freed_memory(settings.malloc_retain_mb)
+        self.shedder = LoadShedder(settings.load_shedding_budget)
+        self._steal = StealMeter()       # CPU share the hypervisor took since the last report
+        self.get_logger().info(self.memory_setting)
+        self.get_logger().info(self.thread_wait_setting)
+        self.sim = HairSimulator(settings.scene)
+        if settings.warmup:
+            secs = warm_up(settings.scene)
+            self.get_logger().info(f'kernels and encoders ready in {secs:.2f} s')
+        freeze_heap()       # no 70 ms full garbage collections over the start-up objects
+
+        # state read by the step and publish paths
+        self._pose_frame = ''            # header.frame_id of the last pose
+        self._pose_child = ''            # child_frame_id of the last pose ('' for PoseStamped)
+        self._last_arrival_ns: Optional[int] = None   # node clock at the last accepted pose
+        self._last_stamp_ns: Optional[int] = None     # its stamp (the stream's time base)
+        self._offset_ns = 0              # simulator time = stream stamp + this (see _on_pose)
+        self._has_pose = False
+        self._dirty = False              # the hair changed since the last encoding
+        self._last_publish = -math.inf   # time.monotonic() of the last publication
+        self._pose_publish_at = -math.inf    # ... of the last one publish_on_pose made
+        self._pose_published_ns = None   # sim time of the last frame publish_on_pose sent
+        self._tf_child: Optional[str] = None
+        self._tf_seen_ns = 0
+        self._color_cache = StrandColorCache(pack_rgb_u32)
+        self.rejected = 0                # poses dropped (malformed, NaN, zero quaternion ...)
+        self.rebuilds = 0
+        self.frames_built = 0            # sim.frame() calls made for publishing
+        self.step_ms = collections.deque(maxlen=1000)
+        self.publish_ms = collections.deque(maxlen=1000)
+        self._publish_ms_since_pose = 0.0    # publishing time since the last pose (shedding)
+        self._diag_marks = (0, 0)        # (dropped substeps, rejected) at the last report
+
+        depth = settings.output_queue_depth
+        self.outputs: Dict[str, _Output] = {
+            'points': _Output(self, 'hair/points', PointCloud2, depth),
+            'markers': _Output(self, 'hair/markers', MarkerArray, depth),
+            'guide_points': _Output(self, 'hair/guides/points', PointCloud2, depth),
+            'guide_markers': _Output(self, 'hair/guides/markers', MarkerArray, depth),
+        }
+        self._diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
+        self.create_service(Trigger, '~/reset', self._on_reset)
+        period = settings.publish_period
+        self._publish_timer = self.create_timer(period, self._on_publish_timer)
+        self._idle_timer = self.create_timer(period, self._on_idle_timer)
+        self._diag_timer = self.create_timer(1.0 / settings.diagnostics_rate_hz,
+                                             self._on_diag_timer)
+        pose_qos = QoSProfile(history=qos_profile_sensor_data.history,
+                              depth=settings.pose_queue_depth,
+                              reliability=qos_profile_sensor_data.reliability,
+                              durability=qos_profile_sensor_data.durability)
+        self.create_subscription(PoseStamped, 'head_pose', self._on_pose, pose_qos)
+        self.create_subscription(TransformStamped, 'head_transform', self._on_pose, pose_qos)
+        if settings.use_tf:
+            if TFMessage is None:
+                self.get_logger().warn('use_tf is true but tf2_msgs is not installed: /tf is '
+                                       'not subscribed (head_pose and head_transform still are)')
+            else:
+                tf_qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100,
+                                    reliability=ReliabilityPolicy.BEST_EFFORT,
+                                    durability=DurabilityPolicy.VOLATILE)
+                self.create_subscription(TFMessage, '/tf', self._on_tf, tf_qos)
+        scene = settings.scene
+        ghosts = self.sim.ghosts.count if self.sim.ghosts is not None else 0
+        self.get_logger().info(
+            f'ready: {self.sim.guides.count} guides ({scene.groom.guide_nodes} nodes), '
+            f'{ghosts} ghosts ({scene.groom.ghost_nodes} nodes), solver {scene.solver.type}, '
+            f'publishing at {settings.publish_rate_hz:g} Hz')
+
+    # ================================================================ parameters
+    def _declare_all(self) -> None:
+        sf = P.by_name()['scene_file']
+        self.declare_parameter(sf.name, sf.default, descriptor(sf))
+        scene_file = self.get_parameter('scene_file').value
+        self._base = load_base_scene(scene_file)
+        table = P.table(self._base)
+        overrides = getattr(self, '_parameter_overrides', None)
+        for p in table:
+            if p.name == 'scene_file':
+                continue
+            if isinstance(overrides, dict) and p.name in overrides:
+                fixed = _coerce_parameter(p, overrides[p.name])
+                if fixed is not None:            # `-p damping:=2` means 2.0
+                    overrides[p.name] = fixed
+            self.declare_parameter(p.name, p.default, descriptor(p))
+        values = {p.name: _plain(self.get_parameter(p.name).value) for p in table}
+        self._settings = P.make_settings(values, self._base)    # ParamError if invalid
+        self._pending = self._settings
+        self._table = {p.name: p for p in table}
+        self.add_pre_set_parameters_callback(self._pre_set)
+        self.add_on_set_parameters_callback(self._on_set)
+        self.add_post_set_parameters_callback(self._post_set)
+
+    def _pre_set(self, parameters: List[Parameter]) -> List[Parameter]:
+        """Integers given for doubles become doubles (``ros2 param set ... damping 2``)."""
+        out = []
+        for prm in parameters:
+            p = self._table.get(prm.name)
+            fixed = _coerce_parameter(p, prm) if p is not None else None
+            out.append(fixed if fixed is not None else prm)
+        return out
+
+    def _changes(self, parameters: List[Parameter]) -> Dict[str, object]:
+        return {prm.name: _plain(prm.value) for prm in parameters if prm.name in self._table}
+
+    def _on_set(self, parameters: List[Parameter]) -> SetParametersResult:
+        """Validate a candidate change against the pending snapshot; change nothing."""
+        changes = self._changes(parameters)
+        if not changes:
+            return SetParametersResult(successful=True)
+        try:
+            P.apply_changes(self._pending, changes, self._base)
+        except P.ParamError as e:
+            return SetParametersResult(successful=False, reason=str(e))
+        return SetParametersResult(successful=True)
+
+    def _post_set(self, parameters: List[Parameter]) -> None:
+        """Store the accepted change as the snapshot the next step applies."""
+        changes = self._changes(parameters)
+        if not changes:
+            return
+        old = self._pending
+        new = self._pending = P.apply_changes(old, changes, self._base)[0]
+        # timers and threads are not part of a step: they follow at once
+        if new.publish_rate_hz != old.publish_rate_hz:
+            period_ns = int(round(1e9 / new.publish_rate_hz))
+            self._publish_timer.timer_period_ns = period_ns
+            self._idle_timer.timer_period_ns = period_ns
+        if new.diagnostics_rate_hz != old.diagnostics_rate_hz:
+            self._diag_timer.timer_period_ns = int(round(1e9 / new.diagnostics_rate_hz))
+        if new.numba_threads != old.numba_threads:
+            self._apply_threads(new.numba_threads)
+
+    def _apply_threads(self, wanted: int) -> None:
+        """Threads of numba's parallel kernels (0 = all it was started with)."""
+        most = numba.config.NUMBA_NUM_THREADS
+        n = most if wanted <= 0 else min(wanted, most)
+        if wanted > most:
+            self.get_logger().warn(f'numba_threads {wanted} > NUMBA_NUM_THREADS {most}: '
+                                   f'using {most}')
+        numba.set_num_threads(n)
+        self.numba_threads = n
+
+    def _apply_pending(self) -> None:
+        """Adopt the pending snapshot (start of every step/publication); rebuild if needed."""
+        new = self._pending
+        if new is self._settings:
+            return
+        old, self._settings = self._settings, new
+        if new.scene != old.scene:
+            if self.sim.update_scene(new.scene):
+                self.shedder.reset()
+                self.rebuilds += 1
+                self.get_logger().info(
+                    f'groom changed: hair rebuilt ({self.sim.guides.count} guides, '
+                    f'{self.sim.ghosts.count if self.sim.ghosts is not None else 0} ghosts)')
+        self._invalidate()
+
+    # ================================================================ inputs
+    def _reject(self, reason: str) -> None:
+        self.rejected += 1
+        self.get_logger().warn(f'head pose dropped ({self.rejected} so far): {reason}',
+                               throttle_duration_sec=WARN_THROTTLE_S)
+
+    def _on_pose(self, msg) -> None:
+        """A head pose (PoseStamped, TransformStamped or a /tf entry): feed and step."""
+        self._apply_pending()
+        try:
+            sample = pose_from_msg(msg)
+        except (PoseError, TypeError, ValueError) as e:
+            self._reject(str(e))
+            return
+        now_ns = self.get_clock().now().nanoseconds
+        t_ns = sample.t_ns if sample.t_ns > 0 else now_ns
+        if t_ns <= 0:
+            self._reject('stamp is 0 and the node clock has not started '
+                         '(use_sim_time without /clock?)')
+            return
+        offset = self._offset_ns
+        if self._last_stamp_ns is not None and t_ns < self._last_stamp_ns:
+            offset = 0                   # backwards: the simulator resets to this stamp
+        elif self._last_stamp_ns is not None and \
+                self.sim.time_ns > self._last_stamp_ns + offset and \
+                t_ns + offset <= self.sim.time_ns:
+            # The stream resumes behind the time the hair settled to while it was stale
+            # (stamps slower than the node clock): continue one substep after it, do not
+            # freeze.  Output stamps subtract the offset again.
+            offset = self.sim.time_ns + self.sim.dt_ns - t_ns
+        result = self.sim.push_pose(t_ns + offset, sample.position, sample.quaternion)
+        if result is PoseResult.REJECTED:
+            self._reject(self.sim.track.last_rejection)
+            return
+        if result is PoseResult.RESET_BACKWARDS:
+            self.get_logger().info('head pose time went backwards: hair reset',
+                                   throttle_duration_sec=WARN_THROTTLE_S)
+        self._offset_ns = offset
+        self._pose_frame = sample.frame_id
+        self._pose_child = sample.child_frame_id
+        self._last_arrival_ns = now_ns
+        self._last_stamp_ns = t_ns
+        if result.is_reset:
+            self.shedder.reset()
+        self._step(t_ns + offset)
+        if self._settings.publish_on_pose and self._pose_frame_due():
+            self._publish()
+            self._pose_publish_at = time.monotonic()
+        self._shed_load(t_ns)
+
+    def _on_tf(self, msg) -> None:
+        """Pick the head transform out of a TFMessage (``head_frame`` or the prefix)."""
+        self._apply_pending()
+        prefix = self._settings.head_frame_prefix
+        if self._tf_child is not None and not (prefix and self._tf_child.startswith(prefix)):
+            self._tf_child = None        # the prefix changed: choose again
+        now_ns = self.get_clock().now().nanoseconds
+        for tr in msg.transforms:
+            child = str(tr.child_frame_id).lstrip('/')
+            if prefix:
+                if not child.startswith(prefix):
+                    continue
+                stale = (now_ns - self._tf_seen_ns) * 1e-9 > self._settings.stale_timeout
+                if self._tf_child is None or (child != self._tf_child and stale):
+                    if self._tf_child != child:
+                        self.get_logger().info(f'head frame from /tf: {child}')
+                    self._tf_child = child
+                if child != self._tf_child:
+                    continue
+                self._tf_seen_ns = now_ns
+            elif child != self._settings.head_frame.lstrip('/'):
+                continue
+            self._on_pose(tr)
+
+    def _step(self, t_ns: int) -> None:
+        start = time.perf_counter()
+        self.sim.advance_to(t_ns)
+        self.step_ms.append((time.perf_counter() - start) * 1e3)
+        self._has_pose = True
+        self._dirty = True
+
+    def _shed_load(self, stamp_ns: int) -> None:
+        """Track the ghosts once per pose while the steps do not fit the pose period
+        (``load_shedding``; the policy is
+        :class:`~hair_tracking.ros.load_shedding.LoadShedder`)."""
+        s, sim = self._settings, self.sim
+        if not (s.load_shedding and sim.ghost_tracker is not None
+                and sim.scene.tracking.every_substep):    # nothing to shed
+            sim.track_once_per_call = False
+            self._publish_ms_since_pose = 0.0
+            return
+        self.shedder.budget = s.load_shedding_budget
+        c = sim.counters
+        work = self.step_ms[-1] + self._publish_ms_since_pose   # this thread's time per pose
+        self._publish_ms_since_pose = 0.0
+        shed = self.shedder.update(stamp_ns, work, c.last_track_ms, c.last_substeps)
+        if shed != sim.track_once_per_call:
+            sim.track_once_per_call = shed
+            self.get_logger().info(
+                'load shedding: ghosts tracked once per pose (simulating and publishing took '
+                f'more than {s.load_shedding_budget:g} of the pose period)' if shed else
+                'load shedding ended: ghosts tracked as the scene says again')
+
+    def _pose_frame_due(self) -> bool:
+        """``publish_on_pose``: is this pose's frame due?  Once 0.9 publishing periods of
+        *stream* time (the stamps) have passed since the last frame sent this way, or time went
+        back.  Counting stamps rather than wall-clock time makes the set of frames a function of
+        the input alone, as in ``hair_sim_bag run``: poses that DDS delivers in a burst (1 ms
+        apart on the wall clock, 8 ms apart in their stamps) each get their frame, where a
+        wall-clock cap skipped one and the next pose overwrote it before the timer sent it."""
+        t = self.sim.time_ns
+        last = self._pose_published_ns
+        if last is not None and 0 <= t - last < 0.9e9 * self._settings.publish_period:
+            return False
+        self._pose_published_ns = t
+        return True
+
+    def _on_idle_timer(self) -> None:
+        """A stale stream: hold the last pose and let the hair settle on the node clock."""
+        self._apply_pending()
+        if self._last_arrival_ns is None:
+            return
+        now_ns = self.get_clock().now().nanoseconds
+        since = now_ns - self._last_arrival_ns
+        if since * 1e-9 < self._settings.stale_timeout:
+            return
+        target = self._last_stamp_ns + self._offset_ns + since
+        if self.sim.time_ns is not None and target > self.sim.time_ns:
+            self._step(target)
+
+    def _on_reset(self, request, response):
+        self._apply_pending()
+        self.sim.reset()
+        self._invalidate()
+        response.success = True
+        response.message = 'hair reset to its rest shape at the current head pose'
+        self.get_logger().info(response.message)
+        return response
+
+    # ================================================================ outputs
+    def _invalidate(self) -> None:
+        self._dirty = True
+        for out in self.outputs.values():
+            out.cached = None
+
+    def _on_publish_timer(self) -> None:
+        """The publishing rate: resend or rebuild the frame, unless a pose just sent one, or
+        ``publish_on_pose`` sent one within the last period (the poses keep the rate; a resend
+        would repeat their frame: at 10 k ghosts with poses at the publishing rate the timer
+        resent about one 3.2 MB cloud per pose before, and twice as many poses went without a
+        cloud of their own while the node was busy sending them)."""
+        self._apply_pending()
+        now, period = time.monotonic(), self._settings.publish_period
+        if now - self._last_publish < 0.5 * period:
+            return                       # just published from a pose callback
+        if self._settings.publish_on_pose and now - self._pose_publish_at < period:
+            return
+        self._publish()
+
+    def output_frame_id(self) -> str:
+        """frame_id of the published hair (see ``output_frame``)."""
+        s = self._settings
+        if s.output_frame == 'head':
+            return self._pose_child or s.head_frame or 'head'
+        return self._pose_frame or s.fixed_frame or 'world'
+
+    def _publish(self) -> None:
+        """Encode and publish the outputs somebody subscribes to (nothing else is built)."""
+        if not self._has_pose:
+            return
+        outs = self.outputs
+        s = self._settings
+        wanted = {k: o.wanted() for k, o in outs.items()}
+        if not s.publish_guides:
+            wanted['guide_points'] = wanted['guide_markers'] = False
+        self._last_publish = time.monotonic()
+        if not any(wanted.values()):
+            return
+        start = time.perf_counter()
+        for o in outs.values():
+            o.raw.direct = s.publish_through_rcl     # stays False where rcl is not usable
+        if not self._dirty:              # same hair: resend the bytes (keeps markers alive)
+            for k, o in outs.items():
+                if wanted[k] and o.cached is not None:
+                    o.raw.publish(o.cached)
+                    o.published += 1
+                    wanted[k] = False
+            if not any(wanted.values()):
+                return
+        head_frame = s.output_frame == 'head'
+        # the clouds are written from the simulator's state (the ghosts from the tracker's
+        # own layout) into buffers kept per output; a frame is built only for markers
+        frame = None
+        if wanted['markers'] or wanted['guide_markers']:
+            frame = self.sim.frame(head_frame=head_frame, copy=False)
+            self.frames_built += 1
+        frame_id = self.output_frame_id()
+        stamp = max(0, (self.sim.time_ns or 0) - self._offset_ns)   # the stream's time base
+        lifetime_ns = int(round(s.marker_lifetime * 1e9))
+        for key, guides, ns, color in (
+                ('points', False, 'hair', s.marker_color),
+                ('markers', False, 'hair', s.marker_color),
+                ('guide_points', True, 'guides', s.guide_color),
+                ('guide_markers', True, 'guides', s.guide_color)):
+            if not wanted[key]:
+                continue
+            o = outs[key]
+            if key.endswith('points'):
+                n_strands, n_points, write = self.sim.record_writer(guides, head_frame)
+                data = o.cloud.encode(n_strands, n_points, write, frame_id=frame_id,
+                                      stamp_ns=stamp,
+                                      packed_rgb=self._colors(ns, n_strands, color))
+                o.cached = data
+            else:
+                strands = frame.guides if guides else frame.strands
+                shape = (strands.shape[0], s.marker_style)
+                fresh = o.shape != shape
+                data = strands_to_marker_array_cdr(
+                    strands, frame_id=frame_id, stamp_ns=stamp, ns=ns, style=s.marker_style,
+                    width=s.marker_width, color=color, lifetime_ns=lifetime_ns,
+                    delete_all_first=fresh)
+                o.shape = shape
+                o.cached = None if fresh else data     # never resend a DELETEALL
+            o.encoded += 1
+            o.raw.publish(data)
+            o.published += 1
+        self._dirty = False
+        took = (time.perf_counter() - start) * 1e3
+        self.publish_ms.append(took)
+        self._publish_ms_since_pose += took
+
+    def _colors(self, ns: str, n: int, rgba) -> np.ndarray:
+        """(n,) uint32 packed per-strand colours of the cloud (cached)."""
+        return self._color_cache.get(ns, n, rgba)
+
+    # ================================================================ diagnostics
+    def diagnostics(self) -> DiagnosticStatus:
+        """The node's health: timings, substeps, stretch, rejected poses (one status)."""
+        sim = self.sim
+        c = sim.counters
+        level, problems = DiagnosticStatus.OK, []
+        now_ns = self.get_clock().now().nanoseconds
+        if self._last_arrival_ns is None:
+            level, problems = DiagnosticStatus.WARN, ['waiting for a head pose']
+        else:
+            age = (now_ns - self._last_arrival_ns) * 1e-9
+            if age > self._settings.stale_timeout:
+                level = DiagnosticStatus.WARN
+                problems.append(f'head pose stale for {age:.1f} s (holding the last pose)')
+        dropped_before, rejected_before = self._diag_marks
+        if c.substeps_dropped > dropped_before:
+            level = DiagnosticStatus.WARN
+            problems.append(f'{c.substeps_dropped - dropped_before} substeps dropped')
+        if self.rejected > rejected_before:
+            level = DiagnosticStatus.WARN
+            problems.append(f'{self.rejected - rejected_before} head poses rejected')
+        self._diag_marks = (c.substeps_dropped, self.rejected)
+        if sim.track_once_per_call:
+            level = DiagnosticStatus.WARN
+            problems.append('load shedding: ghosts tracked once per pose to keep up')
+        step = list(self.step_ms)[-100:]
+        pub = list(self.publish_ms)[-100:]
+
+        def kv(key, value):
+            return KeyValue(key=key, value=str(value))
+        values = [
+            kv('step_ms_last', f'{step[-1]:.3f}' if step else 'n/a'),
+            kv('step_ms_max_recent', f'{max(step):.3f}' if step else 'n/a'),
+            kv('publish_ms_last', f'{pub[-1]:.3f}' if pub else 'n/a'),
+            kv('publish_ms_max_recent', f'{max(pub):.3f}' if pub else 'n/a'),
+            kv('substeps', c.substeps),
+            kv('substeps_last', c.last_substeps),
+            kv('substeps_dropped', c.substeps_dropped),
+            kv('max_stretch', f'{sim.max_stretch():.6f}'),
+            kv('penetration_m', f'{sim.penetration():.6f}'),
+            kv('poses_rejected', self.rejected),
+            kv('hair_resets', c.resets),
+            kv('hair_rebuilds', self.rebuilds),
+            kv('guides', sim.guides.count),
+            kv('ghosts', sim.ghosts.count if sim.ghosts is not None else 0),
+            kv('sim_time_ns', sim.time_ns if sim.time_ns is not None else 'n/a'),
+            kv('stream_offset_ms', f'{self._offset_ns * 1e-6:.3f}'),
+            kv('numba_threads', self.numba_threads),
+            kv('load_shedding', 'active' if sim.track_once_per_call else
+               ('ready' if self._settings.load_shedding else 'off')),
+            kv('load_shedding_switches', self.shedder.switches),
+            kv('ghost_kernel', 'none' if sim.ghost_tracker is None else
+               ('parallel' if sim.ghost_tracker.threads.in_use else 'serial')),
+            kv('ghost_kernel_switches', 0 if sim.ghost_tracker is None else
+               sim.ghost_tracker.threads.switches),
+            kv('cpu_steal_recent', format_share(self._steal.share())),
+            kv('output_frame', self.output_frame_id()),
+        ]
+        return DiagnosticStatus(level=level, name=f'{self.get_name()}: hair simulation',
+                                message='; '.join(problems) if problems else 'ok',
+                                hardware_id='hair_tracking', values=values)
+
+    def _on_diag_timer(self) -> None:
+        if self._diag_pub.get_subscription_count() == 0:
+            return
+        msg = DiagnosticArray(status=[self.diagnostics()])
+        msg.header.stamp = self.get_clock().now().to_msg()
+        self._diag_pub.publish(msg)
+
+
+# ==================================================================== helpers
+def _plain(value):
+    """A parameter value as plain Python (arrays as lists)."""
+    if isinstance(value, (list, tuple)) or hasattr(value, 'tolist'):
+        return list(value)
+    return value
+
+
+def _coerce_parameter(p: Optional[P.Param], prm: Parameter) -> Optional[Parameter]:
+    """``prm`` with integers turned into doubles where ``p`` is a double (else None)."""
+    if p is None:
+        return None
+    if p.kind == 'double' and prm.type_ == Parameter.Type.INTEGER:
+        return Parameter(prm.name, Parameter.Type.DOUBLE, float(prm.value))
+    if p.kind == 'double_array' and prm.type_ == Parameter.Type.INTEGER_ARRAY:
+        return Parameter(prm.name, Parameter.Type.DOUBLE_ARRAY, [float(v) for v in prm.value])
+    return None
+
+
+def main(args=None) -> int:
+    """Console entry point ``hair_sim_node``: init, spin, clean exit on Ctrl-C.
+
+    Returns 0 on Ctrl-C or an external shutdown, 2 when the start parameters are invalid (the
+    message names the parameter and the allowed values).
+    """
+    node = executor = None
+    code = 0
+    try:
+        rclpy.init(args=args)
+        executor = SingleThreadedExecutor()   # before the node: Ctrl-C may come at any time
+        node = HairSimNode()
+        executor.add_node(node)
+        executor.spin()
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except (P.ParamError, SceneError, ParameterException) as e:
+        print(f'[hair_sim] invalid parameters: {e}', file=sys.stderr)
+        code = 2
+    finally:
+        if executor is not None:
+            executor.shutdown(timeout_sec=1.0)
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return code
+
+
+if __name__ == '__main__':
+    sys.exit(main())
