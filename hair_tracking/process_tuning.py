@@ -1,29 +1,24 @@
-"""Process-wide settings that keep a long-running hair process free of start-up-sized pauses.
+"""Process-wide settings for the executables that run the hair for a long time.
 
-Two causes of pauses that have nothing to do with the simulation itself:
+Each is applied only by an executable's ``main()`` (``hair_sim_node``, ``hair_sim_bag``, the live
+demo), never by a library call or a constructor, and each is switchable from that executable's
+command line (:func:`add_arguments`, :func:`apply`):
 
-* the cyclic garbage collector walking every object rclpy and numba created at start-up
-  (:func:`freeze_heap`);
-* page faults on large message buffers (:func:`retain_freed_memory`).  A 10 k-strand cloud is
-  3.2 MB, and on its way from the encoder to a subscriber in the same process it is copied into
-  fresh buffers five times (encoder, rclpy's serialized message, the DDS change, the reader's
-  sample, the subscriber's ``bytes``).  glibc returns freed memory at the top of a heap to the
-  system once more than ``M_TRIM_THRESHOLD`` is free (its dynamic rule sets that to twice the
-  largest freed ``mmap`` chunk: 6.4 MB here), so each new buffer is mapped again and every one of
-  its 4 KiB pages is faulted in and zeroed by the kernel.  Measured with perf in
-  ``scripts/bench_latency.py`` at 10 k ghosts: page faults, page clearing and the memory cgroup's
-  accounting took more CPU than the simulation, and ``munmap`` holding the address-space lock
-  slowed the numba threads too (node step 13 ms against 4.8 ms standalone).  Keeping freed
-  memory mapped cut the pose-to-cloud latency from 32-34 ms to 12 ms median in the same run.
+* ``--malloc-retain-mb`` (:func:`retain_freed_memory`): glibc keeps freed memory mapped for reuse,
+  so the large message buffers a cloud is copied through are not faulted in page by page again;
+* ``--omp-wait-policy`` (:func:`set_omp_wait_policy`): numba's idle OpenMP workers sleep instead of
+  spinning, leaving the cores to the executor and DDS threads;
+* ``--no-gc-freeze`` (:func:`freeze_heap`, on by default): the objects made at start-up are taken
+  out of the cyclic garbage collector's reach once the process is set up.
 """
 import ctypes
 import ctypes.util
 import gc
 import os
-from typing import Optional
+from typing import List, Optional
 
-#: Default of the node's ``malloc_retain_mb`` and what the bag tools (record, play, the live
-#: demo) use: a few clouds' worth of copies, small next to a desktop's memory.
+#: Default of ``--malloc-retain-mb``: a few clouds' worth of copies, small next to a desktop's
+#: memory.
 DEFAULT_RETAIN_MB = 256
 # mallopt(3) parameter numbers (glibc malloc.h)
 M_TRIM_THRESHOLD = -1
@@ -36,10 +31,10 @@ def freeze_heap() -> None:
     """Take every object alive now out of the cyclic garbage collector's reach (``gc.freeze``).
 
     Call it once the process is set up (modules imported, kernels loaded, the hair built).  A
-    full collection walks every tracked object: with rclpy and numba loaded (about 120 k
-    objects) that is 67 ms on this machine, a pause that lands on whatever frame triggers it.
-    Frozen objects are never examined again; what the loop allocates later is collected as
-    usual.  Garbage made before the call is collected first.
+    full collection walks every tracked object (some 10^5 with rclpy and numba loaded), a pause
+    of tens of milliseconds on whatever frame triggers it; frozen objects are never examined
+    again, what the loop allocates later is collected as usual.  Garbage made before the call is
+    collected first.
     """
     gc.collect()
     gc.freeze()
@@ -64,8 +59,10 @@ def retain_freed_memory(megabytes: int) -> str:
     """Let glibc keep up to ``megabytes`` of freed heap memory mapped for reuse.
 
     Sets ``M_TRIM_THRESHOLD`` to ``megabytes`` and ``M_MMAP_THRESHOLD`` to 32 MiB, so message
-    buffers up to 32 MiB come from the heap and, once freed, are reused without page faults
-    (see the module docstring for the measurement).  The cost is memory: the process keeps up
+    buffers up to 32 MiB come from the heap and, once freed, are reused without page faults.
+    glibc's own rule returns freed memory at the top of the heap once more than twice the
+    largest freed chunk is free, so a process that copies multi-megabyte clouds maps and faults
+    in fresh pages for every copy.  The cost is memory: the process keeps up
     to ``megabytes`` more resident than it uses at a time.  Process-wide, and can be called at
     any time.
 
@@ -73,7 +70,7 @@ def retain_freed_memory(megabytes: int) -> str:
     already sets malloc tunables (the user's choice wins) or when the C library is not glibc.
     """
     if megabytes <= 0:
-        return 'malloc_retain_mb 0: glibc malloc defaults kept'
+        return 'malloc retention 0: glibc malloc defaults kept'
     if 'glibc.malloc.' in os.environ.get('GLIBC_TUNABLES', ''):
         return 'GLIBC_TUNABLES sets malloc tunables: left as they are'
     libc = _glibc()
@@ -87,7 +84,7 @@ def retain_freed_memory(megabytes: int) -> str:
     return f'malloc keeps up to {trim >> 20} MB of freed memory for reuse'
 
 
-#: Values of the node's ``omp_wait_policy``.
+#: Values of ``--omp-wait-policy``.
 OMP_WAIT_POLICIES = ('passive', 'active', 'environment')
 
 
@@ -105,13 +102,9 @@ def set_omp_wait_policy(policy: str) -> str:
     """How numba's idle OpenMP worker threads wait for the next parallel region.
 
     libgomp's default (``active`` for a while) spins: after each parallel region the worker
-    burns its core until the next one or a spin limit.  Measured here: a 10 k-element parallel
-    loop followed by a 2 ms sleep cost 1.86 ms of CPU per round with the default against 0.04
-    ms passive.  A node shares its two cores with the rclpy executor, the DDS threads and, in
-    ``scripts/bench_latency.py``, the probe taking each cloud; spinning workers took that time
-    from them (10 k ghosts, six alternated pairs: pose -> cloud p99 16.1-18.3 ms with the
-    default, 14.6-16.3 ms in five of six runs passive, medians alike).  ``passive`` sets
-    ``OMP_WAIT_POLICY=PASSIVE`` before the OpenMP layer starts: workers sleep at once.
+    burns its core until the next one or a spin limit, CPU time a node needs for its executor
+    and DDS threads.  ``passive`` sets ``OMP_WAIT_POLICY=PASSIVE`` before the OpenMP layer
+    starts: workers sleep at once.
 
     Only takes effect before numba launches its threads (call it before ``set_num_threads``
     or any parallel kernel) and only when the environment does not set the variable already
@@ -128,3 +121,30 @@ def set_omp_wait_policy(policy: str) -> str:
         return f'OpenMP threads already started: wait policy {policy} not applied'
     os.environ['OMP_WAIT_POLICY'] = policy.upper()
     return f'OpenMP worker threads wait {policy} (OMP_WAIT_POLICY={policy.upper()})'
+
+
+def add_arguments(parser) -> None:
+    """Add the process settings to an executable's ``argparse`` parser."""
+    g = parser.add_argument_group(
+        'process settings', 'process-wide, applied once at start by this executable')
+    g.add_argument('--malloc-retain-mb', type=int, default=DEFAULT_RETAIN_MB, metavar='MB',
+                   help='freed memory glibc keeps mapped for reuse, so large message buffers '
+                        'are not faulted in again page by page; 0 keeps glibc\'s defaults; '
+                        'GLIBC_TUNABLES wins (default: %(default)s)')
+    g.add_argument('--omp-wait-policy', choices=OMP_WAIT_POLICIES, default='passive',
+                   help='how idle OpenMP worker threads of the numba kernels wait: passive '
+                        'sleeps, active spins first (libgomp\'s default), environment leaves '
+                        'OMP_WAIT_POLICY alone; an OMP_WAIT_POLICY in the environment wins '
+                        '(default: %(default)s)')
+    g.add_argument('--no-gc-freeze', dest='gc_freeze', action='store_false',
+                   help='do not freeze the objects made at start-up out of the garbage '
+                        "collector's reach once set up (default: freeze)")
+
+
+def apply(args) -> List[str]:
+    """Apply the memory and thread settings of :func:`add_arguments` (before numba starts its
+    threads); returns what was done, for the log.  The GC freeze is the caller's, once set up."""
+    if not 0 <= args.malloc_retain_mb <= 2047:
+        raise ValueError(f'--malloc-retain-mb must be in [0, 2047], got {args.malloc_retain_mb}')
+    return [set_omp_wait_policy(args.omp_wait_policy),
+            retain_freed_memory(args.malloc_retain_mb)]

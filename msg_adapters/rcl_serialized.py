@@ -21,16 +21,25 @@ the duration of a foreign call:
 * :class:`SerializedTaker` takes into one buffer it keeps (grown when a message is larger),
   and returns a read-only view of it, valid until the next take.
 
-Both fall back to rclpy's own calls when ``librcl`` cannot be found in the process (the entry
-points are part of rcl's public C API: ``rcl/publisher.h``, ``rcl/subscription.h``; the message
-struct is ``rcutils_uint8_array_t``).  Linux only: the libraries are located through the
-process's own memory map when the dynamic loader does not know them by name.
+The entry points are part of rcl's public C API (``rcl/publisher.h``, ``rcl/subscription.h``;
+the message struct is ``rcutils_uint8_array_t``), but the structure layouts are written out here
+by hand and the rcl pointer is read from rclpy's handle, which is not rclpy's public API.  So the
+direct path is opt-in (``SerializedPublisher(..., direct=True)``, the node's
+``publish_through_rcl``) and used only with the rclpy release it was verified against
+(:data:`VERIFIED_RCLPY`); with any other release, or where ``librcl`` cannot be found in the
+process, :func:`unusable_reason` says why and the publisher keeps rclpy's own ``publish``.
+Linux only: the libraries are located through the process's own memory map when the dynamic
+loader does not know them by name.
 """
 import ctypes
+import importlib.metadata
 import os
 from typing import Optional
 
 import numpy as np
+
+#: The rclpy release (Jazzy) whose rcl structures and handles this module was verified against.
+VERIFIED_RCLPY = '7.1.5'
 
 
 class _Allocator(ctypes.Structure):
@@ -122,9 +131,30 @@ def _libs():
     return _LIBS
 
 
+def rclpy_version() -> Optional[str]:
+    """The installed rclpy's version (its package metadata), None if it has none."""
+    try:
+        return importlib.metadata.version('rclpy')
+    except importlib.metadata.PackageNotFoundError:
+        return None
+
+
+def unusable_reason(publisher=None) -> Optional[str]:
+    """Why rcl cannot be called directly here (for ``publisher``, if given), or None."""
+    version = rclpy_version()
+    if version != VERIFIED_RCLPY:
+        return (f'rclpy {version or "of unknown version"} is not {VERIFIED_RCLPY}, the release '
+                'the direct rcl path was verified against')
+    if _libs() is None:
+        return 'librcl / librcutils are not loaded in this process'
+    if publisher is not None and not hasattr(publisher.handle, 'pointer'):
+        return 'the rclpy publisher does not expose its rcl pointer'
+    return None
+
+
 def available() -> bool:
     """True when rcl's serialized publish and take can be called directly in this process."""
-    return _libs() is not None
+    return unusable_reason() is None
 
 
 def _rcl_error(what: str, ret: int) -> RuntimeError:
@@ -146,17 +176,14 @@ def _byte_view(data) -> np.ndarray:
 class SerializedPublisher:
     """Publish serialized messages of an rclpy publisher through rcl, the GIL released."""
 
-    def __init__(self, publisher, direct: Optional[bool] = None):
-        """``direct``: None = through rcl when :func:`available`, False = always rclpy's own
-        ``publish`` (for comparison), True = through rcl or raise."""
+    def __init__(self, publisher, direct: bool = False):
+        """``direct``: False (default) = rclpy's own ``publish``; True = through rcl where
+        :func:`unusable_reason` finds nothing against it, else rclpy's ``publish`` (the reason
+        is in :attr:`reason`)."""
         self.publisher = publisher
-        # rclpy's handle must expose the rcl pointer (it does since Humble's pybind11 port)
-        usable = available() and hasattr(publisher.handle, 'pointer')
-        if direct and not usable:
-            raise RuntimeError('rcl cannot be called directly here: librcl / librcutils not '
-                               'loaded, or the rclpy publisher does not expose its rcl pointer')
-        self._usable = usable
-        self._direct = usable if direct is None else bool(direct)
+        #: why the direct path cannot be used here (None where it can)
+        self.reason = unusable_reason(publisher)
+        self._direct = bool(direct) and self.reason is None
 
     @property
     def direct(self) -> bool:
@@ -165,8 +192,8 @@ class SerializedPublisher:
 
     @direct.setter
     def direct(self, value: bool) -> None:
-        """Asking for rcl where it cannot be used keeps rclpy's path."""
-        self._direct = bool(value) and self._usable
+        """Asking for rcl where it cannot be used keeps rclpy's path (see :attr:`reason`)."""
+        self._direct = bool(value) and self.reason is None
 
     def publish(self, data) -> None:
         """Publish ``data``, the CDR bytes of one message of the publisher's type."""
@@ -195,8 +222,9 @@ class SerializedTaker:
     """
 
     def __init__(self, subscription, capacity: int = 1 << 20):
-        if not available():
-            raise RuntimeError('librcl / librcutils are not loaded in this process')
+        reason = unusable_reason()
+        if reason is not None:
+            raise RuntimeError(f'rcl cannot be called directly here: {reason}')
         self.subscription = subscription
         rcutils = _libs()[1]
         self._msg = _Uint8Array()

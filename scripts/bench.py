@@ -49,7 +49,7 @@ from hair_tracking.core.groom import make_groom  # noqa: E402
 from hair_tracking.core.head_track import IDENTITY  # noqa: E402
 from hair_tracking.core.model import StrandSet  # noqa: E402
 from hair_tracking.core.scene import Scene  # noqa: E402
-from hair_tracking.cpu_steal import format_share, StealMeter  # noqa: E402
+from cpu_steal import format_share, StealMeter  # noqa: E402  (scripts/cpu_steal.py)
 from hair_tracking.ghosts.tracker import GhostTracker  # noqa: E402
 from hair_tracking.guides.solver import GuideSolver  # noqa: E402
 

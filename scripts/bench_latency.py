@@ -39,8 +39,9 @@ from visualization_msgs.msg import MarkerArray
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
-from hair_tracking import params as P  # noqa: E402
-from hair_tracking.cpu_steal import format_share, StealMeter  # noqa: E402
+from hair_tracking import process_tuning  # noqa: E402
+from hair_tracking.core import params as P  # noqa: E402
+from cpu_steal import format_share, StealMeter  # noqa: E402  (scripts/cpu_steal.py)
 from hair_tracking.ros.node import HairSimNode  # noqa: E402
 from msg_adapters.pose import pose_stamped_msg  # noqa: E402
 from msg_adapters.rcl_serialized import SerializedTaker, SerializedWaiter  # noqa: E402
@@ -177,6 +178,8 @@ def run_case(ghosts, mode, args, domain_id):
     node_type = timed_node(clock) if args.stages else HairSimNode
     node = node_type(context=ctx, parameter_overrides=[
         Parameter(k, value=v) for k, v in overrides.items()])
+    if args.gc_freeze:
+        process_tuning.freeze_heap()      # as hair_sim_node's main() does once set up
     probe = rclpy.create_node('bench_probe', context=ctx)
     sent, received = {}, {}
     lock = threading.Lock()
@@ -342,8 +345,11 @@ def main(argv=None):
     ap.add_argument('--switch-interval', type=float, default=0.0005,
                     help="Python's GIL switch interval [s] (default 5 ms makes the node wait "
                          'for the probe threads)')
+    process_tuning.add_arguments(ap)
     args = ap.parse_args(argv)
     args.set = dict(args.set)
+    for line in process_tuning.apply(args):     # as hair_sim_node's main() does
+        print(line)
     os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
     sys.setswitchinterval(args.switch_interval)
 

@@ -17,7 +17,7 @@ import sys
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, ROOT)
 
-from hair_tracking import head_motion as hm  # noqa: E402
+from hair_tracking.bags import head_motion as hm  # noqa: E402
 
 DEFAULT_BVH = '/work/shared/data/head_motion/cmu_131_01_walk.bvh'
 

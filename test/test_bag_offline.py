@@ -165,7 +165,6 @@ def test_deterministic_output(walk_bag, tmp_path):
     sa = run_bag(walk_bag, a, settings, RunOptions(duration_s=0.8))
     sb = run_bag(walk_bag, b, settings, RunOptions(duration_s=0.8, storage='sqlite3'))
     assert sa.frames == sb.frames > 0
-    assert all(s.cpu_steal is None or 0.0 <= s.cpu_steal <= 1.0 for s in (sa, sb))
     for topic in ('/hair/points', '/hair/markers', '/diagnostics', '/head_pose'):
         ma, mb = _messages(a, topic), _messages(b, topic)
         assert len(ma) == len(mb) > 0

@@ -79,9 +79,7 @@ def test_rebuild_policy_is_the_groom_and_read_only_are_start_settings():
     assert rebuild == {n for n in table if n.startswith('groom.')}
     assert {n for n, p in table.items() if p.read_only} == {'scene_file', 'warmup', 'use_tf',
                                                             'pose_queue_depth',
-                                                            'output_queue_depth',
-                                                            'omp_wait_policy',
-                                                            'malloc_retain_mb'}
+                                                            'output_queue_depth'}
     assert not any(p.rebuild and p.read_only for p in table.values())
     for p in table.values():
         assert p.description and p.full_description().startswith(p.description)

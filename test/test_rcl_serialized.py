@@ -40,8 +40,35 @@ def spin_until(executor, cond, what, timeout=10.0):
     raise AssertionError(f'timed out waiting for {what}')
 
 
-def test_rcl_is_found_in_the_process():
-    assert rs.available()          # the wheels and a ROS install both load librcl with rclpy
+def test_rcl_is_found_in_the_process_with_the_verified_rclpy():
+    assert rs.rclpy_version() == rs.VERIFIED_RCLPY     # the release the Makefile installs
+    assert rs.available() and rs.unusable_reason() is None
+
+
+def test_another_rclpy_release_keeps_rclpys_publish_and_says_why(ros, monkeypatch):
+    ctx, node, executor = ros
+    got = []
+    node.create_subscription(String, 'other', got.append, QOS)
+    pub = node.create_publisher(String, 'other', QOS)
+    spin_until(executor, lambda: pub.get_subscription_count() > 0, 'the match')
+    monkeypatch.setattr(rs, 'VERIFIED_RCLPY', '0.0.0')
+    plain = rs.SerializedPublisher(pub, direct=True)
+    assert plain.direct is False
+    assert 'is not 0.0.0, the release the direct rcl path was verified against' in plain.reason
+    plain.direct = True
+    assert plain.direct is False
+    plain.publish(serialize_message(String(data='via rclpy')))
+    spin_until(executor, lambda: got, 'the message')
+    assert got[0].data == 'via rclpy'
+    with pytest.raises(RuntimeError, match='verified against'):
+        rs.SerializedTaker(node.create_subscription(String, 'other', lambda m: None, QOS))
+
+
+def test_rclpys_publish_is_the_default(ros):
+    ctx, node, executor = ros
+    pub = node.create_publisher(String, 'default', QOS)
+    assert rs.SerializedPublisher(pub).direct is False
+    assert rs.SerializedPublisher(pub, direct=True).direct is True
 
 
 def test_published_bytes_reach_an_ordinary_subscriber_unchanged(ros):
@@ -54,7 +81,7 @@ def test_published_bytes_reach_an_ordinary_subscriber_unchanged(ros):
     node.create_subscription(PointCloud2, 'cloud', got.append, QOS)
     pub = node.create_publisher(PointCloud2, 'cloud', QOS)
     spin_until(executor, lambda: pub.get_subscription_count() > 0, 'the match')
-    direct = rs.SerializedPublisher(pub)
+    direct = rs.SerializedPublisher(pub, direct=True)
     assert direct.direct
     for data in (cloud, bytearray(cloud), np.frombuffer(cloud, np.uint8), memoryview(cloud)):
         direct.publish(data)
@@ -82,7 +109,7 @@ def test_taker_gets_each_message_once_in_order_and_grows_its_buffer(ros):
     assert waiter.wait(0.01) == []
     texts = ['short', 'x' * 5000, 'mid' * 50]
     for t in texts:
-        rs.SerializedPublisher(pub).publish(serialize_message(String(data=t)))
+        rs.SerializedPublisher(pub, direct=True).publish(serialize_message(String(data=t)))
     assert waiter.wait(5.0) == [sub]
     got = []
     while len(got) < len(texts):
@@ -129,7 +156,7 @@ def test_a_reader_thread_gets_every_cloud_and_its_wait_lets_python_run(ros):
             count += 1
         assert time.monotonic() - start < 0.6 and count > 1000
         for _ in range(5):
-            rs.SerializedPublisher(pub).publish(cloud)
+            rs.SerializedPublisher(pub, direct=True).publish(cloud)
         deadline = time.monotonic() + 10.0
         while len(sizes) < 5 and time.monotonic() < deadline:
             time.sleep(0.01)
@@ -143,7 +170,7 @@ def test_a_reader_thread_gets_every_cloud_and_its_wait_lets_python_run(ros):
 def test_a_destroyed_publisher_raises_instead_of_crashing(ros):
     ctx, node, executor = ros
     pub = node.create_publisher(String, 'gone', QOS)
-    direct = rs.SerializedPublisher(pub)
+    direct = rs.SerializedPublisher(pub, direct=True)
     node.destroy_publisher(pub)
     with pytest.raises(Exception):
         direct.publish(serialize_message(String(data='late')))
@@ -168,12 +195,10 @@ def test_without_the_rcl_pointer_publishing_stays_on_rclpy(ros):
     node.create_subscription(String, 'plain', got.append, QOS)
     pub = node.create_publisher(String, 'plain', QOS)
     spin_until(executor, lambda: pub.get_subscription_count() > 0, 'the match')
-    plain = rs.SerializedPublisher(_HandleWithoutPointer(pub))
-    assert plain.direct is False
+    plain = rs.SerializedPublisher(_HandleWithoutPointer(pub), direct=True)
+    assert plain.direct is False and 'rcl pointer' in plain.reason
     plain.direct = True                     # what the node's publish_through_rcl does
     assert plain.direct is False
     plain.publish(bytearray(serialize_message(String(data='via rclpy'))))
     spin_until(executor, lambda: got, 'the message')
     assert got[0].data == 'via rclpy'
-    with pytest.raises(RuntimeError, match='rcl pointer'):
-        rs.SerializedPublisher(_HandleWithoutPointer(pub), direct=True)

@@ -25,6 +25,7 @@ from typing import List, Optional
 
 import numpy as np
 
+from hair_tracking import process_tuning
 from hair_tracking.bags.io import (BagError, EXIT_CONTENT, EXIT_FAILURE, EXIT_INPUT,
                                    EXIT_INTERRUPTED, EXIT_OK,
                                    EXIT_OUTPUT, EXIT_USAGE, POSE_KINDS, STORAGES)
@@ -236,7 +237,8 @@ def cmd_run(args) -> int:
         bar.update(done)
 
     try:
-        summary = run_bag(src, args.output, settings, opts, progress)
+        summary = run_bag(src, args.output, settings, opts, progress,
+                          after_setup=process_tuning.freeze_heap if args.gc_freeze else None)
     finally:
         if bar is not None:
             bar.close()
@@ -363,6 +365,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--no-head-pose', action='store_true', help='do not copy /head_pose')
     p.add_argument('--overwrite', action='store_true', help='replace an existing output')
     p.add_argument('-q', '--quiet', action='store_true', help='no progress bar')
+    process_tuning.add_arguments(p)
     p.set_defaults(func=cmd_run)
 
     # ---- play
@@ -382,6 +385,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--delay', type=float, default=0.0, help='sleep this long before playing')
     p.add_argument('--domain-id', type=int, help='ROS_DOMAIN_ID to use')
     p.add_argument('-q', '--quiet', action='store_true', help='no progress line')
+    process_tuning.add_arguments(p)
     p.set_defaults(func=cmd_play)
 
     # ---- record
@@ -402,6 +406,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--domain-id', type=int, help='ROS_DOMAIN_ID to use')
     p.add_argument('--overwrite', action='store_true', help='replace an existing output')
     p.add_argument('-q', '--quiet', action='store_true', help='no progress line')
+    process_tuning.add_arguments(p)
     p.set_defaults(func=cmd_record)
 
     # ---- render
@@ -428,6 +433,11 @@ def main(argv: Optional[List[str]] = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
+        if hasattr(args, 'malloc_retain_mb'):       # run, play, record: process-wide settings
+            try:
+                process_tuning.apply(args)
+            except ValueError as e:
+                raise BagError(str(e), EXIT_USAGE) from None
         return int(args.func(args) or 0)
     except BagError as exc:
         print(f'hair_sim_bag {args.command}: error: {exc}', file=sys.stderr)

@@ -31,7 +31,6 @@ from hair_tracking.bags.io import BagError, EXIT_CONTENT, EXIT_FAILURE, EXIT_USA
 from hair_tracking.core.params import make_settings, NODE_NAME, ParamError, Settings
 from hair_tracking.core.scene import Scene, SceneError
 from hair_tracking.core.strand_colors import StrandColorCache
-from hair_tracking.cpu_steal import format_share, StealMeter
 
 POINTS_TOPIC = '/hair/points'
 MARKERS_TOPIC = '/hair/markers'
@@ -247,7 +246,6 @@ class RunSummary:
     strands: int = 0
     nodes: int = 0
     finite: bool = True
-    cpu_steal: Optional[float] = None    # CPU share the hypervisor took during the loop
 
     @property
     def ms_per_pose(self) -> float:
@@ -271,8 +269,7 @@ class RunSummary:
             f'{self.ms_per_pose:.2f} ms per pose (simulation median {np.median(sim):.2f} ms, '
             f'p95 {np.percentile(sim, 95):.2f} ms)',
             f'real-time factor: {self.realtime_factor:.1f}x '
-            f'({self.bag_duration_s:.2f} s of recording in {self.loop_s:.2f} s; CPU time '
-            f'stolen by the hypervisor meanwhile: {format_share(self.cpu_steal)})',
+            f'({self.bag_duration_s:.2f} s of recording in {self.loop_s:.2f} s)',
             f'max stretch: {self.max_stretch * 100:.4f} %; deepest head penetration: '
             f'{self.max_penetration_m * 1e3:.3f} mm',
             f'poses rejected: {self.rejected}; resets: {self.resets}; substeps: {self.substeps} '
@@ -318,14 +315,16 @@ class Progress:
 
 def run_bag(input_path: str, output_path: str, settings: Settings,
             options: Optional[RunOptions] = None,
-            progress: Optional[Callable[[int, int], None]] = None) -> RunSummary:
+            progress: Optional[Callable[[int, int], None]] = None,
+            after_setup: Optional[Callable[[], None]] = None) -> RunSummary:
     """Simulate the hair on the head poses of ``input_path`` and write ``output_path``.
 
     Returns the summary; raises BagError for unusable input or output (nothing is left at the
-    output path then).  ``progress(done, total)`` is called as poses are processed.
+    output path then).  ``progress(done, total)`` is called as poses are processed,
+    ``after_setup()`` once the hair is built and the kernels are loaded, before the loop (the
+    ``hair_sim_bag run`` executable freezes its start-up objects there).
     """
     from hair_tracking.core.head_track import PoseResult
-    from hair_tracking.process_tuning import freeze_heap, retain_freed_memory
     from hair_tracking.simulator import HairSimulator, warm_up
 
     opt = options or RunOptions()
@@ -351,13 +350,13 @@ def run_bag(input_path: str, output_path: str, settings: Settings,
         raise BagError('the output frame is empty (set fixed_frame / head_frame)', EXIT_CONTENT)
 
     t_setup = time.perf_counter()
-    retain_freed_memory(settings.malloc_retain_mb)
     warm_up(scene)      # compile or load every kernel here, not inside the timed loop
     sim = HairSimulator(scene)
     enc = FrameEncoder(settings)
     if opt.points:      # load (or compile) the cloud's compiled point writer outside the loop
         enc.points(np.zeros((1, 2, 3)), 'warmup', 1)
-    freeze_heap()
+    if after_setup is not None:
+        after_setup()
     summary.setup_s = time.perf_counter() - t_setup
 
     custom = {'hair_tracking.input': os.path.basename(str(input_path)),
@@ -388,7 +387,6 @@ def run_bag(input_path: str, output_path: str, settings: Settings,
         total = len(poses)
         worst_stretch = worst_depth = 0.0
         t_loop = time.perf_counter()
-        steal = StealMeter()
         for i in range(total):
             t = int(poses.t_ns[i])
             log_t = int(poses.log_ns[i])
@@ -437,7 +435,6 @@ def run_bag(input_path: str, output_path: str, settings: Settings,
             if progress is not None:
                 progress(i + 1, total)
         summary.loop_s = time.perf_counter() - t_loop
-        summary.cpu_steal = steal.share()
         summary.max_stretch = worst_stretch
         summary.max_penetration_m = worst_depth
         summary.rejected = poses.invalid + sim.track.counters['rejected']

@@ -25,7 +25,6 @@ from typing import Callable, Dict, List, Optional, Sequence
 
 from hair_tracking.bags import io as bag_io
 from hair_tracking.bags.io import BagError, EXIT_CONTENT, EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE
-from hair_tracking.process_tuning import DEFAULT_RETAIN_MB, retain_freed_memory
 
 CLOCK_TOPIC = '/clock'
 
@@ -275,7 +274,6 @@ def main_play(args) -> int:
     remap = parse_remaps(args.remap)
     if args.delay < 0 or args.wait_for_subscribers < 0:
         raise BagError('--delay and --wait-for-subscribers must be >= 0', EXIT_USAGE)
-    retain_freed_memory(DEFAULT_RETAIN_MB)     # each played message is a fresh buffer
     kwargs = {} if args.domain_id is None else {'domain_id': args.domain_id}
     rclpy.init(args=None, **kwargs)
     node = player = None

@@ -21,7 +21,6 @@ from typing import Callable, Dict, List, Optional, Sequence
 from hair_tracking.bags import io as bag_io
 from hair_tracking.bags.io import BagError, EXIT_OK, EXIT_USAGE
 from hair_tracking.bags.play import check_topic_name, message_class
-from hair_tracking.process_tuning import DEFAULT_RETAIN_MB, retain_freed_memory
 
 #: never recorded with --all (rosout is noise; parameter events are per node)
 _SKIP_ALL = ('/rosout', '/parameter_events')
@@ -189,7 +188,6 @@ def main_record(args) -> int:
     def on_term(signum, frame):
         raise KeyboardInterrupt
     previous = signal.signal(signal.SIGTERM, on_term)
-    retain_freed_memory(DEFAULT_RETAIN_MB)     # each recorded cloud is a fresh large buffer
     kwargs = {} if args.domain_id is None else {'domain_id': args.domain_id}
     rclpy.init(args=None, **kwargs)
     node = rec = None

@@ -27,7 +27,6 @@ from typing import Any, Dict, Iterable, Mapping, Optional, Tuple
 import yaml
 
 from hair_tracking.core.scene import RULES, Scene, SceneError
-from hair_tracking.process_tuning import DEFAULT_RETAIN_MB, OMP_WAIT_POLICIES
 
 NODE_NAME = 'hair_sim'
 
@@ -345,11 +344,11 @@ NODE_PARAMS: Tuple[Param, ...] = (
           'also publish right after a pose was simulated when a publishing period of stream '
           'time (pose stamps) has passed (lower latency; at most publish_rate_hz frames per '
           'second of stream time)'),
-    Param('publish_through_rcl', 'bool', True,
-          "hand the encoded outputs to rcl's serialized publish directly (ctypes, the GIL "
-          "released, no extra copy) instead of rclpy's Publisher.publish, which copies them "
-          'once more and holds the GIL while the middleware copies them; same bytes either '
-          'way. Falls back to rclpy when librcl is not found in the process'),
+    Param('publish_through_rcl', 'bool', False,
+          "opt-in: hand the encoded outputs to rcl's serialized publish directly (ctypes, the "
+          "GIL released, no extra copy) instead of rclpy's Publisher.publish; same bytes "
+          'either way. Used only with the rclpy release it was verified against; anywhere '
+          "else the node logs why and keeps rclpy's publish"),
     Param('publish_guides', 'bool', False,
           'also publish the guide strands on hair/guides/points and hair/guides/markers'),
     Param('marker_style', 'string', 'line_list',
@@ -376,27 +375,11 @@ NODE_PARAMS: Tuple[Param, ...] = (
     Param('load_shedding', 'bool', True,
           'when simulating and publishing a pose take longer than load_shedding_budget of the '
           'pose period (median of 8 poses), track the ghosts once per pose instead of every '
-          'substep until the full schedule fits again; keeps a live stream from queueing up '
-          '(10 k ghosts on 2 cores: 200-330 ms latency without). Never used by hair_sim_bag '
-          'run'),
+          'substep until the full schedule fits again; keeps a live stream from queueing up. '
+          'Never used by hair_sim_bag run'),
     Param('load_shedding_budget', 'double', 0.7,
           'share of the pose period that simulating and publishing a pose may take before load '
           'shedding starts (it ends below 2/3 of that)', lo=0.05, hi=10.0),
-    Param('omp_wait_policy', 'string', 'passive',
-          "how numba's idle OpenMP worker threads wait between parallel regions: passive "
-          "sleeps at once and leaves the cores to the executor, DDS and other threads; active "
-          "spins first (libgomp's default: 1.8 ms of CPU after every region here; p99 of "
-          'pose -> cloud at 10 k ghosts 16-18 ms against 15-16 passive); environment leaves '
-          'OMP_WAIT_POLICY alone. Applied at start before numba starts its threads; an '
-          'OMP_WAIT_POLICY in the environment wins', choices=OMP_WAIT_POLICIES,
-          read_only=True),
-    Param('malloc_retain_mb', 'int', DEFAULT_RETAIN_MB,
-          'freed memory glibc keeps mapped for reuse (process-wide mallopt: trim threshold, '
-          'and buffers up to 32 MB from the heap). Large clouds are copied into fresh buffers '
-          'several times on their way to DDS; returning those to the system makes every copy '
-          'fault in its pages again (10 k ghosts: latency 33 -> 12 ms). 0 = glibc defaults; '
-          'ignored when GLIBC_TUNABLES sets malloc tunables', unit='MB', lo=0, hi=2047,
-          read_only=True),
 )
 
 
@@ -511,7 +494,8 @@ def render_yaml(node_name: str = NODE_NAME, base: Optional[Scene] = None) -> str
     """
     lines = [
         f'# Parameters of the {node_name} node (hair_tracking).  Generated from the table in',
-        '# hair_tracking/params.py (python -m hair_tracking.core.params > config/hair_sim.yaml).',
+        '# hair_tracking/core/params.py:',
+        '#   python -m hair_tracking.core.params > config/hair_sim.yaml',
         '#   ros2 run hair_tracking hair_sim_node --ros-args --params-file config/hair_sim.yaml',
         '# Doubles are written with a decimal point (1.0, -3.0): ROS 2 types parameters by how',
         '# the value is written.  (ro) read-only, set at start; (rebuild) a change rebuilds the',

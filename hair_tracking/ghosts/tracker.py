@@ -47,7 +47,6 @@ from hair_tracking.ghosts.kernels import (block_groups, chunk_count, copy_blocks
 from hair_tracking.ghosts.weights import arc_fractions, elastic_code
 from hair_tracking.guides.collision import Collider
 from hair_tracking.guides.integrate import runs_parallel
-from hair_tracking.parallel_choice import ParallelChooser
 
 
 class GhostTracker:
@@ -203,11 +202,8 @@ class GhostTracker:
         self.stats: Dict[str, int] = {
             'ghosts': int(s_count), 'groups': int(n_groups),
             'largest_group': int(group_size.max()) if n_groups else 0,
-            'steps': 0, 'clamped': 0, 'contacts': 0, 'parallel': 0, 'thread_switches': 0,
+            'steps': 0, 'clamped': 0, 'contacts': 0, 'parallel': 0,
         }
-        #: parallel kernel or serial twin, whichever the timings favour (see
-        #: :mod:`hair_tracking.parallel_choice`; same results either way)
-        self.threads = ParallelChooser()
 
     # ------------------------------------------------------------------ API
     def release(self) -> None:
@@ -300,8 +296,9 @@ class GhostTracker:
             np.copyto(self._x_prev, self.positions())
         self._take()
         nodes = self._xb.size // 3
-        self.threads.timed(
-            runs_parallel(nodes), track_groups, track_groups_serial,
+        parallel = runs_parallel(nodes)
+        kernel = track_groups if parallel else track_groups_serial
+        kernel(
             self._xb, self._vb, self.ghosts.rest, self._seg_len_blocks, self.order,
             self.group_start, self.block_group, self.group_guide, self._group_row,
             self._node_table, self._node_row, self._rest_off_blocks, self._root_blocks,
@@ -315,8 +312,7 @@ class GhostTracker:
             self._contacts)
         self._synced_x = self._synced_v = False
         self.stats['steps'] += 1
-        self.stats['parallel'] = int(self.threads.in_use)
-        self.stats['thread_switches'] = self.threads.switches
+        self.stats['parallel'] = int(parallel)
         self.stats['clamped'] = int(self._clamped.sum())
         if self._fused_collider:
             self.stats['contacts'] = int(self._contacts.sum())

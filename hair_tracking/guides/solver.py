@@ -43,7 +43,6 @@ from hair_tracking.guides import integrate
 from hair_tracking.core.metrics import max_stretch
 from hair_tracking.core.model import HeadPose, StrandSet
 from hair_tracking.guides import pbd_constraints
-from hair_tracking.parallel_choice import ParallelChooser
 
 #: PBD sweeps of the second-neighbour (bending) constraints per FTL substep, before the FTL pass.
 FTL_BEND_PASSES = 1
@@ -114,9 +113,6 @@ class GuideSolver:
         self._x_ref = np.empty_like(strands.x) if need_ref else None
         self._counters = {'substeps': 0, 'clamped': 0, 'clamped_total': 0,
                           'contacts': 0, 'contacts_total': 0}
-        #: parallel kernels or their serial twins, whichever the timings favour (see
-        #: :mod:`hair_tracking.parallel_choice`; same results either way)
-        self.threads = ParallelChooser()
 
     # ------------------------------------------------------------------ API
     def reset(self, head: HeadPose) -> None:
@@ -128,14 +124,7 @@ class GuideSolver:
     def step(self, dt: float, head_prev: HeadPose, head: HeadPose) -> None:
         """Advance one substep ``dt`` [s] while the head moves from ``head_prev`` to ``head``."""
         nodes = self.strands.x.shape[0] * self.strands.x.shape[1]
-        self.threads.timed(integrate.runs_parallel(nodes), self._step_parallel,
-                           self._step_serial, dt, head_prev, head)
-
-    def _step_parallel(self, dt: float, head_prev: HeadPose, head: HeadPose) -> None:
-        self._step(dt, head_prev, head, True)
-
-    def _step_serial(self, dt: float, head_prev: HeadPose, head: HeadPose) -> None:
-        self._step(dt, head_prev, head, False)
+        self._step(dt, head_prev, head, integrate.runs_parallel(nodes))
 
     def _step(self, dt: float, head_prev: HeadPose, head: HeadPose, parallel: bool) -> None:
         dt = float(dt)

@@ -29,9 +29,9 @@ from typing import Dict, List, Optional
 
 import numpy as np
 
+from hair_tracking import process_tuning
 from hair_tracking.bags import io as bag_io
 from hair_tracking.bags.io import BagError
-from hair_tracking.process_tuning import DEFAULT_RETAIN_MB, retain_freed_memory
 
 DEFAULT_DOMAIN = 88
 NODE_READY_TIMEOUT_S = 120.0      # first start may compile every numba kernel
@@ -115,7 +115,6 @@ def run_demo(args) -> int:
     from hair_tracking.bags.render import render
 
     os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
-    retain_freed_memory(DEFAULT_RETAIN_MB)     # the player and the recorder run in this process
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     bag = args.bag or bag_io.bundled_bag()
@@ -280,9 +279,14 @@ def main(argv=None) -> int:
     ap.add_argument('--markers', action='store_true', help='also record /hair/markers')
     ap.add_argument('--fps', type=float, default=10.0, help='pictures per second of the GIF')
     ap.add_argument('--max-frames', type=int, default=100, help='at most this many pictures')
+    process_tuning.add_arguments(ap)
     args = ap.parse_args(argv)
     if not args.rate > 0:
         ap.error('--rate must be > 0')
+    try:
+        process_tuning.apply(args)        # the player and the recorder run in this process
+    except ValueError as e:
+        ap.error(str(e))
     try:
         return run_demo(args)
     except BagError as exc:

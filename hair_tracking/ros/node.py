@@ -38,6 +38,7 @@ the next step applies (a groom change rebuilds the hair at the current head pose
 
 Everything runs in one thread (a SingleThreadedExecutor), so callbacks never race.
 """
+import argparse
 import collections
 import math
 import sys
@@ -66,12 +67,11 @@ from msg_adapters.pointcloud import CloudBuffer, pack_rgb_u32
 from msg_adapters.pose import pose_from_msg, PoseError
 from msg_adapters.rcl_serialized import SerializedPublisher
 
+from hair_tracking import process_tuning
 from hair_tracking.core import params as P
 from hair_tracking.core.head_track import PoseResult
 from hair_tracking.core.scene import Scene, SceneError
 from hair_tracking.core.strand_colors import StrandColorCache
-from hair_tracking.cpu_steal import format_share, StealMeter
-from hair_tracking.process_tuning import freeze_heap, retain_freed_memory, set_omp_wait_policy
 from hair_tracking.resources import config_path
 from hair_tracking.ros.load_shedding import LoadShedder
 from hair_tracking.simulator import HairSimulator, warm_up as warm_up_simulator
@@ -148,7 +148,7 @@ class _Output:
 
     def __init__(self, node: Node, topic: str, msg_type, depth: int = 2):
         self.pub = node.create_publisher(msg_type, topic, output_qos(depth))
-        self.raw = SerializedPublisher(self.pub)     # publish_through_rcl
+        self.raw = SerializedPublisher(self.pub)     # direct with publish_through_rcl
         self.cloud = CloudBuffer()       # the message a cloud output rewrites each frame
         self.cached = None               # the last message sent (bytes or a uint8 array)
         self.encoded = 0             # messages built (encoded) so far
@@ -175,18 +175,12 @@ class HairSimNode(Node):
                          parameter_overrides=parameter_overrides)
         self._declare_all()
         settings = self._settings
-        self.thread_wait_setting = set_omp_wait_policy(settings.omp_wait_policy)
         self._apply_threads(settings.numba_threads)
-        self.memory_setting = retain_freed_memory(settings.malloc_retain_mb)
         self.shedder = LoadShedder(settings.load_shedding_budget)
-        self._steal = StealMeter()       # CPU share the hypervisor took since the last report
-        self.get_logger().info(self.memory_setting)
-        self.get_logger().info(self.thread_wait_setting)
         self.sim = HairSimulator(settings.scene)
         if settings.warmup:
             secs = warm_up(settings.scene)
             self.get_logger().info(f'kernels and encoders ready in {secs:.2f} s')
-        freeze_heap()       # no 70 ms full garbage collections over the start-up objects
 
         # state read by the step and publish paths
         self._pose_frame = ''            # header.frame_id of the last pose
@@ -202,6 +196,7 @@ class HairSimNode(Node):
         self._tf_child: Optional[str] = None
         self._tf_seen_ns = 0
         self._color_cache = StrandColorCache(pack_rgb_u32)
+        self._rcl_refusal_logged = False
         self.rejected = 0                # poses dropped (malformed, NaN, zero quaternion ...)
         self.rebuilds = 0
         self.frames_built = 0            # sim.frame() calls made for publishing
@@ -516,6 +511,10 @@ class HairSimNode(Node):
         start = time.perf_counter()
         for o in outs.values():
             o.raw.direct = s.publish_through_rcl     # stays False where rcl is not usable
+        reason = outs['points'].raw.reason
+        if s.publish_through_rcl and reason and not self._rcl_refusal_logged:
+            self.get_logger().warn(f'publish_through_rcl: {reason}; publishing through rclpy')
+            self._rcl_refusal_logged = True
         if not self._dirty:              # same hair: resend the bytes (keeps markers alive)
             for k, o in outs.items():
                 if wanted[k] and o.cached is not None:
@@ -622,10 +621,7 @@ class HairSimNode(Node):
                ('ready' if self._settings.load_shedding else 'off')),
             kv('load_shedding_switches', self.shedder.switches),
             kv('ghost_kernel', 'none' if sim.ghost_tracker is None else
-               ('parallel' if sim.ghost_tracker.threads.in_use else 'serial')),
-            kv('ghost_kernel_switches', 0 if sim.ghost_tracker is None else
-               sim.ghost_tracker.threads.switches),
-            kv('cpu_steal_recent', format_share(self._steal.share())),
+               ('parallel' if sim.ghost_tracker.stats['parallel'] else 'serial')),
             kv('output_frame', self.output_frame_id()),
         ]
         return DiagnosticStatus(level=level, name=f'{self.get_name()}: hair simulation',
@@ -659,18 +655,49 @@ def _coerce_parameter(p: Optional[P.Param], prm: Parameter) -> Optional[Paramete
     return None
 
 
+def make_parser() -> argparse.ArgumentParser:
+    """The command line of ``hair_sim_node`` in front of ``--ros-args``."""
+    parser = argparse.ArgumentParser(
+        prog='hair_sim_node',
+        description='ROS 2 node that makes hair follow a head-pose stream: subscribes '
+                    'head_pose (PoseStamped) and head_transform (TransformStamped), publishes '
+                    'hair/points (PointCloud2), hair/markers (MarkerArray) and /diagnostics, '
+                    'offers ~/reset. Every setting is a ROS parameter (see config/hair_sim.yaml '
+                    'and docs/node.md).',
+        epilog='ROS arguments follow --ros-args, e.g. hair_sim_node --ros-args '
+               '--params-file config/hair_sim.yaml -p scene_file:=long_hair '
+               '-r head_pose:=/face/pose')
+    process_tuning.add_arguments(parser)
+    return parser
+
+
 def main(args=None) -> int:
     """Console entry point ``hair_sim_node``: init, spin, clean exit on Ctrl-C.
 
-    Returns 0 on Ctrl-C or an external shutdown, 2 when the start parameters are invalid (the
-    message names the parameter and the allowed values).
+    ``args`` is the whole command line (``sys.argv`` by default): the options before
+    ``--ros-args`` are this executable's (``--help``, the process settings of
+    :mod:`hair_tracking.process_tuning`), the rest goes to rclpy.  Returns 0 on Ctrl-C or an
+    external shutdown, 2 when the start parameters are invalid (the message names the parameter
+    and the allowed values).
     """
+    argv = list(sys.argv if args is None else args)
+    split = argv.index('--ros-args') if '--ros-args' in argv else len(argv)
+    options = make_parser().parse_args(argv[1:split])
+    try:
+        done = process_tuning.apply(options)
+    except ValueError as e:
+        print(f'[hair_sim] {e}', file=sys.stderr)
+        return 2
     node = executor = None
     code = 0
     try:
-        rclpy.init(args=args)
+        rclpy.init(args=argv[:1] + argv[split:])
+        for line in done:
+            rclpy.logging.get_logger(P.NODE_NAME).info(line)
         executor = SingleThreadedExecutor()   # before the node: Ctrl-C may come at any time
         node = HairSimNode()
+        if options.gc_freeze:
+            process_tuning.freeze_heap()
         executor.add_node(node)
         executor.spin()
     except (KeyboardInterrupt, ExternalShutdownException):

@@ -2,10 +2,9 @@
 
 On a shared VM the same work can take 1.5-3x longer from one hour to the next, and the main
 cause on the project's machine is *steal*: time the hypervisor ran other guests while this VM
-had work (the 8th value of the ``cpu`` line of ``/proc/stat``).  Idle, a few jiffies a minute;
-in its slow phases 16-31 % of all CPU time, mostly while both vCPUs are busy.  Timings taken
-then say more about the neighbours than about the code, so the benchmarks, ``hair_sim_bag
-run``'s summary and the node's diagnostics report the stolen share next to their timings.
+had work (the 8th value of the ``cpu`` line of ``/proc/stat``).  Timings taken while it is high
+say more about the neighbours than about the code, so the benchmarks in ``scripts/`` report the
+stolen share next to their timings.
 Standard library only; where ``/proc/stat`` cannot be read (not Linux) every figure is None.
 """
 from typing import Optional, Tuple

@@ -1,9 +1,12 @@
-"""The stolen-CPU figures the benchmarks, the offline summary and the node report."""
+"""The stolen-CPU figures the benchmarks report (scripts/cpu_steal.py)."""
 import os
+import sys
 
 import pytest
 
-from hair_tracking.cpu_steal import cpu_times, format_share, steal_share, StealMeter
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
+                                'scripts'))
+from cpu_steal import cpu_times, format_share, steal_share, StealMeter  # noqa: E402
 
 
 def write_stat(path, steal, other=(100, 5, 50, 800, 10, 1, 2), guest=(7, 3)):
