@@ -32,7 +32,7 @@ Time handling
 from dataclasses import dataclass, field
 import math
 import time
-from typing import Dict, Optional
+from typing import Callable, Dict, Optional
 
 import numpy as np
 
@@ -92,9 +92,11 @@ class Counters:
 class HairSimulator:
     """Guides + ghosts driven by a head-pose stream, assembled from a :class:`Scene`."""
 
-    def __init__(self, scene: Scene):
+    def __init__(self, scene: Scene, clock: Callable[[], float] = time.perf_counter):
+        """``clock()`` [s] times the work reported in :attr:`counters` (a test injects one)."""
         scene.validate()
         self.scene = scene
+        self.clock = clock
         self.track = HeadTrack(scene.head_track)
         self.counters = Counters()
         self.time_ns: Optional[int] = None
@@ -175,7 +177,7 @@ class HairSimulator:
         if self.time_ns is None or t_ns <= self.time_ns:
             self.counters.last_substeps = 0
             return 0
-        start = time.perf_counter()
+        start = self.clock()
         due = (int(t_ns) - self.time_ns) // self.dt_ns
         cap = self.scene.solver.max_substeps
         if due > cap:
@@ -196,7 +198,7 @@ class HairSimulator:
         self._track_ghosts(dt * len(times), len(times))
         self.counters.substeps += len(times)
         self.counters.last_substeps = len(times)
-        self.counters.last_advance_ms = (time.perf_counter() - start) * 1e3
+        self.counters.last_advance_ms = (self.clock() - start) * 1e3
         return len(times)
 
     def reset(self) -> None:
@@ -304,9 +306,9 @@ class HairSimulator:
         np.copyto(self._x_old, self.guides.x)
         self.guide_solver.step(dt, head_prev, head)
         if self.ghost_tracker is not None and self._every_substep():
-            start = time.perf_counter()
+            start = self.clock()
             self.ghost_tracker.step(dt, self._x_old, head)
-            self.counters.last_track_ms += (time.perf_counter() - start) * 1e3
+            self.counters.last_track_ms += (self.clock() - start) * 1e3
         self._last_speed = math.sqrt(max_step_sq(self.guides.x, self._x_old)) / dt
 
     # Ghost tracking schedule.  With ``tracking.every_substep: false`` the ghosts are tracked
@@ -327,9 +329,9 @@ class HairSimulator:
     def _track_ghosts(self, dt: float, substeps: int) -> None:
         if self.ghost_tracker is None or self._every_substep() or substeps == 0:
             return
-        start = time.perf_counter()
+        start = self.clock()
         self.ghost_tracker.step(dt, self._ghost_guide_x, self.head, substeps=substeps)
-        self.counters.last_track_ms += (time.perf_counter() - start) * 1e3
+        self.counters.last_track_ms += (self.clock() - start) * 1e3
 
     def _rest_at(self, head: HeadPose) -> None:
         self.guide_solver.reset(head)

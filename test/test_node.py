@@ -53,14 +53,15 @@ def yaw_quat(angle):
 class Harness:
     """A hair_sim node and a probe node in one context, spun by one executor."""
 
-    def __init__(self, overrides=None, domain_id=None):
+    def __init__(self, overrides=None, domain_id=None, work_clock=None):
         self.ctx = Context()
         rclpy.init(context=self.ctx, domain_id=next(_DOMAINS) if domain_id is None
                    else domain_id)
         values = dict(SMALL)
         values.update(overrides or {})
+        clock = {} if work_clock is None else {'work_clock': work_clock}
         self.node = HairSimNode(context=self.ctx, parameter_overrides=[
-            Parameter(k, value=v) for k, v in values.items()])
+            Parameter(k, value=v) for k, v in values.items()], **clock)
         self.probe = Node('probe', context=self.ctx)
         self.executor = SingleThreadedExecutor(context=self.ctx)
         self.executor.add_node(self.node)
@@ -133,8 +134,8 @@ class Harness:
 def harness(request):
     made = []
 
-    def make(**overrides):
-        h = Harness(overrides)
+    def make(work_clock=None, **overrides):
+        h = Harness(overrides, work_clock=work_clock)
         made.append(h)
         return h
     yield make
@@ -525,24 +526,45 @@ def test_tf_input_selects_the_head_by_name_or_prefix(harness):
     assert node.sim.head.position[0] == pytest.approx(0.18)
 
 
+class TickClock:
+    """An injected work clock: every read is ``tick`` seconds after the previous one, so the
+    work the node measures depends on what it does, not on how fast the machine is."""
+
+    def __init__(self, tick):
+        self.tick = tick
+        self.now = 0.0
+
+    def __call__(self):
+        self.now += self.tick
+        return self.now
+
+
 def test_load_shedding_tracks_once_per_pose_while_the_steps_do_not_fit(harness):
-    """Poses one substep (4.2 ms) apart and a budget of 5 % of that: no step of a 1 k-ghost
-    groom fits, so after half a window of poses the ghosts are tracked once per pose, the
-    diagnostics say so (WARN); switching the parameter off goes back to the scene's schedule
-    on the next pose."""
-    h = harness(**{'groom.guides': 64, 'groom.ghosts_per_guide': 16,
-                   'load_shedding_budget': 0.05})
+    """Poses one substep (4.2 ms) apart and a work clock on which every measured step takes
+    milliseconds: no step fits 5 % of the period, so after two poses over a whole period the
+    ghosts are tracked once per pose and the diagnostics say so (WARN).  When the work becomes
+    tiny the full schedule comes back after a window of poses; switching the parameter off
+    goes back to the scene's schedule on the next pose."""
+    clock = TickClock(2e-3)
+    h = harness(work_clock=clock, **{'groom.guides': 4, 'groom.ghosts_per_guide': 2,
+                                     'load_shedding_budget': 0.05})
     pub = h.pose_publisher()
-    times = grid_times(h, 13, step_substeps=1)
-    for k, t in enumerate(times[:12]):
+    times = grid_times(h, 30, step_substeps=1)
+    for k, t in enumerate(times[:4]):
         h.send(pub, pose_stamped_msg(t, [0.001 * k, 0.0, 0.0], yaw_quat(0.0), 'world'))
     assert h.node.sim.track_once_per_call and h.node.shedder.switches == 1
     status = h.node.diagnostics()
     values = {kv.key: kv.value for kv in status.values}
     assert values['load_shedding'] == 'active' and status.level == DiagnosticStatus.WARN
     assert 'load shedding' in status.message
+    clock.tick = 1e-9                       # now every step fits easily
+    for k, t in enumerate(times[4:28]):
+        h.send(pub, pose_stamped_msg(t, [0.001 * k, 0.0, 0.0], yaw_quat(0.0), 'world'))
+    assert not h.node.sim.track_once_per_call and h.node.shedder.switches == 2
+    clock.tick = 2e-3
+    h.send(pub, pose_stamped_msg(times[28], [0.0, 0.0, 0.0], yaw_quat(0.0), 'world'))
     assert h.node.set_parameters([Parameter('load_shedding', value=False)])[0].successful
-    h.send(pub, pose_stamped_msg(times[12], [0.012, 0.0, 0.0], yaw_quat(0.0), 'world'))
+    h.send(pub, pose_stamped_msg(times[29], [0.012, 0.0, 0.0], yaw_quat(0.0), 'world'))
     assert not h.node.sim.track_once_per_call
     values = {kv.key: kv.value for kv in h.node.diagnostics().values}
     assert values['load_shedding'] == 'off'

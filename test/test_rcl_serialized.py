@@ -138,32 +138,35 @@ def test_a_reader_thread_gets_every_cloud_and_its_wait_lets_python_run(ros):
     cloud = strands_to_pointcloud2_cdr(np.zeros((2000, 16, 3)), frame_id='w')
     sizes, stop, waiting = [], threading.Event(), threading.Event()
 
+    first_wait = []
+
     def read():
         waiting.set()
         while not stop.is_set():
-            for _ in waiter.wait(1.0):
+            ready = waiter.wait(30.0)
+            if not first_wait:
+                first_wait.append(ready)
+            for _ in ready:
                 while (raw := taker.take()) is not None:
                     sizes.append(len(raw))
     reader = threading.Thread(target=read)
     reader.start()
     try:
         waiting.wait(5.0)
-        # the reader now blocks in a 1 s wait: were the GIL held there, this loop of pure
-        # Python could not finish before the wait times out
-        start = time.monotonic()
-        count = 0
-        while time.monotonic() - start < 0.2:
-            count += 1
-        assert time.monotonic() - start < 0.6 and count > 1000
+        time.sleep(0.05)              # the reader is now (or soon) blocked in its 30 s wait
+        # this thread publishes while the reader waits: were the GIL held in the wait, it
+        # could not run before the wait timed out, and the first wait would come back empty
         for _ in range(5):
             rs.SerializedPublisher(pub, direct=True).publish(cloud)
-        deadline = time.monotonic() + 10.0
+        deadline = time.monotonic() + 20.0
         while len(sizes) < 5 and time.monotonic() < deadline:
             time.sleep(0.01)
     finally:
         stop.set()
-        reader.join(5.0)
-    assert sizes == [len(cloud)] * 5
+        pub.publish(cloud)            # wakes the reader from its wait so that it sees stop
+        reader.join(35.0)
+    assert first_wait and first_wait[0] == [sub]
+    assert sizes[:5] == [len(cloud)] * 5
     taker.close()
 
 

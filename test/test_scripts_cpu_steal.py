@@ -46,10 +46,6 @@ def test_unreadable_or_foreign_files_give_none(tmp_path):
 
 
 @pytest.mark.skipif(not os.path.exists('/proc/stat'), reason='Linux only')
-def test_this_machine_reports_a_share():
-    meter = StealMeter()
-    sum(i * i for i in range(200_000))                 # let some CPU time pass
-    share = meter.share()
-    assert share is None or 0.0 <= share <= 1.0
+def test_this_machine_reports_its_counters():
     steal, total = cpu_times()
-    assert 0 <= steal <= total
+    assert 0 <= steal <= total and total > 0

@@ -61,6 +61,7 @@ import numpy as np
 
 from hair_tracking.core.model import HeadPose
 from hair_tracking.core.transforms import quat_to_matrix
+from hair_tracking.resources import data_path
 
 #: metres per BVH length unit for the CMU conversions (README of the data set: 0.056444).
 CMU_SCALE_M = 0.056444
@@ -77,7 +78,7 @@ CMU_HEAD_AXES = np.array([[0.0, 1.0, 0.0],
                           [0.0, 0.0, 1.0],
                           [1.0, 0.0, 0.0]])
 
-DATA_DIR = os.path.join(os.path.dirname(os.path.abspath(__file__)), 'data')
+DATA_DIR = data_path('')
 BUNDLED_WALK_CSV = os.path.join(DATA_DIR, 'cmu_131_01_walk_head.csv')
 
 POSE_CSV_COLUMNS = ('t_s', 'px', 'py', 'pz', 'qx', 'qy', 'qz', 'qw')

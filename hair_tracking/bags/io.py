@@ -37,6 +37,7 @@ from typing import Dict, List, Optional, Sequence, Tuple
 import numpy as np
 
 from hair_tracking.core.transforms import quat_multiply, quat_to_matrix
+from hair_tracking.resources import data_path
 
 # ---------------------------------------------------------------- exit codes
 EXIT_OK = 0
@@ -57,8 +58,7 @@ _SUFFIX_STORAGE = {'.mcap': 'mcap', '.db3': 'sqlite3'}
 _MAGIC = {b'\x89MCAP0\r\n': 'mcap', b'SQLite format 3\x00': 'sqlite3', b'#ROSBAG V2.0\n': 'ros1'}
 _KIND_SUFFIX = {'mcap': '.mcap', 'sqlite3': '.db3', 'ros1': '.bag'}
 
-BUNDLED_BAG = os.path.join(os.path.dirname(os.path.abspath(__file__)), 'data',
-                           'walk_head_pose.mcap')
+BUNDLED_BAG = data_path('walk_head_pose.mcap')
 
 
 class BagError(Exception):

@@ -48,7 +48,7 @@ def start_node(domain: int, log_path: Path, params: List[str], threads: Optional
     env.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
     if threads:
         env['NUMBA_NUM_THREADS'] = str(threads)
-    root = str(Path(__file__).resolve().parents[1])
+    root = str(Path(__file__).resolve().parents[2])     # the folder holding hair_tracking/
     env['PYTHONPATH'] = root + (os.pathsep + env['PYTHONPATH'] if env.get('PYTHONPATH') else '')
     cmd = [sys.executable, '-m', 'hair_tracking.ros.node', '--ros-args',
            '-p', 'use_sim_time:=true']

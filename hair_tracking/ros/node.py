@@ -43,7 +43,7 @@ import collections
 import math
 import sys
 import time
-from typing import Dict, List, Optional
+from typing import Callable, Dict, List, Optional
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PoseStamped, TransformStamped
@@ -163,21 +163,25 @@ class HairSimNode(Node):
     """The ``hair_sim`` node (see the module docstring).
 
     ``context``, ``parameter_overrides`` and ``cli_args`` are passed to :class:`rclpy.node.Node`
-    so tests and benchmarks can run it in-process.  Construction declares the parameters, builds
-    the simulator, warms up the kernels (``warmup``) and only then subscribes.  Invalid start
-    parameters raise :class:`~hair_tracking.core.params.ParamError` naming the parameter.
+    so tests and benchmarks can run it in-process; ``work_clock()`` [s] times the work of each
+    step and publication that load shedding weighs (tests inject a deterministic one).
+    Construction declares the parameters, builds the simulator, warms up the kernels
+    (``warmup``) and only then subscribes.  Invalid start parameters raise
+    :class:`~hair_tracking.core.params.ParamError` naming the parameter.
     """
 
     def __init__(self, node_name: str = P.NODE_NAME, *, context=None,
                  parameter_overrides: Optional[List[Parameter]] = None,
-                 cli_args: Optional[List[str]] = None, namespace: Optional[str] = None):
+                 cli_args: Optional[List[str]] = None, namespace: Optional[str] = None,
+                 work_clock: Callable[[], float] = time.perf_counter):
         super().__init__(node_name, context=context, cli_args=cli_args, namespace=namespace,
                          parameter_overrides=parameter_overrides)
         self._declare_all()
         settings = self._settings
         self._apply_threads(settings.numba_threads)
         self.shedder = LoadShedder(settings.load_shedding_budget)
-        self.sim = HairSimulator(settings.scene)
+        self._work_clock = work_clock    # times the step and publish work (load shedding)
+        self.sim = HairSimulator(settings.scene, clock=work_clock)
         if settings.warmup:
             secs = warm_up(settings.scene)
             self.get_logger().info(f'kernels and encoders ready in {secs:.2f} s')
@@ -405,9 +409,9 @@ class HairSimNode(Node):
             self._on_pose(tr)
 
     def _step(self, t_ns: int) -> None:
-        start = time.perf_counter()
+        start = self._work_clock()
         self.sim.advance_to(t_ns)
-        self.step_ms.append((time.perf_counter() - start) * 1e3)
+        self.step_ms.append((self._work_clock() - start) * 1e3)
         self._has_pose = True
         self._dirty = True
 
@@ -508,7 +512,7 @@ class HairSimNode(Node):
         self._last_publish = time.monotonic()
         if not any(wanted.values()):
             return
-        start = time.perf_counter()
+        start = self._work_clock()
         for o in outs.values():
             o.raw.direct = s.publish_through_rcl     # stays False where rcl is not usable
         reason = outs['points'].raw.reason
@@ -561,7 +565,7 @@ class HairSimNode(Node):
             o.raw.publish(data)
             o.published += 1
         self._dirty = False
-        took = (time.perf_counter() - start) * 1e3
+        took = (self._work_clock() - start) * 1e3
         self.publish_ms.append(took)
         self._publish_ms_since_pose += took
 
