@@ -39,6 +39,7 @@ demo-core: $(STAMP)
 
 bench: $(STAMP)
 	$(PY) -m pip install -q pypbd
+	$(PY) scripts/check_simd.py
 	$(PY) scripts/bench.py --json out/bench.json
 	$(TEST_ENV) $(PY) scripts/bench_msgs.py --json out/bench_msgs.json
 	$(TEST_ENV) $(PY) scripts/bench_latency.py --json out/bench_latency.json

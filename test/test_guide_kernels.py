@@ -4,8 +4,6 @@ The references below are written independently of the kernels' loop structure: v
 strands, Gauss–Seidel along the strand, masses used directly (not through ``pair_weights``).
 Kernels use fused multiply-add (``integrate.FASTMATH``), so agreement is to ~1e-12, not bitwise.
 """
-import re
-
 import numba
 import numpy as np
 import pytest
@@ -376,28 +374,3 @@ def test_lane_major_layout_round_trip():
     b = np.arange(3 * 4, dtype=float).reshape(3, 4)
     assert np.array_equal(pbd_constraints.from_lane_major(pbd_constraints.lane_major(b), b.shape),
                           b)
-
-
-@pytest.mark.parametrize('name', ['pbd_sweep_lanes', 'xpbd_sweep_lanes'])
-def test_lane_sweeps_compile_to_simd(name):
-    """LLVM turns the loop over a block's strands into vector instructions (a vector square root
-    in the IR).  The sweeps ran scalar, three times slower, with signed indices or a run-time
-    lane count; this guards the layout and the index types.  Compiled afresh (numba shows no IR
-    of cached code), called as the kernels call them: the gap a literal, the node count not."""
-    fn = getattr(pbd_constraints, name)
-    options = {k: v for k, v in fn.targetoptions.items() if k not in ('nopython', 'cache')}
-    fresh = numba.njit(**options)(fn.py_func)
-    n, lanes = 6, pbd_constraints.LANES
-    p = np.random.default_rng(0).normal(size=n * 3 * lanes)
-    rd, w = np.full((n - 1) * lanes, 0.1), np.full((n - 1) * 2 * lanes, 0.5)
-    if name == 'pbd_sweep_lanes':
-        @numba.njit
-        def call(p, rd, w, n):
-            fresh(p, rd, w, n, 1, 0.9)
-    else:
-        @numba.njit
-        def call(p, rd, w, n):
-            fresh(p, w[:n * lanes], rd, rd, np.zeros_like(rd), n, 1, 0.5)
-    call(p, rd, w, n)                    # n a run-time value, as x.shape[1] in the kernels
-    ir = '\n'.join(fresh.inspect_llvm(sig) for sig in fresh.signatures)
-    assert re.search(r'llvm\.sqrt\.v\d+f64', ir), f'{name}: no vector square root in the IR'
