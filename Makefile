@@ -8,11 +8,14 @@ PIP := $(VENV)/bin/pip
 ROS_WHEELS := ros-jazzy-rclpy[fastrtps] ros-jazzy-common-interfaces
 PY_DEPS := setuptools wheel numpy numba pyyaml rosbags matplotlib pytest flake8
 STAMP := $(VENV)/.complete
+# numba's on-disk cache of the default scene's kernels (hair_sim_warmup), rebuilt after an edit
+KERNELS := $(VENV)/.kernels
+SOURCES := $(shell find hair_tracking msg_adapters -name '*.py' 2>/dev/null)
 TEST_ENV := ROS_PYTHON_CHECK_FIELDS=1 ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST PYTHONUNBUFFERED=1
 
 .PHONY: install test demo demo-core bench stability eval lint clean
 
-install: $(STAMP)
+install: $(STAMP) $(KERNELS)
 
 $(STAMP): setup.py Makefile package.xml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -22,7 +25,11 @@ $(STAMP): setup.py Makefile package.xml
 	$(PY) -c "import rclpy, numba, rosbags, yaml, matplotlib"
 	touch $(STAMP)
 
-test: $(STAMP)
+$(KERNELS): $(STAMP) $(SOURCES)
+	$(TEST_ENV) $(PY) -m hair_tracking.ros.warmup
+	touch $(KERNELS)
+
+test: install
 	$(TEST_ENV) $(PY) -m pytest -q test
 
 lint: $(STAMP)
@@ -30,14 +37,14 @@ lint: $(STAMP)
 
 # The main job: the node, the bundled head-pose bag played into it with /clock, its output
 # recorded to a bag and rendered (see docs/bags.md).
-demo: $(STAMP)
+demo: install
 	$(TEST_ENV) $(PY) -m hair_tracking.ros.live_demo --out out/demo
 
 # The offline core demo: simulator only, numbers and a picture (no DDS).
-demo-core: $(STAMP)
+demo-core: install
 	$(TEST_ENV) $(PY) -m hair_tracking.evaluation.demo --out out/demo-core
 
-bench: $(STAMP)
+bench: install
 	$(PY) -m pip install -q pypbd
 	$(PY) scripts/check_simd.py
 	$(PY) scripts/bench.py --json out/bench.json
@@ -47,12 +54,12 @@ bench: $(STAMP)
 		--set tracking.every_substep=false --json out/bench_latency_10k_once_per_pose.json
 
 # The full matrix of stiff and extreme cases (about 25 min); writes docs/results/stability.*
-stability: $(STAMP)
+stability: install
 	$(PY) -m hair_tracking.evaluation.cli stability
 
 # Error against run time of every method (installs the peer pypbd); writes docs/results and
 # docs/figures
-eval: $(STAMP)
+eval: install
 	$(PY) -m pip install -q pypbd
 	$(PY) -m hair_tracking.evaluation.cli accuracy
 
