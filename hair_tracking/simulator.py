@@ -313,12 +313,9 @@ class HairSimulator:
 
     # Ghost tracking schedule.  With ``tracking.every_substep: false`` the ghosts are tracked
     # once per advance_to() call (one head pose), over all the guide substeps of that call, with
-    # the per-substep feedback strengths compounded (GhostTracker.step's ``substeps``).  At
-    # 240 Hz substeps and a 60 Hz pose stream that is 4x fewer tracking steps, the dominant cost
-    # of a large groom.  Not the default: on 1.5 m strands (quick stability matrix, 'ftl
-    # segment 100 mm') the energy measured over the still tail rises by 1.46 J/kg (bound 1.39;
-    # 0.57 every substep), with centre-of-mass tracking on whatever its strength, while the
-    # hair still swings there (see docs/ghosts.md and the session notes).
+    # the per-substep feedback strengths compounded (GhostTracker.step's ``substeps``): at
+    # 240 Hz substeps and a 60 Hz pose stream, 4x fewer tracking steps (see docs/ghosts.md for
+    # its stability on long strands).
     def _every_substep(self) -> bool:
         return self.scene.tracking.every_substep and not self.track_once_per_call
 

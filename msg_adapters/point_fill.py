@@ -1,9 +1,8 @@
 """One pass that writes strands into the point records of a PointCloud2's data.
 
 numpy needs a strided float64 -> float32 copy per field plus a separate finiteness scan; this
-loop reads each coordinate once and writes each record once (a whole 100 k strands x 16 points
-cloud: 30.2 -> 13.3 ms, ``scripts/bench_msgs.py``, same run).  Compiled with numba
-(``cache=True``: loaded from disk after the first run).
+loop reads each coordinate once and writes each record once (``scripts/bench_msgs.py`` times
+both).  Compiled with numba (``cache=True``: loaded from disk after the first run).
 """
 import sys
 
@@ -36,13 +35,9 @@ def _fill_records(words, x, rgb, ids, n_points, per_point_rgb):
     *viewed as float32*.  Returns True when every coordinate is finite.
 
     Ids and colours are bit patterns: they are copied as float32 words, which moves their bits
-    unchanged (no arithmetic touches them).  One float32 output array and a finiteness test
-    without a floating-point dependency chain made this 3.5x faster than writing through a
-    float32 and a uint32 view of the same memory with ``np.isfinite`` (0.5 against 1.8 ms for
-    10 k x 16 points here); flat arrays and a constant record size (rather than 3-d indexing
-    of a reshaped view, whose strides numba reads at run time) another 1.4-2x (old and new
-    alternated in one process: 10 k x 16 points with a colour per strand 1.10 -> 0.54 ms,
-    100 k 11.8-13.8 -> 8.5-8.8 ms; without colours 0.82 -> 0.45 and 9.1-10.2 -> 7.3-7.5 ms)."""
+    unchanged (no arithmetic touches them).  One float32 output array, a finiteness test
+    without a floating-point dependency chain, flat arrays and a constant record size (numba
+    reads the strides of a reshaped view at run time) keep the loop memory-bound."""
     bad = 0
     with_rgb = rgb.shape[0] > 0
     for s in range(ids.shape[0]):

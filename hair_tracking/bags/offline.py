@@ -120,8 +120,8 @@ def load_settings(scene: Optional[str] = None, params_file: Optional[str] = None
 class FrameEncoder:
     """Serialized output messages of one frame, exactly as the node builds them (CDR bytes):
     per-strand colours from :func:`hair_tracking.core.strand_colors.strand_colors`,
-    ``line_list``/``line_strips``
-    markers with a DELETEALL in front of the first array (and whenever the strand count
+    ``line_list``/``line_strips`` markers with a DELETEALL in front of the first array (and
+    whenever the strand count
     changes), marker lifetime of ``marker_lifetime_periods`` publishing periods."""
 
     def __init__(self, settings: Settings):

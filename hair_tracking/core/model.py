@@ -51,8 +51,8 @@ class StrandSet:
 
     ``x`` and ``v`` are properties because a solver may keep the state in a layout of its own
     between its steps (the ghost tracker does, see
-    :class:`hair_tracking.ghosts.tracker.GhostTracker`):
-    it registers itself with :meth:`hold`, and reading or assigning ``x`` or ``v`` first calls
+    :class:`hair_tracking.ghosts.tracker.GhostTracker`): it registers itself with :meth:`hold`, and
+    reading or assigning ``x`` or ``v`` first calls
     its ``release()``, which writes the current state into these arrays and makes them the
     truth again (the holder reads them back on its next step).  So read ``x`` after stepping
     rather than keeping an old reference to it.

@@ -1,8 +1,7 @@
 """The node's parameters: one declarative table, validation, and the frozen settings snapshot.
 
 Every scene field of :class:`hair_tracking.core.scene.Scene` is a ROS parameter under its dotted
-path
-(``groom.guides``, ``solver.type``, ``gravity`` ...), next to the node's own runtime settings
+path (``groom.guides``, ``solver.type``, ``gravity`` ...), next to the node's own runtime settings
 (``publish_rate_hz``, ``marker_style`` ...).  The table below is the single place that says, for
 each parameter, its type, default, description, unit, allowed values, whether it is read-only and
 whether a change rebuilds the hair.  Defaults and ranges of scene fields are *read from the scene

@@ -6,8 +6,7 @@ the caller's and left untouched.  The functions here write the positions of S st
 points, record ``s * N + j`` for point ``j`` of strand ``s``, optionally carried by a rigid
 transform ``y = rot (x - origin)`` (world -> head frame: ``rot`` = R^T, ``origin`` = the head
 position, as :meth:`hair_tracking.core.model.HeadPose.to_head`), and report whether every
-coordinate
-written is finite (a cloud's ``is_dense``).
+coordinate written is finite (a cloud's ``is_dense``).
 
 :func:`blocks_to_records` reads the ghost tracker's own layout (block by block,
 [node][axis][ghost], see :mod:`hair_tracking.ghosts.kernels`) directly: publishing a frame

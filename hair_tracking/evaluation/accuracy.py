@@ -6,8 +6,8 @@ numbers, on the same ghost strands and the same head trajectory for every method
 
 Reference
     every ghost strand simulated as a guide (:class:`~hair_tracking.evaluation.methods.FullSim`)
-    with XPBD
-    (Macklin, Müller & Chentanez 2016) at compliance 0 (inextensible), a small step and several
+    with XPBD (Macklin, Müller & Chentanez 2016) at compliance 0 (inextensible), a small step and
+    several
     iterations (:data:`REFERENCE`), with the head collider.  XPBD is the one solver of the package
     whose material does not depend on the step and the iteration count, so its fine-step limit
     is a well-defined model; the other solvers converge to different materials (PBD's stiffness
@@ -36,8 +36,8 @@ Metrics (per output frame at :data:`FRAME_RATE`, then aggregated over the run)
 
 Every method starts from its own settled rest state at the first head pose (``settle_time`` of
 the scene with a still head, velocities then zeroed, as
-:class:`~hair_tracking.simulator.HairSimulator`
-does), and then steps its own fixed substep; head poses at substep times are interpolated
+:class:`~hair_tracking.simulator.HairSimulator` does), and then steps its own fixed substep; head
+poses at substep times are interpolated
 linearly / by slerp from the recorded samples.
 """
 import csv

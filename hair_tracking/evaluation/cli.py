@@ -4,12 +4,12 @@
     hair_sim_eval stability [--quick] [--out docs/results] [--only NAME ...]
 
 ``accuracy`` measures error against run time of every method
-(:mod:`hair_tracking.evaluation.accuracy`) on the
-bundled walk recording, a VR head-mounted-display trace (if the shared data are present) and a
+(:mod:`hair_tracking.evaluation.accuracy`) on the bundled walk recording, a VR head-mounted-display
+trace (if the shared data are present) and a
 synthetic head shake, and writes ``accuracy.csv``, ``accuracy.md`` and PNG plots.
 ``stability`` runs the matrix of stiff and extreme cases
-(:mod:`hair_tracking.evaluation.stability`) and writes
-``stability.csv`` and ``stability.md``; it exits with status 1 if a case fails.
+(:mod:`hair_tracking.evaluation.stability`) and writes ``stability.csv`` and ``stability.md``; it
+exits with status 1 if a case fails.
 
 ``--quick`` is the CI-sized variant (a few minutes on two cores); the default is the full
 evaluation whose outputs are committed under ``docs/``.  Timings are taken single-threaded by

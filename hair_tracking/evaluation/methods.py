@@ -4,13 +4,11 @@ Every method produces the positions of the *same* ghost strands (the workload's 
 head frame) node for node, so its output can be compared with the reference:
 
 * :class:`FullSim` -- every ghost strand simulated as a guide by
-  :class:`~hair_tracking.guides.solver.GuideSolver`
-  (PBD, XPBD or FTL at the scene's settings).  With a fine step, many iterations and XPBD at
-  compliance 0 this is the reference.
+  :class:`~hair_tracking.guides.solver.GuideSolver` (PBD, XPBD or FTL at the scene's settings).
+  With a fine step, many iterations and XPBD at compliance 0 this is the reference.
 * :class:`GhostTracking` -- the method of the package (Park & Kim): ``S / ratio`` guides made by
   :func:`~hair_tracking.core.groom.make_groom` (as :class:`~hair_tracking.simulator.HairSimulator`
-  makes them) simulated by
-  :class:`~hair_tracking.guides.solver.GuideSolver`, the ghosts moved by
+  makes them) simulated by :class:`~hair_tracking.guides.solver.GuideSolver`, the ghosts moved by
   :class:`~hair_tracking.ghosts.tracker.GhostTracker` each substep
   (or once per output frame over all its substeps with ``tracking.every_substep: false``, as the
   simulator does once per pose).

@@ -1,8 +1,8 @@
 """Stability matrix: stiff and extreme cases, each run to completion with pass/fail.
 
 Every case drives a :class:`~hair_tracking.simulator.HairSimulator` (guides + ghosts, the product
-path) with a
-head-pose stream, calling ``push_pose`` then ``advance_to`` per pose as the ROS node does, and
+path) with a head-pose stream, calling ``push_pose`` then ``advance_to`` per pose as the ROS node
+does, and
 ends with a still head (the *tail*) so that a blow-up cannot hide behind motion.  After every
 ``check_every``-th pose it measures the worst figures; a case **passes** when, everywhere:
 

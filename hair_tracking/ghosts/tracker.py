@@ -1,14 +1,14 @@
 """Ghost strands that follow the simulated guides: the method of Park & Kim.
 
 ``GhostTracker`` assigns every ghost strand to a guide (equation (1),
-:mod:`hair_tracking.ghosts.correspondence`),
-precomputes everything static, and then, once per substep after the guides moved, advances all
+:mod:`hair_tracking.ghosts.correspondence`), precomputes everything static, and then, once per
+substep after the guides moved, advances all
 ghosts with one fused numba kernel (:func:`hair_tracking.ghosts.kernels.track_groups`):
 
 a. velocity transfer -- each ghost node moves by the displacement of its target point on the guide
    (the point at the node's arc-length fraction);
 b. individuality weights -- equations (4)-(5) with ``dt`` explicit
-(:mod:`hair_tracking.ghosts.weights`);
+   (:mod:`hair_tracking.ghosts.weights`);
 c. offset feedback -- a pull toward ``guide point + Q rest_offset``, ``Q`` the guide segment's
    frame (head rotation composed with the smallest rotation of the rest tangent onto the current
    one), so the offsets turn with the head (unlike TressFX follow hairs);
@@ -19,8 +19,7 @@ f. optional length restoration (one Follow-The-Leader pass, Mueller, Kim & Chent
 g. roots (nodes 0 and 1) pinned at ``head.to_world(rest)``;
 h. optional collision with the head collider: inside the kernel for the project's
    :class:`hair_tracking.guides.collision.Collider`, node by node after (f) (push out with
-   friction, then, with length
-   restoration on, the collision-aware FTL step of the guides,
+   friction, then, with length restoration on, the collision-aware FTL step of the guides,
    :func:`hair_tracking.guides.ftl.restore_node`, so a
    push does not stretch the ghost); any other collider's ``apply`` runs after the kernel on the
    whole arrays.
@@ -55,8 +54,7 @@ class GhostTracker:
     ``ghosts.x``/``ghosts.v`` (world frame [m], [m/s]) show the state whenever they are read:
     between steps the tracker keeps it in its kernel's layout (block by block, [node][axis]
     [ghost], see :mod:`hair_tracking.ghosts.kernels`) and writes it back into the arrays only when
-    they
-    are read or assigned (:meth:`release`, called by the StrandSet's properties); a write into
+    they are read or assigned (:meth:`release`, called by the StrandSet's properties); a write into
     them is taken by the next step.  So several substeps without a read cost no conversion;
     :meth:`positions` reads without handing the state back.
 

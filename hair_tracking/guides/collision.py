@@ -233,9 +233,9 @@ class Collider:
         ``x_prev`` (S, N, 3) is the friction reference (e.g. the start-of-substep positions carried
         with the head, so friction acts on the slip relative to the head); ``inv_mass`` (S, N):
         only nodes with ``inv_mass > 0`` move; ``head`` a
-        :class:`~hair_tracking.core.model.HeadPose`.
-        Returns the number of contacts (nodes moved).  Small problems run the serial twin of
-        the kernel (:func:`~hair_tracking.guides.integrate.runs_parallel`).
+        :class:`~hair_tracking.core.model.HeadPose`.  Returns the number of contacts (nodes
+        moved).  Small problems run the serial twin of the kernel
+        (:func:`~hair_tracking.guides.integrate.runs_parallel`).
         """
         _points('x', x)
         _points('x_prev', x_prev)

@@ -18,8 +18,8 @@ g dt)`` settles at up to ``s_damp g dt / (1 - s_damp)``, 0.37 m/s at dt = 1/240 
 
 Bending comes first: ``bend_passes`` PBD Gauss–Seidel sweeps of the second-neighbour distance
 constraints with ``bend_stiffness``
-(:func:`hair_tracking.guides.pbd_constraints.pbd_sweep_block`), then
-the FTL pass restores the lengths exactly. ``iterations`` of the scene does not apply to FTL.
+(:func:`hair_tracking.guides.pbd_constraints.pbd_sweep_block`), then the FTL pass restores the
+lengths exactly. ``iterations`` of the scene does not apply to FTL.
 
 Degenerate input: if a segment has collapsed (``|p_i - p_{i-1}| < 1e-12`` m) the node is placed
 along the segment's rest direction carried by the head (``R (rest_i - rest_{i-1})``); a
@@ -146,8 +146,8 @@ def ftl_restore(x, rest, rest_length, rot, pos, center, axes, refine, corr):
     (as the FTL pass does); if that point lies inside the collision ellipsoid (semi-axes
     ``axes`` = radii + margin, centre ``center``, head frame; head pose ``rot``, ``pos``) it is
     moved to the surface (:func:`hair_tracking.guides.collision.surface_point`, ``refine``
-    refinements)
-    and put back at the rest distance along the new direction, up to :data:`RESTORE_ITERATIONS`
+    refinements) and put back at the rest distance along the new direction, up to
+    :data:`RESTORE_ITERATIONS`
     times (see :func:`restore_node`).
     For a predecessor outside the surface this converges to the point of the circle where the
     sphere of radius ``rest_length`` around it meets the surface, so lengths stay exact and a node
@@ -191,8 +191,8 @@ def ftl_step(x, v, x_old, corr, rest, inv_mass, rest_length, bend_rest, bend_w,
 
     ``bend_w`` from :func:`hair_tracking.guides.pbd_constraints.pair_weights` with gap 2; ``corr``
     (S, N, 3) receives the FTL corrections (needed by
-    :func:`hair_tracking.guides.integrate.finalize`
-    when a collider runs before finalizing). ``s_damp`` is the FTL velocity correction 0..1.
+    :func:`hair_tracking.guides.integrate.finalize` when a collider runs before finalizing).
+    ``s_damp`` is the FTL velocity correction 0..1.
     Returns the clamped node count (0 when not finalizing).
     """
     nblk = (x.shape[0] + BLOCK - 1) // BLOCK

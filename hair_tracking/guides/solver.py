@@ -55,8 +55,7 @@ class GuideSolver:
     """Advances ``strands.x`` / ``strands.v`` (world frame) one substep at a time.
 
     ``strands``: a :class:`~hair_tracking.core.model.StrandSet` (changed in place; its ``x`` and
-    ``v``
-    must be C-contiguous float64 ``(S, N, 3)``, ``N >= 3``); ``scene``: a
+    ``v`` must be C-contiguous float64 ``(S, N, 3)``, ``N >= 3``); ``scene``: a
     :class:`~hair_tracking.core.scene.Scene` (solver, gravity, damping, collider).
 
     Attributes: ``collider`` (``None`` when the scene has none; the simulator may hand it to the
@@ -66,8 +65,7 @@ class GuideSolver:
 
     With FTL and a collider, a substep is predict, bend, FTL pass, collide and, when a node was
     pushed, a collision-aware second FTL pass (:func:`~hair_tracking.guides.ftl.ftl_restore`):
-    lengths
-    stay exact and nodes outside the bare collider (measured in the stability matrix,
+    lengths stay exact and nodes outside the bare collider (measured in the stability matrix,
     ``docs/stability.md``).
     """
 

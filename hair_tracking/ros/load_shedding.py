@@ -24,8 +24,7 @@ one slow pose does not flip it) against the pose period (median interval of thei
   alone still does not decide.
 
 This module imports no ROS package; the node feeds it (:mod:`hair_tracking.ros.node`).  Offline
-runs
-(``hair_sim_bag run``) never shed: their output must be a function of the input alone.
+runs (``hair_sim_bag run``) never shed: their output must be a function of the input alone.
 """
 from collections import deque
 from statistics import median

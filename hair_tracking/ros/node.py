@@ -33,8 +33,7 @@ Parameters: one per entry of the table in :mod:`hair_tracking.core.params` (ever
 the node's settings), declared with descriptions and ranges; changes are validated in the on-set
 callback (a rejection names the parameter and the allowed values and changes nothing) and
 stored by the post-set callback as a frozen :class:`~hair_tracking.core.params.Settings` snapshot
-that
-the next step applies (a groom change rebuilds the hair at the current head pose).
+that the next step applies (a groom change rebuilds the hair at the current head pose).
 
 Everything runs in one thread (a SingleThreadedExecutor), so callbacks never race.
 """
