@@ -25,7 +25,7 @@ class StrandColorCache:
     or the colour changes (the node and ``FrameEncoder`` ask once per published frame).
 
     ``pack``: the function applied to the colours before they are cached (the publishers pass
-    ``msg_adapters.pointcloud.pack_rgb_u32``: packing 10 k colours took 0.5 ms a frame).  The
+    ``msg_adapters.pointcloud.pack_rgb_u32``, so a frame does not pack them again).  The
     cached arrays are read-only (every frame shares them)."""
 
     def __init__(self, pack: Callable[[np.ndarray], np.ndarray]):

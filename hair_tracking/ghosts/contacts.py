@@ -7,13 +7,13 @@ outside the surface (:func:`hair_tracking.guides.ftl.restore_node`).
 
 Hair resting on the head keeps 10-15 % of the ghost nodes in contact every substep (gravity
 pulls them in by ``g dt^2``).  Done node by node, each contact is a chain of about ten
-dependent square roots and divisions plus a hard-to-predict branch: 250 ns a contact here,
-half of a 10 k-ghost tracking step.  This module does the same arithmetic in passes over the
-*pushed nodes only*, laid out contiguously, so that LLVM vectorises them:
+dependent square roots and divisions plus a hard-to-predict branch.  This module does the same
+arithmetic in passes over the *pushed nodes only*, laid out contiguously, so that LLVM
+vectorises them:
 
-1. the inside test of all lanes (vectorised; a compaction in the same loop made it scalar, a
-   tenth of the kernel's samples under ``perf``), then a branch-free compaction of the pushed
-   lanes' indices;
+1. the inside test of all lanes (vectorised: the compaction is a separate loop, which keeps
+   this one free of stores that depend on the test), then a branch-free compaction of the
+   pushed lanes' indices;
 2. their positions, start positions, predecessors, rest segments and lengths gathered into rows
    of the work space;
 3. one loop without data-dependent branches (``select``s instead): the radial projection, the

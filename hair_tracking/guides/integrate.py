@@ -35,17 +35,10 @@ import numpy as np
 import numba
 from numba import njit, prange
 
-#: Strands one thread processes together. The constraint sweeps interleave the strands of a
-#: block (strand index innermost), so the CPU overlaps their independent dependency chains;
-#: measured on the 2-core Xeon here: about 2.5x faster than one strand at a time.
 #: Below this many nodes a kernel runs on one thread (its serial twin): the work is then
 #: smaller than a parallel region's launch.  The default groom's 64 guides (1 k nodes) stay
-#: serial, its 512 ghosts (8 k nodes) run on all threads.  Measured in the sixth session, after
-#: malloc_retain_mb removed the page-fault storms that had made parallel regions look 3-15x
-#: slower (the fifth session's threshold was 2^17): offline run of the walk sample, loop 2.01
-#: -> 1.66 s (in-process A/B, five runs each; 1 k nodes: 1.85 s); node step at 1 k ghosts
-#: 5.2 -> 3.8 ms, at 512 ghosts and 120 Hz poses 2.0 -> 1.6 ms.  Results do not depend on the
-#: thread count (tested).
+#: serial, its 512 ghosts (8 k nodes) run on all threads.  Results do not depend on the thread
+#: count (tested).
 PARALLEL_MIN_NODES = 1 << 12
 
 
@@ -61,9 +54,8 @@ def serial_twin(kernel):
     compiled function of its own (``*_block``); a body inlined into both variants may be
     contracted differently by LLVM (it was in ``ftl_restore``: last-bit differences, hence
     ``ftl_restore_block``).  For problems below :data:`PARALLEL_MIN_NODES`: even on one
-    thread a parallel region costs a launch through the threading layer, which at 64 guides of
-    16 nodes was a third of a guide substep (0.16 -> 0.11 ms measured with twins of the five
-    guide kernels).
+    thread a parallel region costs a launch through the threading layer, at 64 guides of 16
+    nodes a large part of a guide substep.
 
     The twin is a copy of the Python function named ``<name>_serial``, so numba's on-disk cache
     (whose index is keyed by the function's qualified name and line, not by its options) keeps
@@ -91,6 +83,8 @@ def parallel_from(nodes: int):
         PARALLEL_MIN_NODES = saved
 
 
+#: Strands one thread processes together.  The constraint sweeps interleave the strands of a
+#: block (strand index innermost), so the CPU overlaps their independent dependency chains.
 BLOCK = 8
 
 #: LLVM fast-math flags of every kernel: only ``contract`` (fused multiply-add). Results are

@@ -3,8 +3,7 @@ keep up, and every substep again once it can.
 
 A live node has one pose period (16.7 ms at 60 Hz) for each pose.  When the step takes longer,
 poses queue up, each later call has more substeps due, and the step grows until it hits
-``solver.max_substeps``: at 10 k ghosts on two cores the pose-to-cloud latency was 200-330 ms.
-Real-time renderers lower their level of detail under load instead; here the lever is the
+``solver.max_substeps``: the latency grows to many pose periods.  Real-time renderers lower their level of detail under load instead; here the lever is the
 tracking schedule (``tracking.every_substep``): tracking the ghosts once per pose over all its
 substeps costs one tracking step instead of 4 (60 Hz poses, 240 Hz substeps), and is the
 paper's own setting (the ghosts follow the targets once per frame).
@@ -19,9 +18,8 @@ one slow pose does not flip it) against the pose period (median interval of thei
   period (the gap keeps it from switching back and forth);
 * shed at once, without waiting for half a window, when :data:`URGENT_POSES` poses in a row
   took longer than :data:`URGENT` pose periods each: the node then falls further behind with
-  every pose (each next call has more substeps due); waiting for the medians cost the node at
-  10 k ghosts a start of 39, 58, 85, 114 and 166 ms poses before it shed.  One slow pose
-  alone still does not decide.
+  every pose (each next call has more substeps due), so waiting for the medians would let the
+  first poses grow longer and longer.  One slow pose alone still does not decide.
 
 This module imports no ROS package; the node feeds it (:mod:`hair_tracking.ros.node`).  Offline
 runs (``hair_sim_bag run``) never shed: their output must be a function of the input alone.
@@ -34,8 +32,7 @@ from typing import Optional
 WINDOW = 8
 #: Restore only when the full schedule is estimated below this fraction of the budget.
 RESTORE_FRACTION = 2.0 / 3.0
-#: Work above this many pose periods on URGENT_POSES poses in a row sheds at once (with two
-#: periods, 10 k ghosts started with 28, 35 and 37 ms poses at 60 Hz before the fourth shed).
+#: Work above this many pose periods on URGENT_POSES poses in a row sheds at once.
 URGENT = 1.0
 URGENT_POSES = 2
 
