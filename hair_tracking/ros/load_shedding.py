@@ -1,12 +1,13 @@
 """Load shedding for a live pose stream: track the ghosts once per pose while the node cannot
 keep up, and every substep again once it can.
 
-A live node has one pose period (16.7 ms at 60 Hz) for each pose.  When the step takes longer,
-poses queue up, each later call has more substeps due, and the step grows until it hits
-``solver.max_substeps``: the latency grows to many pose periods.  Real-time renderers lower
-their level of detail under load instead; here the lever is the tracking schedule
+A live node has one pose period (16.7 ms at 60 Hz) for each pose. When the step takes longer, poses
+queue up, each later call has more substeps due, and the step grows until it hits
+``solver.max_substeps``: the latency grows to many pose periods. Real-time renderers lower their
+level of detail under load instead; here the lever is the tracking schedule
 (``tracking.every_substep``): tracking the ghosts once per pose over all its substeps costs one
-tracking step instead of 4 (60 Hz poses, 240 Hz substeps), and is the paper's own setting (the ghosts follow the targets once per frame).
+tracking step instead of 4 (60 Hz poses, 240 Hz substeps), and is the paper's own setting (the
+ghosts follow the targets once per frame).
 
 The decision uses the work of the last :data:`WINDOW` poses (the node passes the step plus the
 publishing done since the previous pose: the time its one thread spends per pose; medians, so
