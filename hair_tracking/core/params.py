@@ -318,8 +318,8 @@ NODE_PARAMS: Tuple[Param, ...] = (
           'queue depth of the pose subscriptions (sensor-data QoS keeps the newest ones): 1 '
           'always simulates the newest pose, so a node that falls behind is at most one pose '
           'late (the head between poses is interpolated, no simulated time is lost); more '
-          'keeps every pose of a burst (the sensor-data default is 5: 92 ms instead of 24 ms '
-          'latency at 10 k ghosts on a busy 2-core machine)', lo=1, hi=1000, read_only=True),
+          'keeps every pose of a burst, at the cost of latency when the node is behind (the '
+          'sensor-data default is 5)', lo=1, hi=1000, read_only=True),
     Param('output_queue_depth', 'int', 2,
           'history depth of the reliable hair outputs: 2 keeps latency low for viewers; a '
           'recorder that must not miss a frame under load wants more', lo=1, hi=1000,
