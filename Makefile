@@ -36,7 +36,7 @@ test: $(STAMP)
 	$(TEST_ENV) $(PY) -m pytest -q test
 
 lint: $(STAMP)
-	$(PY) -m flake8 hair_tracking msg_adapters test scripts setup.py
+	$(PY) -m flake8 hair_tracking msg_adapters test scripts launch setup.py
 
 # The main job: the node, the bundled head-pose bag played into it with /clock, its output
 # recorded to a bag and rendered (see docs/bags.md).
