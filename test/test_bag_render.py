@@ -118,3 +118,29 @@ def test_render_bad_inputs(tmp_path, capsys):
     assert main(['render', str(good), '-o', str(tmp_path / 'c')]) == 5
     assert main(['render', str(good), '-o', str(tmp_path / 'd'), '--fps', '0']) == 2
     assert sorted(p.name for p in tmp_path.iterdir()) == ['c', 'good.mcap', 'poses.mcap']
+
+
+def test_head_outline_comes_from_the_head_marker(tmp_path):
+    """The node's /hair/head marker (the collider) sizes the head outline; without it the
+    default scene's collider is drawn."""
+    from rclpy.serialization import serialize_message
+    from msg_adapters.head_marker import collider_marker
+    bag = tmp_path / 'out.mcap'
+    _output_bag(bag, frames=6, diagnostics=False)
+    plain = render(bag, tmp_path / 'plain', gif=False)
+    assert plain['head_radii'] == (0.095, 0.08, 0.105)
+    with_head = tmp_path / 'head.mcap'
+    with bag_io.BagWriter(with_head) as w:
+        w.add_topic('/hair/head', 'visualization_msgs/msg/Marker')
+        w.add_topic('/hair/points', 'sensor_msgs/msg/PointCloud2')
+        w.add_topic('/head_pose', 'geometry_msgs/msg/PoseStamped')
+        for k in range(6):
+            t = 10 ** 9 + k * 33_333_333
+            w.write('/head_pose', t, pose_stamped_bytes(t, [0, 0, 1.6], [0, 0, 0, 1], 'world'))
+            w.write('/hair/head', t, bytes(serialize_message(collider_marker(
+                'ellipsoid', (0, 0, 0), 0.1, (0.11, 0.09, 0.12), frame_id='world', stamp_ns=t,
+                color=(1, 1, 1, 1), head_position=(0, 0, 1.6), head_quaternion=(0, 0, 0, 1)))))
+            w.write('/hair/points', t, strands_to_pointcloud2_cdr(_strands(k, 0.0),
+                                                                  frame_id='world', stamp_ns=t))
+    got = render(with_head, tmp_path / 'head', gif=False)
+    np.testing.assert_allclose(got['head_radii'], (0.11, 0.09, 0.12))

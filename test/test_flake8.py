@@ -7,7 +7,8 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
 def test_flake8_clean():
-    targets = [p for p in ('hair_tracking', 'msg_adapters', 'test', 'scripts', 'setup.py')
+    targets = [p for p in ('hair_tracking', 'msg_adapters', 'test', 'scripts', 'launch',
+                           'setup.py')
                if os.path.exists(os.path.join(ROOT, p))]
     proc = subprocess.run([sys.executable, '-m', 'flake8', *targets], cwd=ROOT,
                           capture_output=True, text=True, timeout=300)

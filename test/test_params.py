@@ -78,6 +78,7 @@ def test_rebuild_policy_is_the_groom_and_read_only_are_start_settings():
     rebuild = {n for n, p in table.items() if p.rebuild}
     assert rebuild == {n for n in table if n.startswith('groom.')}
     assert {n for n, p in table.items() if p.read_only} == {'scene_file', 'warmup', 'use_tf',
+                                                            'gravity_frame',
                                                             'pose_queue_depth',
                                                             'output_queue_depth'}
     assert not any(p.rebuild and p.read_only for p in table.values())
@@ -181,7 +182,7 @@ def test_rendered_yaml_lists_every_parameter_with_typed_defaults():
                 walk(v, prefix + k + '.')
             else:
                 flat[prefix + k] = v
-    walk(data[params.NODE_NAME]['ros__parameters'], '')
+    walk(data['/**']['ros__parameters'], '')
     table = params.by_name()
     assert set(flat) == set(table)
     for name, value in flat.items():

@@ -27,8 +27,8 @@ import numpy as np
 
 from hair_tracking import process_tuning
 from hair_tracking.bags.io import (BagError, EXIT_CONTENT, EXIT_FAILURE, EXIT_INPUT,
-                                   EXIT_INTERRUPTED, EXIT_OK,
-                                   EXIT_OUTPUT, EXIT_USAGE, POSE_KINDS, STORAGES)
+                                   EXIT_INTERRUPTED, EXIT_OK, EXIT_OUTPUT, EXIT_USAGE,
+                                   POSE_KIND_TOPICS, POSE_KINDS, STORAGES)
 
 #: seconds since the epoch given to the first sample of an import (reproducible, non-zero:
 #: a stamp of 0 means "now" to the node); 1e9 s is 2001-09-09T01:46:40Z.
@@ -195,7 +195,7 @@ def cmd_import(args) -> int:
     print(f'  {n} poses, {dur:.3f} s'
           + (f', median rate {1e9 / np.median(np.diff(stamps)):.1f} Hz' if n > 1 else '')
           + (f'; rows dropped: {dropped}' if dropped else ''))
-    topic = args.topic or ('/tf' if args.message == 'tf' else '/head_pose')
+    topic = args.topic or POSE_KIND_TOPICS[args.message]
     print(f'wrote {out} ({args.message} on {topic}, frame {args.frame_id!r}'
           + (f' -> {args.child_frame_id!r}' if args.message != 'pose' else '') + ')')
     return EXIT_OK
@@ -323,8 +323,11 @@ def build_parser() -> argparse.ArgumentParser:
     g = p.add_argument_group('output')
     g.add_argument('--message', choices=POSE_KINDS, default='pose',
                    help='pose: PoseStamped on /head_pose (default); transform: '
-                        'TransformStamped on /head_pose; tf: tf2_msgs/TFMessage on /tf')
-    g.add_argument('--topic', help='topic name (default /head_pose, or /tf)')
+                        'TransformStamped on /head_transform; tf: tf2_msgs/TFMessage on /tf '
+                        '(the hair_sim node\'s input topics: pose and transform bags play into '
+                        'it without remapping, tf ones with use_tf:=true)')
+    g.add_argument('--topic', help='topic name (default: /head_pose, /head_transform or /tf '
+                                   'by --message)')
     g.add_argument('--frame-id', default='world', help='fixed frame (default world)')
     g.add_argument('--child-frame-id', default='head', help='head frame (default head)')
     g.add_argument('--storage', choices=STORAGES,

@@ -704,6 +704,9 @@ def cloud_to_strands(msg) -> np.ndarray:
 
 # ================================================================ head poses -> bag
 POSE_KINDS = ('pose', 'transform', 'tf')
+# The topic of each kind: the hair_sim node's default input of that type, so an imported bag
+# plays into the node without remapping (a 'tf' bag needs the node's use_tf).
+POSE_KIND_TOPICS = {'pose': '/head_pose', 'transform': '/head_transform', 'tf': '/tf'}
 
 
 def stamp_parts(t_ns: int) -> Tuple[int, int]:
@@ -755,8 +758,9 @@ def write_head_pose_bag(path, t_ns, position, quaternion, *, kind: str = 'pose',
 
     ``t_ns`` (F,) int stamps [ns] (header stamp = log time), ``position`` (F, 3) [m] in
     ``frame_id``, ``quaternion`` (F, 4) unit (x, y, z, w) head -> ``frame_id``.  ``kind`` 'pose'
-    (PoseStamped on ``/head_pose``), 'transform' (TransformStamped on ``/head_pose``) or 'tf'
-    (TFMessage on ``/tf``, child ``child_frame_id``).  Serialized with the rosbags Jazzy
+    (PoseStamped on ``/head_pose``), 'transform' (TransformStamped on ``/head_transform``) or
+    'tf' (TFMessage on ``/tf``, child ``child_frame_id``): the node's input topics
+    (:data:`POSE_KIND_TOPICS`).  Serialized with the rosbags Jazzy
     typestore (byte-identical to rclpy's CDR); ``compress`` zstd-compresses MCAP chunks.
     """
     t = np.asarray(t_ns)
@@ -770,7 +774,7 @@ def write_head_pose_bag(path, t_ns, position, quaternion, *, kind: str = 'pose',
                        EXIT_USAGE)
     if not frame_id or (kind != 'pose' and not child_frame_id):
         raise BagError('frame ids must not be empty', EXIT_USAGE)
-    topic = topic or ('/tf' if kind == 'tf' else '/head_pose')
+    topic = topic or POSE_KIND_TOPICS[kind]
     ts = typestore()
     with BagWriter(path, storage=storage, overwrite=overwrite, custom_data=custom_data,
                    compress=compress) as w:

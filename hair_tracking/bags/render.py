@@ -12,8 +12,9 @@ the health from ``/diagnostics``, and writes into a new folder:
   substeps, rejected poses, timings ...), when the bag has ``/diagnostics``.
 
 With ``--frame head`` (default) the hair is drawn in the head frame (REP-103: x forward, y left,
-z up), with the head collider outline, so the motion of the hair relative to the head is what
-moves; the head pose at each picture is the newest ``/head_pose`` at or before its stamp.  With
+z up), with the head collider outline (from the node's ``/hair/head`` marker when the bag has
+it), so the motion of the hair relative to the head is what moves; the head pose at each
+picture is the newest ``/head_pose`` at or before its stamp.  With
 ``--frame world`` the view follows the hair's centre.  Units on the axes: metres.
 Rendering uses matplotlib's Agg backend (no display needed) and Pillow for the GIF.
 """
@@ -33,6 +34,8 @@ VIEWS = {'side': (0, 2, 'x forward [m]', 'z up [m]'),
          'front': (1, 2, 'y left [m]', 'z up [m]'),
          'top': (0, 1, 'x forward [m]', 'y left [m]')}
 HAIR_COLOR = '#6b4423'
+HEAD_MARKER_TOPIC = '/hair/head'
+DEFAULT_HEAD_RADII = (0.095, 0.08, 0.105)     # the default scene's collider [m]
 
 
 def _topic(infos, name):
@@ -143,6 +146,19 @@ def load_head(path):
     hp = bag_io.read_head_poses(path, topic=info.topic)
     order = np.argsort(hp.t_ns, kind='stable')
     return hp.t_ns[order], hp.position[order], hp.quaternion[order]
+
+
+def load_head_shape(path) -> Optional[Tuple[float, float, float]]:
+    """Semi-axes [m] of the head collider from the first SPHERE marker the node published on
+    ``/hair/head`` (its ``scale`` is the full axes), or None when the bag has none."""
+    with bag_io.open_bag(path) as reader:
+        conns = [c for c in reader.connections if c.topic == HEAD_MARKER_TOPIC
+                 and c.msgtype == 'visualization_msgs/msg/Marker']
+        for conn, _, raw in bag_io.messages(reader, conns):
+            msg = bag_io.deserialize(reader, raw, conn.msgtype, conn.topic)
+            if msg.action == 0 and msg.type == 2:          # ADD, SPHERE
+                return (0.5 * msg.scale.x, 0.5 * msg.scale.y, 0.5 * msg.scale.z)
+    return None
 
 
 def load_diagnostics(path) -> Tuple[Dict[str, List[Tuple[float, float]]], str]:
@@ -275,12 +291,13 @@ def _head_at(head, t_ns):
 def render(path, output, *, gif: bool = True, png: bool = False, fps: float = 10.0,
            max_frames: int = 120, max_strands: int = 600, view: str = 'both',
            frame: str = 'head', topic: Optional[str] = None, overwrite: bool = False,
-           head_radii=(0.095, 0.08, 0.105)) -> Dict[str, object]:
+           head_radii=None) -> Dict[str, object]:
     """Render ``path`` into the new folder ``output``; returns what was written.
 
     See the module doc.  BagError for a missing/unreadable bag, no hair topic or an existing
-    output.  ``head_radii`` [m] is the head outline drawn in the head frame (the default
-    collider of the scene).
+    output.  ``head_radii`` [m] is the head outline drawn in the head frame; by default the
+    collider of the node's head marker (``/hair/head``) when the bag has it, else the default
+    scene's collider.
     """
     from PIL import Image
 
@@ -292,6 +309,8 @@ def render(path, output, *, gif: bool = True, png: bool = False, fps: float = 10
     if not frames:
         raise BagError(f'{path}: {hair_topic} holds no hair to draw', EXIT_CONTENT)
     head = load_head(path)
+    if head_radii is None:
+        head_radii = load_head_shape(path) or DEFAULT_HEAD_RADII
     notes = []
     in_head = frame == 'head'
     already_head = in_head and head is None and all(
@@ -327,7 +346,8 @@ def render(path, output, *, gif: bool = True, png: bool = False, fps: float = 10
     parent = out.parent if str(out.parent) else Path('.')
     parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f'.{out.name}.partial-', dir=parent))
-    written: Dict[str, object] = {'topic': hair_topic, 'frames': len(drawn), 'notes': notes}
+    written: Dict[str, object] = {'topic': hair_topic, 'frames': len(drawn), 'notes': notes,
+                                  'head_radii': tuple(float(r) for r in head_radii)}
     try:
         canvas = _Canvas(views, limits, head_radii if in_head else None)
         images = []

@@ -226,7 +226,8 @@ _SCENE_DOCS: Dict[str, Tuple[str, str, bool]] = {
     'output.curve': ('smoothing of the output strands', '', False),
     'output.points_per_strand': ('output points per strand when output.curve is not none',
                                  '', False),
-    'gravity': ('gravity, in the fixed frame of the head pose', 'm/s^2', False),
+    'gravity': ('gravity, in the fixed frame of the head pose (or in gravity_frame)', 'm/s^2',
+                False),
     'damping': ('velocity damping rate', '1/s', False),
 }
 
@@ -313,7 +314,19 @@ NODE_PARAMS: Tuple[Param, ...] = (
           'subscribing, so the first frames are not late', read_only=True),
     Param('use_tf', 'bool', False,
           'also take the head pose from /tf (needs tf2_msgs), selected by head_frame or '
-          'head_frame_prefix', read_only=True),
+          'head_frame_prefix, and composed with its parents from /tf_static and /tf up to the '
+          'root of its tree (the frame the hair is simulated and published in)',
+          read_only=True),
+    Param('publish_tf', 'bool', True,
+          'broadcast each head pose on /tf as robot_state_publisher does: parent the pose\'s '
+          'frame_id (else fixed_frame), child its child_frame_id (else head_frame), so rviz '
+          'resolves output_frame head and the head marker; poses taken from /tf are not sent '
+          'again'),
+    Param('gravity_frame', 'string', '',
+          'frame in which gravity is given; empty: the fixed frame of the head pose. Else '
+          'gravity is rotated into the pose\'s frame through /tf_static and /tf (e.g. world '
+          'when a tracker publishes in a camera optical frame, whose z is the viewing '
+          'direction)', read_only=True),
     Param('pose_queue_depth', 'int', 1,
           'queue depth of the pose subscriptions (sensor-data QoS keeps the newest ones): 1 '
           'always simulates the newest pose, so a node that falls behind is at most one pose '
@@ -366,7 +379,13 @@ NODE_PARAMS: Tuple[Param, ...] = (
     Param('stale_timeout', 'double', 0.25,
           'after this long without a head pose the last pose is held and the hair keeps '
           'settling at publish_rate_hz', unit='s', lo=0.01, hi=3600.0),
-    Param('diagnostics_rate_hz', 'double', 1.0, 'rate of the diagnostics output', unit='Hz',
+    Param('head_marker', 'bool', True,
+          'publish the head collider (sphere or ellipsoid) as a visualization_msgs/Marker on '
+          'hair/head, in the frame of the hair'),
+    Param('head_color', 'double_array', (0.85, 0.7, 0.6, 0.5),
+          'RGBA colour of the head marker', lo=0.0, hi=1.0, length=4),
+    Param('diagnostics_rate_hz', 'double', 1.0,
+          'rate of the diagnostics output, sent whether or not anyone subscribes', unit='Hz',
           lo=0.1, hi=100.0),
     Param('numba_threads', 'int', 0,
           'threads of the parallel numba kernels; 0 = all cores (NUMBA_NUM_THREADS). On a '
@@ -485,11 +504,13 @@ def apply_changes(settings: Settings, changes: Mapping[str, Any],
 
 
 # ------------------------------------------------------------------ YAML
-def render_yaml(node_name: str = NODE_NAME, base: Optional[Scene] = None) -> str:
+def render_yaml(node_name: str = NODE_NAME, base: Optional[Scene] = None,
+                key: str = '/**') -> str:
     """A ROS 2 params file with every parameter at its default, each line commented.
 
     Scene parameters are nested by their dotted names (``groom: guides: 64``), which ROS 2
-    reads back as ``groom.guides``.
+    reads back as ``groom.guides``.  ``key`` is the node-name key: ``/**`` applies to the
+    node under any name and namespace (a launch file's ``name=`` or ``namespace=``).
     """
     lines = [
         f'# Parameters of the {node_name} node (hair_tracking).  Generated from the table in',
@@ -500,7 +521,9 @@ def render_yaml(node_name: str = NODE_NAME, base: Optional[Scene] = None) -> str
         '# the value is written.  (ro) read-only, set at start; (rebuild) a change rebuilds the',
         '# hair at the current head pose; every other parameter can be changed live.',
         '# With scene_file set, delete the scene keys below that should come from that file.',
-        f'{node_name}:',
+        '# "/**" applies to the node under any name or namespace; a key the node does not',
+        '# know is warned about at start.',
+        f'{key}:',
         '  ros__parameters:',
     ]
     open_sections: Tuple[str, ...] = ()

@@ -4,9 +4,9 @@
 
 1. starts the ``hair_sim`` node as its own process with ``use_sim_time:=true``
    (``python -m hair_tracking.ros.node --ros-args ...``) and waits until it subscribes;
-2. records the node's output (``/hair/points``, ``/diagnostics``, and the ``/head_pose`` it is
-   fed; ``--markers`` adds ``/hair/markers``) into ``OUT/hair_output.mcap``, logging at
-   ``/clock`` time;
+2. records the node's output (``/hair/points``, ``/diagnostics``, the head marker
+   ``/hair/head`` and the ``/head_pose`` it is fed; ``--markers`` adds ``/hair/markers``) into
+   ``OUT/hair_output.mcap``, logging at ``/clock`` time;
 3. plays the bundled head-pose bag (CMU 131_01 walk, 8.3 s) into it with ``/clock`` before
    each message, paced by the wall clock;
 4. stops the node, renders ``OUT/pictures/`` (``hair.gif``, ``hair.png``, ``diagnostics.png``)
@@ -141,7 +141,7 @@ def run_demo(args) -> int:
         sim_time = Parameter('use_sim_time', Parameter.Type.BOOL, True)
         rec_node = rclpy.create_node('hair_demo_recorder', parameter_overrides=[sim_time])
         play_node = rclpy.create_node('hair_demo_player')
-        topics = ['/hair/points', '/diagnostics', '/head_pose']
+        topics = ['/hair/points', '/diagnostics', '/head_pose', '/hair/head']
         if args.markers:
             topics.append('/hair/markers')
         player = BagPlayer(play_node, bag, rate=args.rate, duration_s=args.duration,

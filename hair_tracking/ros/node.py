@@ -39,6 +39,7 @@ Everything runs in one thread (a SingleThreadedExecutor), so callbacks never rac
 """
 import argparse
 import collections
+import dataclasses
 import math
 import sys
 import time
@@ -59,18 +60,24 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import PointCloud2
 from std_srvs.srv import Trigger
-from visualization_msgs.msg import MarkerArray
+from visualization_msgs.msg import Marker, MarkerArray
 
+from msg_adapters.head_marker import collider_marker
 from msg_adapters.marker_cdr import strands_to_marker_array_cdr
 from msg_adapters.pointcloud import CloudBuffer, pack_rgb_u32
 from msg_adapters.pose import pose_from_msg, PoseError
 from msg_adapters.rcl_serialized import SerializedPublisher
+from msg_adapters.stamps import time_to_ns
+from msg_adapters.tf import transform_message, transforms as tf_transforms
 
 from hair_tracking import process_tuning
 from hair_tracking.core import params as P
 from hair_tracking.core.head_track import PoseResult
+from hair_tracking.core.params_check import unknown_parameters
 from hair_tracking.core.scene import Scene, SceneError
 from hair_tracking.core.strand_colors import StrandColorCache
+from hair_tracking.core.tf_tree import compose as tf_compose, TfTree
+from hair_tracking.core.transforms import quat_to_matrix
 from hair_tracking.resources import config_path
 from hair_tracking.ros.load_shedding import LoadShedder
 from hair_tracking.simulator import HairSimulator, warm_up as warm_up_simulator
@@ -88,6 +95,7 @@ _PARAM_TYPES = {
     'double_array': Parameter.Type.DOUBLE_ARRAY,
 }
 WARN_THROTTLE_S = 5.0
+HEAD_MARKER_TOPIC = 'hair/head'
 
 
 def output_qos(depth: int) -> QoSProfile:
@@ -216,6 +224,20 @@ class HairSimNode(Node):
             'guide_markers': _Output(self, 'hair/guides/markers', MarkerArray, depth),
         }
         self._diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
+        self.diagnostics_sent = 0
+        self._head_pub = self.create_publisher(Marker, HEAD_MARKER_TOPIC, output_qos(depth))
+        self._tf = TfTree()              # /tf_static and /tf, for use_tf and gravity_frame
+        self._tf_pub = None              # publish_tf
+        self._tf_sent_key = None         # (child, stamp) of the last transform broadcast
+        self.tf_sent = 0
+        self._gravity_used = None        # gravity in the pose's frame given to the simulator
+        if TFMessage is not None:
+            self._tf_pub = self.create_publisher(TFMessage, '/tf', QoSProfile(
+                history=HistoryPolicy.KEEP_LAST, depth=100,
+                reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE))
+        elif settings.publish_tf:
+            self.get_logger().warn('publish_tf is true but tf2_msgs is not installed: the head '
+                                   'pose is not broadcast on /tf')
         self.create_service(Trigger, '~/reset', self._on_reset)
         period = settings.publish_period
         self._publish_timer = self.create_timer(period, self._on_publish_timer)
@@ -228,15 +250,22 @@ class HairSimNode(Node):
                               durability=qos_profile_sensor_data.durability)
         self.create_subscription(PoseStamped, 'head_pose', self._on_pose, pose_qos)
         self.create_subscription(TransformStamped, 'head_transform', self._on_pose, pose_qos)
-        if settings.use_tf:
+        if settings.use_tf or settings.gravity_frame:
             if TFMessage is None:
-                self.get_logger().warn('use_tf is true but tf2_msgs is not installed: /tf is '
-                                       'not subscribed (head_pose and head_transform still are)')
+                self.get_logger().warn('use_tf or gravity_frame is set but tf2_msgs is not '
+                                       'installed: /tf is not subscribed (head_pose and '
+                                       'head_transform still are)')
             else:
                 tf_qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100,
                                     reliability=ReliabilityPolicy.BEST_EFFORT,
                                     durability=DurabilityPolicy.VOLATILE)
-                self.create_subscription(TFMessage, '/tf', self._on_tf, tf_qos)
+                self.create_subscription(TFMessage, '/tf', self._on_tf if settings.use_tf
+                                         else self._on_tf_dynamic, tf_qos)
+                static_qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100,
+                                        reliability=ReliabilityPolicy.RELIABLE,
+                                        durability=DurabilityPolicy.TRANSIENT_LOCAL)
+                self.create_subscription(TFMessage, '/tf_static', self._on_tf_static,
+                                         static_qos)
         scene = settings.scene
         ghosts = self.sim.ghosts.count if self.sim.ghosts is not None else 0
         self.get_logger().info(
@@ -331,6 +360,8 @@ class HairSimNode(Node):
                 self.get_logger().info(
                     f'groom changed: hair rebuilt ({self.sim.guides.count} guides, '
                     f'{self.sim.ghosts.count if self.sim.ghosts is not None else 0} ghosts)')
+            self._gravity_used = None
+            self._update_gravity()
         self._invalidate()
 
     # ================================================================ inputs
@@ -339,7 +370,7 @@ class HairSimNode(Node):
         self.get_logger().warn(f'head pose dropped ({self.rejected} so far): {reason}',
                                throttle_duration_sec=WARN_THROTTLE_S)
 
-    def _on_pose(self, msg) -> None:
+    def _on_pose(self, msg, from_tf: bool = False) -> None:
         """A head pose (PoseStamped, TransformStamped or a /tf entry): feed and step."""
         self._apply_pending()
         try:
@@ -377,14 +408,32 @@ class HairSimNode(Node):
         self._last_stamp_ns = t_ns
         if result.is_reset:
             self.shedder.reset()
+        if not from_tf:
+            self._broadcast_head(t_ns, sample.position, sample.quaternion)
+        self._update_gravity()
         self._step(t_ns + offset)
         if self._settings.publish_on_pose and self._pose_frame_due():
             self._publish()
             self._pose_publish_at = time.monotonic()
         self._shed_load(t_ns)
 
+    def _on_tf_static(self, msg) -> None:
+        self._store_tf(msg, static=True)
+
+    def _on_tf_dynamic(self, msg) -> None:
+        """/tf without use_tf (for gravity_frame): the transforms are only kept."""
+        self._store_tf(msg, static=False)
+
+    def _store_tf(self, msg, static: bool) -> None:
+        for parent, child, t, q, stamp in tf_transforms(msg):
+            self._tf.set(parent, child, t, q, stamp, static=static)
+        if self._settings.gravity_frame and self._has_pose:
+            self._update_gravity()
+
     def _on_tf(self, msg) -> None:
-        """Pick the head transform out of a TFMessage (``head_frame`` or the prefix)."""
+        """Pick the head transform out of a TFMessage (``head_frame`` or the prefix) and
+        compose it with its parents' transforms (``/tf_static``, ``/tf``) up to the root."""
+        self._store_tf(msg, static=False)
         self._apply_pending()
         prefix = self._settings.head_frame_prefix
         if self._tf_child is not None and not (prefix and self._tf_child.startswith(prefix)):
@@ -392,6 +441,12 @@ class HairSimNode(Node):
         now_ns = self.get_clock().now().nanoseconds
         for tr in msg.transforms:
             child = str(tr.child_frame_id).lstrip('/')
+            if self._tf_sent_key is not None and self._tf_sent_key[0] == child:
+                try:
+                    if time_to_ns(tr.header.stamp) == self._tf_sent_key[1]:
+                        continue         # this node's own broadcast (publish_tf)
+                except ValueError:
+                    pass
             if prefix:
                 if not child.startswith(prefix):
                     continue
@@ -405,7 +460,72 @@ class HairSimNode(Node):
                 self._tf_seen_ns = now_ns
             elif child != self._settings.head_frame.lstrip('/'):
                 continue
-            self._on_pose(tr)
+            self._on_pose(self._to_root(tr), from_tf=True)
+
+    def _to_root(self, tr):
+        """The head transform ``tr`` (parent -> head) expressed in the root of the parent's
+        tree: ``root -> ... -> parent`` composed in front (``tr`` itself when the parent has
+        no parent)."""
+        try:
+            root, t, q = self._tf.to_root(tr.header.frame_id)
+        except ValueError as e:                  # a loop in the tree
+            self.get_logger().warn(str(e), throttle_duration_sec=WARN_THROTTLE_S)
+            return tr
+        if root == str(tr.header.frame_id).lstrip('/'):
+            return tr
+        a, b = tr.transform.translation, tr.transform.rotation
+        head = (np.array([a.x, a.y, a.z]), np.array([b.x, b.y, b.z, b.w]))
+        pos, quat = tf_compose((t, q), head)
+        out = TransformStamped()
+        out.header.stamp = tr.header.stamp
+        out.header.frame_id = root
+        out.child_frame_id = tr.child_frame_id
+        o, r = out.transform.translation, out.transform.rotation
+        o.x, o.y, o.z = (float(v) for v in pos)
+        r.x, r.y, r.z, r.w = (float(v) for v in quat)
+        return out
+
+    def _broadcast_head(self, t_ns: int, position, quaternion) -> None:
+        """``publish_tf``: the accepted head pose on /tf, parent and child as the hair's
+        fixed and head frames (:meth:`output_frame_id`), stamped with the pose's stamp."""
+        s = self._settings
+        if not s.publish_tf or self._tf_pub is None:
+            return
+        parent = self._pose_frame or s.fixed_frame or 'world'
+        child = self._pose_child or s.head_frame or 'head'
+        if parent.lstrip('/') == child.lstrip('/'):
+            return
+        q = np.asarray(quaternion, dtype=np.float64)
+        self._tf_pub.publish(transform_message(t_ns, parent, child, position,
+                                               q / np.linalg.norm(q)))
+        self._tf_sent_key = (child.lstrip('/'), t_ns)
+        self.tf_sent += 1
+
+    def _update_gravity(self) -> None:
+        """``gravity_frame``: the scene's gravity rotated into the pose's frame (through
+        /tf_static and /tf) and handed to the simulator when it changed."""
+        s = self._settings
+        if not s.gravity_frame:
+            return
+        g = np.asarray(s.scene.gravity, dtype=np.float64)
+        pose_frame = self._pose_frame or s.fixed_frame or 'world'
+        try:
+            found = self._tf.lookup(pose_frame, s.gravity_frame)
+        except ValueError:                       # a loop in the tree
+            found = None
+        if found is None:
+            self.get_logger().warn(
+                f'gravity_frame {s.gravity_frame!r}: no transform to the pose frame '
+                f'{pose_frame!r} on /tf_static or /tf yet; gravity taken in {pose_frame!r}',
+                throttle_duration_sec=WARN_THROTTLE_S)
+        else:
+            g = quat_to_matrix(found[1]) @ g
+        if self._gravity_used is not None and np.allclose(g, self._gravity_used, rtol=0.0,
+                                                          atol=1e-9):
+            return
+        self._gravity_used = g
+        self.sim.update_scene(dataclasses.replace(self.sim.scene,
+                                                  gravity=tuple(float(v) for v in g)))
 
     def _step(self, t_ns: int) -> None:
         start = self._work_clock()
@@ -503,6 +623,7 @@ class HairSimNode(Node):
         """Encode and publish the outputs somebody subscribes to (nothing else is built)."""
         if not self._has_pose:
             return
+        self._publish_head()
         outs = self.outputs
         s = self._settings
         wanted = {k: o.wanted() for k, o in outs.items()}
@@ -626,17 +747,52 @@ class HairSimNode(Node):
             kv('ghost_kernel', 'none' if sim.ghost_tracker is None else
                ('parallel' if sim.ghost_tracker.stats['parallel'] else 'serial')),
             kv('output_frame', self.output_frame_id()),
+            kv('tf_sent', self.tf_sent),
+            kv('gravity_in_pose_frame', 'n/a' if self._gravity_used is None else
+               ' '.join(f'{v:.4f}' for v in self._gravity_used)),
         ]
         return DiagnosticStatus(level=level, name=f'{self.get_name()}: hair simulation',
                                 message='; '.join(problems) if problems else 'ok',
                                 hardware_id='hair_tracking', values=values)
 
     def _on_diag_timer(self) -> None:
-        if self._diag_pub.get_subscription_count() == 0:
-            return
+        """Diagnostics at ``diagnostics_rate_hz``, listened to or not (an aggregator expects
+        a steady rate)."""
         msg = DiagnosticArray(status=[self.diagnostics()])
         msg.header.stamp = self.get_clock().now().to_msg()
         self._diag_pub.publish(msg)
+        self.diagnostics_sent += 1
+
+    # ================================================================ head marker
+    def _publish_head(self) -> None:
+        """The collider as a Marker on ``hair/head`` in the frame of the hair (``head_marker``;
+        built only when somebody subscribes)."""
+        s = self._settings
+        if not s.head_marker or self._head_pub.get_subscription_count() == 0:
+            return
+        c = self.sim.scene.collider
+        kw = {}
+        if s.output_frame != 'head':
+            kw = dict(head_position=self.sim.head.position,
+                      head_quaternion=self.sim.head.quaternion)
+        stamp = max(0, (self.sim.time_ns or 0) - self._offset_ns)
+        self._head_pub.publish(collider_marker(
+            c.shape, c.center, c.radius, c.radii, frame_id=self.output_frame_id(),
+            stamp_ns=stamp, color=s.head_color, **kw))
+
+    # ================================================================ parameters files
+    def warn_unknown_parameters(self, argv: List[str]) -> Dict[str, List[str]]:
+        """Warn about every parameter that the params files or ``-p`` of ``argv`` (the
+        process's ``--ros-args``) set for this node but that the node does not have (ROS 2
+        itself ignores them silently); returns ``{source: [names]}``."""
+        fqn = self.get_fully_qualified_name()
+        found = unknown_parameters(argv, fqn, self._table, self.get_name())
+        for source, names in found.items():
+            self.get_logger().warn(
+                f'{source}: unknown parameter{"s" if len(names) > 1 else ""} for {fqn}, '
+                f'ignored: {", ".join(names)} (the node\'s parameters: config/hair_sim.yaml, '
+                f'docs/node.md)')
+        return found
 
 
 # ==================================================================== helpers
@@ -699,6 +855,7 @@ def main(args=None) -> int:
             rclpy.logging.get_logger(P.NODE_NAME).info(line)
         executor = SingleThreadedExecutor()   # before the node: Ctrl-C may come at any time
         node = HairSimNode()
+        node.warn_unknown_parameters(argv)
         if options.gc_freeze:
             process_tuning.freeze_heap()
         executor.add_node(node)

@@ -1,0 +1,92 @@
+"""launch/hair_sim.launch.py and rviz/hair_sim.rviz, checked without the launch package (no
+wheel of ros2launch/launch_ros exists here, so the launch file is never run in these tests):
+it compiles, names an executable the package installs, a node name and parameters the node
+has, and a share file that is installed; the rviz configuration shows the topics the node
+publishes.  The install tree itself is checked in test_colcon.py.
+"""
+import ast
+import os
+
+import yaml
+
+from hair_tracking.core import params
+from hair_tracking.ros.node import HEAD_MARKER_TOPIC
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+LAUNCH = os.path.join(ROOT, 'launch', 'hair_sim.launch.py')
+RVIZ = os.path.join(ROOT, 'rviz', 'hair_sim.rviz')
+
+
+def _constants(path):
+    """Module-level ``NAME = literal`` assignments of a Python file."""
+    with open(path, encoding='utf-8') as f:
+        tree = ast.parse(f.read(), path)
+    out = {}
+    for stmt in tree.body:
+        if isinstance(stmt, ast.Assign) and len(stmt.targets) == 1 \
+                and isinstance(stmt.targets[0], ast.Name):
+            try:
+                out[stmt.targets[0].id] = ast.literal_eval(stmt.value)
+            except ValueError:
+                pass
+    return out, tree
+
+
+def _entry_points():
+    with open(os.path.join(ROOT, 'setup.py'), encoding='utf-8') as f:
+        tree = ast.parse(f.read())
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Dict):
+            for k, v in zip(node.keys, node.values):
+                if isinstance(k, ast.Constant) and k.value == 'console_scripts':
+                    return {s.split('=')[0].strip() for s in ast.literal_eval(v)}
+    raise AssertionError('no console_scripts in setup.py')
+
+
+def test_launch_file_compiles_and_names_what_exists():
+    with open(LAUNCH, encoding='utf-8') as f:
+        compile(f.read(), LAUNCH, 'exec')
+    consts, tree = _constants(LAUNCH)
+    assert consts['PACKAGE'] == 'hair_tracking'
+    assert consts['EXECUTABLE'] in _entry_points()
+    assert consts['NODE_NAME'] == params.NODE_NAME
+    assert os.path.isfile(os.path.join(ROOT, *consts['RVIZ_CONFIG']))
+    table = params.by_name()
+    for name in consts['SETS_PARAMETERS']:
+        assert name in table or name == 'use_sim_time', name
+    assert set(consts['ARGUMENTS']) == {'params_file', 'scene', 'namespace', 'use_sim_time',
+                                        'rviz'}
+    # every preset the scene argument's help names is shipped
+    for preset in ('default', 'long_hair', 'short_hair', 'stiff_extreme'):
+        assert os.path.isfile(os.path.join(ROOT, 'config', f'scene_{preset}.yaml'))
+    # the launch file's strings that look like parameter names are the node's
+    names = {n.value for n in ast.walk(tree) if isinstance(n, ast.Constant)
+             and isinstance(n.value, str) and n.value in ('scene_file', 'use_sim_time')}
+    assert names == {'scene_file', 'use_sim_time'}
+    assert 'generate_launch_description' in {n.name for n in tree.body
+                                             if isinstance(n, ast.FunctionDef)}
+
+
+def test_launch_and_rviz_files_are_installed_by_setup_py():
+    with open(os.path.join(ROOT, 'setup.py'), encoding='utf-8') as f:
+        text = f.read()
+    assert "('share/' + package_name + '/launch', glob('launch/*.launch.py'))" in text
+    assert "('share/' + package_name + '/rviz', glob('rviz/*.rviz'))" in text
+
+
+def test_rviz_config_shows_the_node_topics():
+    with open(RVIZ, encoding='utf-8') as f:
+        cfg = yaml.safe_load(f)
+    manager = cfg['Visualization Manager']
+    displays = {d['Class']: d for d in manager['Displays']}
+    assert displays['rviz_default_plugins/PointCloud2']['Topic']['Value'] == '/hair/points'
+    assert displays['rviz_default_plugins/MarkerArray']['Topic']['Value'] == '/hair/markers'
+    assert displays['rviz_default_plugins/Marker']['Topic']['Value'] == '/' + HEAD_MARKER_TOPIC
+    assert 'rviz_default_plugins/TF' in displays
+    assert manager['Global Options']['Fixed Frame'] == params.by_name()['fixed_frame'].default
+
+
+def test_colcon_ignores_the_generated_interfaces():
+    # interfaces/tf2_msgs is built by make install for the pip-only venv; a colcon workspace
+    # must not build it over a ROS installation's own tf2_msgs
+    assert os.path.isfile(os.path.join(ROOT, 'interfaces', 'COLCON_IGNORE'))
