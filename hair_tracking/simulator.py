@@ -44,6 +44,7 @@ from hair_tracking.core.model import HeadPose, StrandSet
 from hair_tracking.core.point_records import points_to_records
 from hair_tracking.core.scene import Scene
 from hair_tracking.core.transforms import quat_angle, quat_to_matrix, slerp
+from hair_tracking.ghosts.blend import BlendTracker, choose_guides
 from hair_tracking.ghosts.tracker import GhostTracker
 from hair_tracking.guides.collision import make_collider
 from hair_tracking.guides.integrate import max_step_sq, parallel_from, runs_parallel
@@ -109,16 +110,20 @@ class HairSimulator:
     def _build(self, head: HeadPose = IDENTITY) -> None:
         scene = self.scene
         groom = make_groom(scene.groom)
-        self.guides = StrandSet.from_rest(groom.guide_rest)
+        self.guide_index = None
+        if self._blend(scene) and groom.ghost_rest.shape[0] > 0:
+            # the guides are some of the strands themselves (1:1 is full simulation)
+            self.guide_index = choose_guides(groom.ghost_rest[:, 0], scene.groom.guides)
+            self.guides = StrandSet.from_rest(groom.ghost_rest[self.guide_index])
+        else:
+            self.guides = StrandSet.from_rest(groom.guide_rest)
         self.collider = make_collider(scene.collider)
         self.guide_solver = GuideSolver(self.guides, scene)
         self.ghosts = None
         self.ghost_tracker = None
         if groom.ghost_rest.shape[0] > 0:
             self.ghosts = StrandSet.from_rest(groom.ghost_rest)
-            self.ghost_tracker = GhostTracker(
-                self.ghosts, self.guides, scene,
-                self.collider if scene.tracking.collide else None)
+            self.ghost_tracker = self._make_tracker(scene)
         self._x_old = np.empty_like(self.guides.x)
         self._ghost_guide_x = np.empty_like(self.guides.x)   # guides at the last ghost step
         # farthest any hair node can be from the head origin [m]: root distance + strand length
@@ -142,19 +147,28 @@ class HairSimulator:
         scene.validate()
         old, self.scene = self.scene, scene
         self.track.spec = scene.head_track
-        if scene.groom != old.groom:
+        if scene.groom != old.groom or scene.tracking.mode != old.tracking.mode:
             self._build(self.head)
             return True
         self.collider = make_collider(scene.collider)
         self.guide_solver = GuideSolver(self.guides, scene)
         if self.ghosts is not None:
             if scene.tracking != old.tracking or scene.collider != old.collider:
-                self.ghost_tracker = GhostTracker(
-                    self.ghosts, self.guides, scene,
-                    self.collider if scene.tracking.collide else None, keep_state=True)
+                self.ghost_tracker = self._make_tracker(scene, keep_state=True)
         self.dt_ns = max(1, int(round(scene.solver.dt * 1e9)))
         self._gravity_norm = float(np.linalg.norm(scene.gravity))
         return False
+
+    @staticmethod
+    def _blend(scene: Scene) -> bool:
+        return scene.tracking.mode == 'blend'
+
+    def _make_tracker(self, scene: Scene, keep_state: bool = False):
+        collider = self.collider if scene.tracking.collide else None
+        if self._blend(scene):
+            return BlendTracker(self.ghosts, self.guides, self.guide_index, scene, collider,
+                                k=scene.tracking.blend_guides)
+        return GhostTracker(self.ghosts, self.guides, scene, collider, keep_state=keep_state)
 
     # ---------------------------------------------------------------- input
     def push_pose(self, t_ns: int, position, quaternion) -> PoseResult:
@@ -317,7 +331,8 @@ class HairSimulator:
     # 240 Hz substeps and a 60 Hz pose stream, 4x fewer tracking steps (see docs/ghosts.md for
     # its stability on long strands).
     def _every_substep(self) -> bool:
-        return self.scene.tracking.every_substep and not self.track_once_per_call
+        return self.scene.tracking.every_substep and not self.track_once_per_call \
+            and not self._blend(self.scene)
 
     def _begin_ghosts(self) -> None:
         if self.ghost_tracker is not None and not self._every_substep():

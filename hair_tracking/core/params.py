@@ -199,6 +199,11 @@ _SCENE_DOCS: Dict[str, Tuple[str, str, bool]] = {
     'solver.max_displacement': ('per-substep displacement clamp; 0 disables', 'm', False),
     'solver.settle_time': ('time simulated with a still head after a (re)build or reset',
                            's', False),
+    'tracking.mode': ('ghost tracker: paper (Park & Kim: velocity transfer, weights (4)-(5), '
+                      'centre-of-mass tracking, every substep) or blend (each ghost the '
+                      'skinned blend of tracking.blend_guides guides chosen among the strands, '
+                      'once per frame; see docs/blend.md)', '', True),
+    'tracking.blend_guides': ('blend: guides blended per ghost (nearest roots)', '', False),
     'tracking.candidates': ('guides with the nearest roots examined per ghost', '', False),
     'tracking.com_strength': ('centre-of-mass tracking strength per substep', '', False),
     'tracking.offset_strength': ('pull of each ghost node to its rest offset', '', False),

@@ -28,6 +28,7 @@ SOLVERS = ('ftl', 'pbd', 'xpbd')
 COLLIDERS = ('none', 'sphere', 'ellipsoid')
 ELASTIC_MODES = ('kept', 'changed')
 CURVES = ('none', 'bezier', 'catmull_rom')
+TRACKING_MODES = ('paper', 'blend')
 
 
 @dataclass(frozen=True)
@@ -81,6 +82,8 @@ class SolverSpec:
 
 @dataclass(frozen=True)
 class TrackingSpec:
+    mode: str = 'paper'               # paper: Park & Kim's tracker; blend: guides blended
+    blend_guides: int = 3             # blend: guides per ghost (nearest roots, Shepard weights)
     candidates: int = 8               # guides with nearest roots examined by equation (1)
     com_strength: float = 0.5         # centre-of-mass tracking strength per substep, 0..1
     offset_strength: float = 0.05     # pull of each ghost node to its rest offset, 0..1
@@ -291,6 +294,8 @@ RULES = {
     'solver.shock_propagation': _range(0.0, 1.0),
     'solver.max_displacement': _range(0.0, 10.0),
     'solver.settle_time': _range(0.0, 60.0),
+    'tracking.mode': _choice(TRACKING_MODES),
+    'tracking.blend_guides': _range(1, 8),
     'tracking.candidates': _range(1, 1024),
     'tracking.com_strength': _range(0.0, 1.0),
     'tracking.offset_strength': _range(0.0, 1.0),

@@ -1,0 +1,158 @@
+"""The blend tracker (hair_tracking.ghosts.blend): the compiled kernels against the plain-numpy
+reference, guides chosen among the strands (1:1 is full simulation), rigid motion carried
+exactly, and the simulator running it once per frame."""
+import numpy as np
+import pytest
+
+from hair_tracking.core.model import HeadPose, StrandSet
+from hair_tracking.core.scene import Scene, SceneError
+from hair_tracking.core.transforms import quat_from_axis_angle, quat_to_matrix
+from hair_tracking.ghosts import blend
+from hair_tracking.simulator import HairSimulator
+
+
+def head(angle=0.4, axis=(0.2, 0.3, 1.0), position=(0.05, -0.02, 1.6)):
+    q = quat_from_axis_angle(np.asarray(axis) / np.linalg.norm(axis), angle)
+    return HeadPose(np.asarray(position, dtype=float), q, quat_to_matrix(q))
+
+
+def small_scene(**changes):
+    base = {'groom__guides': 6, 'groom__ghosts_per_guide': 4, 'tracking__mode': 'blend',
+            'solver__settle_time': 0.0}
+    base.update(changes)
+    return Scene().with_changes(**base)
+
+
+def test_choose_guides_spreads_them_deterministically():
+    rng = np.random.default_rng(1)
+    roots = rng.normal(size=(200, 3))
+    a = blend.choose_guides(roots, 20)
+    assert np.array_equal(a, blend.choose_guides(roots, 20)) and len(set(a.tolist())) == 20
+    assert np.array_equal(blend.choose_guides(roots, 200), np.arange(200))
+    # farthest-point sampling: every strand is closer to some guide than a random pick allows
+    d = np.sqrt(((roots[:, None] - roots[a][None]) ** 2).sum(-1)).min(1).max()
+    r = np.sqrt(((roots[:, None] - roots[:20][None]) ** 2).sum(-1)).min(1).max()
+    assert d < r
+    with pytest.raises(ValueError, match='need 1..200 guides'):
+        blend.choose_guides(roots, 0)
+
+
+def test_weights_are_shepard_and_a_guide_follows_only_itself():
+    roots = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.25, 0.0, 0.0], [0.0, 2.0, 0.0]])
+    guides = roots[:2]
+    g, w = blend.blend_weights(roots, guides, k=2)
+    assert g.dtype == np.int32 and w.dtype == np.float32
+    assert g[0].tolist() == [0, 1] and w[0].tolist() == [1.0, 0.0]
+    assert g[1].tolist() == [1, 0] and w[1].tolist() == [1.0, 0.0]
+    # 1/d^2 weights: d = 0.25 and 0.75 -> 16 and 16/9 -> 0.9 and 0.1
+    np.testing.assert_allclose(w[2], [0.9, 0.1], rtol=1e-6)
+    np.testing.assert_allclose(w.sum(axis=1), 1.0, rtol=1e-6)
+
+
+def test_node_map_is_node_to_node_for_equal_counts():
+    seg, t = blend.node_map(16, 16)
+    assert seg.tolist() == list(range(15)) + [14] and t.tolist() == [0.0] * 15 + [1.0]
+    seg, t = blend.node_map(3, 5)
+    assert seg.tolist() == [0, 2, 3] and np.allclose(t, [0.0, 0.0, 1.0])
+
+
+def _random_case(seed, ghosts=30, guides=7, nodes=12, guide_nodes=12):
+    rng = np.random.default_rng(seed)
+    sim = HairSimulator(small_scene(groom__guides=guides, groom__ghosts_per_guide=5,
+                                    groom__ghost_nodes=nodes, groom__guide_nodes=guide_nodes))
+    tr = sim.ghost_tracker
+    h = head()
+    gx = h.to_world(sim.guides.rest) + rng.normal(scale=0.01, size=sim.guides.rest.shape)
+    gx[:, :2] = h.to_world(sim.guides.rest[:, :2])
+    return sim, tr, h, gx
+
+
+@pytest.mark.parametrize('restore,collide', [(True, True), (False, False), (True, False)])
+def test_kernels_match_the_numpy_reference(restore, collide):
+    sim, tr, h, gx = _random_case(3)
+    rot, pos = np.ascontiguousarray(h.rotation), np.ascontiguousarray(h.position)
+    aff = np.empty((gx.shape[0], tr.seg.shape[0], 12))
+    blend.guide_affines(gx, sim.guides.rest, rot, pos, tr.seg, tr.t, aff)
+    out = np.empty_like(sim.ghosts.rest)
+    axes = tr._axes if collide else np.ones(3)
+    blend.blend_strands(out, tr._rest32, tr._roots, tr._len32, tr.guide_of, tr.weight, aff,
+                        rot, pos, restore, collide, tr._center, axes, tr.is_guide, gx)
+    ref = blend.reference_blend(gx, sim.guides.rest, tr._rest32, tr._len32, tr.guide_of,
+                                tr.weight, h, restore, axes if collide else None, tr._center,
+                                tr.is_guide, tr._roots)
+    assert (tr.is_guide >= 0).sum() == gx.shape[0]
+    np.testing.assert_allclose(out, ref, atol=1e-9)
+
+
+def test_different_node_counts_match_the_reference():
+    sim, tr, h, gx = _random_case(4, nodes=9, guide_nodes=17)
+    # the blend's guides are ghost strands, so their node count is the ghosts' own
+    assert sim.guides.rest.shape[1] == 9
+    rot, pos = np.ascontiguousarray(h.rotation), np.ascontiguousarray(h.position)
+    aff = np.empty((gx.shape[0], 9, 12))
+    blend.guide_affines(gx, sim.guides.rest, rot, pos, tr.seg, tr.t, aff)
+    out = np.empty_like(sim.ghosts.rest)
+    blend.blend_strands(out, tr._rest32, tr._roots, tr._len32, tr.guide_of, tr.weight, aff,
+                        rot, pos, True, False, tr._center, tr._axes, tr.is_guide, gx)
+    ref = blend.reference_blend(gx, sim.guides.rest, tr._rest32, tr._len32, tr.guide_of,
+                                tr.weight, h, True, is_guide=tr.is_guide, roots=tr._roots)
+    np.testing.assert_allclose(out, ref, atol=1e-9)
+
+
+def test_guides_carried_rigidly_carry_every_ghost_rigidly():
+    sim = HairSimulator(small_scene(tracking__collide=False))
+    h = head(angle=1.1)
+    sim.guides.x[...] = h.to_world(sim.guides.rest)
+    sim.ghost_tracker.step(1 / 60, None, h)
+    np.testing.assert_allclose(sim.ghosts.x, h.to_world(sim.ghosts.rest), atol=2e-7)
+
+
+def test_one_guide_per_strand_is_full_simulation():
+    sim = HairSimulator(small_scene(groom__ghosts_per_guide=1, groom__guides=12))
+    assert np.array_equal(sim.guide_index, np.arange(12))
+    t0 = 1_000_000_000
+    for k in range(12):
+        q = quat_from_axis_angle(np.array([0.0, 0.0, 1.0]), 0.3 * np.sin(0.5 * k))
+        sim.push_pose(t0 + k * 16_666_667, [0.02 * k, 0.0, 0.0], q)
+        sim.advance_to(t0 + k * 16_666_667)
+    f = sim.frame()
+    np.testing.assert_array_equal(f.ghosts, f.guides)
+
+
+def test_simulator_runs_the_blend_once_per_frame_with_exact_lengths_outside_the_head():
+    sim = HairSimulator(small_scene(groom__guides=8, groom__ghosts_per_guide=8))
+    assert isinstance(sim.ghost_tracker, blend.BlendTracker)
+    assert sim.guides.count == 8 and sim.ghosts.count == 64
+    np.testing.assert_array_equal(sim.guides.rest, sim.ghosts.rest[sim.guide_index])
+    t0 = 1_000_000_000
+    for k in range(30):
+        q = quat_from_axis_angle(np.array([0.0, 0.3, 1.0]) / np.hypot(0.3, 1.0),
+                                 0.6 * np.sin(0.4 * k))
+        sim.push_pose(t0 + k * 16_666_667, [0.03 * np.sin(0.3 * k), 0.0, 0.0], q)
+        sim.advance_to(t0 + k * 16_666_667)
+    assert sim.ghost_tracker.stats['steps'] == 29        # once per advance_to call
+    f = sim.frame()
+    assert np.all(np.isfinite(f.ghosts))
+    seg = np.linalg.norm(np.diff(f.ghosts, axis=1), axis=2)
+    stretch = np.abs(seg / sim.ghosts.rest_length - 1.0)
+    assert stretch.max() < 0.01                # nodes pressed onto the head: within 1 %
+    assert np.median(stretch) < 1e-6           # every other segment exact (float32 lengths)
+    assert sim.penetration() < 1e-6            # on the surface to rounding
+    np.testing.assert_allclose(f.ghosts[:, :2], f.head.to_world(sim.ghosts.rest[:, :2]),
+                               atol=1e-12)     # roots pinned
+
+
+def test_the_mode_is_validated_and_a_change_rebuilds():
+    with pytest.raises(SceneError, match='tracking.mode'):
+        Scene().with_changes(tracking__mode='skin')
+    sim = HairSimulator(small_scene(tracking__mode='paper'))
+    assert sim.guide_index is None
+    assert sim.update_scene(small_scene()) is True
+    assert isinstance(sim.ghost_tracker, blend.BlendTracker)
+
+
+def test_guides_must_be_ghost_strands():
+    sim = HairSimulator(small_scene())
+    other = StrandSet.from_rest(sim.ghosts.rest[:3] + 0.01)
+    with pytest.raises(ValueError, match='must be some of the ghost strands'):
+        blend.BlendTracker(sim.ghosts, other, np.arange(3), sim.scene)
