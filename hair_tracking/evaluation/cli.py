@@ -91,7 +91,7 @@ def cmd_accuracy(args) -> int:
         specs = [s for s in specs if any(o in s.name for o in args.only)]
     reports = []
     t0 = time.perf_counter()
-    for tr in trajectories(args.quick, args.vr):
+    for tr in trajectories(args.quick, args.vr) + recorded(args.motion):
         if args.motions and tr.name not in args.motions:
             continue
         if args.duration:
@@ -152,6 +152,59 @@ def cmd_stability(args) -> int:
     return 1 if failed else 0
 
 
+def recorded(paths, duration=None):
+    """Trajectories of the motion files named by ``--motion``."""
+    from hair_tracking.evaluation.accuracy import Trajectory
+    from hair_tracking.evaluation.dominance import load_motion
+    out = []
+    for path in paths:
+        motion = load_motion(path)
+        out.append(Trajectory(os.path.splitext(os.path.basename(path))[0], motion,
+                              f'recorded: {motion.source}', duration))
+    return out
+
+
+def cmd_dominance(args) -> int:
+    import json
+
+    import numba
+
+    from hair_tracking.core.scene import Scene
+    from hair_tracking.evaluation import dominance as dm
+    from hair_tracking.evaluation.methods import make_workload
+    scene = Scene.from_yaml(args.scene) if args.scene else Scene()
+    tracks = [t for t in trajectories(False, args.vr) if t.name in args.motions]
+    tracks += recorded(args.motion)
+    md = ['# Do the ghosts pay for themselves?', '',
+          f'Reproduce: `{command_line(args)}`', '',
+          f'Machine: {machine_note(max(args.thread_counts))}.', '',
+          'Every method simulates the same strands; errors against every strand simulated by '
+          'FTL at dt 1/960 s; a ghost setting dominates the baseline (every strand, FTL dt '
+          '1/60 s) when it takes at most 1/3 of its time a frame with no more motion error, '
+          'stretch <= 1 % and no penetration beyond the collider margin '
+          '(`hair_tracking/evaluation/dominance.py`).', '']
+    dump = []
+    for ghosts in args.ghosts:
+        workload = make_workload(scene, ghosts)
+        for tr in tracks:
+            for threads in args.thread_counts:
+                numba.set_num_threads(threads)
+                print(f'{tr.name}, {workload.count} strands, {threads} thread(s):', flush=True)
+                rep = dm.study(workload, tr, args.duration, repeats=args.repeats)
+                md.append(dm.markdown(rep, threads))
+                dump.append({**{k: v for k, v in rep.items() if k != 'rows'},
+                             'threads': threads,
+                             'rows': [dict(r.__dict__, ms=r.ms) for r in rep['rows']]})
+                print(md[-1], flush=True)
+    os.makedirs(args.out, exist_ok=True)
+    with open(os.path.join(args.out, 'dominance.md'), 'w', encoding='utf-8') as f:
+        f.write('\n'.join(md))
+    with open(os.path.join(args.out, 'dominance.json'), 'w', encoding='utf-8') as f:
+        json.dump(dump, f, indent=1)
+    print(f"wrote {os.path.join(args.out, 'dominance.md')}")
+    return 0
+
+
 def command_line(args) -> str:
     return 'hair_sim_eval ' + ' '.join(shlex.quote(a) for a in args.argv)
 
@@ -173,6 +226,25 @@ def main(argv=None) -> int:
                    help='simulate only the first S seconds of each trajectory')
     a.add_argument('--only', nargs='*', default=None, help='only methods whose name contains')
     a.add_argument('--threads', type=int, default=1, help='numba/OpenMP threads (default 1)')
+    a.add_argument('--motion', action='append', default=[], metavar='FILE',
+                   help='also a recorded motion: a head-pose bag, a BVH capture or a pose CSV '
+                        '(repeatable)')
+    d = sub.add_parser('dominance', help='ghost settings against simulating every strand with '
+                                         'FTL at dt 1/60 s (same-solver reference)')
+    d.add_argument('--ghosts', type=int, nargs='+', default=[4096, 16384],
+                   help='strand counts (default 4096 16384)')
+    d.add_argument('--motions', nargs='*', default=['walk', 'vr', 'shake'],
+                   help='built-in motions (walk, vr, shake)')
+    d.add_argument('--motion', action='append', default=[], metavar='FILE',
+                   help='also a recorded motion: a head-pose bag, a BVH capture or a pose CSV '
+                        '(repeatable)')
+    d.add_argument('--vr', default=DEFAULT_VR, help='VR360 trace (timestamp viewpoint w x y z)')
+    d.add_argument('--duration', type=float, default=3.0, help='seconds of each motion')
+    d.add_argument('--repeats', type=int, default=2, help='timing runs per method')
+    d.add_argument('--thread-counts', type=int, nargs='+', default=[1],
+                   help='numba thread counts to time (default 1)')
+    d.add_argument('--scene', default='', help='scene YAML (default: the default scene)')
+    d.add_argument('--out', default='docs/results', help='folder of dominance.md / .json')
     s = sub.add_parser('stability', help='the matrix of stiff and extreme cases')
     s.add_argument('--quick', action='store_true', help='the reduced matrix (CI)')
     s.add_argument('--out', default='docs/results', help='folder of the tables')
@@ -180,12 +252,19 @@ def main(argv=None) -> int:
     s.add_argument('--threads', type=int, default=1, help='numba threads (default 1)')
     args = p.parse_args(argv)
     args.argv = argv
+    if args.cmd == 'dominance':
+        args.threads = max(args.thread_counts)
     if args.threads < 1:
         p.error('--threads must be >= 1')
     if getattr(args, 'repeats', 1) < 0:
         p.error('--repeats must be >= 0')
-    if getattr(args, 'ghosts', 0) and args.ghosts < 64:
+    if args.cmd == 'dominance' and min(args.ghosts) < 16:
+        p.error('--ghosts must be at least 16 (the 1:16 ratio needs one guide)')
+    if args.cmd == 'accuracy' and args.ghosts and args.ghosts < 64:
         p.error('--ghosts must be at least 64 (the 1:64 ratio needs one guide)')
+    if args.cmd == 'dominance':
+        _set_threads(max(args.thread_counts))
+        return cmd_dominance(args)
     _set_threads(args.threads)
     if args.cmd == 'accuracy':
         return cmd_accuracy(args)

@@ -12,6 +12,8 @@ head frame) node for node, so its output can be compared with the reference:
   :class:`~hair_tracking.ghosts.tracker.GhostTracker` each substep
   (or once per output frame over all its substeps with ``tracking.every_substep: false``, as the
   simulator does once per pose).
+* :class:`BlendTracking` -- the blend tracker: guides chosen among the strands, every strand the
+  skinned blend of its nearest guides once per output frame.
 * :class:`RigidOffset` -- the game-engine "follow hair" baseline: a ghost node is its guide's
   point at the same arc-length fraction plus the node's rest offset from that point rotated with
   the head (AMD TressFX follow hairs use an unrotated offset; rotating it with the head is the
@@ -38,6 +40,7 @@ import numpy as np
 from hair_tracking.core.groom import make_groom
 from hair_tracking.core.model import HeadPose, StrandSet
 from hair_tracking.core.scene import Scene
+from hair_tracking.ghosts.blend import BlendTracker, choose_guides
 from hair_tracking.ghosts.correspondence import assign_guides, node_correspondence
 from hair_tracking.ghosts.tracker import GhostTracker
 from hair_tracking.guides.collision import make_collider
@@ -211,6 +214,40 @@ class GhostTracking(_GuidedMethod):
 
     def velocities(self):
         return self.ghosts.v
+
+
+class BlendTracking(Method):
+    """Guides chosen among the strands (``S / ratio`` of them, :func:`choose_guides`) simulated
+    by the scene's solver; every strand blended from its ``k`` nearest guides once per output
+    frame (:class:`~hair_tracking.ghosts.blend.BlendTracker`).  At 1:1 this is :class:`FullSim`.
+    """
+
+    family = 'blend'
+
+    def __init__(self, name, workload, scene, ratio, knobs=None, k: int = 3):
+        super().__init__(name, workload, scene, knobs or {})
+        self.ratio = int(ratio)
+        count = workload.count // self.ratio
+        if count < 1:
+            raise ValueError(f'ratio: 1:{ratio} leaves no guide for {workload.count} strands')
+        self.guide_index = choose_guides(workload.ghost_rest[:, 0], count)
+        self.guides = StrandSet.from_rest(workload.ghost_rest[self.guide_index])
+        self.solver = GuideSolver(self.guides, scene)
+        self.ghosts = StrandSet.from_rest(workload.ghost_rest)
+        collider = make_collider(scene.collider) if scene.tracking.collide else None
+        self.tracker = BlendTracker(self.ghosts, self.guides, self.guide_index, scene, collider,
+                                    k=k)
+
+    def reset(self, head):
+        self.solver.reset(head)
+        self.tracker.reset(head)
+
+    def step(self, dt, head_prev, head):
+        self.solver.step(dt, head_prev, head)
+
+    def output(self, head):
+        self.tracker.step(self.dt, None, head)
+        return self.ghosts.x
 
 
 class RigidOffset(_GuidedMethod):

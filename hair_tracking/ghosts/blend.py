@@ -15,9 +15,10 @@ frame, for ghost strand ``s`` and node ``j`` (rest position ``r`` in the head fr
    bones, the weights fixed at start (:func:`blend_weights`);
 3. roots (nodes 0 and 1) are pinned at ``R r + p``; one Follow-The-Leader pass (Mueller, Kim &
    Chentanez 2012) puts every further node back at its rest distance from its predecessor; a
-   node inside the head collider (radii + margin) is moved radially onto it, put back at its
-   rest distance along the new direction, and so on for at most :data:`CONTACT_ROUNDS` rounds
-   (the collision-aware FTL step of the guides with a fixed round count).
+   node that would end inside the head collider (radii + margin) is placed at its rest distance
+   along the direction with the inward part (along the collider's normal at the predecessor)
+   removed, so it slides along the head, and is moved radially onto the surface if the
+   curvature still leaves it inside.
 
 Sources: linear blend skinning of interpolated hairs from guide hairs, with weights from the
 distance between roots, is how Unreal Engine's groom interpolation and AMD TressFX's follow hairs
@@ -44,8 +45,6 @@ from hair_tracking.guides.collision import outside_distance
 DEFAULT_GUIDES_PER_GHOST = 3
 #: Exponent of the inverse-distance weights.
 WEIGHT_POWER = 2.0
-#: Rounds of (onto the collider, back to the rest distance) for a node that ends inside.
-CONTACT_ROUNDS = 4
 
 
 # ----------------------------------------------------------------------------- set-up
@@ -111,8 +110,8 @@ def _unit(x, y, z):
 
 
 @njit(cache=True)
-def _node_affine(gx, grest, g, m, rot, pos, out):
-    """``out`` (12,) = the map of guide ``g``'s node ``m`` (row-major D, then c)."""
+def _node_affine(gx, grest, g, m, rot, out):
+    """``out[m]`` (12,) = the map of guide ``g``'s node ``m`` (row-major D, then c)."""
     a = m - 1 if m > 0 else 0
     b = a + 1
     # rest tangent, carried into the world by the head rotation
@@ -127,77 +126,91 @@ def _node_affine(gx, grest, g, m, rot, pos, out):
     # smallest rotation taking u onto v: I + [k]x + [k]x^2 / (1 + c), k = u x v, c = u . v
     kx, ky, kz = uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx
     c = ux * vx + uy * vy + uz * vz
-    q = np.empty((3, 3))
     if c > -0.999999:
         f = 1.0 / (1.0 + c)
-        q[0, 0] = 1.0 - (ky * ky + kz * kz) * f
-        q[0, 1] = -kz + kx * ky * f
-        q[0, 2] = ky + kx * kz * f
-        q[1, 0] = kz + kx * ky * f
-        q[1, 1] = 1.0 - (kx * kx + kz * kz) * f
-        q[1, 2] = -kx + ky * kz * f
-        q[2, 0] = -ky + kx * kz * f
-        q[2, 1] = kx + ky * kz * f
-        q[2, 2] = 1.0 - (kx * kx + ky * ky) * f
+        q00, q01, q02 = 1.0 - (ky * ky + kz * kz) * f, -kz + kx * ky * f, ky + kx * kz * f
+        q10, q11, q12 = kz + kx * ky * f, 1.0 - (kx * kx + kz * kz) * f, -kx + ky * kz * f
+        q20, q21, q22 = -ky + kx * kz * f, kx + ky * kz * f, 1.0 - (kx * kx + ky * ky) * f
     else:                    # opposite directions: half a turn about an axis normal to u
         px, py, pz = (0.0, -uz, uy) if abs(ux) < 0.9 else (-uz, 0.0, ux)
         px, py, pz = _unit(px, py, pz)
-        q[0, 0] = 2.0 * px * px - 1.0
-        q[0, 1] = 2.0 * px * py
-        q[0, 2] = 2.0 * px * pz
-        q[1, 0] = 2.0 * py * px
-        q[1, 1] = 2.0 * py * py - 1.0
-        q[1, 2] = 2.0 * py * pz
-        q[2, 0] = 2.0 * pz * px
-        q[2, 1] = 2.0 * pz * py
-        q[2, 2] = 2.0 * pz * pz - 1.0
+        q00, q01, q02 = 2.0 * px * px - 1.0, 2.0 * px * py, 2.0 * px * pz
+        q10, q11, q12 = 2.0 * py * px, 2.0 * py * py - 1.0, 2.0 * py * pz
+        q20, q21, q22 = 2.0 * pz * px, 2.0 * pz * py, 2.0 * pz * pz - 1.0
+    for j in range(3):
+        out[m, j] = q00 * rot[0, j] + q01 * rot[1, j] + q02 * rot[2, j]
+        out[m, 3 + j] = q10 * rot[0, j] + q11 * rot[1, j] + q12 * rot[2, j]
+        out[m, 6 + j] = q20 * rot[0, j] + q21 * rot[1, j] + q22 * rot[2, j]
     for i in range(3):
-        for j in range(3):
-            out[3 * i + j] = q[i, 0] * rot[0, j] + q[i, 1] * rot[1, j] + q[i, 2] * rot[2, j]
-    for i in range(3):
-        out[9 + i] = gx[g, m, i] - (out[3 * i] * grest[g, m, 0] + out[3 * i + 1] * grest[g, m, 1]
-                                    + out[3 * i + 2] * grest[g, m, 2])
+        out[m, 9 + i] = gx[g, m, i] - (out[m, 3 * i] * grest[g, m, 0]
+                                       + out[m, 3 * i + 1] * grest[g, m, 1]
+                                       + out[m, 3 * i + 2] * grest[g, m, 2])
 
 
-@njit(cache=True)
+@njit(cache=True, parallel=True)
 def guide_affines(gx, grest, rot, pos, seg, t, out):
     """Kernel, step 1: ``out`` (G, N, 12) the map of every guide at every ghost node index
     (``seg``, ``t`` from :func:`node_map`: the maps of the two guide nodes around the node's
     fraction, interpolated linearly).  ``gx`` (G, M, 3) guides now, world [m]; ``grest``
     (G, M, 3) their rest shapes, head frame; ``rot``, ``pos`` the head pose."""
     m_nodes = gx.shape[1]
-    lo = np.empty(12)
-    hi = np.empty(12)
-    for g in range(gx.shape[0]):
-        last = -1
+    for g in prange(gx.shape[0]):
+        node = np.empty((m_nodes, 12))
+        for m in range(m_nodes):
+            _node_affine(gx, grest, g, m, rot, node)
         for j in range(seg.shape[0]):
-            s = seg[j]
-            if s != last:
-                _node_affine(gx, grest, g, s, rot, pos, lo)
-                if s + 1 < m_nodes:
-                    _node_affine(gx, grest, g, s + 1, rot, pos, hi)
-                last = s
-            u = t[j]
-            for i in range(12):
-                out[g, j, i] = lo[i] + u * (hi[i] - lo[i]) if u != 0.0 else lo[i]
+            a, u = seg[j], t[j]
+            if u == 0.0:
+                for i in range(12):
+                    out[g, j, i] = node[a, i]
+            else:
+                for i in range(12):
+                    out[g, j, i] = node[a, i] + u * (node[a + 1, i] - node[a, i])
 
 
 @njit(cache=True, inline='always')
-def _push_out(nx, ny, nz, rot, pos, center, axes):
-    """A world point inside the ellipsoid ``axes`` around ``center`` (head frame) moved
-    radially onto it; returns (x, y, z, moved)."""
-    qx, qy, qz = nx - pos[0], ny - pos[1], nz - pos[2]
-    hx = rot[0, 0] * qx + rot[1, 0] * qy + rot[2, 0] * qz - center[0]
-    hy = rot[0, 1] * qx + rot[1, 1] * qy + rot[2, 1] * qz - center[1]
-    hz = rot[0, 2] * qx + rot[1, 2] * qy + rot[2, 2] * qz - center[2]
-    e = (hx / axes[0]) ** 2 + (hy / axes[1]) ** 2 + (hz / axes[2]) ** 2
+def _push_out(nx, ny, nz, cw, quad):
+    """A world point inside the ellipsoid ``(x - cw)^T Q (x - cw) < 1`` (``cw`` its centre in
+    the world, ``quad`` the 6 entries of ``Q = R diag(1 / axes^2) R^T``: Q00 Q11 Q22 Q01 Q02
+    Q12) moved radially onto it; returns (x, y, z, moved)."""
+    dx, dy, dz = nx - cw[0], ny - cw[1], nz - cw[2]
+    e = _quad_form(dx, dy, dz, quad)
     if not 0.0 < e < 1.0:
         return nx, ny, nz, False
     f = 1.0 / math.sqrt(e)
-    hx, hy, hz = hx * f + center[0], hy * f + center[1], hz * f + center[2]
-    return (rot[0, 0] * hx + rot[0, 1] * hy + rot[0, 2] * hz + pos[0],
-            rot[1, 0] * hx + rot[1, 1] * hy + rot[1, 2] * hz + pos[1],
-            rot[2, 0] * hx + rot[2, 1] * hy + rot[2, 2] * hz + pos[2], True)
+    return cw[0] + f * dx, cw[1] + f * dy, cw[2] + f * dz, True
+
+
+@njit(cache=True, inline='always')
+def _quad_form(dx, dy, dz, quad):
+    return quad[0] * dx * dx + quad[1] * dy * dy + quad[2] * dz * dz + \
+        2.0 * (quad[3] * dx * dy + quad[4] * dx * dz + quad[5] * dy * dz)
+
+
+@njit(cache=True, inline='always')
+def _inside(nx, ny, nz, cw, quad):
+    return _quad_form(nx - cw[0], ny - cw[1], nz - cw[2], quad) < 1.0
+
+
+@njit(cache=True, inline='always')
+def _slide(nx, ny, nz, px, py, pz, length, cw, quad):
+    """The node at ``length`` from its predecessor ``p`` in the direction of ``n`` with the
+    inward part (along the collider's normal at ``p``'s level) removed: it slides along the
+    surface instead of into it."""
+    ex, ey, ez = px - cw[0], py - cw[1], pz - cw[2]
+    gx = quad[0] * ex + quad[3] * ey + quad[4] * ez           # outward normal Q (p - c)
+    gy = quad[3] * ex + quad[1] * ey + quad[5] * ez
+    gz = quad[4] * ex + quad[5] * ey + quad[2] * ez
+    gx, gy, gz = _unit(gx, gy, gz)
+    dx, dy, dz = nx - px, ny - py, nz - pz
+    inward = dx * gx + dy * gy + dz * gz
+    if inward < 0.0:
+        dx, dy, dz = dx - inward * gx, dy - inward * gy, dz - inward * gz
+    d = math.sqrt(dx * dx + dy * dy + dz * dz)
+    if d <= 0.0:
+        return nx, ny, nz
+    f = length / d
+    return px + f * dx, py + f * dy, pz + f * dz
 
 
 @njit(cache=True, parallel=True)
@@ -214,6 +227,14 @@ def blend_strands(x, rest, roots, rest_length, guide, weight, affine, rot, pos, 
     n_strands, n_nodes = x.shape[0], x.shape[1]
     n_k = guide.shape[1]
     contacts = 0
+    cw = np.empty(3)                                  # the collider's centre in the world
+    for i in range(3):
+        cw[i] = rot[i, 0] * center[0] + rot[i, 1] * center[1] + rot[i, 2] * center[2] + pos[i]
+    inv = 1.0 / (axes * axes)
+    quad = np.empty(6)
+    for i, (a, b) in enumerate(((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))):
+        quad[i] = rot[a, 0] * rot[b, 0] * inv[0] + rot[a, 1] * rot[b, 1] * inv[1] + \
+            rot[a, 2] * rot[b, 2] * inv[2]
     for s in prange(n_strands):
         if is_guide[s] >= 0:
             x[s] = gx[is_guide[s]]
@@ -243,18 +264,12 @@ def blend_strands(x, rest, roots, rest_length, guide, weight, affine, rot, pos, 
                     if d > 0.0:
                         f = float(rest_length[s, j - 1]) / d
                         nx, ny, nz = px + f * dx, py + f * dy, pz + f * dz
-                if collide:
-                    for attempt in range(CONTACT_ROUNDS):
-                        nx, ny, nz, pushed = _push_out(nx, ny, nz, rot, pos, center, axes)
-                        if not pushed:
-                            break
-                        contacts += 1
-                        if restore and attempt < CONTACT_ROUNDS - 1:   # back to rest distance
-                            dx, dy, dz = nx - px, ny - py, nz - pz
-                            d = math.sqrt(dx * dx + dy * dy + dz * dz)
-                            if d > 0.0:
-                                f = float(rest_length[s, j - 1]) / d
-                                nx, ny, nz = px + f * dx, py + f * dy, pz + f * dz
+                if collide and _inside(nx, ny, nz, cw, quad):
+                    contacts += 1
+                    if restore:
+                        nx, ny, nz = _slide(nx, ny, nz, px, py, pz,
+                                            float(rest_length[s, j - 1]), cw, quad)
+                    nx, ny, nz, pushed = _push_out(nx, ny, nz, cw, quad)
             x[s, j, 0] = nx
             x[s, j, 1] = ny
             x[s, j, 2] = nz
@@ -318,16 +333,19 @@ def reference_blend(gx, grest, rest, rest_length, guide, weight, head: HeadPose,
                 d = p - out[s, j - 1]
                 p = out[s, j - 1] + d * (float(rest_length[s, j - 1]) / np.linalg.norm(d))
             if collider_axes is not None:
-                for attempt in range(CONTACT_ROUNDS):
-                    h = rot.T @ (p - pos) - center
-                    e = float(np.sum((h / collider_axes) ** 2))
-                    if not 0.0 < e < 1.0:
-                        break
-                    p = rot @ (h / np.sqrt(e) + center) + pos      # radially onto the surface
-                    if restore and attempt < CONTACT_ROUNDS - 1:   # back to the rest distance
-                        d = p - out[s, j - 1]
-                        p = out[s, j - 1] + d * (float(rest_length[s, j - 1]) /
-                                                 np.linalg.norm(d))
+                qm = rot @ np.diag(1.0 / np.asarray(collider_axes) ** 2) @ rot.T
+                cw = rot @ center + pos
+                if (p - cw) @ qm @ (p - cw) < 1.0:
+                    prev = out[s, j - 1]
+                    if restore:                    # slide along the surface, not into it
+                        n = qm @ (prev - cw)
+                        n /= np.linalg.norm(n)
+                        d = p - prev
+                        d = d - min(0.0, float(d @ n)) * n
+                        p = prev + d * (float(rest_length[s, j - 1]) / np.linalg.norm(d))
+                    e = float((p - cw) @ qm @ (p - cw))
+                    if 0.0 < e < 1.0:              # still inside: radially onto the surface
+                        p = cw + (p - cw) / np.sqrt(e)
             out[s, j] = p
     return out
 

@@ -1,0 +1,193 @@
+"""Do the ghosts pay for themselves?  Ghost settings against simulating every strand.
+
+For one workload (the same strands for every method) and one head motion, every method is
+scored against a **same-solver reference** -- every strand simulated by Follow-The-Leader at
+:data:`REFERENCE_SUBSTEPS` substeps per 60 Hz frame -- and timed:
+
+* **motion error**: RMS over the strands' nodes and the frames from the first frame in which the
+  head has moved (more than 1 mm or 1 mrad from its start) of the error of the *displacement*
+  from the settled state, against the reference's displacement, in % of the strand length
+  (:class:`~hair_tracking.evaluation.accuracy.Scorer`'s ``motion``); the error already present in
+  the settled shape is reported apart (``settled error``);
+* **stretch** (largest ``|l / l0 - 1|``) and **penetration** (deepest node inside the bare head
+  collider) over the run: a setting is admitted only with stretch <= 1 % and penetration <= the
+  collider margin;
+* **ms per frame**: guides, ghosts and everything a frame needs, medians over ``repeats`` timing
+  runs interleaved across the methods (compile time excluded), min and median reported.
+
+A ghost setting **dominates** the baseline, every strand simulated by FTL at dt 1/60 s, when it
+is admitted, takes at most 1/3 of the baseline's ms per frame and has no more motion error.
+
+    hair_sim_eval dominance --ghosts 4096 16384 [--motion FILE] [--threads 1 2]
+"""
+from dataclasses import dataclass, field
+import math
+import time
+from typing import Callable, Dict, List
+
+import numpy as np
+
+from hair_tracking.core.metrics import position_error
+from hair_tracking.core.scene import Scene
+from hair_tracking.evaluation.accuracy import (HeadSchedule, record_reference, run_frames,
+                                               Scorer, Trajectory)
+from hair_tracking.evaluation.methods import BlendTracking, FullSim, GhostTracking, Workload
+
+#: Substeps per 60 Hz frame of the same-solver reference (FTL at dt 1/960 s).
+REFERENCE_SUBSTEPS = 16
+#: Admission: largest stretch [1] ...
+MAX_STRETCH = 0.01
+#: ... and the share of the baseline's time a dominating setting may take.
+TIME_SHARE = 1.0 / 3.0
+BASELINE = 'full FTL dt 1/60'
+
+
+@dataclass
+class Candidate:
+    """One method of the study: a name and how to build it from (workload, scene)."""
+
+    name: str
+    build: Callable[[Workload, Scene], object]
+    dt: float
+    ghost: bool = True
+
+
+def _ftl(scene: Scene, dt: float) -> Scene:
+    return scene.with_changes(solver__type='ftl', solver__dt=dt, solver__max_substeps=10_000)
+
+
+def candidates(scene: Scene, ratio: int = 16) -> List[Candidate]:
+    """The baseline, the paper's tracker once per frame and the blend tracker with guides at
+    three substeps."""
+    out = [Candidate(BASELINE, lambda w, s: FullSim(BASELINE, w, _ftl(s, 1 / 60)), 1 / 60,
+                     ghost=False)]
+    for sub in (1, 2, 4):
+        dt = 1.0 / (60 * sub)
+        name = f'blend 1:{ratio}, guides dt 1/{60 * sub}'
+        out.append(Candidate(name, lambda w, s, dt=dt, name=name:
+                             BlendTracking(name, w, _ftl(s, dt), ratio), dt))
+    name = f'paper 1:{ratio} once per frame, guides dt 1/240'
+    out.append(Candidate(name, lambda w, s, name=name: GhostTracking(
+        name, w, _ftl(s, 1 / 240).with_changes(tracking__every_substep=False), ratio),
+        1 / 240))
+    return out
+
+
+@dataclass
+class Row:
+    name: str
+    ghost: bool
+    frame_ms: List[float] = field(default_factory=list)      # median of each timing run
+    motion_err: float = math.nan                             # % L
+    settled_err: float = math.nan                            # % L
+    stretch: float = math.nan                                # [1]
+    penetration_mm: float = math.nan
+    admitted: bool = False
+    dominates: bool = False
+
+    @property
+    def ms(self) -> float:
+        return float(np.median(self.frame_ms)) if self.frame_ms else math.nan
+
+
+def first_moving_frame(schedule: HeadSchedule, tol: float = 1e-3) -> int:
+    """The first frame whose head pose differs from the start by more than ``tol`` metres or
+    radians (0 if the head moves in the first frame)."""
+    start = schedule.start()
+    for j, poses in enumerate(schedule.poses(1)):
+        h = poses[-1]
+        turn = 2.0 * math.acos(min(1.0, abs(float(np.dot(h.quaternion, start.quaternion)))))
+        if np.linalg.norm(h.position - start.position) > tol or turn > tol:
+            return j
+    return schedule.frames
+
+
+def study(workload: Workload, trajectory: Trajectory, duration_s: float, repeats: int = 2,
+          timing_frames: int = 120, log=print) -> Dict:
+    """Score and time every :func:`candidates` method on one motion; returns a report dict."""
+    scene = workload.scene
+    schedule = HeadSchedule(trajectory.motion, duration_s=duration_s)
+    ref_scene = _ftl(scene, 1.0 / (60 * REFERENCE_SUBSTEPS))
+    ref_frames, ref_settled, _ = record_reference(workload, schedule, ref_scene, log=log)
+    scorer = Scorer(workload, ref_frames, ref_settled)
+    moving = first_moving_frame(schedule)
+    margin_mm = 1e3 * float(scene.collider.margin) if scene.collider.shape != 'none' else 0.0
+    cands = candidates(scene)
+    rows = {c.name: Row(c.name, c.ghost, stretch=0.0, penetration_mm=0.0) for c in cands}
+    for c in cands:                                           # accuracy runs
+        method = c.build(workload, scene)
+        motion = []
+        x0 = np.empty(workload.ghost_rest.shape)
+        row = rows[c.name]
+
+        def score(j, x, head, row=row, x0=x0, motion=motion):
+            if j < 0:
+                x0[...] = x
+                row.settled_err = 100.0 * position_error(x, ref_settled,
+                                                         workload.strand_length)[0]
+                return
+            m = scorer.frame(j, x, head, x0)
+            if j >= moving:
+                motion.append(m['motion'])
+            row.stretch = max(row.stretch, m['stretch'])
+            row.penetration_mm = max(row.penetration_mm, 1e3 * m['pen'])
+        t0 = time.perf_counter()
+        run_frames(method, schedule, schedule.frames, score, scene.solver.settle_time)
+        row.motion_err = 100.0 * float(np.sqrt(np.mean(np.square(motion)))) if motion \
+            else math.nan
+        log(f'    {c.name}: motion error {row.motion_err:.2f} % L, stretch '
+            f'{100 * row.stretch:.3f} %, penetration {row.penetration_mm:.2f} mm '
+            f'({time.perf_counter() - t0:.1f} s)')
+    frames = min(timing_frames, schedule.frames)
+    built = {c.name: c.build(workload, scene) for c in cands}
+    for _ in range(repeats):                                  # timing runs, interleaved
+        for c in cands:
+            secs = run_frames(built[c.name], schedule, frames, None, 0.1)
+            rows[c.name].frame_ms.append(1e3 * float(np.median(secs)))
+    base = rows[BASELINE]
+    for r in rows.values():
+        r.admitted = r.stretch <= MAX_STRETCH and r.penetration_mm <= margin_mm + 1e-6
+        r.dominates = r.ghost and r.admitted and r.ms <= TIME_SHARE * base.ms and \
+            r.motion_err <= base.motion_err
+    return {'motion': trajectory.name, 'description': trajectory.description,
+            'strands': workload.count, 'frames': schedule.frames, 'moving_from': moving,
+            'reference': f'FTL dt 1/{60 * REFERENCE_SUBSTEPS} s, every strand',
+            'margin_mm': margin_mm, 'rows': list(rows.values())}
+
+
+def markdown(report: Dict, threads: int) -> str:
+    """The report of :func:`study` as a Markdown table."""
+    base = next(r for r in report['rows'] if r.name == BASELINE)
+    lines = [f"#### {report['motion']}, {report['strands']} strands x 16 nodes, {threads} "
+             f"thread(s)",
+             '',
+             f"{report['description']}; {report['frames']} frames at 60 Hz, the head moves from "
+             f"frame {report['moving_from']}; reference: {report['reference']}.",
+             '',
+             '| method | ms/frame (median, min) | share of baseline | motion error [% L] | '
+             'settled error [% L] | max stretch [%] | penetration [mm] | dominates |',
+             '|---|---:|---:|---:|---:|---:|---:|:---:|']
+    for r in report['rows']:
+        share = r.ms / base.ms if base.ms > 0 else math.nan
+        mark = 'yes' if r.dominates else ('' if not r.ghost else
+                                          ('no' if r.admitted else 'not admitted'))
+        lines.append(f'| {r.name} | {r.ms:.2f}, {min(r.frame_ms):.2f} | {share:.2f} | '
+                     f'{r.motion_err:.2f} | {r.settled_err:.2f} | {100 * r.stretch:.3f} | '
+                     f'{r.penetration_mm:.2f} | {mark} |')
+    return '\n'.join(lines) + '\n'
+
+
+def load_motion(path: str):
+    """A head motion from a file, read as ``hair_sim_bag import`` and ``run`` read them: a
+    rosbag2 head-pose bag (MCAP, sqlite3; PoseStamped, TransformStamped or TF), a BVH capture
+    (CMU conventions) or a pose CSV (``t_s px py pz qx qy qz qw``)."""
+    from hair_tracking.bags import head_motion as hm
+    from hair_tracking.bags import io as bag_io
+    lower = path.lower()
+    if lower.endswith('.bvh'):
+        return hm.load_bvh_head_motion(path)
+    if lower.endswith(('.csv', '.txt')):
+        return hm.read_pose_csv(path)
+    poses = bag_io.read_head_poses(path)
+    return hm.HeadMotion(t_ns=poses.t_ns - poses.t_ns[0], position=poses.position,
+                         quaternion=poses.quaternion, source=f'{path} ({poses.topic})')

@@ -1,0 +1,102 @@
+"""Speed of the ghost trackers: the blend tracker against the paper's tracker, against the copy
+bandwidth of this machine measured in the same run.
+
+For each ghost count (16 nodes a strand, one guide per 16 ghosts, the default scene otherwise),
+the blend tracker's frame (guide maps + blend + FTL pass + head contacts) and one step of the
+paper tracker are timed in turns, after a warm-up that compiles them; medians of the rounds.
+The bandwidth is a numpy copy of a 64 MB float64 array (read + write counted).  The blend kernel
+reads the float32 rest shape and lengths (16 B a node) and writes float64 positions (24 B):
+its share of the bandwidth is (40 B x nodes / time) / copy bandwidth.
+
+    python scripts/bench_blend.py [--ghosts 10000 100000] [--threads 2] [--json out.json]
+"""
+import argparse
+import json
+import os
+import statistics
+import sys
+import time
+
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+
+import numba  # noqa: E402
+import numpy as np  # noqa: E402
+
+from hair_tracking.core.scene import Scene  # noqa: E402
+from hair_tracking.ghosts import blend  # noqa: E402
+from hair_tracking.simulator import HairSimulator  # noqa: E402
+
+BYTES_PER_NODE = 16 + 24
+
+
+def copy_bandwidth(rounds=7):
+    a = np.ones(8 << 20)
+    b = np.empty_like(a)
+    times = []
+    for _ in range(rounds):
+        t = time.perf_counter()
+        np.copyto(b, a)
+        times.append(time.perf_counter() - t)
+    return 2 * a.nbytes / statistics.median(times)
+
+
+def moved(sim, k):
+    q = [0.0, 0.0, np.sin(0.15 * np.sin(0.3 * k)), np.cos(0.15 * np.sin(0.3 * k))]
+    t = 1_000_000_000 + k * 16_666_667
+    sim.push_pose(t, [0.02 * np.sin(0.2 * k), 0.0, 0.0], q)
+    sim.advance_to(t)
+    return sim
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split('\n')[0])
+    ap.add_argument('--ghosts', type=int, nargs='+', default=[10000, 100000])
+    ap.add_argument('--threads', type=int, default=numba.config.NUMBA_NUM_THREADS)
+    ap.add_argument('--rounds', type=int, default=15)
+    ap.add_argument('--json')
+    args = ap.parse_args(argv)
+    numba.set_num_threads(args.threads)
+    bw = copy_bandwidth()
+    print(f'copy bandwidth {bw / 1e9:.1f} GB/s; {args.threads} thread(s)')
+    results = []
+    for ghosts in args.ghosts:
+        guides = max(1, ghosts // 16)
+        base = Scene().with_changes(groom__guides=guides, groom__ghosts_per_guide=16,
+                                    solver__settle_time=0.0)
+        sims = {'blend': moved(HairSimulator(base.with_changes(tracking__mode='blend')), 1),
+                'paper': moved(HairSimulator(base.with_changes(tracking__mode='paper')), 1)}
+        for k in range(2, 5):
+            for sim in sims.values():
+                moved(sim, k)
+        times = {name: [] for name in sims}
+        for r in range(args.rounds):
+            for name, sim in sims.items():
+                tr, head = sim.ghost_tracker, sim.head
+                gx_old = sim.guides.x.copy()
+                t = time.perf_counter()
+                tr.step(sim.scene.solver.dt, gx_old, head)
+                times[name].append(time.perf_counter() - t)
+        nodes = sims['blend'].ghosts.count * sims['blend'].ghosts.rest.shape[1]
+        row = {'ghosts': sims['blend'].ghosts.count, 'nodes': nodes, 'threads': args.threads,
+               'copy_bandwidth_GBps': bw / 1e9}
+        for name, ts in times.items():
+            med = statistics.median(ts)
+            row[name] = {'median_ms': med * 1e3, 'min_ms': min(ts) * 1e3,
+                         'Mnodes_per_s': nodes / med / 1e6}
+        row['blend']['bandwidth_share'] = BYTES_PER_NODE * nodes / statistics.median(
+            times['blend']) / bw
+        results.append(row)
+        b, p = row['blend'], row['paper']
+        print(f"{row['ghosts']:>7} ghosts x 16: blend {b['median_ms']:.2f} ms "
+              f"({b['Mnodes_per_s']:.0f} M nodes/s, {100 * b['bandwidth_share']:.0f} % of the "
+              f"copy bandwidth); paper tracker step {p['median_ms']:.2f} ms "
+              f"({p['Mnodes_per_s']:.0f} M nodes/s); ratio {p['median_ms'] / b['median_ms']:.1f}x",
+              flush=True)
+    if args.json:
+        with open(args.json, 'w', encoding='utf-8') as f:
+            json.dump({'results': results}, f, indent=2)
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
