@@ -237,6 +237,8 @@ class BlendTracking(Method):
         collider = make_collider(scene.collider) if scene.tracking.collide else None
         self.tracker = BlendTracker(self.ghosts, self.guides, self.guide_index, scene, collider,
                                     k=k)
+        self._perm = self.tracker.permutation
+        self._out = np.empty_like(workload.ghost_rest)
 
     def reset(self, head):
         self.solver.reset(head)
@@ -247,7 +249,8 @@ class BlendTracking(Method):
 
     def output(self, head):
         self.tracker.step(self.dt, None, head)
-        return self.ghosts.x
+        self._out[self._perm] = self.ghosts.x          # back into the workload's order
+        return self._out
 
 
 class RigidOffset(_GuidedMethod):

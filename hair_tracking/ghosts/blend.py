@@ -39,12 +39,16 @@ from numba import njit, prange
 
 from hair_tracking.core.model import HeadPose, StrandSet
 from hair_tracking.core.point_records import points_to_records
+from hair_tracking.ghosts.tracker import _permute
 from hair_tracking.guides.collision import outside_distance
 
 #: Guides blended per ghost by default (Unreal's groom interpolation uses up to three).
 DEFAULT_GUIDES_PER_GHOST = 3
 #: Exponent of the inverse-distance weights.
 WEIGHT_POWER = 2.0
+#: Strands one thread blends together: their length passes run node by node across the block,
+#: so the CPU overlaps the strands' dependency chains (each node is placed from its predecessor).
+STRAND_BLOCK = 8
 
 
 # ----------------------------------------------------------------------------- set-up
@@ -222,8 +226,9 @@ def blend_strands(x, rest, roots, rest_length, guide, weight, affine, rot, pos, 
     (S, K) float32 from :func:`blend_weights`; ``affine`` (G, N, 12) from
     :func:`guide_affines`; ``restore``: the FTL length pass; ``collide``: push nodes out of the
     ellipsoid ``axes`` (radii + margin) around ``center`` (head frame).  A strand that is guide
-    ``is_guide[s] >= 0`` is that guide's positions ``gx`` (G, N, 3), copied.  Returns the number
-    of nodes pushed out."""
+    ``is_guide[s] >= 0`` is that guide's positions ``gx`` (G, N, 3), copied.  Neighbouring
+    strands should share guides (:class:`BlendTracker` orders them so), which keeps the guides'
+    maps in cache.  Returns the number of nodes pushed out."""
     n_strands, n_nodes = x.shape[0], x.shape[1]
     n_k = guide.shape[1]
     contacts = 0
@@ -235,18 +240,20 @@ def blend_strands(x, rest, roots, rest_length, guide, weight, affine, rot, pos, 
     for i, (a, b) in enumerate(((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))):
         quad[i] = rot[a, 0] * rot[b, 0] * inv[0] + rot[a, 1] * rot[b, 1] * inv[1] + \
             rot[a, 2] * rot[b, 2] * inv[2]
-    for s in prange(n_strands):
-        if is_guide[s] >= 0:
-            x[s] = gx[is_guide[s]]
-            continue
-        px = py = pz = 0.0
-        for j in range(n_nodes):
-            if j < 2:            # roots ride with the head
+    n_blocks = (n_strands + STRAND_BLOCK - 1) // STRAND_BLOCK
+    for b in prange(n_blocks):
+        s0 = b * STRAND_BLOCK
+        s1 = min(n_strands, s0 + STRAND_BLOCK)
+        for s in range(s0, s1):          # the blend: every node on its own
+            if is_guide[s] >= 0:
+                x[s] = gx[is_guide[s]]
+                continue
+            for j in range(2):           # roots ride with the head
                 r0, r1, r2 = roots[s, j, 0], roots[s, j, 1], roots[s, j, 2]
-                nx = rot[0, 0] * r0 + rot[0, 1] * r1 + rot[0, 2] * r2 + pos[0]
-                ny = rot[1, 0] * r0 + rot[1, 1] * r1 + rot[1, 2] * r2 + pos[1]
-                nz = rot[2, 0] * r0 + rot[2, 1] * r1 + rot[2, 2] * r2 + pos[2]
-            else:
+                x[s, j, 0] = rot[0, 0] * r0 + rot[0, 1] * r1 + rot[0, 2] * r2 + pos[0]
+                x[s, j, 1] = rot[1, 0] * r0 + rot[1, 1] * r1 + rot[1, 2] * r2 + pos[1]
+                x[s, j, 2] = rot[2, 0] * r0 + rot[2, 1] * r1 + rot[2, 2] * r2 + pos[2]
+            for j in range(2, n_nodes):
                 r0, r1, r2 = float(rest[s, j, 0]), float(rest[s, j, 1]), float(rest[s, j, 2])
                 nx = ny = nz = 0.0
                 for k in range(n_k):
@@ -258,22 +265,34 @@ def blend_strands(x, rest, roots, rest_length, guide, weight, affine, rot, pos, 
                                + affine[g, j, 5] * r2 + affine[g, j, 10])
                     nz += w * (affine[g, j, 6] * r0 + affine[g, j, 7] * r1
                                + affine[g, j, 8] * r2 + affine[g, j, 11])
+                x[s, j, 0] = nx
+                x[s, j, 1] = ny
+                x[s, j, 2] = nz
+        if not (restore or collide):
+            continue
+        # lengths and contacts: node by node across the block's strands, so that the chains
+        # of the strands (each node placed from its predecessor) overlap in the CPU
+        for j in range(2, n_nodes):
+            for s in range(s0, s1):
+                if is_guide[s] >= 0:
+                    continue
+                px, py, pz = x[s, j - 1, 0], x[s, j - 1, 1], x[s, j - 1, 2]
+                nx, ny, nz = x[s, j, 0], x[s, j, 1], x[s, j, 2]
+                length = float(rest_length[s, j - 1])
                 if restore:
                     dx, dy, dz = nx - px, ny - py, nz - pz
                     d = math.sqrt(dx * dx + dy * dy + dz * dz)
                     if d > 0.0:
-                        f = float(rest_length[s, j - 1]) / d
+                        f = length / d
                         nx, ny, nz = px + f * dx, py + f * dy, pz + f * dz
                 if collide and _inside(nx, ny, nz, cw, quad):
                     contacts += 1
                     if restore:
-                        nx, ny, nz = _slide(nx, ny, nz, px, py, pz,
-                                            float(rest_length[s, j - 1]), cw, quad)
+                        nx, ny, nz = _slide(nx, ny, nz, px, py, pz, length, cw, quad)
                     nx, ny, nz, pushed = _push_out(nx, ny, nz, cw, quad)
-            x[s, j, 0] = nx
-            x[s, j, 1] = ny
-            x[s, j, 2] = nz
-            px, py, pz = nx, ny, nz
+                x[s, j, 0] = nx
+                x[s, j, 1] = ny
+                x[s, j, 2] = nz
     return contacts
 
 
@@ -355,7 +374,10 @@ class BlendTracker:
     """Moves ``ghosts`` after ``guides`` once per output frame (see the module docstring).
 
     ``guides`` must be some of the ghost strands: ``guide_index[i]`` is the ghost strand that
-    guide ``i`` is (``ghosts.rest[guide_index] == guides.rest``).  ``k`` guides are blended per
+    guide ``i`` is (``ghosts.rest[guide_index] == guides.rest``).  The ghost StrandSet is
+    reordered once, at construction, by first guide (its arrays replaced by reordered copies):
+    ``permutation[i]`` is the index, before construction, of the strand now in row ``i``, and
+    :attr:`guide_index` names the guides' rows after it.  ``k`` guides are blended per
     ghost; ``collider``, when given and ``scene.tracking.collide`` is true, is the head collider
     (a :class:`~hair_tracking.guides.collision.Collider`).  The ghost state is ``ghosts.x``
     (world frame); ghosts carry no velocity of their own (``ghosts.v`` stays zero).
@@ -376,6 +398,18 @@ class BlendTracker:
         tr = scene.tracking
         self.restore = bool(tr.length_restore)
         self.guide_of, self.weight = blend_weights(ghosts.rest[:, 0], guides.rest[:, 0], k)
+        # the ghost StrandSet is reordered once, by first guide, so that neighbouring strands
+        # read the same guides' maps from cache: row i is the strand ``permutation[i]`` had
+        order = np.argsort(self.guide_of[:, 0], kind='stable')
+        self.permutation = np.arange(ghosts.count, dtype=np.int64)
+        if np.any(order != self.permutation):
+            _permute(ghosts, order)
+            self.permutation = order
+            self.guide_of = np.ascontiguousarray(self.guide_of[order])
+            self.weight = np.ascontiguousarray(self.weight[order])
+            row = np.empty_like(order)
+            row[order] = np.arange(order.size)
+            self.guide_index = row[self.guide_index]
         #: the guide each strand is, -1 for the others (those copy their guide)
         self.is_guide = np.full(ghosts.count, -1, dtype=np.int64)
         self.is_guide[self.guide_index] = np.arange(guides.count)

@@ -540,7 +540,8 @@ class HairSimNode(Node):
         :class:`~hair_tracking.ros.load_shedding.LoadShedder`)."""
         s, sim = self._settings, self.sim
         if not (s.load_shedding and sim.ghost_tracker is not None
-                and sim.scene.tracking.every_substep):    # nothing to shed
+                and sim.scene.tracking.every_substep
+                and sim.scene.tracking.mode == 'paper'):    # nothing to shed
             sim.track_once_per_call = False
             self._publish_ms_since_pose = 0.0
             return
