@@ -42,7 +42,7 @@ from .point_records import blocks_to_records, points_to_records
 from .scene import Scene
 from .tracking_kernels import (block_groups, chunk_count, copy_blocks, group_blocks,
                                guide_frames, TMP_ROWS, track_groups, track_groups_serial)
-from .weights import arc_fractions, elastic_code
+from .weights import elastic_code, tip_weights
 
 
 class GhostTracker:
@@ -140,12 +140,10 @@ class GhostTracker:
         self._rest_off_blocks = group_blocks(self._rest_off, self._block_rows)
         self._seg_len_blocks = group_blocks(ghosts.rest_length[o], self._block_rows)
         self._root_blocks = group_blocks(ghosts.rest[o][:, :min(2, n_nodes)], self._block_rows)
-        frac = arc_fractions(ghosts.rest_length)[o]
+        w_tip = tip_weights(ghosts.rest_length, tr.tip_weight)[o]      # equation (5)'s w_tip
         # per-node data (guide parameter, w_tip) as a table of distinct rows: ghosts with the
         # same arc-length layout share one row
-        # (fractions rounded to 1e-12 so that rounding noise does not split equal layouts)
-        table = np.stack([self._gparam, tr.tip_weight * np.round(frac, 12)],
-                         axis=-1).reshape(s_count, -1)
+        table = np.stack([self._gparam, w_tip], axis=-1).reshape(s_count, -1)
         if s_count == 0 or np.array_equal(table, np.broadcast_to(table[0], table.shape)):
             rows, inverse = table[:1], np.zeros(s_count, dtype=np.int64)   # the usual case
         else:

@@ -39,7 +39,8 @@ import numpy as np
 from .collision import world_center
 from .ghost_contacts import collide_lanes, CONTACT_ROWS
 from .integrate import NO_REFCOUNT
-from .weights import clamp_weight, com_weight, direction_cos, ELASTIC_OFF, elastic_sign
+from .spread import group_variance, spread_factor
+from .weights import com_weight, elastic_weight, ELASTIC_OFF, weighted_position
 
 
 @njit(cache=True, inline='always')
@@ -421,17 +422,13 @@ def _predict_group(X0, V0, P, off, inv_len, l0, l1, gi, j, row, node_table, guid
                          need_target)
     c0, c1, c2, cw = _group_centre(X0, l0, l1, com_w)
     tip = (1.0 if use_tip else 0.0) * tw
-    elastic = elastic_mode != ELASTIC_OFF
-    sign = elastic_sign(elastic_mode) if elastic else 0.0
     u0 = uint64(l0)
     n = uint64(l1 - l0)
     n_clamped = 0
     xs0 = xs1 = xs2 = qs0 = qs1 = qs2 = 0.0
     for kk in range(n):             # (the invariant branch is unswitched by LLVM)
         i = u0 + kk
-        w = 0.0
-        if elastic:
-            w = 0.5 + sign * direction_cos(dx, dy, dz, V0[0, i], V0[1, i], V0[2, i])
+        w = elastic_weight(dx, dy, dz, V0[0, i], V0[1, i], V0[2, i], elastic_mode)
         o0 = off[0, i]
         o1 = off[1, i]
         o2 = off[2, i]
@@ -522,11 +519,10 @@ def _predict(X0, V0, P, T, l0, l1, inv_len, elastic_mode, use_tip, max_weight, k
     u0 = uint64(l0)
     n = uint64(l1 - l0)
     if elastic_mode != ELASTIC_OFF:
-        sign = elastic_sign(elastic_mode)
         for kk in range(n):
             i = u0 + kk
-            w = 0.5 + sign * direction_cos(T[_DX, i], T[_DY, i], T[_DZ, i],
-                                           V0[0, i], V0[1, i], V0[2, i])
+            w = elastic_weight(T[_DX, i], T[_DY, i], T[_DZ, i], V0[0, i], V0[1, i], V0[2, i],
+                               elastic_mode)
             n_clamped += _advance(X0, P, T, i, w, tip_f, inv_len, max_weight, k_off)
     else:
         for kk in range(n):
@@ -537,20 +533,18 @@ def _predict(X0, V0, P, T, l0, l1, inv_len, elastic_mode, use_tip, max_weight, k
 @njit(cache=True, inline='always', fastmath=TRACK_FASTMATH, error_model='numpy')
 def _moved(xo0, xo1, xo2, w, tip, c0, c1, c2, cw, ilen, dx, dy, dz, t0, t1, t2, max_weight,
            k_off):
-    """(a)-(c) for one node at ``xo`` given its elastic weight ``w``: adds w_tip ``tip`` and
-    w_com (group centre ``c``, weight per length ``cw``, 1 / strand length ``ilen``), clamps
-    (b), moves by the guide displacement ``d`` times (1 + W) (a) and pulls toward the target
-    ``t`` (c).  Returns the new position and 1 if the weight sum was clamped.  The one
-    per-node formula of both paths (:func:`_predict_group`, :func:`_advance`)."""
+    """(a)-(c) for one node at ``xo`` given its elastic weight ``w`` (equation (4)): w_com
+    (group centre ``c``, weight per length ``cw``, 1 / strand length ``ilen``), then equation
+    (5) with w_tip ``tip`` (:func:`~hair_tracking.weights.weighted_position`: the move by the
+    guide displacement ``d`` times (1 + W), W clamped) and the pull toward the target ``t``
+    (c).  Returns the new position and 1 if the weight sum was clamped.  The one per-node
+    formula of both paths (:func:`_predict_group`, :func:`_advance`)."""
     e0 = xo0 - c0
     e1 = xo1 - c1
     e2 = xo2 - c2
-    w += tip + com_weight(math.sqrt(e0 * e0 + e1 * e1 + e2 * e2), ilen, cw)
-    clamped = 1 if w > max_weight else 0
-    w = 1.0 + clamp_weight(w, max_weight)
-    x0 = xo0 + dx * w
-    x1 = xo1 + dy * w
-    x2 = xo2 + dz * w
+    w_com = com_weight(math.sqrt(e0 * e0 + e1 * e1 + e2 * e2), ilen, cw)
+    x0, x1, x2, clamped = weighted_position(xo0, xo1, xo2, dx, dy, dz, w, tip, w_com,
+                                            max_weight)
     return (x0 + k_off * (t0 - x0), x1 + k_off * (t1 - x1), x2 + k_off * (t2 - x2), clamped)
 
 
@@ -603,20 +597,7 @@ def _group_stage(P, l0, l1, k_com, spread, var_target, have_target, xs0, xs1, xs
     # (e) scale about the shifted centre toward the target variance
     f = 1.0
     if spread > 0.0 and n > 1:
-        var = 0.0
-        for kk in range(lanes):
-            i = u0 + kk
-            e0 = P[0, i] - m0
-            e1 = P[1, i] - m1
-            e2 = P[2, i] - m2
-            var += e0 * e0 + e1 * e1 + e2 * e2
-        if var > 1e-30:
-            ratio = math.sqrt(var_target / var)
-            if ratio > 2.0:
-                ratio = 2.0
-            elif ratio < 0.5:
-                ratio = 0.5
-            f = 1.0 + spread * (ratio - 1.0)
+        f = spread_factor(group_variance(P, u0, lanes, m0, m1, m2), var_target, spread)
     # x -> c + f (x + d - c) with c = m + d, i.e. x -> m + d + f (x - m)
     for kk in range(lanes):
         i = u0 + kk

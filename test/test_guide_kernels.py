@@ -1,7 +1,8 @@
 """The guide-strand numba kernels agree with plain-numpy references on random inputs.
 
-The references below are written independently of the kernels' loop structure: vectorised over
-strands, Gauss–Seidel along the strand, masses used directly (not through ``pair_weights``).
+The references (:mod:`hair_tracking.reference`) are written independently of the kernels' loop
+structure: vectorised over strands, Gauss–Seidel along the strand, masses used directly (not
+through ``pair_weights``).
 Kernels use fused multiply-add (``integrate.FASTMATH``), so agreement is to ~1e-12, not bitwise.
 """
 import re
@@ -10,94 +11,13 @@ import numba
 import numpy as np
 import pytest
 
-from hair_tracking import ftl, integrate, pbd_constraints
+from hair_tracking import ftl, integrate, pbd_constraints, reference
+from hair_tracking.reference import (ftl_pass as ref_ftl_pass, guide_finalize as ref_finalize,
+                                     guide_predict as ref_predict, pbd_sweep as ref_pbd_sweep,
+                                     xpbd_sweep as ref_xpbd_sweep)
 from hair_tracking.transforms import quat_normalize, quat_to_matrix
 
 ATOL = 1e-12
-
-
-# ------------------------------------------------------------------------- numpy references
-def ref_predict(x, v, rest, inv_mass, rot, pos, rot_prev, pos_prev, gravity, damping, dt, shock):
-    """Returns (p, x_carried, v_integrated) of the predict stage (the kernels keep the integrated
-    velocity local: the finalize stage sets v from the displacement)."""
-    rot_rel = rot @ rot_prev.T
-    moved = (x - pos_prev) @ rot_rel.T + pos
-    xc = x + shock * (moved - x)
-    vc = v + shock * (v @ rot_rel.T - v)
-    free = (inv_mass > 0)[..., None]
-    vn = np.where(free, vc * np.exp(-damping * dt) + np.asarray(gravity) * dt, 0.0)
-    p = np.where(free, xc + vn * dt, xc)
-    p[:, :2] = rest[:, :2] @ rot.T + pos
-    vn[:, :2] = v[:, :2]
-    return p, xc, vn
-
-
-def ref_pbd_sweep(p, rest_dist, inv_mass, gap, k):
-    for i in range(p.shape[1] - gap):
-        j = i + gap
-        wi, wj = inv_mass[:, i], inv_mass[:, j]
-        ws = wi + wj
-        d = p[:, j] - p[:, i]
-        length = np.linalg.norm(d, axis=1)
-        c = length - rest_dist[:, i]
-        nrm = d / np.maximum(length, 1e-15)[:, None]
-        safe = np.where(ws > 0, ws, 1.0)
-        p[:, i] += (k * wi / safe * c)[:, None] * nrm
-        p[:, j] -= (k * wj / safe * c)[:, None] * nrm
-
-
-def ref_xpbd_sweep(p, rest_dist, inv_mass, lam, gap, alpha_tilde):
-    for i in range(p.shape[1] - gap):
-        j = i + gap
-        wi, wj = inv_mass[:, i], inv_mass[:, j]
-        ws = wi + wj
-        d = p[:, j] - p[:, i]
-        length = np.linalg.norm(d, axis=1)
-        c = length - rest_dist[:, i]
-        nrm = d / np.maximum(length, 1e-15)[:, None]
-        dlam = np.where(ws > 0, (-c - alpha_tilde * lam[:, i]) / (ws + alpha_tilde), 0.0)
-        lam[:, i] += dlam
-        p[:, i] -= (wi * dlam)[:, None] * nrm
-        p[:, j] += (wj * dlam)[:, None] * nrm
-
-
-def ref_ftl_pass(p, rest, rest_length, rot):
-    corr = np.zeros_like(p)
-    for i in range(2, p.shape[1]):
-        d = p[:, i] - p[:, i - 1]
-        length = np.linalg.norm(d, axis=1)
-        fallback = (rest[:, i] - rest[:, i - 1]) @ rot.T
-        fb_len = np.linalg.norm(fallback, axis=1)
-        fallback = np.where((fb_len > 1e-12)[:, None],
-                            fallback / np.maximum(fb_len, 1e-300)[:, None], [0.0, 0.0, -1.0])
-        u = np.where((length > 1e-12)[:, None], d / np.maximum(length, 1e-300)[:, None], fallback)
-        new = p[:, i - 1] + rest_length[:, i - 1][:, None] * u
-        corr[:, i] = new - p[:, i]
-        p[:, i] = new
-    return corr
-
-
-def ref_finalize(p, x_old, inv_mass, corr, dt, max_disp, s_damp):
-    p = p.copy()
-    free = inv_mass > 0
-    disp = p - x_old
-    clamped = np.zeros(inv_mass.shape, bool)
-    if max_disp > 0:
-        mag = np.linalg.norm(disp, axis=2)
-        hit = free & (mag > max_disp)
-        disp[hit] *= (max_disp / mag[hit])[:, None]
-        p[hit] = x_old[hit] + disp[hit]
-        clamped |= hit
-    if s_damp > 0:
-        shifted = np.zeros_like(corr)
-        shifted[:, :-1] = corr[:, 1:]
-        disp = np.where(free[..., None], disp - s_damp * shifted, disp)
-        if max_disp > 0:
-            mag = np.linalg.norm(disp, axis=2)
-            hit = free & (mag > max_disp)
-            disp[hit] *= (max_disp / mag[hit])[:, None]
-            clamped |= hit
-    return p, disp / dt, int(clamped.sum())
 
 
 # ------------------------------------------------------------------------------ fixtures
@@ -254,6 +174,45 @@ def test_ftl_step_matches_reference(finalize):
         assert np.allclose(x, p, rtol=0, atol=ATOL)
         seg = np.linalg.norm(np.diff(x, axis=1), axis=2)
         assert np.allclose(seg[:, 1:], c['rest_length'][:, 1:], rtol=1e-12, atol=1e-15)
+
+
+@pytest.mark.parametrize('kind', ['pbd', 'xpbd', 'ftl'])
+def test_solver_steps_match_the_package_reference_steps(kind):
+    """Whole substeps (predict, constraints, finalize) of each guide kernel against
+    :func:`reference.pbd_step`, :func:`reference.xpbd_step`, :func:`reference.ftl_step`."""
+    c = random_case(6, all_free=(kind == 'ftl'))
+    bend_rest = pbd_constraints.second_neighbour_rest(c['rest'])
+    motion = {k: c[k] for k in ('rot', 'pos', 'rot_prev', 'pos_prev', 'gravity', 'damping',
+                                'shock')}
+    im, dt, max_disp = c['inv_mass'], c['dt'], 0.01
+    x, v, x_old = c['x'].copy(), c['v'].copy(), np.zeros_like(c['x'])
+    lanes = pbd_constraints.lane_major
+    if kind == 'pbd':
+        want = reference.pbd_step(c['x'], c['v'], c['rest'], im, c['rest_length'], bend_rest,
+                                  motion, dt, 3, 0.8, 0.3, max_disp)
+        clamped = pbd_constraints.pbd_step(
+            x, v, x_old, c['rest'], im, *pbd_lane_data(im, c['rest_length'], bend_rest),
+            *kernel_common(c), 3, 0.8, 0.3, max_disp, True)
+    elif kind == 'xpbd':
+        a_s, a_b = 1e-6 / dt ** 2, 1e-3 / dt ** 2
+        want = reference.xpbd_step(c['x'], c['v'], c['rest'], im, c['rest_length'], bend_rest,
+                                   motion, dt, 3, a_s, a_b, max_disp)
+        clamped = pbd_constraints.xpbd_step(
+            x, v, x_old, c['rest'], im, lanes(im), lanes(c['rest_length']), lanes(bend_rest),
+            lanes(pbd_constraints.xpbd_gain(im, 1, a_s)),
+            lanes(pbd_constraints.xpbd_gain(im, 2, a_b)), lanes(np.zeros((im.shape[0],
+                                                                          im.shape[1] - 1))),
+            lanes(np.zeros((im.shape[0], im.shape[1] - 2))),
+            pbd_constraints.lane_work(*im.shape), *kernel_common(c), 3, a_s, a_b, max_disp, True)
+    else:
+        want = reference.ftl_step(c['x'], c['v'], c['rest'], im, c['rest_length'], bend_rest,
+                                  motion, dt, 2, 0.4, 0.8, max_disp)
+        clamped = ftl.ftl_step(
+            x, v, x_old, np.zeros_like(x), c['rest'], im, c['rest_length'], bend_rest,
+            pbd_constraints.pair_weights(im, 2), *kernel_common(c), 2, 0.4, 0.8, max_disp, True)
+    assert want[2] > 0 and clamped == want[2]
+    assert np.allclose(x, want[0], rtol=0, atol=ATOL)
+    assert np.allclose(v, want[1], rtol=0, atol=1e-9)
 
 
 def test_ftl_pass_fallback_on_collapsed_segment():
