@@ -31,6 +31,7 @@ Only the rest shapes ``rest`` stay ``(S, N, 3)`` in the user's order (read for t
 and the rare fallbacks), reached through ``order``.  No cross-thread reductions: results are
 deterministic.
 """
+from collections import namedtuple
 import math
 
 from numba import njit, prange, uint64
@@ -142,6 +143,25 @@ TMP_ROWS = _KERNEL_ROWS + CONTACT_ROWS
 BLOCK_LANES = 64
 
 
+#: The arguments of :func:`track_groups`, grouped as NVIDIA Warp / Newton separate a solver's
+#: inputs (numba passes named tuples of arrays and scalars to compiled code).  The fields are
+#: described in :func:`track_groups`.
+#: Static data of the ghosts and guides, built once (:class:`~hair_tracking.ghosts.GhostTracker`).
+GhostModel = namedtuple('GhostModel', [
+    'rest', 'seg_len', 'order', 'group_start', 'block_group', 'group_guide', 'group_row',
+    'node_table', 'node_row', 'rest_off', 'root_rest', 'inv_len', 'var_target', 'tan_rest'])
+#: The ghosts' state, advanced in place.
+GhostState = namedtuple('GhostState', ['xb', 'vb'])
+#: What drives one substep: the guides after / before it, the head pose, ``1 / dt``.
+GuideMotion = namedtuple('GuideMotion', ['guide_x', 'guide_x_old', 'R', 'pos', 'inv_dt'])
+#: The tracking parameters (switches, strengths, the fused head collider).
+TrackParams = namedtuple('TrackParams', [
+    'elastic_mode', 'use_tip', 'com_w', 'max_weight', 'k_off', 'k_com', 'spread', 'ftl',
+    'collide', 'center', 'axes', 'friction', 'refine'])
+#: Work space and per-call counters.
+TrackWork = namedtuple('TrackWork', ['q_buf', 'buf', 'tmp', 'clamped', 'contacts'])
+
+
 def chunk_count(blocks: int, threads: int) -> int:
     """Chunks of blocks that :func:`track_groups` spreads over ``threads`` threads."""
     return max(1, min(blocks, 4 * threads))
@@ -163,17 +183,17 @@ def block_groups(group_start: np.ndarray, lanes: int = BLOCK_LANES) -> np.ndarra
 
 
 @njit(cache=True, nogil=True, parallel=True, fastmath=TRACK_FASTMATH, error_model='numpy')
-def track_groups(xb, vb, rest, seg_len, order, group_start, block_group, group_guide,
-                 group_row, node_table, node_row, rest_off, root_rest, inv_len, var_target,
-                 guide_x, guide_x_old, tan_rest, R, pos, inv_dt, elastic_mode, use_tip, com_w,
-                 max_weight, k_off, k_com, spread, ftl, collide, center, axes, friction, refine,
-                 q_buf, buf, tmp, clamped, contacts):
-    """One tracking substep of all ghosts, in place on ``xb`` and ``vb`` (see the module doc).
+def track_groups(model, state, motion, params, work):
+    """One tracking substep of all ghosts, in place on ``state`` (see the module doc).
 
-    Parameters (S ghosts of N nodes, G guides of M nodes, K groups in B blocks, U distinct node
+    Arguments: ``model`` a :data:`GhostModel`, ``state`` a :data:`GhostState`, ``motion`` a
+    :data:`GuideMotion`, ``params`` a :data:`TrackParams`, ``work`` a :data:`TrackWork`, with
+    these fields (S ghosts of N nodes, G guides of M nodes, K groups in B blocks, U distinct node
     rows, C chunks, L the most lanes of a block, E the most groups of a block):
+    state
       xb, vb (S * N * 3,)     ghost positions [m] / velocities [m/s], world, in the layout of
                               ``rest_off`` (:func:`copy_blocks`)
+    model
       rest (S, N, 3)          ghost rest shapes, head frame [m] (roots and FTL fallback)
       seg_len (S * (N-1),)    ghost rest segment lengths [m], in the layout of ``rest_off``
       order (S,)              ghost index of group-order row k
@@ -193,14 +213,16 @@ def track_groups(xb, vb, rest, seg_len, order, group_start, block_group, group_g
                               [m], in the layout of ``rest_off``
       inv_len (S,)            1 / ghost length [1/m] (group order)
       var_target (K, N)       target group variance (sum of squares) [m^2] for spread control
-      guide_x, guide_x_old    (G, M, 3) guides after / before this substep, world [m]
       tan_rest (G, M-1, 3)    unit rest tangents of the guides, head frame
+    motion
+      guide_x, guide_x_old    (G, M, 3) guides after / before this substep, world [m]
       R (3, 3), pos (3,)      head pose
       inv_dt                  1 / dt [1/s], the substep's inverse, computed by the caller:
                               computed in here, LLVM's reassociation (``TRACK_FASTMATH``)
                               turned every ``(x_new - x_old) * (1 / dt)`` back into a division,
                               three vector divisions a node (11 % of the kernel's perf samples
                               at 100 k ghosts)
+    params
       elastic_mode            weights.ELASTIC_OFF / KEPT / CHANGED
       use_tip, com_w, max_weight, k_off, k_com, spread, ftl   switches and strengths
       collide                 (h) fused: push nodes out of the ellipsoid with semi-axes ``axes``
@@ -208,6 +230,7 @@ def track_groups(xb, vb, rest, seg_len, order, group_start, block_group, group_g
                               node's start-of-substep position, ``refine`` projection refinements;
                               with ``ftl`` the pushed node is put back at its rest distance
                               (:func:`hair_tracking.ftl.restore_node`)
+    work
       q_buf (C, E, M-1, 3, 3) work space per chunk: the segment frames of the block's guides
       buf (C, 3 N L)          work space per chunk: the new positions of a block, [node][axis]
                               [ghost] (64 ghosts of 16 nodes: 24 KiB)
@@ -224,42 +247,40 @@ def track_groups(xb, vb, rest, seg_len, order, group_start, block_group, group_g
     rewritten with ``v = (x_new - x_old) / dt`` in one contiguous loop.  Groups are independent:
     the result does not depend on the number of chunks or threads.
     """
-    n_chunks = buf.shape[0]
+    n_chunks = work.buf.shape[0]
     for c in prange(n_chunks):
-        _track_chunk(c, n_chunks, xb, vb, rest, seg_len, order, group_start, block_group,
-                     group_guide, group_row, node_table, node_row, rest_off, root_rest, inv_len,
-                     var_target, guide_x, guide_x_old, tan_rest, R, pos, inv_dt, elastic_mode,
-                     use_tip, com_w, max_weight, k_off, k_com, spread, ftl, collide, center,
-                     axes, friction, refine, q_buf, buf, tmp, clamped, contacts)
+        _track_chunk(c, n_chunks, model, state, motion, params, work)
 
 
 @njit(cache=True, nogil=True, fastmath=TRACK_FASTMATH, error_model='numpy')
-def track_groups_serial(xb, vb, rest, seg_len, order, group_start, block_group, group_guide,
-                        group_row, node_table, node_row, rest_off, root_rest, inv_len, var_target,
-                        guide_x, guide_x_old, tan_rest, R, pos, inv_dt, elastic_mode, use_tip,
-                        com_w, max_weight, k_off, k_com, spread, ftl, collide, center, axes,
-                        friction, refine, q_buf, buf, tmp, clamped, contacts):
+def track_groups_serial(model, state, motion, params, work):
     """:func:`track_groups` on the calling thread, for small problems: no parallel region to
     launch (which costs a few hundred microseconds a call on this shared machine, more than a
     1 k-ghost substep's arithmetic).  Same results."""
-    n_chunks = buf.shape[0]
+    n_chunks = work.buf.shape[0]
     for c in range(n_chunks):
-        _track_chunk(c, n_chunks, xb, vb, rest, seg_len, order, group_start, block_group,
-                     group_guide, group_row, node_table, node_row, rest_off, root_rest, inv_len,
-                     var_target, guide_x, guide_x_old, tan_rest, R, pos, inv_dt, elastic_mode,
-                     use_tip, com_w, max_weight, k_off, k_com, spread, ftl, collide, center,
-                     axes, friction, refine, q_buf, buf, tmp, clamped, contacts)
+        _track_chunk(c, n_chunks, model, state, motion, params, work)
 
 
 @njit(cache=True, fastmath=TRACK_FASTMATH, error_model='numpy', **NO_REFCOUNT)
-def _track_chunk(c, n_chunks, xb, vb, rest, seg_len, order, group_start, block_group,
-                 group_guide, group_row, node_table, node_row, rest_off, root_rest, inv_len,
-                 var_target, guide_x, guide_x_old, tan_rest, R, pos, inv_dt, elastic_mode, use_tip,
-                 com_w, max_weight, k_off, k_com, spread, ftl, collide, center, axes, friction,
-                 refine, q_buf, buf, tmp, clamped, contacts):
+def _track_chunk(c, n_chunks, model, state, motion, params, work):
     """Chunk ``c`` of :func:`track_groups` (its blocks ``c B / C .. (c+1) B / C - 1``).  A
     function of its own so that the parallel loop's body stays small (numba's parfor lowering
     copies the body's IR, which took most of the compile time when everything was inlined)."""
+    rest, seg_len, order, group_start = model.rest, model.seg_len, model.order, model.group_start
+    block_group, group_guide, group_row = model.block_group, model.group_guide, model.group_row
+    node_table, node_row, rest_off = model.node_table, model.node_row, model.rest_off
+    root_rest, inv_len, var_target = model.root_rest, model.inv_len, model.var_target
+    tan_rest = model.tan_rest
+    xb, vb = state.xb, state.vb
+    guide_x, guide_x_old, R, pos = motion.guide_x, motion.guide_x_old, motion.R, motion.pos
+    inv_dt = motion.inv_dt
+    elastic_mode, use_tip, com_w = params.elastic_mode, params.use_tip, params.com_w
+    max_weight, k_off, k_com = params.max_weight, params.k_off, params.k_com
+    spread, ftl, collide = params.spread, params.ftl, params.collide
+    center, axes, friction, refine = params.center, params.axes, params.friction, params.refine
+    q_buf, buf, tmp, clamped, contacts = work.q_buf, work.buf, work.tmp, work.clamped, \
+        work.contacts
     n_nodes = rest.shape[1]
     m_last = guide_x.shape[1] - 2
     n_blocks = block_group.shape[0] - 1
