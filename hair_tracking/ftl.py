@@ -23,6 +23,7 @@ Degenerate input: if a segment has collapsed (``|p_i - p_{i-1}| < 1e-12`` m) the
 along the segment's rest direction carried by the head (``R (rest_i - rest_{i-1})``); a
 zero rest length places the node on its predecessor. No NaN can arise.
 """
+from collections import namedtuple
 import math
 
 from numba import njit, prange
@@ -31,6 +32,15 @@ from hair_tracking.collision import surface_point, to_head, world_center
 from hair_tracking.integrate import (BLOCK, FASTMATH, finalize_block, NO_REFCOUNT,
                                      predict_block, serial_twin)
 from hair_tracking.pbd_constraints import pbd_sweep_block
+
+#: Static data of :func:`ftl_step`: ``rest`` (S, N, 3) head frame [m], ``inv_mass`` (S, N),
+#: ``rest_length`` (S, N-1), ``bend_rest`` (S, N-2) second-neighbour rest distances [m],
+#: ``bend_w`` from :func:`hair_tracking.pbd_constraints.pair_weights` with gap 2.
+FtlModel = namedtuple('FtlModel', ['rest', 'inv_mass', 'rest_length', 'bend_rest', 'bend_w'])
+#: Parameters of :func:`ftl_step`: bending sweeps and stiffness (0: no bending), the velocity
+#: correction ``s_damp`` 0..1, the displacement clamp [m] (0: off), whether to finalize.
+FtlParams = namedtuple('FtlParams', ['bend_passes', 'bend_stiffness', 's_damp', 'max_disp',
+                                     'do_finalize'])
 
 #: Below this squared segment length [m²] the current direction is unreliable.
 FTL_TINY_SQ = 1e-24
@@ -181,16 +191,23 @@ def ftl_restore_block(x, rest, rest_length, rot, cx, cy, cz, axes, refine, corr,
 
 
 @njit(cache=True, nogil=True, parallel=True, fastmath=FASTMATH, error_model='numpy')
-def ftl_step(x, v, x_old, corr, rest, inv_mass, rest_length, bend_rest, bend_w,
-             rot, pos, rot_rel, pos_prev, gravity, damp, dt, shock,
-             bend_passes, bend_stiffness, s_damp, max_disp, do_finalize):
+def ftl_step(model, state, motion, params, corr):
     """Kernel: one FTL substep of all strands (predict, bending, FTL pass, finalize).
 
-    ``bend_w`` from :func:`hair_tracking.pbd_constraints.pair_weights` with gap 2; ``corr``
-    (S, N, 3) receives the FTL corrections (needed by :func:`hair_tracking.integrate.finalize`
-    when a collider runs before finalizing). ``s_damp`` is the FTL velocity correction 0..1.
+    ``model`` an :data:`FtlModel`, ``state`` an :data:`~hair_tracking.integrate.GuideState`,
+    ``motion`` a :data:`~hair_tracking.integrate.StepMotion`, ``params`` an :data:`FtlParams`;
+    ``corr`` (S, N, 3) receives the FTL corrections (needed by
+    :func:`hair_tracking.integrate.finalize` when a collider runs before finalizing).
     Returns the clamped node count (0 when not finalizing).
     """
+    x, v, x_old = state.x, state.v, state.x_old
+    rest, inv_mass, rest_length = model.rest, model.inv_mass, model.rest_length
+    bend_rest, bend_w = model.bend_rest, model.bend_w
+    rot, pos, rot_rel, pos_prev = motion.rot, motion.pos, motion.rot_rel, motion.pos_prev
+    gravity, damp, dt, shock = motion.gravity, motion.damp, motion.dt, motion.shock
+    bend_passes, bend_stiffness, s_damp = params.bend_passes, params.bend_stiffness, \
+        params.s_damp
+    max_disp, do_finalize = params.max_disp, params.do_finalize
     nblk = (x.shape[0] + BLOCK - 1) // BLOCK
     clamped = 0
     for blk in prange(nblk):

@@ -147,31 +147,34 @@ class GuideSolver:
         if self._x_ref is not None:
             carry = integrate.carry_rigid if parallel else integrate.carry_rigid_serial
             carry(st.x, rot_rel, pos_prev, pos, self._x_ref)
+        state = integrate.GuideState(st.x, st.v, self._x_old)
+        motion = integrate.StepMotion(rot, pos, rot_rel, pos_prev, self._gravity, damp, dt,
+                                      self._shock)
+        sv = self.scene.solver
         if self.kind == 'pbd':
-            sv = self.scene.solver
             kernel = pbd_constraints.pbd_step if parallel else pbd_constraints.pbd_step_serial
-            clamped = kernel(
-                st.x, st.v, self._x_old, st.rest, st.inv_mass, self._rest_length_l,
-                self._bend_rest_l, self._stretch_w, self._bend_w, self._work, rot, pos, rot_rel,
-                pos_prev, self._gravity, damp, dt, self._shock, self._iterations,
-                float(sv.stiffness), float(sv.bend_stiffness), self._max_disp, fused)
+            model = pbd_constraints.PbdModel(st.rest, st.inv_mass, self._rest_length_l,
+                                             self._bend_rest_l, self._stretch_w, self._bend_w)
+            params = pbd_constraints.PbdParams(self._iterations, float(sv.stiffness),
+                                               float(sv.bend_stiffness), self._max_disp, fused)
+            clamped = kernel(model, state, motion, params, self._work)
         elif self.kind == 'xpbd':
             a_stretch, a_bend = self._xpbd_factors(dt)
             kernel = pbd_constraints.xpbd_step if parallel else pbd_constraints.xpbd_step_serial
-            clamped = kernel(
-                st.x, st.v, self._x_old, st.rest, st.inv_mass, self._inv_mass_l,
-                self._rest_length_l, self._bend_rest_l, self._stretch_gain, self._bend_gain,
-                self._lam_stretch, self._lam_bend, self._work, rot, pos, rot_rel, pos_prev,
-                self._gravity, damp, dt, self._shock, self._iterations, a_stretch, a_bend,
-                self._max_disp, fused)
+            model = pbd_constraints.XpbdModel(
+                st.rest, st.inv_mass, self._inv_mass_l, self._rest_length_l, self._bend_rest_l,
+                self._stretch_gain, self._bend_gain)
+            params = pbd_constraints.XpbdParams(self._iterations, a_stretch, a_bend,
+                                                self._max_disp, fused)
+            work = pbd_constraints.XpbdWork(self._work, self._lam_stretch, self._lam_bend)
+            clamped = kernel(model, state, motion, params, work)
         else:
-            sv = self.scene.solver
             kernel = ftl.ftl_step if parallel else ftl.ftl_step_serial
-            clamped = kernel(
-                st.x, st.v, self._x_old, self._corr, st.rest, st.inv_mass, st.rest_length,
-                self._bend_rest, self._bend_w, rot, pos, rot_rel, pos_prev, self._gravity, damp,
-                dt, self._shock, FTL_BEND_PASSES, ftl_bend_stiffness(sv.bend_stiffness, dt),
-                float(sv.ftl_damping), self._max_disp, fused)
+            model = ftl.FtlModel(st.rest, st.inv_mass, st.rest_length, self._bend_rest,
+                                 self._bend_w)
+            params = ftl.FtlParams(FTL_BEND_PASSES, ftl_bend_stiffness(sv.bend_stiffness, dt),
+                                   float(sv.ftl_damping), self._max_disp, fused)
+            clamped = kernel(model, state, motion, params, self._corr)
         contacts = 0
         if not fused:
             ref = self._x_ref if self._x_ref is not None else self._x_old

@@ -53,9 +53,43 @@ def pbd_lane_data(inv_mass, rest_length, bend_rest):
 
 
 def kernel_common(c):
+    """The :data:`integrate.StepMotion` of a random case."""
     rot_rel = integrate.relative_rotation(c['rot_prev'], c['rot'])
-    return (c['rot'], c['pos'], rot_rel, c['pos_prev'], c['gravity'],
-            float(np.exp(-c['damping'] * c['dt'])), c['dt'], c['shock'])
+    return integrate.StepMotion(c['rot'], c['pos'], rot_rel, c['pos_prev'], c['gravity'],
+                                float(np.exp(-c['damping'] * c['dt'])), c['dt'], c['shock'])
+
+
+def run_pbd_step(x, v, x_old, rest, inv_mass, rest_length, bend_rest, c, iterations, k, kb,
+                 max_disp, finalize):
+    """:func:`pbd_constraints.pbd_step` with its arguments built from plain arrays."""
+    rl, br, sw, bw, work = pbd_lane_data(inv_mass, rest_length, bend_rest)
+    return pbd_constraints.pbd_step(
+        pbd_constraints.PbdModel(rest, inv_mass, rl, br, sw, bw),
+        integrate.GuideState(x, v, x_old), kernel_common(c),
+        pbd_constraints.PbdParams(iterations, k, kb, max_disp, finalize), work)
+
+
+def run_xpbd_step(x, v, x_old, rest, im, rest_length, bend_rest, lam_s, lam_b, c, iterations,
+                  a_s, a_b, max_disp, finalize):
+    """:func:`pbd_constraints.xpbd_step` with its arguments built from plain arrays (``lam_*``
+    in lane-major layout)."""
+    lanes = pbd_constraints.lane_major
+    model = pbd_constraints.XpbdModel(
+        rest, im, lanes(im), lanes(rest_length), lanes(bend_rest),
+        lanes(pbd_constraints.xpbd_gain(im, 1, a_s)), lanes(pbd_constraints.xpbd_gain(im, 2, a_b)))
+    work = pbd_constraints.XpbdWork(pbd_constraints.lane_work(*im.shape), lam_s, lam_b)
+    return pbd_constraints.xpbd_step(
+        model, integrate.GuideState(x, v, x_old), kernel_common(c),
+        pbd_constraints.XpbdParams(iterations, a_s, a_b, max_disp, finalize), work)
+
+
+def run_ftl_step(x, v, x_old, corr, rest, im, rest_length, bend_rest, c, passes, kb, s_damp,
+                 max_disp, finalize):
+    """:func:`ftl.ftl_step` with its arguments built from plain arrays."""
+    return ftl.ftl_step(
+        ftl.FtlModel(rest, im, rest_length, bend_rest, pbd_constraints.pair_weights(im, 2)),
+        integrate.GuideState(x, v, x_old), kernel_common(c),
+        ftl.FtlParams(passes, kb, s_damp, max_disp, finalize), corr)
 
 
 def reference_predict(c):
@@ -97,10 +131,8 @@ def test_pbd_step_matches_reference(seed, finalize):
         ref_pbd_sweep(p, c['rest_length'], c['inv_mass'], 1, k)
         ref_pbd_sweep(p, bend_rest, c['inv_mass'], 2, kb)
     x, v, x_old = c['x'].copy(), c['v'].copy(), np.zeros_like(c['x'])
-    clamped = pbd_constraints.pbd_step(
-        x, v, x_old, c['rest'], c['inv_mass'],
-        *pbd_lane_data(c['inv_mass'], c['rest_length'], bend_rest),
-        *kernel_common(c), iterations, k, kb, max_disp, finalize)
+    clamped = run_pbd_step(x, v, x_old, c['rest'], c['inv_mass'], c['rest_length'], bend_rest,
+                           c, iterations, k, kb, max_disp, finalize)
     assert np.allclose(x_old, xc, rtol=0, atol=ATOL)
     if finalize:
         p_ref, v_ref, clamped_ref = ref_finalize(p, xc, c['inv_mass'], None, c['dt'], max_disp,
@@ -131,11 +163,8 @@ def test_xpbd_step_matches_reference(finalize):
     k_lam_s = lanes(np.full(lam_s.shape, 123.0))    # the kernel must reset the multipliers
     k_lam_b = lanes(np.full(lam_b.shape, -7.0))
     im = c['inv_mass']
-    clamped = pbd_constraints.xpbd_step(
-        x, v, x_old, c['rest'], im, lanes(im), lanes(c['rest_length']), lanes(bend_rest),
-        lanes(pbd_constraints.xpbd_gain(im, 1, a_s)), lanes(pbd_constraints.xpbd_gain(im, 2, a_b)),
-        k_lam_s, k_lam_b, pbd_constraints.lane_work(*im.shape),
-        *kernel_common(c), iterations, a_s, a_b, max_disp, finalize)
+    clamped = run_xpbd_step(x, v, x_old, c['rest'], im, c['rest_length'], bend_rest, k_lam_s,
+                            k_lam_b, c, iterations, a_s, a_b, max_disp, finalize)
     assert clamped == 0
     assert np.allclose(pbd_constraints.from_lane_major(k_lam_s, lam_s.shape), lam_s,
                        rtol=1e-9, atol=1e-9)
@@ -159,10 +188,8 @@ def test_ftl_step_matches_reference(finalize):
     corr = ref_ftl_pass(p, c['rest'], c['rest_length'], c['rot'])
     x, v, x_old = c['x'].copy(), c['v'].copy(), np.zeros_like(c['x'])
     k_corr = np.full_like(x, np.nan)
-    clamped = ftl.ftl_step(
-        x, v, x_old, k_corr, c['rest'], c['inv_mass'], c['rest_length'], bend_rest,
-        pbd_constraints.pair_weights(c['inv_mass'], 2), *kernel_common(c),
-        1, kb, s_damp, max_disp, finalize)
+    clamped = run_ftl_step(x, v, x_old, k_corr, c['rest'], c['inv_mass'], c['rest_length'],
+                           bend_rest, c, 1, kb, s_damp, max_disp, finalize)
     assert np.allclose(k_corr, corr, rtol=0, atol=ATOL)
     if finalize:
         p_ref, v_ref, clamped_ref = ref_finalize(p, xc, c['inv_mass'], corr, c['dt'], max_disp,
@@ -190,26 +217,21 @@ def test_solver_steps_match_the_package_reference_steps(kind):
     if kind == 'pbd':
         want = reference.pbd_step(c['x'], c['v'], c['rest'], im, c['rest_length'], bend_rest,
                                   motion, dt, 3, 0.8, 0.3, max_disp)
-        clamped = pbd_constraints.pbd_step(
-            x, v, x_old, c['rest'], im, *pbd_lane_data(im, c['rest_length'], bend_rest),
-            *kernel_common(c), 3, 0.8, 0.3, max_disp, True)
+        clamped = run_pbd_step(x, v, x_old, c['rest'], im, c['rest_length'], bend_rest, c, 3,
+                               0.8, 0.3, max_disp, True)
     elif kind == 'xpbd':
         a_s, a_b = 1e-6 / dt ** 2, 1e-3 / dt ** 2
         want = reference.xpbd_step(c['x'], c['v'], c['rest'], im, c['rest_length'], bend_rest,
                                    motion, dt, 3, a_s, a_b, max_disp)
-        clamped = pbd_constraints.xpbd_step(
-            x, v, x_old, c['rest'], im, lanes(im), lanes(c['rest_length']), lanes(bend_rest),
-            lanes(pbd_constraints.xpbd_gain(im, 1, a_s)),
-            lanes(pbd_constraints.xpbd_gain(im, 2, a_b)), lanes(np.zeros((im.shape[0],
-                                                                          im.shape[1] - 1))),
-            lanes(np.zeros((im.shape[0], im.shape[1] - 2))),
-            pbd_constraints.lane_work(*im.shape), *kernel_common(c), 3, a_s, a_b, max_disp, True)
+        clamped = run_xpbd_step(x, v, x_old, c['rest'], im, c['rest_length'], bend_rest,
+                                lanes(np.zeros((im.shape[0], im.shape[1] - 1))),
+                                lanes(np.zeros((im.shape[0], im.shape[1] - 2))), c, 3, a_s, a_b,
+                                max_disp, True)
     else:
         want = reference.ftl_step(c['x'], c['v'], c['rest'], im, c['rest_length'], bend_rest,
                                   motion, dt, 2, 0.4, 0.8, max_disp)
-        clamped = ftl.ftl_step(
-            x, v, x_old, np.zeros_like(x), c['rest'], im, c['rest_length'], bend_rest,
-            pbd_constraints.pair_weights(im, 2), *kernel_common(c), 2, 0.4, 0.8, max_disp, True)
+        clamped = run_ftl_step(x, v, x_old, np.zeros_like(x), c['rest'], im, c['rest_length'],
+                               bend_rest, c, 2, 0.4, 0.8, max_disp, True)
     assert want[2] > 0 and clamped == want[2]
     assert np.allclose(x, want[0], rtol=0, atol=ATOL)
     assert np.allclose(v, want[1], rtol=0, atol=1e-9)
@@ -278,11 +300,8 @@ def test_kernels_deterministic_across_threads_and_blocks():
         numba.set_num_threads(threads)
         try:
             x, v = c['x'][sl].copy(), c['v'][sl].copy()
-            pbd_constraints.pbd_step(x, v, np.zeros_like(x), c['rest'][sl].copy(),
-                                     c['inv_mass'][sl].copy(),
-                                     *pbd_lane_data(c['inv_mass'][sl], c['rest_length'][sl],
-                                                    bend_rest[sl]),
-                                     *kernel_common(c), 4, 1.0, 0.3, 0.05, True)
+            run_pbd_step(x, v, np.zeros_like(x), c['rest'][sl].copy(), c['inv_mass'][sl].copy(),
+                         c['rest_length'][sl], bend_rest[sl], c, 4, 1.0, 0.3, 0.05, True)
         finally:
             numba.set_num_threads(old)
         return x, v
