@@ -194,20 +194,16 @@ def ftl_restore_block(x, rest, rest_length, rot, cx, cy, cz, axes, refine, corr,
 def ftl_step(model, state, motion, params, corr):
     """Kernel: one FTL substep of all strands (predict, bending, FTL pass, finalize).
 
-    ``model`` an :data:`FtlModel`, ``state`` an :data:`~hair_tracking.integrate.GuideState`,
-    ``motion`` a :data:`~hair_tracking.integrate.StepMotion`, ``params`` an :data:`FtlParams`;
-    ``corr`` (S, N, 3) receives the FTL corrections (needed by
+    ``model``, ``state``, ``motion``, ``params``: the fields of :data:`FtlModel`,
+    :data:`~hair_tracking.integrate.GuideState`, :data:`~hair_tracking.integrate.StepMotion`,
+    :data:`FtlParams` as plain tuples; ``corr`` (S, N, 3) receives the FTL corrections (needed by
     :func:`hair_tracking.integrate.finalize` when a collider runs before finalizing).
     Returns the clamped node count (0 when not finalizing).
     """
-    x, v, x_old = state.x, state.v, state.x_old
-    rest, inv_mass, rest_length = model.rest, model.inv_mass, model.rest_length
-    bend_rest, bend_w = model.bend_rest, model.bend_w
-    rot, pos, rot_rel, pos_prev = motion.rot, motion.pos, motion.rot_rel, motion.pos_prev
-    gravity, damp, dt, shock = motion.gravity, motion.damp, motion.dt, motion.shock
-    bend_passes, bend_stiffness, s_damp = params.bend_passes, params.bend_stiffness, \
-        params.s_damp
-    max_disp, do_finalize = params.max_disp, params.do_finalize
+    x, v, x_old = state                                                 # GuideState
+    rest, inv_mass, rest_length, bend_rest, bend_w = model              # FtlModel
+    rot, pos, rot_rel, pos_prev, gravity, damp, dt, shock = motion      # StepMotion
+    bend_passes, bend_stiffness, s_damp, max_disp, do_finalize = params     # FtlParams
     nblk = (x.shape[0] + BLOCK - 1) // BLOCK
     clamped = 0
     for blk in prange(nblk):

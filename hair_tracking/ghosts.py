@@ -306,8 +306,9 @@ class GhostTracker:
             _per(tr.spread, substeps), tr.length_restore, self._fused_collider, self._center,
             self._axes, self._friction, self._refine)
         work = TrackWork(self._q_buf, self._buf, self._tmp, self._clamped, self._contacts)
-        self.threads.timed(runs_parallel(nodes), track_groups, track_groups_serial, model,
-                           GhostState(self._xb, self._vb), motion, params, work)
+        self.threads.timed(runs_parallel(nodes), track_groups, track_groups_serial,
+                           tuple(model), tuple(GhostState(self._xb, self._vb)), tuple(motion),
+                           tuple(params), tuple(work))
         self._synced_x = self._synced_v = False
         self.stats['steps'] += 1
         self.stats['parallel'] = int(self.threads.in_use)

@@ -147,9 +147,10 @@ class GuideSolver:
         if self._x_ref is not None:
             carry = integrate.carry_rigid if parallel else integrate.carry_rigid_serial
             carry(st.x, rot_rel, pos_prev, pos, self._x_ref)
-        state = integrate.GuideState(st.x, st.v, self._x_old)
-        motion = integrate.StepMotion(rot, pos, rot_rel, pos_prev, self._gravity, damp, dt,
-                                      self._shock)
+        # the kernels' arguments as plain tuples (see integrate.GuideState)
+        state = tuple(integrate.GuideState(st.x, st.v, self._x_old))
+        motion = tuple(integrate.StepMotion(rot, pos, rot_rel, pos_prev, self._gravity, damp, dt,
+                                            self._shock))
         sv = self.scene.solver
         if self.kind == 'pbd':
             kernel = pbd_constraints.pbd_step if parallel else pbd_constraints.pbd_step_serial
@@ -157,7 +158,7 @@ class GuideSolver:
                                              self._bend_rest_l, self._stretch_w, self._bend_w)
             params = pbd_constraints.PbdParams(self._iterations, float(sv.stiffness),
                                                float(sv.bend_stiffness), self._max_disp, fused)
-            clamped = kernel(model, state, motion, params, self._work)
+            clamped = kernel(tuple(model), state, motion, tuple(params), self._work)
         elif self.kind == 'xpbd':
             a_stretch, a_bend = self._xpbd_factors(dt)
             kernel = pbd_constraints.xpbd_step if parallel else pbd_constraints.xpbd_step_serial
@@ -167,14 +168,14 @@ class GuideSolver:
             params = pbd_constraints.XpbdParams(self._iterations, a_stretch, a_bend,
                                                 self._max_disp, fused)
             work = pbd_constraints.XpbdWork(self._work, self._lam_stretch, self._lam_bend)
-            clamped = kernel(model, state, motion, params, work)
+            clamped = kernel(tuple(model), state, motion, tuple(params), tuple(work))
         else:
             kernel = ftl.ftl_step if parallel else ftl.ftl_step_serial
             model = ftl.FtlModel(st.rest, st.inv_mass, st.rest_length, self._bend_rest,
                                  self._bend_w)
             params = ftl.FtlParams(FTL_BEND_PASSES, ftl_bend_stiffness(sv.bend_stiffness, dt),
                                    float(sv.ftl_damping), self._max_disp, fused)
-            clamped = kernel(model, state, motion, params, self._corr)
+            clamped = kernel(tuple(model), state, motion, tuple(params), self._corr)
         contacts = 0
         if not fused:
             ref = self._x_ref if self._x_ref is not None else self._x_old

@@ -117,7 +117,9 @@ except ImportError:         # pragma: no cover - another numba layout
 
 #: Arguments of the guide kernels (:func:`hair_tracking.pbd_constraints.pbd_step`,
 #: :func:`~hair_tracking.pbd_constraints.xpbd_step`, :func:`hair_tracking.ftl.ftl_step`), grouped
-#: as NVIDIA Warp / Newton separate a solver's inputs; numba passes named tuples to compiled code.
+#: as NVIDIA Warp / Newton separate a solver's inputs.  The kernels take them as plain tuples in
+#: these fields' order (``tuple(GuideState(x, v, x_old))``): numba types a named tuple by
+#: encoding its class and field names on every call, a few microseconds a call.
 #: The guides' state, advanced in place: positions ``x`` and velocities ``v`` (S, N, 3) [m],
 #: [m/s], and ``x_old`` (S, N, 3), written: the start positions after the rigid carry.
 GuideState = namedtuple('GuideState', ['x', 'v', 'x_old'])

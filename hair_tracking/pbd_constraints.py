@@ -293,14 +293,10 @@ def _lanes_finished(p, x, v, x_old, inv_mass, s0, s1, dt, max_disp, do_finalize)
 def _pbd_block(blk, model, state, motion, params, work):
     """Block ``blk`` of :func:`pbd_step` (a compiled body of its own: the serial twin runs the
     same code, see :func:`hair_tracking.integrate.serial_twin`)."""
-    x, v, x_old = state.x, state.v, state.x_old
-    rest, inv_mass, rest_length = model.rest, model.inv_mass, model.rest_length
-    bend_rest, stretch_w, bend_w = model.bend_rest, model.stretch_w, model.bend_w
-    rot, pos, rot_rel, pos_prev = motion.rot, motion.pos, motion.rot_rel, motion.pos_prev
-    gravity, damp, dt, shock = motion.gravity, motion.damp, motion.dt, motion.shock
-    iterations, stiffness = params.iterations, params.stiffness
-    bend_stiffness, max_disp, do_finalize = params.bend_stiffness, params.max_disp, \
-        params.do_finalize
+    x, v, x_old = state                                                 # GuideState
+    rest, inv_mass, rest_length, bend_rest, stretch_w, bend_w = model   # PbdModel
+    rot, pos, rot_rel, pos_prev, gravity, damp, dt, shock = motion      # StepMotion
+    iterations, stiffness, bend_stiffness, max_disp, do_finalize = params   # PbdParams
     s0, s1 = _lanes_predicted(blk, x, v, x_old, rest, inv_mass, work, rot, pos, rot_rel,
                               pos_prev, gravity, damp, dt, shock)
     n = x.shape[1]
@@ -315,15 +311,12 @@ def _pbd_block(blk, model, state, motion, params, work):
 @njit(cache=True, fastmath=FASTMATH, error_model='numpy', **NO_REFCOUNT)
 def _xpbd_block(blk, model, state, motion, params, xwork):
     """Block ``blk`` of :func:`xpbd_step` (see :func:`_pbd_block`)."""
-    x, v, x_old = state.x, state.v, state.x_old
-    rest, inv_mass, inv_mass_l = model.rest, model.inv_mass, model.inv_mass_l
-    rest_length, bend_rest = model.rest_length, model.bend_rest
-    stretch_gain, bend_gain = model.stretch_gain, model.bend_gain
-    work, lam_stretch, lam_bend = xwork.p, xwork.lam_stretch, xwork.lam_bend
-    rot, pos, rot_rel, pos_prev = motion.rot, motion.pos, motion.rot_rel, motion.pos_prev
-    gravity, damp, dt, shock = motion.gravity, motion.damp, motion.dt, motion.shock
-    iterations, alpha_stretch = params.iterations, params.alpha_stretch
-    alpha_bend, max_disp, do_finalize = params.alpha_bend, params.max_disp, params.do_finalize
+    x, v, x_old = state                                                 # GuideState
+    (rest, inv_mass, inv_mass_l, rest_length, bend_rest, stretch_gain,
+     bend_gain) = model                                                 # XpbdModel
+    work, lam_stretch, lam_bend = xwork                                 # XpbdWork
+    rot, pos, rot_rel, pos_prev, gravity, damp, dt, shock = motion      # StepMotion
+    iterations, alpha_stretch, alpha_bend, max_disp, do_finalize = params   # XpbdParams
     s0, s1 = _lanes_predicted(blk, x, v, x_old, rest, inv_mass, work, rot, pos, rot_rel,
                               pos_prev, gravity, damp, dt, shock)
     n = x.shape[1]
@@ -343,9 +336,10 @@ def _xpbd_block(blk, model, state, motion, params, xwork):
 def pbd_step(model, state, motion, params, work):
     """Kernel: one PBD substep of all strands (predict, ``iterations`` sweeps, finalize).
 
-    ``model`` a :data:`PbdModel`, ``state`` an :data:`~hair_tracking.integrate.GuideState`,
-    ``motion`` a :data:`~hair_tracking.integrate.StepMotion`, ``params`` a :data:`PbdParams`,
-    ``work`` from :func:`lane_work`.
+    ``model``, ``state``, ``motion``, ``params``: the fields of :data:`PbdModel`,
+    :data:`~hair_tracking.integrate.GuideState`, :data:`~hair_tracking.integrate.StepMotion`,
+    :data:`PbdParams` as plain tuples (``tuple(PbdModel(...))``, see
+    :data:`~hair_tracking.integrate.GuideState`); ``work`` from :func:`lane_work`.
 
     Per block of :data:`LANES` strands: :func:`integrate.predict_block`, the positions into the
     block's row of ``work`` (:func:`lane_work`), ``iterations`` times a stretch sweep
@@ -366,9 +360,9 @@ def pbd_step(model, state, motion, params, work):
 def xpbd_step(model, state, motion, params, work):
     """Kernel: one XPBD substep of all strands (predict, reset λ, ``iterations`` sweeps, finalize).
 
-    ``model`` an :data:`XpbdModel`, ``state`` an :data:`~hair_tracking.integrate.GuideState`,
-    ``motion`` a :data:`~hair_tracking.integrate.StepMotion`, ``params`` an :data:`XpbdParams`,
-    ``work`` an :data:`XpbdWork`.
+    The fields of :data:`XpbdModel`, :data:`~hair_tracking.integrate.GuideState`,
+    :data:`~hair_tracking.integrate.StepMotion`, :data:`XpbdParams`, :data:`XpbdWork` as plain
+    tuples.
 
     As :func:`pbd_step`, with :func:`xpbd_sweep_lanes`.  ``alpha_stretch``/``alpha_bend`` are
     the time-step scaled compliances ``α̃ = α / dt²``; ``stretch_gain``/``bend_gain`` from
@@ -378,7 +372,7 @@ def xpbd_step(model, state, motion, params, work):
     not finalizing).
     """
     clamped = 0
-    for blk in prange(work.p.shape[0]):
+    for blk in prange(work[0].shape[0]):
         clamped += _xpbd_block(blk, model, state, motion, params, work)
     return clamped
 

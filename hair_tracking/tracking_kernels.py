@@ -144,8 +144,9 @@ BLOCK_LANES = 64
 
 
 #: The arguments of :func:`track_groups`, grouped as NVIDIA Warp / Newton separate a solver's
-#: inputs (numba passes named tuples of arrays and scalars to compiled code).  The fields are
-#: described in :func:`track_groups`.
+#: inputs; the fields are described in :func:`track_groups`.  The kernel takes them as plain
+#: tuples in these fields' order (``tuple(GhostModel(...))``): numba types a named tuple by
+#: encoding its class and field names on every call, a few microseconds a call.
 #: Static data of the ghosts and guides, built once (:class:`~hair_tracking.ghosts.GhostTracker`).
 GhostModel = namedtuple('GhostModel', [
     'rest', 'seg_len', 'order', 'group_start', 'block_group', 'group_guide', 'group_row',
@@ -186,10 +187,10 @@ def block_groups(group_start: np.ndarray, lanes: int = BLOCK_LANES) -> np.ndarra
 def track_groups(model, state, motion, params, work):
     """One tracking substep of all ghosts, in place on ``state`` (see the module doc).
 
-    Arguments: ``model`` a :data:`GhostModel`, ``state`` a :data:`GhostState`, ``motion`` a
-    :data:`GuideMotion`, ``params`` a :data:`TrackParams`, ``work`` a :data:`TrackWork`, with
-    these fields (S ghosts of N nodes, G guides of M nodes, K groups in B blocks, U distinct node
-    rows, C chunks, L the most lanes of a block, E the most groups of a block):
+    Arguments: the fields of :data:`GhostModel`, :data:`GhostState`, :data:`GuideMotion`,
+    :data:`TrackParams` and :data:`TrackWork` as five plain tuples, each in its fields' order
+    (S ghosts of N nodes, G guides of M nodes, K groups in B blocks, U distinct node rows,
+    C chunks, L the most lanes of a block, E the most groups of a block):
     state
       xb, vb (S * N * 3,)     ghost positions [m] / velocities [m/s], world, in the layout of
                               ``rest_off`` (:func:`copy_blocks`)
@@ -247,7 +248,7 @@ def track_groups(model, state, motion, params, work):
     rewritten with ``v = (x_new - x_old) / dt`` in one contiguous loop.  Groups are independent:
     the result does not depend on the number of chunks or threads.
     """
-    n_chunks = work.buf.shape[0]
+    n_chunks = work[1].shape[0]
     for c in prange(n_chunks):
         _track_chunk(c, n_chunks, model, state, motion, params, work)
 
@@ -257,7 +258,7 @@ def track_groups_serial(model, state, motion, params, work):
     """:func:`track_groups` on the calling thread, for small problems: no parallel region to
     launch (which costs a few hundred microseconds a call on this shared machine, more than a
     1 k-ghost substep's arithmetic).  Same results."""
-    n_chunks = work.buf.shape[0]
+    n_chunks = work[1].shape[0]
     for c in range(n_chunks):
         _track_chunk(c, n_chunks, model, state, motion, params, work)
 
@@ -267,20 +268,13 @@ def _track_chunk(c, n_chunks, model, state, motion, params, work):
     """Chunk ``c`` of :func:`track_groups` (its blocks ``c B / C .. (c+1) B / C - 1``).  A
     function of its own so that the parallel loop's body stays small (numba's parfor lowering
     copies the body's IR, which took most of the compile time when everything was inlined)."""
-    rest, seg_len, order, group_start = model.rest, model.seg_len, model.order, model.group_start
-    block_group, group_guide, group_row = model.block_group, model.group_guide, model.group_row
-    node_table, node_row, rest_off = model.node_table, model.node_row, model.rest_off
-    root_rest, inv_len, var_target = model.root_rest, model.inv_len, model.var_target
-    tan_rest = model.tan_rest
-    xb, vb = state.xb, state.vb
-    guide_x, guide_x_old, R, pos = motion.guide_x, motion.guide_x_old, motion.R, motion.pos
-    inv_dt = motion.inv_dt
-    elastic_mode, use_tip, com_w = params.elastic_mode, params.use_tip, params.com_w
-    max_weight, k_off, k_com = params.max_weight, params.k_off, params.k_com
-    spread, ftl, collide = params.spread, params.ftl, params.collide
-    center, axes, friction, refine = params.center, params.axes, params.friction, params.refine
-    q_buf, buf, tmp, clamped, contacts = work.q_buf, work.buf, work.tmp, work.clamped, \
-        work.contacts
+    (rest, seg_len, order, group_start, block_group, group_guide, group_row, node_table,
+     node_row, rest_off, root_rest, inv_len, var_target, tan_rest) = model      # GhostModel
+    xb, vb = state                                                              # GhostState
+    guide_x, guide_x_old, R, pos, inv_dt = motion                               # GuideMotion
+    (elastic_mode, use_tip, com_w, max_weight, k_off, k_com, spread, ftl, collide, center, axes,
+     friction, refine) = params                                                 # TrackParams
+    q_buf, buf, tmp, clamped, contacts = work                                   # TrackWork
     n_nodes = rest.shape[1]
     m_last = guide_x.shape[1] - 2
     n_blocks = block_group.shape[0] - 1

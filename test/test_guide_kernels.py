@@ -55,8 +55,9 @@ def pbd_lane_data(inv_mass, rest_length, bend_rest):
 def kernel_common(c):
     """The :data:`integrate.StepMotion` of a random case."""
     rot_rel = integrate.relative_rotation(c['rot_prev'], c['rot'])
-    return integrate.StepMotion(c['rot'], c['pos'], rot_rel, c['pos_prev'], c['gravity'],
-                                float(np.exp(-c['damping'] * c['dt'])), c['dt'], c['shock'])
+    return tuple(integrate.StepMotion(c['rot'], c['pos'], rot_rel, c['pos_prev'], c['gravity'],
+                                      float(np.exp(-c['damping'] * c['dt'])), c['dt'],
+                                      c['shock']))
 
 
 def run_pbd_step(x, v, x_old, rest, inv_mass, rest_length, bend_rest, c, iterations, k, kb,
@@ -64,9 +65,9 @@ def run_pbd_step(x, v, x_old, rest, inv_mass, rest_length, bend_rest, c, iterati
     """:func:`pbd_constraints.pbd_step` with its arguments built from plain arrays."""
     rl, br, sw, bw, work = pbd_lane_data(inv_mass, rest_length, bend_rest)
     return pbd_constraints.pbd_step(
-        pbd_constraints.PbdModel(rest, inv_mass, rl, br, sw, bw),
-        integrate.GuideState(x, v, x_old), kernel_common(c),
-        pbd_constraints.PbdParams(iterations, k, kb, max_disp, finalize), work)
+        tuple(pbd_constraints.PbdModel(rest, inv_mass, rl, br, sw, bw)),
+        tuple(integrate.GuideState(x, v, x_old)), kernel_common(c),
+        tuple(pbd_constraints.PbdParams(iterations, k, kb, max_disp, finalize)), work)
 
 
 def run_xpbd_step(x, v, x_old, rest, im, rest_length, bend_rest, lam_s, lam_b, c, iterations,
@@ -79,17 +80,19 @@ def run_xpbd_step(x, v, x_old, rest, im, rest_length, bend_rest, lam_s, lam_b, c
         lanes(pbd_constraints.xpbd_gain(im, 1, a_s)), lanes(pbd_constraints.xpbd_gain(im, 2, a_b)))
     work = pbd_constraints.XpbdWork(pbd_constraints.lane_work(*im.shape), lam_s, lam_b)
     return pbd_constraints.xpbd_step(
-        model, integrate.GuideState(x, v, x_old), kernel_common(c),
-        pbd_constraints.XpbdParams(iterations, a_s, a_b, max_disp, finalize), work)
+        tuple(model), tuple(integrate.GuideState(x, v, x_old)), kernel_common(c),
+        tuple(pbd_constraints.XpbdParams(iterations, a_s, a_b, max_disp, finalize)),
+        tuple(work))
 
 
 def run_ftl_step(x, v, x_old, corr, rest, im, rest_length, bend_rest, c, passes, kb, s_damp,
                  max_disp, finalize):
     """:func:`ftl.ftl_step` with its arguments built from plain arrays."""
     return ftl.ftl_step(
-        ftl.FtlModel(rest, im, rest_length, bend_rest, pbd_constraints.pair_weights(im, 2)),
-        integrate.GuideState(x, v, x_old), kernel_common(c),
-        ftl.FtlParams(passes, kb, s_damp, max_disp, finalize), corr)
+        tuple(ftl.FtlModel(rest, im, rest_length, bend_rest,
+                           pbd_constraints.pair_weights(im, 2))),
+        tuple(integrate.GuideState(x, v, x_old)), kernel_common(c),
+        tuple(ftl.FtlParams(passes, kb, s_damp, max_disp, finalize)), corr)
 
 
 def reference_predict(c):
