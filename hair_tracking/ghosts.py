@@ -40,9 +40,9 @@ from .model import HeadPose, StrandSet
 from .parallel_choice import ParallelChooser
 from .point_records import blocks_to_records, points_to_records
 from .scene import Scene
-from .tracking_kernels import (block_groups, chunk_count, copy_blocks, GhostModel, GhostState,
-                               group_blocks, guide_frames, GuideMotion, TMP_ROWS, TrackParams,
-                               track_groups, track_groups_serial, TrackWork)
+from .tracking_kernels import (block_groups, chunk_count, copy_blocks, GhostModel,
+                               group_blocks, guide_frames, TMP_ROWS, track_groups,
+                               track_groups_serial, TrackWork)
 from .weights import elastic_code, tip_weights
 
 
@@ -193,6 +193,15 @@ class GhostTracker:
             self._friction, self._refine = 0.0, 0
         self._collide_after = self.collide and not self._fused_collider
         self._x_prev = np.empty_like(ghosts.x) if self._collide_after else None
+        # the kernel's static arguments, plain tuples in the fields' order (see
+        # tracking_kernels.GhostModel)
+        self._model = tuple(GhostModel(
+            ghosts.rest, self._seg_len_blocks, self.order, self.group_start, self.block_group,
+            self.group_guide, self._group_row, self._node_table, self._node_row,
+            self._rest_off_blocks, self._root_blocks, self._inv_len, self._var_target,
+            self._tan_rest))
+        self._work = tuple(TrackWork(self._q_buf, self._buf, self._tmp, self._clamped,
+                                     self._contacts))
         self.stats: Dict[str, int] = {
             'ghosts': int(s_count), 'groups': int(n_groups),
             'largest_group': int(group_size.max()) if n_groups else 0,
@@ -293,22 +302,15 @@ class GhostTracker:
             np.copyto(self._x_prev, self.positions())
         self._take()
         nodes = self._xb.size // 3
-        model = GhostModel(
-            self.ghosts.rest, self._seg_len_blocks, self.order, self.group_start,
-            self.block_group, self.group_guide, self._group_row, self._node_table,
-            self._node_row, self._rest_off_blocks, self._root_blocks, self._inv_len,
-            self._var_target, self._tan_rest)
-        motion = GuideMotion(_f64(gx), _f64(guide_x_old), _f64(head.rotation),
-                             _f64(head.position), 1.0 / float(dt))
-        params = TrackParams(
-            self._elastic, tr.tip_weight > 0.0, tr.com_weight, tr.max_weight,
-            _per(tr.offset_strength, substeps), _per(tr.com_strength, substeps),
-            _per(tr.spread, substeps), tr.length_restore, self._fused_collider, self._center,
-            self._axes, self._friction, self._refine)
-        work = TrackWork(self._q_buf, self._buf, self._tmp, self._clamped, self._contacts)
+        # plain tuples in the fields' order of GhostState, GuideMotion and TrackParams
+        motion = (_f64(gx), _f64(guide_x_old), _f64(head.rotation), _f64(head.position),
+                  1.0 / float(dt))
+        params = (self._elastic, tr.tip_weight > 0.0, tr.com_weight, tr.max_weight,
+                  _per(tr.offset_strength, substeps), _per(tr.com_strength, substeps),
+                  _per(tr.spread, substeps), tr.length_restore, self._fused_collider,
+                  self._center, self._axes, self._friction, self._refine)
         self.threads.timed(runs_parallel(nodes), track_groups, track_groups_serial,
-                           tuple(model), tuple(GhostState(self._xb, self._vb)), tuple(motion),
-                           tuple(params), tuple(work))
+                           self._model, (self._xb, self._vb), motion, params, self._work)
         self._synced_x = self._synced_v = False
         self.stats['steps'] += 1
         self.stats['parallel'] = int(self.threads.in_use)
