@@ -26,7 +26,7 @@ zero rest length places the node on its predecessor. No NaN can arise.
 from collections import namedtuple
 import math
 
-from numba import njit, prange
+from numba import int64, njit, prange
 
 from hair_tracking.collision import surface_point, to_head, world_center
 from hair_tracking.integrate import (BLOCK, FASTMATH, finalize_block, NO_REFCOUNT,
@@ -164,7 +164,8 @@ def ftl_restore(x, rest, rest_length, rot, pos, center, axes, refine, corr):
     """
     cx, cy, cz = world_center(rot, pos, center)
     for s in prange(x.shape[0]):
-        ftl_restore_block(x, rest, rest_length, rot, cx, cy, cz, axes, refine, corr, s, s + 1)
+        i = int64(s)          # (the index as in the serial twin: one compiled block body)
+        ftl_restore_block(x, rest, rest_length, rot, cx, cy, cz, axes, refine, corr, i, i + 1)
 
 
 @njit(cache=True, fastmath=FASTMATH, error_model='numpy', **NO_REFCOUNT)

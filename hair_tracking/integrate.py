@@ -302,7 +302,8 @@ def finalize(x, v, x_old, inv_mass, corr, dt, max_disp, s_damp):
     """Kernel: :func:`finalize_block` over all strands (used when a collider runs in between)."""
     total = 0
     for s in prange(x.shape[0]):
-        total += finalize_block(x, v, x_old, inv_mass, corr, s, s + 1, dt, max_disp, s_damp)
+        i = np.int64(s)       # (the index as in the serial twin: one compiled finalize_block)
+        total += finalize_block(x, v, x_old, inv_mass, corr, i, i + 1, dt, max_disp, s_damp)
     return total
 
 

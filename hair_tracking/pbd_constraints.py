@@ -352,7 +352,8 @@ def pbd_step(model, state, motion, params, work):
     """
     clamped = 0
     for blk in prange(work.shape[0]):
-        clamped += _pbd_block(blk, model, state, motion, params, work)
+        # (the index as in the serial twin: one compiled block body)
+        clamped += _pbd_block(np.int64(blk), model, state, motion, params, work)
     return clamped
 
 
@@ -373,7 +374,7 @@ def xpbd_step(model, state, motion, params, work):
     """
     clamped = 0
     for blk in prange(work[0].shape[0]):
-        clamped += _xpbd_block(blk, model, state, motion, params, work)
+        clamped += _xpbd_block(np.int64(blk), model, state, motion, params, work)
     return clamped
 
 

@@ -250,7 +250,9 @@ def track_groups(model, state, motion, params, work):
     """
     n_chunks = work[1].shape[0]
     for c in prange(n_chunks):
-        _track_chunk(c, n_chunks, model, state, motion, params, work)
+        # the parallel loop's index is unsigned: as int64 the serial twin's loop shares this
+        # compiled body instead of compiling its own
+        _track_chunk(np.int64(c), n_chunks, model, state, motion, params, work)
 
 
 @njit(cache=True, nogil=True, fastmath=TRACK_FASTMATH, error_model='numpy')
