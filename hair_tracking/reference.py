@@ -108,7 +108,7 @@ def ftl_pass(p, rest, rest_length, rot):
 
 def guide_finalize(p, x_old, inv_mass, corr, dt, max_disp, s_damp):
     """Finalize stage: free nodes' displacements clamped to ``max_disp`` (0: off), the FTL
-    velocity correction ``- s_damp corr[i+1]`` (Mueller, Kim & Chentanez 2012, eq. (9)), and
+    velocity correction ``- s_damp corr[i+1]`` (Mueller, Kim & Chentanez 2012), and
     ``v = displacement / dt``.  Returns ``(x, v, clamped node count)``."""
     p = p.copy()
     free = inv_mass > 0
