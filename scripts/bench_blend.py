@@ -23,7 +23,6 @@ import numba  # noqa: E402
 import numpy as np  # noqa: E402
 
 from hair_tracking.core.scene import Scene  # noqa: E402
-from hair_tracking.ghosts import blend  # noqa: E402
 from hair_tracking.simulator import HairSimulator  # noqa: E402
 
 BYTES_PER_NODE = 16 + 24

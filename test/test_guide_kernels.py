@@ -1,7 +1,8 @@
 """The guide-strand numba kernels agree with plain-numpy references on random inputs.
 
-The references below are written independently of the kernels' loop structure: vectorised over
-strands, Gauss–Seidel along the strand, masses used directly (not through ``pair_weights``).
+The references (:mod:`hair_tracking.guides.reference`) are written independently of the
+kernels' loop structure: vectorised over strands, Gauss–Seidel along the strand, masses used
+directly (not through ``pair_weights``).
 Kernels use fused multiply-add (``integrate.FASTMATH``), so agreement is to ~1e-12, not bitwise.
 """
 import numba
@@ -12,94 +13,17 @@ from hair_tracking.guides import ftl
 
 from hair_tracking.guides import integrate
 
-from hair_tracking.core.transforms import quat_normalize, quat_to_matrix
 from hair_tracking.guides import pbd_constraints
 
+from hair_tracking.core.transforms import quat_normalize, quat_to_matrix
+from hair_tracking.guides import reference
+from hair_tracking.guides.reference import (ftl_pass as ref_ftl_pass,
+                                            guide_finalize as ref_finalize,
+                                            guide_predict as ref_predict,
+                                            pbd_sweep as ref_pbd_sweep,
+                                            xpbd_sweep as ref_xpbd_sweep)
+
 ATOL = 1e-12
-
-
-# ------------------------------------------------------------------------- numpy references
-def ref_predict(x, v, rest, inv_mass, rot, pos, rot_prev, pos_prev, gravity, damping, dt, shock):
-    """Returns (p, x_carried, v_integrated) of the predict stage (the kernels keep the integrated
-    velocity local: the finalize stage sets v from the displacement)."""
-    rot_rel = rot @ rot_prev.T
-    moved = (x - pos_prev) @ rot_rel.T + pos
-    xc = x + shock * (moved - x)
-    vc = v + shock * (v @ rot_rel.T - v)
-    free = (inv_mass > 0)[..., None]
-    vn = np.where(free, vc * np.exp(-damping * dt) + np.asarray(gravity) * dt, 0.0)
-    p = np.where(free, xc + vn * dt, xc)
-    p[:, :2] = rest[:, :2] @ rot.T + pos
-    vn[:, :2] = v[:, :2]
-    return p, xc, vn
-
-
-def ref_pbd_sweep(p, rest_dist, inv_mass, gap, k):
-    for i in range(p.shape[1] - gap):
-        j = i + gap
-        wi, wj = inv_mass[:, i], inv_mass[:, j]
-        ws = wi + wj
-        d = p[:, j] - p[:, i]
-        length = np.linalg.norm(d, axis=1)
-        c = length - rest_dist[:, i]
-        nrm = d / np.maximum(length, 1e-15)[:, None]
-        safe = np.where(ws > 0, ws, 1.0)
-        p[:, i] += (k * wi / safe * c)[:, None] * nrm
-        p[:, j] -= (k * wj / safe * c)[:, None] * nrm
-
-
-def ref_xpbd_sweep(p, rest_dist, inv_mass, lam, gap, alpha_tilde):
-    for i in range(p.shape[1] - gap):
-        j = i + gap
-        wi, wj = inv_mass[:, i], inv_mass[:, j]
-        ws = wi + wj
-        d = p[:, j] - p[:, i]
-        length = np.linalg.norm(d, axis=1)
-        c = length - rest_dist[:, i]
-        nrm = d / np.maximum(length, 1e-15)[:, None]
-        dlam = np.where(ws > 0, (-c - alpha_tilde * lam[:, i]) / (ws + alpha_tilde), 0.0)
-        lam[:, i] += dlam
-        p[:, i] -= (wi * dlam)[:, None] * nrm
-        p[:, j] += (wj * dlam)[:, None] * nrm
-
-
-def ref_ftl_pass(p, rest, rest_length, rot):
-    corr = np.zeros_like(p)
-    for i in range(2, p.shape[1]):
-        d = p[:, i] - p[:, i - 1]
-        length = np.linalg.norm(d, axis=1)
-        fallback = (rest[:, i] - rest[:, i - 1]) @ rot.T
-        fb_len = np.linalg.norm(fallback, axis=1)
-        fallback = np.where((fb_len > 1e-12)[:, None],
-                            fallback / np.maximum(fb_len, 1e-300)[:, None], [0.0, 0.0, -1.0])
-        u = np.where((length > 1e-12)[:, None], d / np.maximum(length, 1e-300)[:, None], fallback)
-        new = p[:, i - 1] + rest_length[:, i - 1][:, None] * u
-        corr[:, i] = new - p[:, i]
-        p[:, i] = new
-    return corr
-
-
-def ref_finalize(p, x_old, inv_mass, corr, dt, max_disp, s_damp):
-    p = p.copy()
-    free = inv_mass > 0
-    disp = p - x_old
-    clamped = np.zeros(inv_mass.shape, bool)
-    if max_disp > 0:
-        mag = np.linalg.norm(disp, axis=2)
-        hit = free & (mag > max_disp)
-        disp[hit] *= (max_disp / mag[hit])[:, None]
-        p[hit] = x_old[hit] + disp[hit]
-        clamped |= hit
-    if s_damp > 0:
-        shifted = np.zeros_like(corr)
-        shifted[:, :-1] = corr[:, 1:]
-        disp = np.where(free[..., None], disp - s_damp * shifted, disp)
-        if max_disp > 0:
-            mag = np.linalg.norm(disp, axis=2)
-            hit = free & (mag > max_disp)
-            disp[hit] *= (max_disp / mag[hit])[:, None]
-            clamped |= hit
-    return p, disp / dt, int(clamped.sum())
 
 
 # ------------------------------------------------------------------------------ fixtures
@@ -135,9 +59,46 @@ def pbd_lane_data(inv_mass, rest_length, bend_rest):
 
 
 def kernel_common(c):
+    """The :data:`integrate.StepMotion` of a random case."""
     rot_rel = integrate.relative_rotation(c['rot_prev'], c['rot'])
-    return (c['rot'], c['pos'], rot_rel, c['pos_prev'], c['gravity'],
-            float(np.exp(-c['damping'] * c['dt'])), c['dt'], c['shock'])
+    return tuple(integrate.StepMotion(c['rot'], c['pos'], rot_rel, c['pos_prev'], c['gravity'],
+                                      float(np.exp(-c['damping'] * c['dt'])), c['dt'],
+                                      c['shock']))
+
+
+def run_pbd_step(x, v, x_old, rest, inv_mass, rest_length, bend_rest, c, iterations, k, kb,
+                 max_disp, finalize):
+    """:func:`pbd_constraints.pbd_step` with its arguments built from plain arrays."""
+    rl, br, sw, bw, work = pbd_lane_data(inv_mass, rest_length, bend_rest)
+    return pbd_constraints.pbd_step(
+        tuple(pbd_constraints.PbdModel(rest, inv_mass, rl, br, sw, bw)),
+        tuple(integrate.GuideState(x, v, x_old)), kernel_common(c),
+        tuple(pbd_constraints.PbdParams(iterations, k, kb, max_disp, finalize)), work)
+
+
+def run_xpbd_step(x, v, x_old, rest, im, rest_length, bend_rest, lam_s, lam_b, c, iterations,
+                  a_s, a_b, max_disp, finalize):
+    """:func:`pbd_constraints.xpbd_step` with its arguments built from plain arrays (``lam_*``
+    in lane-major layout)."""
+    lanes = pbd_constraints.lane_major
+    model = pbd_constraints.XpbdModel(
+        rest, im, lanes(im), lanes(rest_length), lanes(bend_rest),
+        lanes(pbd_constraints.xpbd_gain(im, 1, a_s)), lanes(pbd_constraints.xpbd_gain(im, 2, a_b)))
+    work = pbd_constraints.XpbdWork(pbd_constraints.lane_work(*im.shape), lam_s, lam_b)
+    return pbd_constraints.xpbd_step(
+        tuple(model), tuple(integrate.GuideState(x, v, x_old)), kernel_common(c),
+        tuple(pbd_constraints.XpbdParams(iterations, a_s, a_b, max_disp, finalize)),
+        tuple(work))
+
+
+def run_ftl_step(x, v, x_old, corr, rest, im, rest_length, bend_rest, c, passes, kb, s_damp,
+                 max_disp, finalize):
+    """:func:`ftl.ftl_step` with its arguments built from plain arrays."""
+    return ftl.ftl_step(
+        tuple(ftl.FtlModel(rest, im, rest_length, bend_rest,
+                           pbd_constraints.pair_weights(im, 2))),
+        tuple(integrate.GuideState(x, v, x_old)), kernel_common(c),
+        tuple(ftl.FtlParams(passes, kb, s_damp, max_disp, finalize)), corr)
 
 
 def reference_predict(c):
@@ -179,10 +140,8 @@ def test_pbd_step_matches_reference(seed, finalize):
         ref_pbd_sweep(p, c['rest_length'], c['inv_mass'], 1, k)
         ref_pbd_sweep(p, bend_rest, c['inv_mass'], 2, kb)
     x, v, x_old = c['x'].copy(), c['v'].copy(), np.zeros_like(c['x'])
-    clamped = pbd_constraints.pbd_step(
-        x, v, x_old, c['rest'], c['inv_mass'],
-        *pbd_lane_data(c['inv_mass'], c['rest_length'], bend_rest),
-        *kernel_common(c), iterations, k, kb, max_disp, finalize)
+    clamped = run_pbd_step(x, v, x_old, c['rest'], c['inv_mass'], c['rest_length'], bend_rest,
+                           c, iterations, k, kb, max_disp, finalize)
     assert np.allclose(x_old, xc, rtol=0, atol=ATOL)
     if finalize:
         p_ref, v_ref, clamped_ref = ref_finalize(p, xc, c['inv_mass'], None, c['dt'], max_disp,
@@ -213,11 +172,8 @@ def test_xpbd_step_matches_reference(finalize):
     k_lam_s = lanes(np.full(lam_s.shape, 123.0))    # the kernel must reset the multipliers
     k_lam_b = lanes(np.full(lam_b.shape, -7.0))
     im = c['inv_mass']
-    clamped = pbd_constraints.xpbd_step(
-        x, v, x_old, c['rest'], im, lanes(im), lanes(c['rest_length']), lanes(bend_rest),
-        lanes(pbd_constraints.xpbd_gain(im, 1, a_s)), lanes(pbd_constraints.xpbd_gain(im, 2, a_b)),
-        k_lam_s, k_lam_b, pbd_constraints.lane_work(*im.shape),
-        *kernel_common(c), iterations, a_s, a_b, max_disp, finalize)
+    clamped = run_xpbd_step(x, v, x_old, c['rest'], im, c['rest_length'], bend_rest, k_lam_s,
+                            k_lam_b, c, iterations, a_s, a_b, max_disp, finalize)
     assert clamped == 0
     assert np.allclose(pbd_constraints.from_lane_major(k_lam_s, lam_s.shape), lam_s,
                        rtol=1e-9, atol=1e-9)
@@ -241,10 +197,8 @@ def test_ftl_step_matches_reference(finalize):
     corr = ref_ftl_pass(p, c['rest'], c['rest_length'], c['rot'])
     x, v, x_old = c['x'].copy(), c['v'].copy(), np.zeros_like(c['x'])
     k_corr = np.full_like(x, np.nan)
-    clamped = ftl.ftl_step(
-        x, v, x_old, k_corr, c['rest'], c['inv_mass'], c['rest_length'], bend_rest,
-        pbd_constraints.pair_weights(c['inv_mass'], 2), *kernel_common(c),
-        1, kb, s_damp, max_disp, finalize)
+    clamped = run_ftl_step(x, v, x_old, k_corr, c['rest'], c['inv_mass'], c['rest_length'],
+                           bend_rest, c, 1, kb, s_damp, max_disp, finalize)
     assert np.allclose(k_corr, corr, rtol=0, atol=ATOL)
     if finalize:
         p_ref, v_ref, clamped_ref = ref_finalize(p, xc, c['inv_mass'], corr, c['dt'], max_disp,
@@ -256,6 +210,40 @@ def test_ftl_step_matches_reference(finalize):
         assert np.allclose(x, p, rtol=0, atol=ATOL)
         seg = np.linalg.norm(np.diff(x, axis=1), axis=2)
         assert np.allclose(seg[:, 1:], c['rest_length'][:, 1:], rtol=1e-12, atol=1e-15)
+
+
+@pytest.mark.parametrize('kind', ['pbd', 'xpbd', 'ftl'])
+def test_solver_steps_match_the_package_reference_steps(kind):
+    """Whole substeps (predict, constraints, finalize) of each guide kernel against
+    :func:`reference.pbd_step`, :func:`reference.xpbd_step`, :func:`reference.ftl_step`."""
+    c = random_case(6, all_free=(kind == 'ftl'))
+    bend_rest = pbd_constraints.second_neighbour_rest(c['rest'])
+    motion = {k: c[k] for k in ('rot', 'pos', 'rot_prev', 'pos_prev', 'gravity', 'damping',
+                                'shock')}
+    im, dt, max_disp = c['inv_mass'], c['dt'], 0.01
+    x, v, x_old = c['x'].copy(), c['v'].copy(), np.zeros_like(c['x'])
+    lanes = pbd_constraints.lane_major
+    if kind == 'pbd':
+        want = reference.pbd_step(c['x'], c['v'], c['rest'], im, c['rest_length'], bend_rest,
+                                  motion, dt, 3, 0.8, 0.3, max_disp)
+        clamped = run_pbd_step(x, v, x_old, c['rest'], im, c['rest_length'], bend_rest, c, 3,
+                               0.8, 0.3, max_disp, True)
+    elif kind == 'xpbd':
+        a_s, a_b = 1e-6 / dt ** 2, 1e-3 / dt ** 2
+        want = reference.xpbd_step(c['x'], c['v'], c['rest'], im, c['rest_length'], bend_rest,
+                                   motion, dt, 3, a_s, a_b, max_disp)
+        clamped = run_xpbd_step(x, v, x_old, c['rest'], im, c['rest_length'], bend_rest,
+                                lanes(np.zeros((im.shape[0], im.shape[1] - 1))),
+                                lanes(np.zeros((im.shape[0], im.shape[1] - 2))), c, 3, a_s, a_b,
+                                max_disp, True)
+    else:
+        want = reference.ftl_step(c['x'], c['v'], c['rest'], im, c['rest_length'], bend_rest,
+                                  motion, dt, 2, 0.4, 0.8, max_disp)
+        clamped = run_ftl_step(x, v, x_old, np.zeros_like(x), c['rest'], im, c['rest_length'],
+                               bend_rest, c, 2, 0.4, 0.8, max_disp, True)
+    assert want[2] > 0 and clamped == want[2]
+    assert np.allclose(x, want[0], rtol=0, atol=ATOL)
+    assert np.allclose(v, want[1], rtol=0, atol=1e-9)
 
 
 def test_ftl_pass_fallback_on_collapsed_segment():
@@ -321,11 +309,8 @@ def test_kernels_deterministic_across_threads_and_blocks():
         numba.set_num_threads(threads)
         try:
             x, v = c['x'][sl].copy(), c['v'][sl].copy()
-            pbd_constraints.pbd_step(x, v, np.zeros_like(x), c['rest'][sl].copy(),
-                                     c['inv_mass'][sl].copy(),
-                                     *pbd_lane_data(c['inv_mass'][sl], c['rest_length'][sl],
-                                                    bend_rest[sl]),
-                                     *kernel_common(c), 4, 1.0, 0.3, 0.05, True)
+            run_pbd_step(x, v, np.zeros_like(x), c['rest'][sl].copy(), c['inv_mass'][sl].copy(),
+                         c['rest_length'][sl], bend_rest[sl], c, 4, 1.0, 0.3, 0.05, True)
         finally:
             numba.set_num_threads(old)
         return x, v

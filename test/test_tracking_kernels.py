@@ -6,6 +6,7 @@ from hair_tracking.core.model import HeadPose, StrandSet
 from hair_tracking.core.scene import Scene
 from hair_tracking.core.transforms import quat_normalize, quat_to_matrix, rotation_between
 from hair_tracking.ghosts.kernels import guide_frames
+from hair_tracking.ghosts.reference import ghost_step
 from hair_tracking.ghosts.tracker import GhostTracker
 from hair_tracking.ghosts.weights import (arc_fractions, clamp_weight, com_weight, ELASTIC_CHANGED,
                                           elastic_code, ELASTIC_KEPT, ELASTIC_OFF, elastic_weight,
@@ -38,119 +39,6 @@ def head_pose(rng, angle_scale=0.3, shift=0.05):
 
 def scene_with(**tracking):
     return Scene().with_changes(**{f'tracking__{k}': v for k, v in tracking.items()})
-
-
-def reference_step(x, v, ghost_rest, ghost_len, guide_of, seg, t, guide_rest, gx, gx_old,
-                   head, dt, tr, collider=None):
-    """Plain-numpy tracking substep written from docs/ghosts.md (stages a-g); with ``collider``
-    also (h), node by node with the project's scalar one-node functions
-    (:func:`collision.push_out`, then with length restoration :func:`ftl.restore_node`)."""
-    x = x.copy()
-    v = v.copy()
-    R, pos = head.rotation, head.position
-    n_nodes = x.shape[1]
-    frac = arc_fractions(ghost_len)
-    tipw = tr.tip_weight * frac
-    length = ghost_len.sum(axis=1)
-    rows = np.arange(x.shape[0])[:, None]
-    gr = guide_rest[guide_of][rows, seg]
-    gr1 = guide_rest[guide_of][rows, seg + 1]
-    r_point = (1 - t)[..., None] * gr + t[..., None] * gr1
-    target_rest = ghost_rest.copy()
-    var_target = {}
-    for g in np.unique(guide_of):
-        m = np.flatnonzero(guide_of == g)
-        com = ghost_rest[m].mean(axis=0)
-        dev = ghost_rest[m] - com
-        var_target[g] = tr.spread_target * np.einsum('snk,snk->n', dev, dev)
-        if tr.spread > 0 and tr.spread_target != 1.0:
-            target_rest[m, 2:] = com[2:] + np.sqrt(tr.spread_target) * dev[:, 2:]
-    off = target_rest - r_point
-    # guide segment frames from the project's own rotation_between
-    G, M = gx.shape[:2]
-    frames = np.empty((G, M - 1, 3, 3))
-    for g in range(G):
-        for s in range(M - 1):
-            a = guide_rest[g, s + 1] - guide_rest[g, s]
-            b = gx[g, s + 1] - gx[g, s]
-            if np.linalg.norm(a) < 1e-12 or np.linalg.norm(b) < 1e-300:
-                frames[g, s] = R
-            else:
-                frames[g, s] = rotation_between(R @ (a / np.linalg.norm(a)),
-                                                b / np.linalg.norm(b)) @ R
-    elastic = elastic_code(tr)
-    group_level = tr.com_strength > 0 or tr.spread > 0
-    for g in np.unique(guide_of):
-        m = np.flatnonzero(guide_of == g)
-        n = m.size
-        new = pos + ghost_rest[m, :2] @ R.T
-        v[m, :2] = (new - x[m, :2]) / dt
-        x[m, :2] = new
-        for j in range(2, n_nodes):
-            sg, tt = seg[m, j], t[m, j][:, None]
-            p = (1 - tt) * gx[g, sg] + tt * gx[g, sg + 1]
-            d = p - ((1 - tt) * gx_old[g, sg] + tt * gx_old[g, sg + 1])
-            xo = x[m, j].copy()
-            v0 = v[m, j]
-            w = np.zeros(n)
-            if elastic != ELASTIC_OFF:
-                nn = np.sum(d * d, axis=1) * np.sum(v0 * v0, axis=1)      # |d|^2 |v0|^2
-                ok = nn > 1e-300
-                cos = np.where(ok, np.sum(d * v0, axis=1) / np.sqrt(np.where(ok, nn, 1)), 0.0)
-                cos = np.clip(cos, -1, 1)
-                w += 0.5 * cos + 0.5 if elastic == ELASTIC_KEPT else 0.5 - 0.5 * cos
-            if tr.tip_weight > 0:
-                w += tipw[m, j]
-            if tr.com_weight > 0 and n > 1:
-                w += tr.com_weight * np.linalg.norm(xo - xo.mean(axis=0), axis=1) / length[m]
-            w = np.clip(w, 0.0, tr.max_weight)
-            xp = xo + d * (1 + w)[:, None]
-            q = p + np.einsum('sab,sb->sa', frames[g, sg], off[m, j])
-            if tr.offset_strength > 0:
-                xp = xp + tr.offset_strength * (q - xp)
-            if group_level:
-                delta = tr.com_strength * (q.mean(axis=0) - xp.mean(axis=0))
-                f = 1.0
-                if tr.spread > 0 and n > 1:
-                    var = np.sum((xp - xp.mean(axis=0)) ** 2)
-                    if var > 1e-30:
-                        ratio = np.clip(np.sqrt(var_target[g][j] / var), 0.5, 2.0)
-                        f = 1.0 + tr.spread * (ratio - 1.0)
-                c = xp.mean(axis=0) + delta
-                xp = xp + delta
-                xp = c + f * (xp - c)
-            if tr.length_restore:
-                prev = x[m, j - 1]
-                dv = xp - prev
-                nd = np.linalg.norm(dv, axis=1, keepdims=True)
-                fallback = (ghost_rest[m, j] - ghost_rest[m, j - 1]) @ R.T
-                xp = np.where(nd > 1e-300, prev + dv * ghost_len[m, j - 1][:, None] /
-                              np.where(nd > 1e-300, nd, 1.0), prev + fallback)
-            if collider is not None:
-                xp = _collide_reference(xp, xo, x[m, j - 1], ghost_len[m, j - 1],
-                                        ghost_rest[m, j] - ghost_rest[m, j - 1], head,
-                                        collider, tr.length_restore)
-            v[m, j] = (xp - xo) / dt
-            x[m, j] = xp
-    return x, v
-
-
-def _collide_reference(p, start, prev, seg_len, rest_seg, head, collider, restore):
-    """(h) for the lanes of one node index, one lane at a time with the scalar functions."""
-    from hair_tracking.guides.collision import push_out
-    from hair_tracking.guides.ftl import restore_node
-    R = head.rotation
-    c = head.position + R @ collider.center
-    a = collider.radii + collider.margin
-    out = p.copy()
-    for k in range(p.shape[0]):
-        moved, y0, y1, y2 = push_out(*p[k], *start[k], R, *c, *a, collider.friction,
-                                     collider.refine)
-        if moved and restore:
-            y0, y1, y2 = restore_node(y0, y1, y2, *prev[k], seg_len[k], *rest_seg[k], R, *c,
-                                      *a, collider.refine, 0)
-        out[k] = (y0, y1, y2)
-    return out
 
 
 OPTION_SETS = [
@@ -187,7 +75,7 @@ def test_kernel_matches_numpy_reference(options, regroup, even):
         old = guides.x.copy()
         head = head_pose(rng)
         guides.x[...] = head.to_world(guides.rest) + rng.normal(scale=0.004, size=old.shape)
-        want_x, want_v = reference_step(
+        want_x, want_v = ghost_step(
             ghosts.x, ghosts.v, ghosts.rest, ghosts.rest_length, tracker.guide_of,
             tracker.seg, tracker.t, guides.rest, guides.x, old, head, dt, scene.tracking)
         tracker.step(dt, old, head)
@@ -208,7 +96,7 @@ def _steps_match_reference(rng, tracker, guides, ghosts, scene, collider, steps)
         old = guides.x.copy()
         head = head_pose(rng, angle_scale=0.05, shift=0.005)
         guides.x[...] = head.to_world(guides.rest) + rng.normal(scale=0.004, size=old.shape)
-        want_x, want_v = reference_step(
+        want_x, want_v = ghost_step(
             ghosts.x, ghosts.v, ghosts.rest, ghosts.rest_length, tracker.guide_of,
             tracker.seg, tracker.t, guides.rest, guides.x, old, head, dt, scene.tracking,
             collider)

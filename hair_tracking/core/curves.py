@@ -85,6 +85,13 @@ def _node_space(n: int, points: int):
     return seg, s
 
 
+def bernstein(degree: int, i: int, t: float) -> float:
+    """Weight of control point ``i`` of a Bezier curve of ``degree`` at parameter ``t``:
+    ``C(degree, i) (1 - t)^(degree - i) t^i``; for degree 3 the four weights of equation (6),
+    ``(1-t)^3, 3 (1-t)^2 t, 3 (1-t) t^2, t^3``."""
+    return math.comb(degree, i) * (1.0 - t) ** (degree - i) * t ** i
+
+
 @lru_cache(maxsize=64)
 def bezier_stencil(n: int, points: int):
     """Node indices (P, 4) and weights (P, 4) of the Bezier output points (see module doc)."""
@@ -105,7 +112,7 @@ def bezier_stencil(n: int, points: int):
             t = 1.0
         for i in range(deg + 1):
             idx[p, i] = first + i
-            w[p, i] = math.comb(deg, i) * (1.0 - t) ** (deg - i) * t ** i
+            w[p, i] = bernstein(deg, i, t)
         for i in range(deg + 1, 4):
             idx[p, i] = first + deg
     idx.flags.writeable = False

@@ -151,33 +151,41 @@ def nearest_roots(ghost_roots: np.ndarray, guide_roots: np.ndarray, k: int) -> n
 
 
 # ------------------------------------------------------------------ equation (1)
+@njit(cache=True, inline='always')
+def correspondence_distance(ghost_rest, s, guide_rest, g, bound):
+    """Equation (1): ``d(d_s, g_g) = sum_k || d_{s,k} - prox(d_{s,k}, g_g) ||^2`` [m^2] of ghost
+    ``s`` of ``ghost_rest`` (S, N, 3) and guide ``g`` of ``guide_rest`` (G, M, 3), ``prox`` the
+    guide's node nearest to the ghost node.  The sum stops as soon as it exceeds ``bound`` (a
+    candidate that cannot win any more; ``np.inf``: the full sum)."""
+    total = 0.0
+    for j in range(ghost_rest.shape[1]):
+        px = ghost_rest[s, j, 0]
+        py = ghost_rest[s, j, 1]
+        pz = ghost_rest[s, j, 2]
+        dmin = np.inf
+        for q in range(guide_rest.shape[1]):
+            dx = px - guide_rest[g, q, 0]
+            dy = py - guide_rest[g, q, 1]
+            dz = pz - guide_rest[g, q, 2]
+            d = dx * dx + dy * dy + dz * dz
+            if d < dmin:
+                dmin = d
+        total += dmin
+        if total > bound:        # cannot win any more (strictly worse)
+            break
+    return total
+
+
 @njit(cache=True, nogil=True, parallel=True)
 def equation1_kernel(ghost_rest, guide_rest, candidates, guide_of, cost):
     """Equation (1) over the candidate guides of every ghost: ``guide_of[s]`` the minimiser
     (ties: lower guide index), ``cost[s]`` its value [m^2]."""
-    n = ghost_rest.shape[1]
-    m = guide_rest.shape[1]
     for s in prange(ghost_rest.shape[0]):
         best = np.inf
         best_g = -1
         for c in range(candidates.shape[1]):
             g = candidates[s, c]
-            total = 0.0
-            for j in range(n):
-                px = ghost_rest[s, j, 0]
-                py = ghost_rest[s, j, 1]
-                pz = ghost_rest[s, j, 2]
-                dmin = np.inf
-                for q in range(m):
-                    dx = px - guide_rest[g, q, 0]
-                    dy = py - guide_rest[g, q, 1]
-                    dz = pz - guide_rest[g, q, 2]
-                    d = dx * dx + dy * dy + dz * dz
-                    if d < dmin:
-                        dmin = d
-                total += dmin
-                if total > best:        # cannot win any more (strictly worse)
-                    break
+            total = correspondence_distance(ghost_rest, s, guide_rest, g, best)
             if total < best or (total == best and g < best_g):
                 best = total
                 best_g = g

@@ -31,14 +31,15 @@ Only the rest shapes ``rest`` stay ``(S, N, 3)`` in the user's order (read for t
 and the rare fallbacks), reached through ``order``.  No cross-thread reductions: results are
 deterministic.
 """
+from collections import namedtuple
 import math
 
 from numba import njit, prange, uint64
 import numpy as np
 
 from hair_tracking.ghosts.contacts import collide_lanes, CONTACT_ROWS
-from hair_tracking.ghosts.weights import (clamp_weight, com_weight, direction_cos, ELASTIC_OFF,
-                                          elastic_sign)
+from hair_tracking.ghosts.spread import group_variance, spread_factor
+from hair_tracking.ghosts.weights import com_weight, elastic_weight, ELASTIC_OFF, weighted_position
 from hair_tracking.guides.collision import world_center
 from hair_tracking.guides.integrate import NO_REFCOUNT
 
@@ -142,6 +143,27 @@ TMP_ROWS = _KERNEL_ROWS + CONTACT_ROWS
 BLOCK_LANES = 64
 
 
+#: The arguments of :func:`track_groups`, grouped as NVIDIA Warp / Newton separate a solver's
+#: inputs; the fields are described in :func:`track_groups`.  The kernel takes them as plain
+#: tuples in these fields' order (``tuple(GhostModel(...))``): numba types a named tuple by
+#: encoding its class and field names on every call, a few microseconds a call.
+#: Static data of the ghosts and guides, built once
+# (:class:`~hair_tracking.ghosts.tracker.GhostTracker`).
+GhostModel = namedtuple('GhostModel', [
+    'rest', 'seg_len', 'order', 'group_start', 'block_group', 'group_guide', 'group_row',
+    'node_table', 'node_row', 'rest_off', 'root_rest', 'inv_len', 'var_target', 'tan_rest'])
+#: The ghosts' state, advanced in place.
+GhostState = namedtuple('GhostState', ['xb', 'vb'])
+#: What drives one substep: the guides after / before it, the head pose, ``1 / dt``.
+GuideMotion = namedtuple('GuideMotion', ['guide_x', 'guide_x_old', 'R', 'pos', 'inv_dt'])
+#: The tracking parameters (switches, strengths, the fused head collider).
+TrackParams = namedtuple('TrackParams', [
+    'elastic_mode', 'use_tip', 'com_w', 'max_weight', 'k_off', 'k_com', 'spread', 'ftl',
+    'collide', 'center', 'axes', 'friction', 'refine'])
+#: Work space and per-call counters.
+TrackWork = namedtuple('TrackWork', ['q_buf', 'buf', 'tmp', 'clamped', 'contacts'])
+
+
 def chunk_count(blocks: int, threads: int) -> int:
     """Chunks of blocks that :func:`track_groups` spreads over ``threads`` threads."""
     return max(1, min(blocks, 4 * threads))
@@ -163,17 +185,17 @@ def block_groups(group_start: np.ndarray, lanes: int = BLOCK_LANES) -> np.ndarra
 
 
 @njit(cache=True, nogil=True, parallel=True, fastmath=TRACK_FASTMATH, error_model='numpy')
-def track_groups(xb, vb, rest, seg_len, order, group_start, block_group, group_guide,
-                 group_row, node_table, node_row, rest_off, root_rest, inv_len, var_target,
-                 guide_x, guide_x_old, tan_rest, R, pos, inv_dt, elastic_mode, use_tip, com_w,
-                 max_weight, k_off, k_com, spread, ftl, collide, center, axes, friction, refine,
-                 q_buf, buf, tmp, clamped, contacts):
-    """One tracking substep of all ghosts, in place on ``xb`` and ``vb`` (see the module doc).
+def track_groups(model, state, motion, params, work):
+    """One tracking substep of all ghosts, in place on ``state`` (see the module doc).
 
-    Parameters (S ghosts of N nodes, G guides of M nodes, K groups in B blocks, U distinct node
-    rows, C chunks, L the most lanes of a block, E the most groups of a block):
+    Arguments: the fields of :data:`GhostModel`, :data:`GhostState`, :data:`GuideMotion`,
+    :data:`TrackParams` and :data:`TrackWork` as five plain tuples, each in its fields' order
+    (S ghosts of N nodes, G guides of M nodes, K groups in B blocks, U distinct node rows,
+    C chunks, L the most lanes of a block, E the most groups of a block):
+    state
       xb, vb (S * N * 3,)     ghost positions [m] / velocities [m/s], world, in the layout of
                               ``rest_off`` (:func:`copy_blocks`)
+    model
       rest (S, N, 3)          ghost rest shapes, head frame [m] (roots and FTL fallback)
       seg_len (S * (N-1),)    ghost rest segment lengths [m], in the layout of ``rest_off``
       order (S,)              ghost index of group-order row k
@@ -193,14 +215,16 @@ def track_groups(xb, vb, rest, seg_len, order, group_start, block_group, group_g
                               [m], in the layout of ``rest_off``
       inv_len (S,)            1 / ghost length [1/m] (group order)
       var_target (K, N)       target group variance (sum of squares) [m^2] for spread control
-      guide_x, guide_x_old    (G, M, 3) guides after / before this substep, world [m]
       tan_rest (G, M-1, 3)    unit rest tangents of the guides, head frame
+    motion
+      guide_x, guide_x_old    (G, M, 3) guides after / before this substep, world [m]
       R (3, 3), pos (3,)      head pose
       inv_dt                  1 / dt [1/s], the substep's inverse, computed by the caller:
                               computed in here, LLVM's reassociation (``TRACK_FASTMATH``)
                               turned every ``(x_new - x_old) * (1 / dt)`` back into a division,
                               three vector divisions a node (11 % of the kernel's perf samples
                               at 100 k ghosts)
+    params
       elastic_mode            weights.ELASTIC_OFF / KEPT / CHANGED
       use_tip, com_w, max_weight, k_off, k_com, spread, ftl   switches and strengths
       collide                 (h) fused: push nodes out of the ellipsoid with semi-axes ``axes``
@@ -208,6 +232,7 @@ def track_groups(xb, vb, rest, seg_len, order, group_start, block_group, group_g
                               node's start-of-substep position, ``refine`` projection refinements;
                               with ``ftl`` the pushed node is put back at its rest distance
                               (:func:`hair_tracking.guides.ftl.restore_node`)
+    work
       q_buf (C, E, M-1, 3, 3) work space per chunk: the segment frames of the block's guides
       buf (C, 3 N L)          work space per chunk: the new positions of a block, [node][axis]
                               [ghost] (64 ghosts of 16 nodes: 24 KiB)
@@ -224,42 +249,35 @@ def track_groups(xb, vb, rest, seg_len, order, group_start, block_group, group_g
     rewritten with ``v = (x_new - x_old) / dt`` in one contiguous loop.  Groups are independent:
     the result does not depend on the number of chunks or threads.
     """
-    n_chunks = buf.shape[0]
+    n_chunks = work[1].shape[0]
     for c in prange(n_chunks):
-        _track_chunk(c, n_chunks, xb, vb, rest, seg_len, order, group_start, block_group,
-                     group_guide, group_row, node_table, node_row, rest_off, root_rest, inv_len,
-                     var_target, guide_x, guide_x_old, tan_rest, R, pos, inv_dt, elastic_mode,
-                     use_tip, com_w, max_weight, k_off, k_com, spread, ftl, collide, center,
-                     axes, friction, refine, q_buf, buf, tmp, clamped, contacts)
+        # the parallel loop's index is unsigned: as int64 the serial twin's loop shares this
+        # compiled body instead of compiling its own
+        _track_chunk(np.int64(c), n_chunks, model, state, motion, params, work)
 
 
 @njit(cache=True, nogil=True, fastmath=TRACK_FASTMATH, error_model='numpy')
-def track_groups_serial(xb, vb, rest, seg_len, order, group_start, block_group, group_guide,
-                        group_row, node_table, node_row, rest_off, root_rest, inv_len, var_target,
-                        guide_x, guide_x_old, tan_rest, R, pos, inv_dt, elastic_mode, use_tip,
-                        com_w, max_weight, k_off, k_com, spread, ftl, collide, center, axes,
-                        friction, refine, q_buf, buf, tmp, clamped, contacts):
+def track_groups_serial(model, state, motion, params, work):
     """:func:`track_groups` on the calling thread, for small problems: no parallel region to
     launch (which costs a few hundred microseconds a call on this shared machine, more than a
     1 k-ghost substep's arithmetic).  Same results."""
-    n_chunks = buf.shape[0]
+    n_chunks = work[1].shape[0]
     for c in range(n_chunks):
-        _track_chunk(c, n_chunks, xb, vb, rest, seg_len, order, group_start, block_group,
-                     group_guide, group_row, node_table, node_row, rest_off, root_rest, inv_len,
-                     var_target, guide_x, guide_x_old, tan_rest, R, pos, inv_dt, elastic_mode,
-                     use_tip, com_w, max_weight, k_off, k_com, spread, ftl, collide, center,
-                     axes, friction, refine, q_buf, buf, tmp, clamped, contacts)
+        _track_chunk(c, n_chunks, model, state, motion, params, work)
 
 
 @njit(cache=True, fastmath=TRACK_FASTMATH, error_model='numpy', **NO_REFCOUNT)
-def _track_chunk(c, n_chunks, xb, vb, rest, seg_len, order, group_start, block_group,
-                 group_guide, group_row, node_table, node_row, rest_off, root_rest, inv_len,
-                 var_target, guide_x, guide_x_old, tan_rest, R, pos, inv_dt, elastic_mode, use_tip,
-                 com_w, max_weight, k_off, k_com, spread, ftl, collide, center, axes, friction,
-                 refine, q_buf, buf, tmp, clamped, contacts):
+def _track_chunk(c, n_chunks, model, state, motion, params, work):
     """Chunk ``c`` of :func:`track_groups` (its blocks ``c B / C .. (c+1) B / C - 1``).  A
     function of its own so that the parallel loop's body stays small (numba's parfor lowering
     copies the body's IR, which took most of the compile time when everything was inlined)."""
+    (rest, seg_len, order, group_start, block_group, group_guide, group_row, node_table,
+     node_row, rest_off, root_rest, inv_len, var_target, tan_rest) = model      # GhostModel
+    xb, vb = state                                                              # GhostState
+    guide_x, guide_x_old, R, pos, inv_dt = motion                               # GuideMotion
+    (elastic_mode, use_tip, com_w, max_weight, k_off, k_com, spread, ftl, collide, center, axes,
+     friction, refine) = params                                                 # TrackParams
+    q_buf, buf, tmp, clamped, contacts = work                                   # TrackWork
     n_nodes = rest.shape[1]
     m_last = guide_x.shape[1] - 2
     n_blocks = block_group.shape[0] - 1
@@ -422,17 +440,13 @@ def _predict_group(X0, V0, P, off, inv_len, l0, l1, gi, j, row, node_table, guid
                          need_target)
     c0, c1, c2, cw = _group_centre(X0, l0, l1, com_w)
     tip = (1.0 if use_tip else 0.0) * tw
-    elastic = elastic_mode != ELASTIC_OFF
-    sign = elastic_sign(elastic_mode) if elastic else 0.0
     u0 = uint64(l0)
     n = uint64(l1 - l0)
     n_clamped = 0
     xs0 = xs1 = xs2 = qs0 = qs1 = qs2 = 0.0
     for kk in range(n):             # (the invariant branch is unswitched by LLVM)
         i = u0 + kk
-        w = 0.0
-        if elastic:
-            w = 0.5 + sign * direction_cos(dx, dy, dz, V0[0, i], V0[1, i], V0[2, i])
+        w = elastic_weight(dx, dy, dz, V0[0, i], V0[1, i], V0[2, i], elastic_mode)
         o0 = off[0, i]
         o1 = off[1, i]
         o2 = off[2, i]
@@ -523,11 +537,10 @@ def _predict(X0, V0, P, T, l0, l1, inv_len, elastic_mode, use_tip, max_weight, k
     u0 = uint64(l0)
     n = uint64(l1 - l0)
     if elastic_mode != ELASTIC_OFF:
-        sign = elastic_sign(elastic_mode)
         for kk in range(n):
             i = u0 + kk
-            w = 0.5 + sign * direction_cos(T[_DX, i], T[_DY, i], T[_DZ, i],
-                                           V0[0, i], V0[1, i], V0[2, i])
+            w = elastic_weight(T[_DX, i], T[_DY, i], T[_DZ, i], V0[0, i], V0[1, i], V0[2, i],
+                               elastic_mode)
             n_clamped += _advance(X0, P, T, i, w, tip_f, inv_len, max_weight, k_off)
     else:
         for kk in range(n):
@@ -538,20 +551,19 @@ def _predict(X0, V0, P, T, l0, l1, inv_len, elastic_mode, use_tip, max_weight, k
 @njit(cache=True, inline='always', fastmath=TRACK_FASTMATH, error_model='numpy')
 def _moved(xo0, xo1, xo2, w, tip, c0, c1, c2, cw, ilen, dx, dy, dz, t0, t1, t2, max_weight,
            k_off):
-    """(a)-(c) for one node at ``xo`` given its elastic weight ``w``: adds w_tip ``tip`` and
-    w_com (group centre ``c``, weight per length ``cw``, 1 / strand length ``ilen``), clamps
-    (b), moves by the guide displacement ``d`` times (1 + W) (a) and pulls toward the target
-    ``t`` (c).  Returns the new position and 1 if the weight sum was clamped.  The one
-    per-node formula of both paths (:func:`_predict_group`, :func:`_advance`)."""
+    """(a)-(c) for one node at ``xo`` given its elastic weight ``w`` (equation (4)): w_com
+    (group centre ``c``, weight per length ``cw``, 1 / strand length ``ilen``), then equation
+    (5) with w_tip ``tip`` (:func:`~hair_tracking.ghosts.weights.weighted_position`: the move by
+    the
+    guide displacement ``d`` times (1 + W), W clamped) and the pull toward the target ``t``
+    (c).  Returns the new position and 1 if the weight sum was clamped.  The one per-node
+    formula of both paths (:func:`_predict_group`, :func:`_advance`)."""
     e0 = xo0 - c0
     e1 = xo1 - c1
     e2 = xo2 - c2
-    w += tip + com_weight(math.sqrt(e0 * e0 + e1 * e1 + e2 * e2), ilen, cw)
-    clamped = 1 if w > max_weight else 0
-    w = 1.0 + clamp_weight(w, max_weight)
-    x0 = xo0 + dx * w
-    x1 = xo1 + dy * w
-    x2 = xo2 + dz * w
+    w_com = com_weight(math.sqrt(e0 * e0 + e1 * e1 + e2 * e2), ilen, cw)
+    x0, x1, x2, clamped = weighted_position(xo0, xo1, xo2, dx, dy, dz, w, tip, w_com,
+                                            max_weight)
     return (x0 + k_off * (t0 - x0), x1 + k_off * (t1 - x1), x2 + k_off * (t2 - x2), clamped)
 
 
@@ -604,20 +616,7 @@ def _group_stage(P, l0, l1, k_com, spread, var_target, have_target, xs0, xs1, xs
     # (e) scale about the shifted centre toward the target variance
     f = 1.0
     if spread > 0.0 and n > 1:
-        var = 0.0
-        for kk in range(lanes):
-            i = u0 + kk
-            e0 = P[0, i] - m0
-            e1 = P[1, i] - m1
-            e2 = P[2, i] - m2
-            var += e0 * e0 + e1 * e1 + e2 * e2
-        if var > 1e-30:
-            ratio = math.sqrt(var_target / var)
-            if ratio > 2.0:
-                ratio = 2.0
-            elif ratio < 0.5:
-                ratio = 0.5
-            f = 1.0 + spread * (ratio - 1.0)
+        f = spread_factor(group_variance(P, u0, lanes, m0, m1, m2), var_target, spread)
     # x -> c + f (x + d - c) with c = m + d, i.e. x -> m + d + f (x - m)
     for kk in range(lanes):
         i = u0 + kk

@@ -40,10 +40,10 @@ from hair_tracking.core.model import HeadPose, StrandSet
 from hair_tracking.core.point_records import blocks_to_records, points_to_records
 from hair_tracking.core.scene import Scene
 from hair_tracking.ghosts.correspondence import assign_guides, node_correspondence
-from hair_tracking.ghosts.kernels import (block_groups, chunk_count, copy_blocks, group_blocks,
-                                          guide_frames, TMP_ROWS, track_groups,
-                                          track_groups_serial)
-from hair_tracking.ghosts.weights import arc_fractions, elastic_code
+from hair_tracking.ghosts.kernels import (block_groups, chunk_count, copy_blocks, GhostModel,
+                                          group_blocks, guide_frames, TMP_ROWS, track_groups,
+                                          track_groups_serial, TrackWork)
+from hair_tracking.ghosts.weights import elastic_code, tip_weights
 from hair_tracking.guides.collision import Collider
 from hair_tracking.guides.integrate import runs_parallel
 
@@ -143,12 +143,10 @@ class GhostTracker:
         self._rest_off_blocks = group_blocks(self._rest_off, self._block_rows)
         self._seg_len_blocks = group_blocks(ghosts.rest_length[o], self._block_rows)
         self._root_blocks = group_blocks(ghosts.rest[o][:, :min(2, n_nodes)], self._block_rows)
-        frac = arc_fractions(ghosts.rest_length)[o]
+        w_tip = tip_weights(ghosts.rest_length, tr.tip_weight)[o]      # equation (5)'s w_tip
         # per-node data (guide parameter, w_tip) as a table of distinct rows: ghosts with the
         # same arc-length layout share one row
-        # (fractions rounded to 1e-12 so that rounding noise does not split equal layouts)
-        table = np.stack([self._gparam, tr.tip_weight * np.round(frac, 12)],
-                         axis=-1).reshape(s_count, -1)
+        table = np.stack([self._gparam, w_tip], axis=-1).reshape(s_count, -1)
         if s_count == 0 or np.array_equal(table, np.broadcast_to(table[0], table.shape)):
             rows, inverse = table[:1], np.zeros(s_count, dtype=np.int64)   # the usual case
         else:
@@ -197,6 +195,15 @@ class GhostTracker:
             self._friction, self._refine = 0.0, 0
         self._collide_after = self.collide and not self._fused_collider
         self._x_prev = np.empty_like(ghosts.x) if self._collide_after else None
+        # the kernel's static arguments, plain tuples in the fields' order (see
+        # tracking_kernels.GhostModel)
+        self._model = tuple(GhostModel(
+            ghosts.rest, self._seg_len_blocks, self.order, self.group_start, self.block_group,
+            self.group_guide, self._group_row, self._node_table, self._node_row,
+            self._rest_off_blocks, self._root_blocks, self._inv_len, self._var_target,
+            self._tan_rest))
+        self._work = tuple(TrackWork(self._q_buf, self._buf, self._tmp, self._clamped,
+                                     self._contacts))
         self.stats: Dict[str, int] = {
             'ghosts': int(s_count), 'groups': int(n_groups),
             'largest_group': int(group_size.max()) if n_groups else 0,
@@ -294,20 +301,16 @@ class GhostTracker:
             np.copyto(self._x_prev, self.positions())
         self._take()
         nodes = self._xb.size // 3
+        # plain tuples in the fields' order of GhostState, GuideMotion and TrackParams
+        motion = (_f64(gx), _f64(guide_x_old), _f64(head.rotation), _f64(head.position),
+                  1.0 / float(dt))
+        params = (self._elastic, tr.tip_weight > 0.0, tr.com_weight, tr.max_weight,
+                  _per(tr.offset_strength, substeps), _per(tr.com_strength, substeps),
+                  _per(tr.spread, substeps), tr.length_restore, self._fused_collider,
+                  self._center, self._axes, self._friction, self._refine)
         parallel = runs_parallel(nodes)
         kernel = track_groups if parallel else track_groups_serial
-        kernel(
-            self._xb, self._vb, self.ghosts.rest, self._seg_len_blocks, self.order,
-            self.group_start, self.block_group, self.group_guide, self._group_row,
-            self._node_table, self._node_row, self._rest_off_blocks, self._root_blocks,
-            self._inv_len, self._var_target, _f64(gx), _f64(guide_x_old), self._tan_rest,
-            _f64(head.rotation), _f64(head.position), 1.0 / float(dt),
-            self._elastic, tr.tip_weight > 0.0, tr.com_weight, tr.max_weight,
-            _per(tr.offset_strength, substeps), _per(tr.com_strength, substeps),
-            _per(tr.spread, substeps), tr.length_restore,
-            self._fused_collider, self._center, self._axes, self._friction,
-            self._refine, self._q_buf, self._buf, self._tmp, self._clamped,
-            self._contacts)
+        kernel(self._model, (self._xb, self._vb), motion, params, self._work)
         self._synced_x = self._synced_v = False
         self.stats['steps'] += 1
         self.stats['parallel'] = int(parallel)

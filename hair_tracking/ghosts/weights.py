@@ -85,6 +85,24 @@ def com_weight(distance, inv_length, weight_per_length):
 
 
 @njit(cache=True, inline='always')
+def weighted_position(x0, x1, x2, d0, d1, d2, w_elastic, w_tip, w_com, max_weight):
+    """Equation (5) for one node, with the velocity transfer it weights: the node at ``x`` moves
+    by its guide point's displacement ``d = v dt`` plus the weighted copy of it,
+
+        pos* = x + d (1 + W),   W = W* + (w_tip + w_com) clamped to [0, max_weight]
+
+    (the paper's ``pos`` is the transferred position ``x + d``; ``dt`` is the implied time step
+    that turns the velocity into a displacement).  ``w_elastic`` is W* of equation (4)
+    (:func:`elastic_weight`), ``w_tip`` from :func:`tip_weights`, ``w_com`` from
+    :func:`com_weight`.  Returns ``(pos*_x, pos*_y, pos*_z, clamped)``, ``clamped`` 1 when the
+    weight sum exceeded ``max_weight``."""
+    w = w_elastic + (w_tip + w_com)
+    clamped = 1 if w > max_weight else 0
+    w = 1.0 + clamp_weight(w, max_weight)
+    return x0 + d0 * w, x1 + d1 * w, x2 + d2 * w, clamped
+
+
+@njit(cache=True, inline='always')
 def clamp_weight(total, max_weight):
     """The weight sum W* + w_tip + w_com limited to [0, max_weight] (energy safety)."""
     if total > max_weight:
@@ -115,7 +133,10 @@ def arc_fractions(rest_length: np.ndarray) -> np.ndarray:
 
 
 def tip_weights(rest_length: np.ndarray, tip_weight: float) -> np.ndarray:
-    """(S, N) w_tip: ``tip_weight`` times the node's arc-length fraction (0 at the root)."""
+    """(S, N) w_tip of equation (5): ``tip_weight`` times the node's arc-length fraction (0 at
+    the root, ``tip_weight`` at the tip).  The fractions are rounded to 12 decimals, so that
+    strands with the same layout get bit-equal weights (the tracker shares one row of its node
+    table between them)."""
     if not (tip_weight >= 0.0 and np.isfinite(tip_weight)):
         raise ValueError(f'tracking.tip_weight must be a finite number >= 0, got {tip_weight!r}')
-    return arc_fractions(rest_length) * float(tip_weight)
+    return float(tip_weight) * np.round(arc_fractions(rest_length), 12)

@@ -272,6 +272,11 @@ class Collider:
         out = np.zeros(x.shape[0])
         kernel = penetration_ellipsoid if runs_parallel(x.shape[0] * x.shape[1]) else \
             penetration_ellipsoid_serial
+        if x.flags.writeable:
+            # always a read-only view: one compiled kernel for the guides' arrays and the
+            # ghost tracker's read-only positions
+            x = x.view()
+            x.flags.writeable = False
         kernel(x, mass, use, rot, pos, self.center, self.radii, self._pen_refine, out)
         return float(out.max()) if out.size else 0.0
 

@@ -25,14 +25,24 @@ Degenerate input: if a segment has collapsed (``|p_i - p_{i-1}| < 1e-12`` m) the
 along the segment's rest direction carried by the head (``R (rest_i - rest_{i-1})``); a
 zero rest length places the node on its predecessor. No NaN can arise.
 """
+from collections import namedtuple
 import math
 
-from numba import njit, prange
+from numba import int64, njit, prange
 
 from hair_tracking.guides.collision import surface_point, to_head, world_center
 from hair_tracking.guides.integrate import (BLOCK, FASTMATH, finalize_block, NO_REFCOUNT,
                                             predict_block, serial_twin)
 from hair_tracking.guides.pbd_constraints import pbd_sweep_block
+
+#: Static data of :func:`ftl_step`: ``rest`` (S, N, 3) head frame [m], ``inv_mass`` (S, N),
+#: ``rest_length`` (S, N-1), ``bend_rest`` (S, N-2) second-neighbour rest distances [m],
+#: ``bend_w`` from :func:`hair_tracking.guides.pbd_constraints.pair_weights` with gap 2.
+FtlModel = namedtuple('FtlModel', ['rest', 'inv_mass', 'rest_length', 'bend_rest', 'bend_w'])
+#: Parameters of :func:`ftl_step`: bending sweeps and stiffness (0: no bending), the velocity
+#: correction ``s_damp`` 0..1, the displacement clamp [m] (0: off), whether to finalize.
+FtlParams = namedtuple('FtlParams', ['bend_passes', 'bend_stiffness', 's_damp', 'max_disp',
+                                     'do_finalize'])
 
 #: Below this squared segment length [m²] the current direction is unreliable.
 FTL_TINY_SQ = 1e-24
@@ -157,7 +167,8 @@ def ftl_restore(x, rest, rest_length, rot, pos, center, axes, refine, corr):
     """
     cx, cy, cz = world_center(rot, pos, center)
     for s in prange(x.shape[0]):
-        ftl_restore_block(x, rest, rest_length, rot, cx, cy, cz, axes, refine, corr, s, s + 1)
+        i = int64(s)          # (the index as in the serial twin: one compiled block body)
+        ftl_restore_block(x, rest, rest_length, rot, cx, cy, cz, axes, refine, corr, i, i + 1)
 
 
 @njit(cache=True, fastmath=FASTMATH, error_model='numpy', **NO_REFCOUNT)
@@ -184,17 +195,20 @@ def ftl_restore_block(x, rest, rest_length, rot, cx, cy, cz, axes, refine, corr,
 
 
 @njit(cache=True, nogil=True, parallel=True, fastmath=FASTMATH, error_model='numpy')
-def ftl_step(x, v, x_old, corr, rest, inv_mass, rest_length, bend_rest, bend_w,
-             rot, pos, rot_rel, pos_prev, gravity, damp, dt, shock,
-             bend_passes, bend_stiffness, s_damp, max_disp, do_finalize):
+def ftl_step(model, state, motion, params, corr):
     """Kernel: one FTL substep of all strands (predict, bending, FTL pass, finalize).
 
-    ``bend_w`` from :func:`hair_tracking.guides.pbd_constraints.pair_weights` with gap 2; ``corr``
-    (S, N, 3) receives the FTL corrections (needed by
+    ``model``, ``state``, ``motion``, ``params``: the fields of :data:`FtlModel`,
+    :data:`~hair_tracking.guides.integrate.GuideState`,
+    :data:`~hair_tracking.guides.integrate.StepMotion`,
+    :data:`FtlParams` as plain tuples; ``corr`` (S, N, 3) receives the FTL corrections (needed by
     :func:`hair_tracking.guides.integrate.finalize` when a collider runs before finalizing).
-    ``s_damp`` is the FTL velocity correction 0..1.
     Returns the clamped node count (0 when not finalizing).
     """
+    x, v, x_old = state                                                 # GuideState
+    rest, inv_mass, rest_length, bend_rest, bend_w = model              # FtlModel
+    rot, pos, rot_rel, pos_prev, gravity, damp, dt, shock = motion      # StepMotion
+    bend_passes, bend_stiffness, s_damp, max_disp, do_finalize = params     # FtlParams
     nblk = (x.shape[0] + BLOCK - 1) // BLOCK
     clamped = 0
     for blk in prange(nblk):

@@ -27,6 +27,7 @@ frame. Arrays are C-contiguous float64 ``(S, N, 3)``. The block helpers work on 
 ``s0 <= s < s1`` so that a fused solver kernel can run them back to back on a block of strands
 while it is in cache (see :data:`BLOCK`).
 """
+from collections import namedtuple
 from contextlib import contextmanager
 import math
 import types
@@ -107,6 +108,22 @@ try:
     NO_REFCOUNT = {'_nrt': False} if hasattr(_CPUOptions, '_nrt') else {}
 except ImportError:         # pragma: no cover - another numba layout
     NO_REFCOUNT = {}
+
+
+#: Arguments of the guide kernels (:func:`hair_tracking.guides.pbd_constraints.pbd_step`,
+#: :func:`~hair_tracking.guides.pbd_constraints.xpbd_step`,
+#: :func:`hair_tracking.guides.ftl.ftl_step`), grouped as NVIDIA Warp / Newton separate a
+#: solver's inputs.  The kernels take them as plain tuples in these fields' order
+#: (``tuple(GuideState(x, v, x_old))``): numba types a named tuple by encoding its class and
+#: field names on every call, a few microseconds a call.
+#: The guides' state, advanced in place: positions ``x`` and velocities ``v`` (S, N, 3) [m],
+#: [m/s], and ``x_old`` (S, N, 3), written: the start positions after the rigid carry.
+GuideState = namedtuple('GuideState', ['x', 'v', 'x_old'])
+#: What drives one substep (the predict stage, :func:`predict_block`): head pose ``rot`` (3, 3),
+#: ``pos`` (3,) now, ``rot_rel`` = ``rot rot_prev^T`` and ``pos_prev`` of the previous pose,
+#: ``gravity`` (3,) [m/s^2], ``damp`` = exp(-damping dt), ``dt`` [s], ``shock`` 0..1.
+StepMotion = namedtuple('StepMotion', ['rot', 'pos', 'rot_rel', 'pos_prev', 'gravity', 'damp',
+                                       'dt', 'shock'])
 
 
 def block_count(strands: int) -> int:
@@ -281,7 +298,8 @@ def finalize(x, v, x_old, inv_mass, corr, dt, max_disp, s_damp):
     """Kernel: :func:`finalize_block` over all strands (used when a collider runs in between)."""
     total = 0
     for s in prange(x.shape[0]):
-        total += finalize_block(x, v, x_old, inv_mass, corr, s, s + 1, dt, max_disp, s_damp)
+        i = np.int64(s)       # (the index as in the serial twin: one compiled finalize_block)
+        total += finalize_block(x, v, x_old, inv_mass, corr, i, i + 1, dt, max_disp, s_damp)
     return total
 
 

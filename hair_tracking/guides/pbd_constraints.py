@@ -29,6 +29,7 @@ result of a strand does not depend on its block or on the thread count, and equa
 Zero-length segments are safe: ``1/|d|`` is computed as ``1/sqrt(max(|d|², 1e-30))``, so a
 degenerate pair moves by at most about its rest distance and never produces NaN.
 """
+from collections import namedtuple
 import math
 
 import numpy as np
@@ -36,6 +37,29 @@ from numba import njit, prange, uint64
 
 from hair_tracking.guides.integrate import (FASTMATH, finalize_block, NO_REFCOUNT, predict_block,
                                             serial_twin)
+
+#: Static data of :func:`pbd_step` (the last four in :func:`lane_major` layout): ``rest``
+#: (S, N, 3) head frame [m], ``inv_mass`` (S, N), ``rest_length``, ``bend_rest`` (rest
+#: distances of neighbours and second neighbours [m]), ``stretch_w``, ``bend_w``
+#: (:func:`pair_weights` with gap 1 and 2).
+PbdModel = namedtuple('PbdModel', ['rest', 'inv_mass', 'rest_length', 'bend_rest', 'stretch_w',
+                                   'bend_w'])
+#: Parameters of :func:`pbd_step`: sweeps per substep, stretch and bending stiffness (0..1; a
+#: bending stiffness of 0 skips bending), displacement clamp [m] (0: off), whether to finalize.
+PbdParams = namedtuple('PbdParams', ['iterations', 'stiffness', 'bend_stiffness', 'max_disp',
+                                     'do_finalize'])
+#: Static data of :func:`xpbd_step` (all but ``rest`` and ``inv_mass`` in :func:`lane_major`
+#: layout): ``inv_mass_l`` the inverse masses, ``stretch_gain``/``bend_gain`` from
+#: :func:`xpbd_gain`.
+XpbdModel = namedtuple('XpbdModel', ['rest', 'inv_mass', 'inv_mass_l', 'rest_length',
+                                     'bend_rest', 'stretch_gain', 'bend_gain'])
+#: Parameters of :func:`xpbd_step`: ``alpha_*`` the time-step scaled compliances
+#: ``α̃ = α / dt²`` (a negative ``alpha_bend`` disables bending).
+XpbdParams = namedtuple('XpbdParams', ['iterations', 'alpha_stretch', 'alpha_bend', 'max_disp',
+                                       'do_finalize'])
+#: Work space of :func:`xpbd_step`: the positions (:func:`lane_work`) and the multipliers
+#: ``lam_stretch``, ``lam_bend`` (:func:`lane_major` layout, reset by the kernel).
+XpbdWork = namedtuple('XpbdWork', ['p', 'lam_stretch', 'lam_bend'])
 
 #: Floor of ``|p_j - p_i|²`` [m²] when inverting a distance (zero-length segments).
 TINY_SQ = 1e-30
@@ -266,11 +290,13 @@ def _lanes_finished(p, x, v, x_old, inv_mass, s0, s1, dt, max_disp, do_finalize)
 
 
 @njit(cache=True, fastmath=FASTMATH, error_model='numpy', **NO_REFCOUNT)
-def _pbd_block(blk, x, v, x_old, rest, inv_mass, rest_length, bend_rest, stretch_w, bend_w,
-               work, rot, pos, rot_rel, pos_prev, gravity, damp, dt, shock, iterations,
-               stiffness, bend_stiffness, max_disp, do_finalize):
+def _pbd_block(blk, model, state, motion, params, work):
     """Block ``blk`` of :func:`pbd_step` (a compiled body of its own: the serial twin runs the
     same code, see :func:`hair_tracking.guides.integrate.serial_twin`)."""
+    x, v, x_old = state                                                 # GuideState
+    rest, inv_mass, rest_length, bend_rest, stretch_w, bend_w = model   # PbdModel
+    rot, pos, rot_rel, pos_prev, gravity, damp, dt, shock = motion      # StepMotion
+    iterations, stiffness, bend_stiffness, max_disp, do_finalize = params   # PbdParams
     s0, s1 = _lanes_predicted(blk, x, v, x_old, rest, inv_mass, work, rot, pos, rot_rel,
                               pos_prev, gravity, damp, dt, shock)
     n = x.shape[1]
@@ -283,11 +309,14 @@ def _pbd_block(blk, x, v, x_old, rest, inv_mass, rest_length, bend_rest, stretch
 
 
 @njit(cache=True, fastmath=FASTMATH, error_model='numpy', **NO_REFCOUNT)
-def _xpbd_block(blk, x, v, x_old, rest, inv_mass, inv_mass_l, rest_length, bend_rest,
-                stretch_gain, bend_gain, lam_stretch, lam_bend, work, rot, pos, rot_rel,
-                pos_prev, gravity, damp, dt, shock, iterations, alpha_stretch, alpha_bend,
-                max_disp, do_finalize):
+def _xpbd_block(blk, model, state, motion, params, xwork):
     """Block ``blk`` of :func:`xpbd_step` (see :func:`_pbd_block`)."""
+    x, v, x_old = state                                                 # GuideState
+    (rest, inv_mass, inv_mass_l, rest_length, bend_rest, stretch_gain,
+     bend_gain) = model                                                 # XpbdModel
+    work, lam_stretch, lam_bend = xwork                                 # XpbdWork
+    rot, pos, rot_rel, pos_prev, gravity, damp, dt, shock = motion      # StepMotion
+    iterations, alpha_stretch, alpha_bend, max_disp, do_finalize = params   # XpbdParams
     s0, s1 = _lanes_predicted(blk, x, v, x_old, rest, inv_mass, work, rot, pos, rot_rel,
                               pos_prev, gravity, damp, dt, shock)
     n = x.shape[1]
@@ -304,10 +333,14 @@ def _xpbd_block(blk, x, v, x_old, rest, inv_mass, inv_mass_l, rest_length, bend_
 
 
 @njit(cache=True, nogil=True, parallel=True, fastmath=FASTMATH, error_model='numpy')
-def pbd_step(x, v, x_old, rest, inv_mass, rest_length, bend_rest, stretch_w, bend_w, work,
-             rot, pos, rot_rel, pos_prev, gravity, damp, dt, shock,
-             iterations, stiffness, bend_stiffness, max_disp, do_finalize):
+def pbd_step(model, state, motion, params, work):
     """Kernel: one PBD substep of all strands (predict, ``iterations`` sweeps, finalize).
+
+    ``model``, ``state``, ``motion``, ``params``: the fields of :data:`PbdModel`,
+    :data:`~hair_tracking.guides.integrate.GuideState`,
+    :data:`~hair_tracking.guides.integrate.StepMotion`,
+    :data:`PbdParams` as plain tuples (``tuple(PbdModel(...))``, see
+    :data:`~hair_tracking.guides.integrate.GuideState`); ``work`` from :func:`lane_work`.
 
     Per block of :data:`LANES` strands: :func:`integrate.predict_block`, the positions into the
     block's row of ``work`` (:func:`lane_work`), ``iterations`` times a stretch sweep
@@ -320,18 +353,19 @@ def pbd_step(x, v, x_old, rest, inv_mass, rest_length, bend_rest, stretch_w, ben
     """
     clamped = 0
     for blk in prange(work.shape[0]):
-        clamped += _pbd_block(blk, x, v, x_old, rest, inv_mass, rest_length, bend_rest,
-                              stretch_w, bend_w, work, rot, pos, rot_rel, pos_prev, gravity,
-                              damp, dt, shock, iterations, stiffness, bend_stiffness, max_disp,
-                              do_finalize)
+        # (the index as in the serial twin: one compiled block body)
+        clamped += _pbd_block(np.int64(blk), model, state, motion, params, work)
     return clamped
 
 
 @njit(cache=True, nogil=True, parallel=True, fastmath=FASTMATH, error_model='numpy')
-def xpbd_step(x, v, x_old, rest, inv_mass, inv_mass_l, rest_length, bend_rest, stretch_gain,
-              bend_gain, lam_stretch, lam_bend, work, rot, pos, rot_rel, pos_prev, gravity,
-              damp, dt, shock, iterations, alpha_stretch, alpha_bend, max_disp, do_finalize):
+def xpbd_step(model, state, motion, params, work):
     """Kernel: one XPBD substep of all strands (predict, reset λ, ``iterations`` sweeps, finalize).
+
+    The fields of :data:`XpbdModel`, :data:`~hair_tracking.guides.integrate.GuideState`,
+    :data:`~hair_tracking.guides.integrate.StepMotion`, :data:`XpbdParams`, :data:`XpbdWork` as
+    plain
+    tuples.
 
     As :func:`pbd_step`, with :func:`xpbd_sweep_lanes`.  ``alpha_stretch``/``alpha_bend`` are
     the time-step scaled compliances ``α̃ = α / dt²``; ``stretch_gain``/``bend_gain`` from
@@ -341,11 +375,8 @@ def xpbd_step(x, v, x_old, rest, inv_mass, inv_mass_l, rest_length, bend_rest, s
     not finalizing).
     """
     clamped = 0
-    for blk in prange(work.shape[0]):
-        clamped += _xpbd_block(blk, x, v, x_old, rest, inv_mass, inv_mass_l, rest_length,
-                               bend_rest, stretch_gain, bend_gain, lam_stretch, lam_bend, work,
-                               rot, pos, rot_rel, pos_prev, gravity, damp, dt, shock,
-                               iterations, alpha_stretch, alpha_bend, max_disp, do_finalize)
+    for blk in prange(work[0].shape[0]):
+        clamped += _xpbd_block(np.int64(blk), model, state, motion, params, work)
     return clamped
 
 

@@ -91,6 +91,8 @@ class GuideSolver:
         if self.kind == 'ftl':
             self._bend_w = pbd_constraints.pair_weights(im, 2)
             self._corr = np.zeros_like(strands.x)
+            self._model = tuple(ftl.FtlModel(strands.rest, im, strands.rest_length,
+                                             self._bend_rest, self._bend_w))
         else:
             # the PBD and XPBD kernels read their per-constraint data block by block, strands
             # side by side (pbd_constraints.lane_major), and project in a work space
@@ -102,11 +104,16 @@ class GuideSolver:
             if self.kind == 'pbd':
                 self._stretch_w = lanes(pbd_constraints.pair_weights(im, 1))
                 self._bend_w = lanes(pbd_constraints.pair_weights(im, 2))
+                self._model = tuple(pbd_constraints.PbdModel(
+                    strands.rest, im, self._rest_length_l, self._bend_rest_l, self._stretch_w,
+                    self._bend_w))
             else:
                 self._inv_mass_l = lanes(im)
                 self._lam_stretch = lanes(np.zeros((s, n - 1)))
                 self._lam_bend = lanes(np.zeros((s, n - 2)))
-                self._xpbd_dt = None
+                self._xpbd_work = tuple(pbd_constraints.XpbdWork(self._work, self._lam_stretch,
+                                                                 self._lam_bend))
+                self._xpbd_dt = None          # the model, with its dt-dependent gains: later
         need_ref = self.collider is not None and self.collider.friction > 0.0
         self._x_ref = np.empty_like(strands.x) if need_ref else None
         self._counters = {'substeps': 0, 'clamped': 0, 'clamped_total': 0,
@@ -142,31 +149,27 @@ class GuideSolver:
         if self._x_ref is not None:
             carry = integrate.carry_rigid if parallel else integrate.carry_rigid_serial
             carry(st.x, rot_rel, pos_prev, pos, self._x_ref)
+        # the kernels' arguments, plain tuples in the fields' order of integrate.GuideState,
+        # integrate.StepMotion and the solver's Params (built here each substep; the models in
+        # __init__ / _xpbd_factors)
+        state = (st.x, st.v, self._x_old)
+        motion = (rot, pos, rot_rel, pos_prev, self._gravity, damp, dt, self._shock)
+        sv = self.scene.solver
         if self.kind == 'pbd':
-            sv = self.scene.solver
             kernel = pbd_constraints.pbd_step if parallel else pbd_constraints.pbd_step_serial
-            clamped = kernel(
-                st.x, st.v, self._x_old, st.rest, st.inv_mass, self._rest_length_l,
-                self._bend_rest_l, self._stretch_w, self._bend_w, self._work, rot, pos, rot_rel,
-                pos_prev, self._gravity, damp, dt, self._shock, self._iterations,
-                float(sv.stiffness), float(sv.bend_stiffness), self._max_disp, fused)
+            params = (self._iterations, float(sv.stiffness), float(sv.bend_stiffness),
+                      self._max_disp, fused)
+            clamped = kernel(self._model, state, motion, params, self._work)
         elif self.kind == 'xpbd':
             a_stretch, a_bend = self._xpbd_factors(dt)
             kernel = pbd_constraints.xpbd_step if parallel else pbd_constraints.xpbd_step_serial
-            clamped = kernel(
-                st.x, st.v, self._x_old, st.rest, st.inv_mass, self._inv_mass_l,
-                self._rest_length_l, self._bend_rest_l, self._stretch_gain, self._bend_gain,
-                self._lam_stretch, self._lam_bend, self._work, rot, pos, rot_rel, pos_prev,
-                self._gravity, damp, dt, self._shock, self._iterations, a_stretch, a_bend,
-                self._max_disp, fused)
+            params = (self._iterations, a_stretch, a_bend, self._max_disp, fused)
+            clamped = kernel(self._model, state, motion, params, self._xpbd_work)
         else:
-            sv = self.scene.solver
             kernel = ftl.ftl_step if parallel else ftl.ftl_step_serial
-            clamped = kernel(
-                st.x, st.v, self._x_old, self._corr, st.rest, st.inv_mass, st.rest_length,
-                self._bend_rest, self._bend_w, rot, pos, rot_rel, pos_prev, self._gravity, damp,
-                dt, self._shock, FTL_BEND_PASSES, ftl_bend_stiffness(sv.bend_stiffness, dt),
-                float(sv.ftl_damping), self._max_disp, fused)
+            params = (FTL_BEND_PASSES, ftl_bend_stiffness(sv.bend_stiffness, dt),
+                      float(sv.ftl_damping), self._max_disp, fused)
+            clamped = kernel(self._model, state, motion, params, self._corr)
         contacts = 0
         if not fused:
             ref = self._x_ref if self._x_ref is not None else self._x_old
@@ -236,6 +239,10 @@ class GuideSolver:
                 pbd_constraints.xpbd_gain(im, 1, a_stretch))
             self._bend_gain = pbd_constraints.lane_major(
                 pbd_constraints.xpbd_gain(im, 2, a_bend))
+            st = self.strands
+            self._model = tuple(pbd_constraints.XpbdModel(
+                st.rest, im, self._inv_mass_l, self._rest_length_l, self._bend_rest_l,
+                self._stretch_gain, self._bend_gain))
             self._xpbd_dt = dt
         return a_stretch, a_bend
 
