@@ -166,10 +166,8 @@ class HairSimulator:
     def _make_tracker(self, scene: Scene, keep_state: bool = False):
         collider = self.collider if scene.tracking.collide else None
         if self._blend(scene):
-            tracker = BlendTracker(self.ghosts, self.guides, self.guide_index, scene, collider,
-                                   k=scene.tracking.blend_guides)
-            self.guide_index = tracker.guide_index       # the rows after its reordering
-            return tracker
+            return BlendTracker(self.ghosts, self.guides, self.guide_index, scene, collider,
+                                k=scene.tracking.blend_guides)
         return GhostTracker(self.ghosts, self.guides, scene, collider, keep_state=keep_state)
 
     # ---------------------------------------------------------------- input

@@ -71,13 +71,14 @@ def _random_case(seed, ghosts=30, guides=7, nodes=12, guide_nodes=12):
 def test_kernels_match_the_numpy_reference(restore, collide):
     sim, tr, h, gx = _random_case(3)
     rot, pos = np.ascontiguousarray(h.rotation), np.ascontiguousarray(h.position)
-    aff = np.empty((gx.shape[0], tr.seg.shape[0], 12))
+    aff = np.empty((gx.shape[0], 12, tr.seg.shape[0]))
     blend.guide_affines(gx, sim.guides.rest, rot, pos, tr.seg, tr.t, aff)
     out = np.empty_like(sim.ghosts.rest)
     axes = tr._axes if collide else np.ones(3)
     blend.blend_strands(out, tr._rest32, tr._roots, tr._len32, tr.guide_of, tr.weight, aff,
                         rot, pos, restore, collide, tr._center, axes, tr.is_guide, gx)
-    ref = blend.reference_blend(gx, sim.guides.rest, tr._rest32, tr._len32, tr.guide_of,
+    ref = blend.reference_blend(gx, sim.guides.rest, tr._rest32.transpose(0, 2, 1), tr._len32,
+                                tr.guide_of,
                                 tr.weight, h, restore, axes if collide else None, tr._center,
                                 tr.is_guide, tr._roots)
     assert (tr.is_guide >= 0).sum() == gx.shape[0]
@@ -89,12 +90,13 @@ def test_different_node_counts_match_the_reference():
     # the blend's guides are ghost strands, so their node count is the ghosts' own
     assert sim.guides.rest.shape[1] == 9
     rot, pos = np.ascontiguousarray(h.rotation), np.ascontiguousarray(h.position)
-    aff = np.empty((gx.shape[0], 9, 12))
+    aff = np.empty((gx.shape[0], 12, 9))
     blend.guide_affines(gx, sim.guides.rest, rot, pos, tr.seg, tr.t, aff)
     out = np.empty_like(sim.ghosts.rest)
     blend.blend_strands(out, tr._rest32, tr._roots, tr._len32, tr.guide_of, tr.weight, aff,
                         rot, pos, True, False, tr._center, tr._axes, tr.is_guide, gx)
-    ref = blend.reference_blend(gx, sim.guides.rest, tr._rest32, tr._len32, tr.guide_of,
+    ref = blend.reference_blend(gx, sim.guides.rest, tr._rest32.transpose(0, 2, 1), tr._len32,
+                                tr.guide_of,
                                 tr.weight, h, True, is_guide=tr.is_guide, roots=tr._roots)
     np.testing.assert_allclose(out, ref, atol=1e-9)
 

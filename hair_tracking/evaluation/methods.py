@@ -237,8 +237,6 @@ class BlendTracking(Method):
         collider = make_collider(scene.collider) if scene.tracking.collide else None
         self.tracker = BlendTracker(self.ghosts, self.guides, self.guide_index, scene, collider,
                                     k=k)
-        self._perm = self.tracker.permutation
-        self._out = np.empty_like(workload.ghost_rest)
 
     def reset(self, head):
         self.solver.reset(head)
@@ -249,8 +247,7 @@ class BlendTracking(Method):
 
     def output(self, head):
         self.tracker.step(self.dt, None, head)
-        self._out[self._perm] = self.ghosts.x          # back into the workload's order
-        return self._out
+        return self.ghosts.x
 
 
 class RigidOffset(_GuidedMethod):

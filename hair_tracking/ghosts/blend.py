@@ -39,7 +39,6 @@ from numba import njit, prange
 
 from hair_tracking.core.model import HeadPose, StrandSet
 from hair_tracking.core.point_records import points_to_records
-from hair_tracking.ghosts.tracker import _permute
 from hair_tracking.guides.collision import outside_distance
 
 #: Guides blended per ghost by default (Unreal's groom interpolation uses up to three).
@@ -49,6 +48,8 @@ WEIGHT_POWER = 2.0
 #: Strands one thread blends together: their length passes run node by node across the block,
 #: so the CPU overlaps the strands' dependency chains (each node is placed from its predecessor).
 STRAND_BLOCK = 8
+#: Work items of the blend's parallel loop (each a run of blocks with its own scratch row).
+CHUNKS = 64
 
 
 # ----------------------------------------------------------------------------- set-up
@@ -153,7 +154,7 @@ def _node_affine(gx, grest, g, m, rot, out):
 
 @njit(cache=True, parallel=True)
 def guide_affines(gx, grest, rot, pos, seg, t, out):
-    """Kernel, step 1: ``out`` (G, N, 12) the map of every guide at every ghost node index
+    """Kernel, step 1: ``out`` (G, 12, N) the map of every guide at every ghost node index
     (``seg``, ``t`` from :func:`node_map`: the maps of the two guide nodes around the node's
     fraction, interpolated linearly).  ``gx`` (G, M, 3) guides now, world [m]; ``grest``
     (G, M, 3) their rest shapes, head frame; ``rot``, ``pos`` the head pose."""
@@ -166,10 +167,10 @@ def guide_affines(gx, grest, rot, pos, seg, t, out):
             a, u = seg[j], t[j]
             if u == 0.0:
                 for i in range(12):
-                    out[g, j, i] = node[a, i]
+                    out[g, i, j] = node[a, i]
             else:
                 for i in range(12):
-                    out[g, j, i] = node[a, i] + u * (node[a + 1, i] - node[a, i])
+                    out[g, i, j] = node[a, i] + u * (node[a + 1, i] - node[a, i])
 
 
 @njit(cache=True, inline='always')
@@ -220,15 +221,14 @@ def _slide(nx, ny, nz, px, py, pz, length, cw, quad):
 @njit(cache=True, parallel=True)
 def blend_strands(x, rest, roots, rest_length, guide, weight, affine, rot, pos, restore,
                   collide, center, axes, is_guide, gx):
-    """Kernel, steps 2-3: ``x`` (S, N, 3) world [m] receives every strand; ``rest`` (S, N, 3)
-    float32 head frame; ``roots`` (S, 2, 3) its first two nodes in float64 (pinned exactly);
-    ``rest_length`` (S, N-1) float32; ``guide`` (S, K) int32 and ``weight``
-    (S, K) float32 from :func:`blend_weights`; ``affine`` (G, N, 12) from
+    """Kernel, steps 2-3: ``x`` (S, N, 3) world [m] receives every strand; ``rest`` (S, 3, N)
+    float32 head frame, component-major; ``roots`` (S, 2, 3) its first two nodes in float64
+    (pinned exactly); ``rest_length`` (S, N-1) float32; ``guide`` (S, K) int32 and ``weight``
+    (S, K) float32 from :func:`blend_weights`; ``affine`` (G, 12, N) from
     :func:`guide_affines`; ``restore``: the FTL length pass; ``collide``: push nodes out of the
     ellipsoid ``axes`` (radii + margin) around ``center`` (head frame).  A strand that is guide
-    ``is_guide[s] >= 0`` is that guide's positions ``gx`` (G, N, 3), copied.  Neighbouring
-    strands should share guides (:class:`BlendTracker` orders them so), which keeps the guides'
-    maps in cache.  Returns the number of nodes pushed out."""
+    ``is_guide[s] >= 0`` is that guide's positions ``gx`` (G, N, 3), copied.  Returns the number
+    of nodes pushed out."""
     n_strands, n_nodes = x.shape[0], x.shape[1]
     n_k = guide.shape[1]
     contacts = 0
@@ -241,58 +241,65 @@ def blend_strands(x, rest, roots, rest_length, guide, weight, affine, rot, pos, 
         quad[i] = rot[a, 0] * rot[b, 0] * inv[0] + rot[a, 1] * rot[b, 1] * inv[1] + \
             rot[a, 2] * rot[b, 2] * inv[2]
     n_blocks = (n_strands + STRAND_BLOCK - 1) // STRAND_BLOCK
-    for b in prange(n_blocks):
-        s0 = b * STRAND_BLOCK
-        s1 = min(n_strands, s0 + STRAND_BLOCK)
-        for s in range(s0, s1):          # the blend: every node on its own
-            if is_guide[s] >= 0:
-                x[s] = gx[is_guide[s]]
-                continue
-            for j in range(2):           # roots ride with the head
-                r0, r1, r2 = roots[s, j, 0], roots[s, j, 1], roots[s, j, 2]
-                x[s, j, 0] = rot[0, 0] * r0 + rot[0, 1] * r1 + rot[0, 2] * r2 + pos[0]
-                x[s, j, 1] = rot[1, 0] * r0 + rot[1, 1] * r1 + rot[1, 2] * r2 + pos[1]
-                x[s, j, 2] = rot[2, 0] * r0 + rot[2, 1] * r1 + rot[2, 2] * r2 + pos[2]
-            for j in range(2, n_nodes):
-                r0, r1, r2 = float(rest[s, j, 0]), float(rest[s, j, 1]), float(rest[s, j, 2])
-                nx = ny = nz = 0.0
+    n_chunks = min(n_blocks, CHUNKS)
+    for c in prange(n_chunks):
+        acc = np.empty((3, n_nodes))            # one strand's blended nodes, [axis][node]
+        for b in range(c * n_blocks // n_chunks, (c + 1) * n_blocks // n_chunks):
+            s0 = b * STRAND_BLOCK
+            s1 = min(n_strands, s0 + STRAND_BLOCK)
+            for s in range(s0, s1):          # the blend: every node on its own
+                if is_guide[s] >= 0:
+                    x[s] = gx[is_guide[s]]
+                    continue
+                acc[:, :] = 0.0
+                r = rest[s]
                 for k in range(n_k):
                     w = float(weight[s, k])
-                    g = guide[s, k]
-                    nx += w * (affine[g, j, 0] * r0 + affine[g, j, 1] * r1
-                               + affine[g, j, 2] * r2 + affine[g, j, 9])
-                    ny += w * (affine[g, j, 3] * r0 + affine[g, j, 4] * r1
-                               + affine[g, j, 5] * r2 + affine[g, j, 10])
-                    nz += w * (affine[g, j, 6] * r0 + affine[g, j, 7] * r1
-                               + affine[g, j, 8] * r2 + affine[g, j, 11])
-                x[s, j, 0] = nx
-                x[s, j, 1] = ny
-                x[s, j, 2] = nz
-        if not (restore or collide):
-            continue
-        # lengths and contacts: node by node across the block's strands, so that the chains
-        # of the strands (each node placed from its predecessor) overlap in the CPU
-        for j in range(2, n_nodes):
-            for s in range(s0, s1):
-                if is_guide[s] >= 0:
-                    continue
-                px, py, pz = x[s, j - 1, 0], x[s, j - 1, 1], x[s, j - 1, 2]
-                nx, ny, nz = x[s, j, 0], x[s, j, 1], x[s, j, 2]
-                length = float(rest_length[s, j - 1])
-                if restore:
-                    dx, dy, dz = nx - px, ny - py, nz - pz
-                    d = math.sqrt(dx * dx + dy * dy + dz * dz)
-                    if d > 0.0:
-                        f = length / d
-                        nx, ny, nz = px + f * dx, py + f * dy, pz + f * dz
-                if collide and _inside(nx, ny, nz, cw, quad):
-                    contacts += 1
+                    a = affine[guide[s, k]]
+                    # contiguous in j; unsigned, so numba adds no negative-index wraparound
+                    # and LLVM vectorises the loop
+                    for j in range(np.uint64(2), np.uint64(n_nodes)):
+                        r0, r1, r2 = r[0, j], r[1, j], r[2, j]
+                        acc[0, j] += w * (a[0, j] * r0 + a[1, j] * r1 + a[2, j] * r2
+                                          + a[9, j])
+                        acc[1, j] += w * (a[3, j] * r0 + a[4, j] * r1 + a[5, j] * r2
+                                          + a[10, j])
+                        acc[2, j] += w * (a[6, j] * r0 + a[7, j] * r1 + a[8, j] * r2
+                                          + a[11, j])
+                for j in range(2):           # roots ride with the head
+                    r0, r1, r2 = roots[s, j, 0], roots[s, j, 1], roots[s, j, 2]
+                    x[s, j, 0] = rot[0, 0] * r0 + rot[0, 1] * r1 + rot[0, 2] * r2 + pos[0]
+                    x[s, j, 1] = rot[1, 0] * r0 + rot[1, 1] * r1 + rot[1, 2] * r2 + pos[1]
+                    x[s, j, 2] = rot[2, 0] * r0 + rot[2, 1] * r1 + rot[2, 2] * r2 + pos[2]
+                for j in range(2, n_nodes):
+                    x[s, j, 0] = acc[0, j]
+                    x[s, j, 1] = acc[1, j]
+                    x[s, j, 2] = acc[2, j]
+            if not (restore or collide):
+                continue
+            # lengths and contacts: node by node across the block's strands, so that the
+            # chains of the strands (each node placed from its predecessor) overlap in the CPU
+            for j in range(2, n_nodes):
+                for s in range(s0, s1):
+                    if is_guide[s] >= 0:
+                        continue
+                    px, py, pz = x[s, j - 1, 0], x[s, j - 1, 1], x[s, j - 1, 2]
+                    nx, ny, nz = x[s, j, 0], x[s, j, 1], x[s, j, 2]
+                    length = float(rest_length[s, j - 1])
                     if restore:
-                        nx, ny, nz = _slide(nx, ny, nz, px, py, pz, length, cw, quad)
-                    nx, ny, nz, pushed = _push_out(nx, ny, nz, cw, quad)
-                x[s, j, 0] = nx
-                x[s, j, 1] = ny
-                x[s, j, 2] = nz
+                        dx, dy, dz = nx - px, ny - py, nz - pz
+                        d = math.sqrt(dx * dx + dy * dy + dz * dz)
+                        if d > 0.0:
+                            f = length / d
+                            nx, ny, nz = px + f * dx, py + f * dy, pz + f * dz
+                    if collide and _inside(nx, ny, nz, cw, quad):
+                        contacts += 1
+                        if restore:
+                            nx, ny, nz = _slide(nx, ny, nz, px, py, pz, length, cw, quad)
+                        nx, ny, nz, pushed = _push_out(nx, ny, nz, cw, quad)
+                    x[s, j, 0] = nx
+                    x[s, j, 1] = ny
+                    x[s, j, 2] = nz
     return contacts
 
 
@@ -374,10 +381,7 @@ class BlendTracker:
     """Moves ``ghosts`` after ``guides`` once per output frame (see the module docstring).
 
     ``guides`` must be some of the ghost strands: ``guide_index[i]`` is the ghost strand that
-    guide ``i`` is (``ghosts.rest[guide_index] == guides.rest``).  The ghost StrandSet is
-    reordered once, at construction, by first guide (its arrays replaced by reordered copies):
-    ``permutation[i]`` is the index, before construction, of the strand now in row ``i``, and
-    :attr:`guide_index` names the guides' rows after it.  ``k`` guides are blended per
+    guide ``i`` is (``ghosts.rest[guide_index] == guides.rest``).  ``k`` guides are blended per
     ghost; ``collider``, when given and ``scene.tracking.collide`` is true, is the head collider
     (a :class:`~hair_tracking.guides.collision.Collider`).  The ghost state is ``ghosts.x``
     (world frame); ghosts carry no velocity of their own (``ghosts.v`` stays zero).
@@ -398,26 +402,14 @@ class BlendTracker:
         tr = scene.tracking
         self.restore = bool(tr.length_restore)
         self.guide_of, self.weight = blend_weights(ghosts.rest[:, 0], guides.rest[:, 0], k)
-        # the ghost StrandSet is reordered once, by first guide, so that neighbouring strands
-        # read the same guides' maps from cache: row i is the strand ``permutation[i]`` had
-        order = np.argsort(self.guide_of[:, 0], kind='stable')
-        self.permutation = np.arange(ghosts.count, dtype=np.int64)
-        if np.any(order != self.permutation):
-            _permute(ghosts, order)
-            self.permutation = order
-            self.guide_of = np.ascontiguousarray(self.guide_of[order])
-            self.weight = np.ascontiguousarray(self.weight[order])
-            row = np.empty_like(order)
-            row[order] = np.arange(order.size)
-            self.guide_index = row[self.guide_index]
         #: the guide each strand is, -1 for the others (those copy their guide)
         self.is_guide = np.full(ghosts.count, -1, dtype=np.int64)
         self.is_guide[self.guide_index] = np.arange(guides.count)
         self.seg, self.t = node_map(ghosts.rest.shape[1], guides.rest.shape[1])
-        self._rest32 = np.ascontiguousarray(ghosts.rest, dtype=np.float32)
+        self._rest32 = np.ascontiguousarray(ghosts.rest.transpose(0, 2, 1), dtype=np.float32)
         self._roots = np.ascontiguousarray(ghosts.rest[:, :2], dtype=np.float64)
         self._len32 = np.ascontiguousarray(ghosts.rest_length, dtype=np.float32)
-        self._affine = np.empty((guides.count, ghosts.rest.shape[1], 12))
+        self._affine = np.empty((guides.count, 12, ghosts.rest.shape[1]))
         self.collide = bool(tr.collide and collider is not None)
         if self.collide:
             # as the guide solver does: no more margin than the rest clearance of any free node
