@@ -29,6 +29,7 @@ Time handling
   (docs/stability.md), up to 1500 % stretch.  The split count depends only on the state, so runs
   stay deterministic; ``counters.extra['split_substeps']`` counts the extra substeps.
 """
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 import math
 import time
@@ -373,35 +374,52 @@ class HairSimulator:
         self._last_speed = 0.0
 
 
+@contextmanager
+def _unchanged():
+    yield
+
+
+def _threshold_for(stages):
+    """A node count ``T`` such that every ``(tiny_nodes, parallel)`` stage runs parallel in the
+    tiny copy exactly when its full-size stage does (``tiny_nodes >= T``), or None."""
+    for t in sorted({0, 1 << 62} | {n for n, _ in stages} | {n + 1 for n, _ in stages}):
+        if all((n >= t) == par for n, par in stages):
+            return t
+    return None
+
+
 def warm_up(scene: Scene) -> HairSimulator:
     """Compile (or load from numba's on-disk cache) every kernel ``scene`` uses.
 
     Runs a tiny copy of the scene (same solver, collider, tracking and output options, at most
-    two guides with two ghosts each) through a moving, turning head, a frame in both frames and
-    the stretch and penetration checks, so the first real steps are not late: through the
-    serial kernels the tiny copy uses, and through the parallel ones too when the full scene is
-    large enough to run them (:func:`~hair_tracking.guides.integrate.runs_parallel`).  Returns the
+    two guides with two ghosts each) through a moving, turning head and the stretch and
+    penetration checks, so the first real steps are not late: every stage through the variant,
+    serial or parallel, that the full scene will run
+    (:func:`~hair_tracking.guides.integrate.runs_parallel`), and only that one.  Returns the
     tiny simulator (callers may warm their own output code on its frames).
     """
     g = scene.groom
     small = scene.with_changes(groom__guides=min(g.guides, 2),
                                groom__ghosts_per_guide=min(g.ghosts_per_guide, 2),
                                solver__settle_time=0.0)
+    guide_len = g.ghost_nodes if scene.tracking.mode == 'blend' else g.guide_nodes
+    stages = [(small.groom.guides * guide_len, runs_parallel(g.guides * guide_len))]
+    if g.ghosts_per_guide > 0:
+        stages.append((small.groom.guides * small.groom.ghosts_per_guide * g.ghost_nodes,
+                       runs_parallel(g.guides * g.ghosts_per_guide * g.ghost_nodes)))
+    threshold = _threshold_for(stages)
     sim = HairSimulator(small)
     dt_ns = max(1, int(round(small.solver.dt * 1e9)))
-    sim.push_pose(1, [0.0, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0])
-    sim.push_pose(1 + 4 * dt_ns, [0.01, 0.0, 0.0], [0.0, 0.0, 0.0871557, 0.9961947])
-    sim.advance_to(1 + 4 * dt_ns)
-    sim.max_stretch()
-    sim.penetration()
-    guide_nodes = g.guides * g.guide_nodes
-    ghost_nodes = g.guides * g.ghosts_per_guide * g.ghost_nodes
-    if runs_parallel(guide_nodes) or runs_parallel(ghost_nodes):
-        # the full scene runs parallel kernels (the tiny copy ran their serial twins); each
-        # stage decides on its own node count, as GuideSolver and GhostTracker do
-        with parallel_from(0):
-            sim.push_pose(1 + 8 * dt_ns, [0.0, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0])
-            sim.advance_to(1 + 8 * dt_ns)
+    passes = [threshold] if threshold is not None else [None, 0]
+    for k, t in enumerate(passes):
+        # each stage decides serial or parallel on its own node count, as GuideSolver and
+        # GhostTracker do: the threshold puts every stage of the tiny copy on the side its
+        # full-size stage is on, so exactly the variants the scene will run are compiled
+        with parallel_from(t) if t is not None else _unchanged():
+            t0 = 1 + 8 * k * dt_ns
+            sim.push_pose(t0, [0.0, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0])
+            sim.push_pose(t0 + 4 * dt_ns, [0.01, 0.0, 0.0], [0.0, 0.0, 0.0871557, 0.9961947])
+            sim.advance_to(t0 + 4 * dt_ns)
             sim.max_stretch()
             sim.penetration()
     return sim

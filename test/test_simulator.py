@@ -172,11 +172,13 @@ def test_update_scene_rebuilds_only_for_groom_changes():
     assert np.all(np.isfinite(sim.frame().ghosts))
 
 
-@pytest.mark.parametrize('guides, per_guide, parallel', [(64, 2, False), (128, 78, True)])
-def test_warm_up_loads_the_kernels_the_full_scene_runs(monkeypatch, guides, per_guide, parallel):
-    """A small groom runs the serial twins, a large one (>= PARALLEL_MIN_NODES nodes) the
-    parallel kernels: warm-up (a tiny copy of the scene) goes through the ones the full scene
-    will call, so none is compiled or loaded from disk on the first real frame."""
+@pytest.mark.parametrize('guides, per_guide', [(64, 2), (128, 78), (512, 2)])
+def test_warm_up_loads_exactly_the_kernel_variants_the_full_scene_runs(
+        monkeypatch, guides, per_guide):
+    """Each stage runs its serial twin below PARALLEL_MIN_NODES nodes and the parallel kernel
+    above: warm-up (a tiny copy of the scene) goes through the variant each full-size stage
+    will call, so none is compiled or loaded from disk on the first real frame, and through no
+    other (compiling a variant nobody calls only makes the start slower)."""
     from hair_tracking import simulator
     from hair_tracking.guides import ftl
     from hair_tracking.guides import integrate
@@ -192,13 +194,22 @@ def test_warm_up_loads_the_kernels_the_full_scene_runs(monkeypatch, guides, per_
                 calls.add(name)
                 return real(*a)
             monkeypatch.setattr(module, name, spy)
-    scene = Scene().with_changes(groom__guides=guides, groom__ghosts_per_guide=per_guide)
-    nodes = guides * 16 * (1 + per_guide)
-    assert integrate.runs_parallel(nodes) == parallel
+    scene = Scene().with_changes(groom__guides=guides, groom__ghosts_per_guide=per_guide,
+                                 tracking__mode='paper')
+    guides_parallel = integrate.runs_parallel(guides * 16)
+    ghosts_parallel = integrate.runs_parallel(guides * per_guide * 16)
     simulator.warm_up(scene)
-    assert {'ftl_step_serial', 'track_groups_serial'} <= calls
-    assert ({'ftl_step', 'track_groups'} <= calls) == parallel
+    assert calls == {'ftl_step' if guides_parallel else 'ftl_step_serial',
+                     'track_groups' if ghosts_parallel else 'track_groups_serial'}
     assert integrate.PARALLEL_MIN_NODES == threshold        # restored after warm-up
+
+
+def test_warm_up_threshold_puts_every_tiny_stage_on_its_full_size_side():
+    from hair_tracking.simulator import _threshold_for
+    assert _threshold_for([(32, False), (64, True)]) == 33
+    assert _threshold_for([(32, True), (64, True)]) == 0
+    assert _threshold_for([(32, False), (64, False)]) > 64
+    assert _threshold_for([(32, True), (64, False)]) is None     # then two passes are made
 
 
 def test_max_step_sq_is_the_largest_squared_displacement():
