@@ -68,10 +68,10 @@ stability: install
 	$(PY) -m hair_tracking.evaluation.cli stability
 
 # Error against run time of every method (installs the peer pypbd); writes docs/results and
-# docs/figures
+# docs/figures.  VR_TRACE=path/to/vr360_user1_quaternion.txt adds the headset trace.
 eval: install
 	$(PY) -m pip install -q pypbd
-	$(PY) -m hair_tracking.evaluation.cli accuracy
+	$(PY) -m hair_tracking.evaluation.cli accuracy $(if $(VR_TRACE),--vr $(VR_TRACE))
 
 clean:
 	rm -rf $(VENV) out build *.egg-info hair_tracking/__pycache__/numba-*

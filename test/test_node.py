@@ -582,6 +582,18 @@ def test_load_shedding_stays_off_when_the_scene_already_tracks_once_per_pose(har
     assert 'load shedding' not in h.node.diagnostics().message
 
 
+def test_load_shedding_stays_off_with_the_blend_tracker(harness):
+    """The blend tracker runs once per pose already: however slow the steps, nothing is shed."""
+    h = harness(work_clock=TickClock(2e-3), **{'groom.guides': 4, 'groom.ghosts_per_guide': 2,
+                                               'tracking.mode': 'blend',
+                                               'load_shedding_budget': 0.05})
+    pub = h.pose_publisher()
+    for k, t in enumerate(grid_times(h, 8, step_substeps=1)):
+        h.send(pub, pose_stamped_msg(t, [0.001 * k, 0.0, 0.0], yaw_quat(0.0), 'world'))
+    assert not h.node.sim.track_once_per_call and h.node.shedder.switches == 0
+    assert h.node.sim.ghost_tracker.stats['steps'] > 0
+
+
 def test_diagnostics_are_published_with_the_step_numbers(harness):
     h = harness(diagnostics_rate_hz=20.0)
     got = []

@@ -1,12 +1,14 @@
 """``hair_sim_eval``: the evaluation of the package, from the command line.
 
     hair_sim_eval accuracy [--quick] [--out docs/results] [--figures docs/figures]
+    hair_sim_eval dominance [--ghosts 4096 16384] [--motion FILE ...]
     hair_sim_eval stability [--quick] [--out docs/results] [--only NAME ...]
 
 ``accuracy`` measures error against run time of every method
 (:mod:`hair_tracking.evaluation.accuracy`) on the bundled walk recording, a VR head-mounted-display
-trace (if the shared data are present) and a
-synthetic head shake, and writes ``accuracy.csv``, ``accuracy.md`` and PNG plots.
+trace (with ``--vr PATH``), a synthetic head shake and any recording given with ``--motion``,
+and writes ``accuracy.csv``, ``accuracy.md`` and PNG plots.  ``dominance`` scores ghost
+settings against simulating every strand (:mod:`hair_tracking.evaluation.dominance`).
 ``stability`` runs the matrix of stiff and extreme cases
 (:mod:`hair_tracking.evaluation.stability`) and writes ``stability.csv`` and ``stability.md``; it
 exits with status 1 if a case fails.
@@ -23,8 +25,9 @@ import shlex
 import sys
 import time
 
-DEFAULT_VR = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), '..',
-                          'shared', 'data', 'head_motion', 'vr360_user1_quaternion.txt')
+#: The VR360 headset trace is not bundled (its licence asks for attribution we keep with the
+#: data): pass ``--vr PATH`` to include it.
+DEFAULT_VR = ''
 
 #: Head-centre offset from the neck pivot in the head frame [m] used for the VR trace, which
 #: records orientation only (a head turns about the neck, so its centre moves).
@@ -70,7 +73,7 @@ def trajectories(quick: bool, vr_path: str, log=print):
         out.append(Trajectory('vr', vr, f'VR360 user 1 HMD trace, busiest 10 s (from '
                                         f'{start:g} s), 59 Hz, head 10 cm above the neck pivot'))
     else:
-        log(f'VR trace not found at {vr_path}: skipped (pass --vr PATH)')
+        log(f'VR trace not given or not found ({vr_path or "no --vr"}): skipped')
     out.append(Trajectory('shake', sm.named('shake10', 3.0),
                           'synthetic head shake, 10 rad/s peak at 2 Hz, then 0.5 s still'))
     return out
