@@ -631,10 +631,9 @@ def _run_node(args, domain_id, options=()):
                             stderr=subprocess.STDOUT, text=True)
 
 
-def test_executable_reads_the_params_file_and_overrides_and_exits_cleanly_on_ctrl_c():
-    proc = _run_node(['--params-file', os.path.join(ROOT, 'config', 'hair_sim.yaml'),
-                      '-p', 'groom.guides:=3', '-p', 'groom.ghosts_per_guide:=2',
-                      '-p', 'solver.settle_time:=0.0', '-p', 'damping:=2'], 34)
+def _until_ready_then_ctrl_c(proc) -> str:
+    """Read the node's output until it says ready (at most 120 s), send Ctrl-C, wait for it to
+    exit; returns everything it printed."""
     lines = []
     try:
         deadline = time.monotonic() + 120
@@ -645,14 +644,21 @@ def test_executable_reads_the_params_file_and_overrides_and_exits_cleanly_on_ctr
             lines.append(line)
             if 'ready:' in line:
                 break
-        assert any('ready: 3 guides' in ln and '6 ghosts' in ln for ln in lines), ''.join(lines)
         proc.send_signal(signal.SIGINT)
         out, _ = proc.communicate(timeout=30)
     finally:
         if proc.poll() is None:
             proc.kill()
             proc.communicate()
-    text = ''.join(lines) + out
+    return ''.join(lines) + out
+
+
+def test_executable_reads_the_params_file_and_overrides_and_exits_cleanly_on_ctrl_c():
+    proc = _run_node(['--params-file', os.path.join(ROOT, 'config', 'hair_sim.yaml'),
+                      '-p', 'groom.guides:=3', '-p', 'groom.ghosts_per_guide:=2',
+                      '-p', 'solver.settle_time:=0.0', '-p', 'damping:=2'], 34)
+    text = _until_ready_then_ctrl_c(proc)
+    assert any('ready: 3 guides' in ln and '6 ghosts' in ln for ln in text.splitlines()), text
     assert proc.returncode == 0, text
     assert 'Traceback' not in text
     # --omp-wait-policy (default passive) is applied before numba starts its threads
@@ -667,23 +673,7 @@ def test_executable_takes_its_process_settings_from_its_own_options():
                       '-p', 'solver.settle_time:=0.0'], 56,
                      options=['--omp-wait-policy', 'active', '--malloc-retain-mb', '0',
                               '--no-gc-freeze'])
-    lines = []
-    try:
-        deadline = time.monotonic() + 120
-        while time.monotonic() < deadline:
-            line = proc.stdout.readline()
-            if not line:
-                break
-            lines.append(line)
-            if 'ready:' in line:
-                break
-        proc.send_signal(signal.SIGINT)
-        out, _ = proc.communicate(timeout=30)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.communicate()
-    text = ''.join(lines) + out
+    text = _until_ready_then_ctrl_c(proc)
     assert proc.returncode == 0, text
     assert 'malloc retention 0: glibc malloc defaults kept' in text, text
     assert (f'OMP_WAIT_POLICY={env_policy} from the environment kept' if env_policy else
