@@ -415,3 +415,51 @@ def test_head_motion_validates():
     assert np.array_equal(m.quaternion[1], [0, 0, 0, 1.0])
     with pytest.raises(hm.HeadMotionError, match='integer'):
         hm.HeadMotion(np.array([0.0, 5.0]), np.zeros((2, 3)), np.tile([0, 0, 0, 1.0], (2, 1)))
+
+
+def test_pose_table_columns_are_recognised_by_their_names(tmp_path):
+    text = ('timestamp,x,y,z,quat_w,quat_x,quat_y,quat_z\n'
+            '10.0,0.1,0.2,1.6,1,0,0,0\n10.5,0.1,0.2,1.7,1,0,0,0\n')
+    path = _write(tmp_path / 'tracker.csv', text)
+    assert hm.recognise_columns(str(path)) == (
+        'timestamp', ('quat_x', 'quat_y', 'quat_z', 'quat_w'), ('x', 'y', 'z'))
+    hmd = _write(tmp_path / 'hmd.txt', 'time w x y z\n0 1 0 0 0\n')
+    assert hm.recognise_columns(str(hmd)) == ('time', ('x', 'y', 'z', 'w'), None)
+    with pytest.raises(hm.HeadMotionError, match=r"no time and no quaternion columns recognised "
+                                                 r"among \['a', 'b'\]"):
+        hm.recognise_columns(str(_write(tmp_path / 'bad.csv', 'a,b\n1,2\n')))
+
+
+def test_headset_ticks_since_year_one_import_with_a_time_scale(tmp_path):
+    """A trace stamped in 100 ns ticks since 0001-01-01 (about 6.4e17 ticks, 6.4e19 ns: more
+    than int64 ns hold): the first stamp is subtracted exactly before scaling, so the durations
+    are right, and the times are relative to the first row."""
+    t0 = 638_680_000_000_000_000
+    rows = [f'{t0 + k * 111_111},0,0,1.6,0,0,0,1' for k in range(10)]   # 90 Hz
+    path = _write(tmp_path / 'ticks.csv', 't,px,py,pz,qx,qy,qz,qw\n' + '\n'.join(rows) + '\n')
+    m = hm.read_pose_table(str(path), time_column='t', time_scale='1e-7')
+    assert m.t_ns[0] == 0 and m.t_ns[1] == 11_111_100 and m.t_ns[-1] == 9 * 11_111_100
+    assert 'relative to the first row' in m.source
+    # the same ticks read as microseconds still fit relative to the first row, and absurd
+    # spans are refused with a message instead of an overflow
+    us = hm.read_pose_table(str(path), time_column='t', time_unit='us')
+    assert us.t_ns[1] - us.t_ns[0] == 111_111_000
+    far = _write(tmp_path / 'far.csv', 't,px,py,pz,qx,qy,qz,qw\n0,0,0,1,0,0,0,1\n'
+                 '1e30,0,0,1,0,0,0,1\n')
+    with pytest.raises(hm.HeadMotionError, match='more than a ROS time can hold'):
+        hm.read_pose_table(str(far), time_column='t')
+    with pytest.raises(hm.HeadMotionError, match='time_scale must be a positive number'):
+        hm.read_pose_table(str(path), time_column='t', time_scale='-1')
+
+
+def test_import_takes_a_table_named_its_own_way(tmp_path, capsys):
+    from hair_tracking.bags.cli import main
+    t0 = 638_680_000_000_000_000
+    rows = [f'{t0 + k * 111_111} 0 0 1.6 0 0 0 1' for k in range(91)]
+    path = _write(tmp_path / 'ticks.txt', 'timestamp x y z qx qy qz qw\n' + '\n'.join(rows))
+    assert main(['import', str(path), '-o', str(tmp_path / 'o.mcap'), '--time-scale', '1e-7']) == 0
+    out = capsys.readouterr().out
+    assert "time 'timestamp' [1e-7 s ticks]" in out and 'position x,y,z' in out
+    assert '1.000 s' in out                    # 90 intervals of 11.11 ms
+    assert main(['import', str(path), '-o', str(tmp_path / 'p.mcap'), '--time-unit', 'us']) == 0
+    assert 'Traceback' not in capsys.readouterr().err

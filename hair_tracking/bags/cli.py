@@ -138,16 +138,30 @@ def load_recording(args):
                                              head_axes=axes, origin=args.origin)
             note = f'BVH joint {args.joint!r}, units {words}, head axes {args.axes}'
         else:
-            pos_cols = (None if args.position_columns.strip().lower() == 'none'
-                        else _names(args.position_columns, 3, '--position-columns'))
+            time_col, quat_cols, pos_cols = args.time_column, None, None
+            quat_order = args.quat_order
+            if args.quat_columns:
+                quat_cols = _names(args.quat_columns, 4, '--quat-columns')
+            if args.position_columns and args.position_columns.strip().lower() != 'none':
+                pos_cols = _names(args.position_columns, 3, '--position-columns')
+            if time_col is None or quat_cols is None or args.position_columns is None:
+                found = hm.recognise_columns(path, args.delimiter)     # by their names
+                time_col = time_col or found[0]
+                if quat_cols is None:
+                    quat_cols, quat_order = found[1], 'xyzw'
+                if args.position_columns is None:
+                    pos_cols = found[2]
             motion = hm.read_pose_table(
-                path, time_column=args.time_column, time_unit=args.time_unit,
-                quat_columns=_names(args.quat_columns, 4, '--quat-columns'),
-                quat_order=args.quat_order, position_columns=pos_cols,
+                path, time_column=time_col, time_unit=args.time_unit,
+                quat_columns=quat_cols, quat_order=quat_order, position_columns=pos_cols,
                 neck_offset=_floats(args.neck_offset, 3, '--neck-offset'),
-                pivot=_floats(args.pivot, 3, '--pivot'), delimiter=args.delimiter)
-            note = (f'pose table, time {args.time_column!r} [{args.time_unit}], quaternion '
-                    f'{args.quat_order}' + (', orientation only' if pos_cols is None else ''))
+                pivot=_floats(args.pivot, 3, '--pivot'), delimiter=args.delimiter,
+                time_scale=args.time_scale)
+            unit = f'{args.time_scale} s ticks' if args.time_scale else args.time_unit
+            note = (f'pose table, time {time_col!r} [{unit}], quaternion '
+                    f'{",".join(quat_cols)} ({quat_order})'
+                    + (', orientation only' if pos_cols is None else
+                       f', position {",".join(pos_cols)}'))
     except hm.HeadMotionError as exc:
         raise BagError(str(exc), EXIT_INPUT) from None
     except OSError as exc:
@@ -299,13 +313,20 @@ def build_parser() -> argparse.ArgumentParser:
                    help='head axes in the joint frame: the CMU skeleton convention (default) or '
                         'inferred from the walking direction')
     g = p.add_argument_group('pose table')
-    g.add_argument('--time-column', default='t_s', help='time column (default t_s)')
+    g.add_argument('--time-column', default=None,
+                   help='time column (default: recognised by name: t_s, t, time, timestamp, '
+                        'stamp, ...)')
     g.add_argument('--time-unit', choices=('s', 'ms', 'us', 'ns'), default='s')
-    g.add_argument('--quat-columns', default='qx,qy,qz,qw',
-                   help='the four quaternion columns, in --quat-order (default qx,qy,qz,qw)')
+    g.add_argument('--time-scale', default=None, metavar='SECONDS',
+                   help='seconds per tick of the time column instead of --time-unit, e.g. 1e-7 '
+                        'for 100 ns ticks; any epoch (the first stamp is subtracted exactly)')
+    g.add_argument('--quat-columns', default=None,
+                   help='the four quaternion columns, in --quat-order (default: recognised by '
+                        'name: qx qy qz qw, quat_x ..., rot_x ..., orientation_x ..., or w x y z)')
     g.add_argument('--quat-order', choices=('xyzw', 'wxyz'), default='xyzw')
-    g.add_argument('--position-columns', default='px,py,pz',
-                   help="three position columns [m], or 'none' for orientation only")
+    g.add_argument('--position-columns', default=None,
+                   help="three position columns [m], or 'none' for orientation only (default: "
+                        'recognised by name: px py pz, x y z, pos_x ..., or none found)')
     g.add_argument('--neck-offset', default='0,0,0',
                    help='orientation only: head origin from the neck pivot, head frame [m]')
     g.add_argument('--pivot', default='0,0,0', help='orientation only: neck pivot, world [m]')

@@ -627,23 +627,61 @@ def load_bvh_head_motion(path: str, joint: str = 'Head', scale: float = CMU_SCAL
 
 
 # ================================================================ pose tables
-def _parse_time_ns(text: str, unit: str):
-    """Exact decimal text -> int ns (no float rounding), None for NaN/Inf; raises
-    decimal.InvalidOperation for text that is not a number."""
-    d = decimal.Decimal(text)
-    if not d.is_finite():
-        return None
-    return int((d * _TIME_FACTOR_NS[unit]).to_integral_value(rounding=decimal.ROUND_HALF_EVEN))
+#: Column names pose tables of trackers and headsets use (lower case), tried in this order when
+#: a table does not name its columns as asked: time, position (x y z), quaternion (x y z w).
+TIME_NAMES = ('t_s', 't', 'time', 'timestamp', 'stamp', 'time_s', 'seconds', 'sec', 'ts')
+POSITION_NAMES = (('px', 'py', 'pz'), ('x', 'y', 'z'), ('pos_x', 'pos_y', 'pos_z'),
+                  ('position_x', 'position_y', 'position_z'), ('tx', 'ty', 'tz'),
+                  ('pos.x', 'pos.y', 'pos.z'), ('position.x', 'position.y', 'position.z'))
+QUATERNION_NAMES = (('qx', 'qy', 'qz', 'qw'), ('quat_x', 'quat_y', 'quat_z', 'quat_w'),
+                    ('rot_x', 'rot_y', 'rot_z', 'rot_w'),
+                    ('orientation_x', 'orientation_y', 'orientation_z', 'orientation_w'),
+                    ('ox', 'oy', 'oz', 'ow'), ('q.x', 'q.y', 'q.z', 'q.w'),
+                    ('orientation.x', 'orientation.y', 'orientation.z', 'orientation.w'))
+#: The largest stamp a ROS time can hold [ns].
+MAX_STAMP_NS = 2 ** 63 - 1
+
+
+def recognise_columns(path: str, delimiter=None):
+    """The columns of a pose table by their names, without flags: ``(time, quaternion (x, y, z,
+    w) names, position names or None)``, matched case-insensitively against
+    :data:`TIME_NAMES`, :data:`QUATERNION_NAMES` and :data:`POSITION_NAMES` (the table's own
+    spelling is returned).  Raises HeadMotionError naming the columns it found when a time or
+    quaternion column is missing."""
+    if not os.path.isfile(path):
+        raise HeadMotionError(f'pose table not found: {path}')
+    with open(path, 'r', encoding='utf-8', errors='replace') as fh:
+        header = next((ln for ln in fh if ln.strip() and not ln.lstrip().startswith('#')), '')
+    delim = delimiter if delimiter is not None else (',' if ',' in header else None)
+    names = [n.strip() for n in (header.split(delim) if delim else header.split())]
+    lower = {n.lower(): n for n in names}
+    time = next((lower[t] for t in TIME_NAMES if t in lower), None)
+    quat = next((tuple(lower[c] for c in cs) for cs in QUATERNION_NAMES
+                 if all(c in lower for c in cs)), None)
+    if quat is None and all(c in lower for c in ('w', 'x', 'y', 'z')) and \
+            not any(all(c in lower for c in cs) for cs in POSITION_NAMES if cs != ('x', 'y', 'z')):
+        quat = tuple(lower[c] for c in ('x', 'y', 'z', 'w'))   # an orientation-only w x y z
+    pos = next((tuple(lower[c] for c in cs) for cs in POSITION_NAMES
+                if all(c in lower for c in cs) and not (quat and set(cs) & set(quat))), None)
+    if time is None or quat is None:
+        missing = ' and no '.join(w for w, v in (('time', time), ('quaternion', quat))
+                                  if v is None)
+        raise HeadMotionError(f'{path}: no {missing} columns recognised among {names} (name '
+                              'them with --time-column / --quat-columns)')
+    return time, quat, pos
 
 
 def read_pose_table(path: str, time_column: str = 't_s', time_unit: str = 's',
                     quat_columns=('qx', 'qy', 'qz', 'qw'), quat_order: str = 'xyzw',
                     position_columns=('px', 'py', 'pz'), neck_offset=None, pivot=None,
-                    delimiter=None, source: str = '') -> HeadMotion:
+                    delimiter=None, source: str = '', time_scale=None) -> HeadMotion:
     """Read a pose table: CSV or whitespace-separated text whose first non-comment line names
     the columns.  Blank lines and lines starting with ``#`` are skipped.
 
-    ``time_column`` in ``time_unit`` ('s', 'ms', 'us', 'ns'; parsed exactly, no float rounding);
+    ``time_column`` in ``time_unit`` ('s', 'ms', 'us', 'ns'), or in ticks of ``time_scale``
+    seconds (e.g. ``'1e-7'`` for 100 ns ticks; a string is taken exactly), any epoch: times are
+    parsed exactly (no float rounding) and the first row's stamp is subtracted before scaling;
+    the times are absolute when the first stamp fits a ROS time (int64 ns), else relative to it;
     ``quat_columns`` four column names holding the quaternion components in ``quat_order``
     ('xyzw' or 'wxyz'); ``position_columns`` three column names [m], or None for an
     orientation-only table: then the head origin is ``pivot + R @ neck_offset`` (a head turning
@@ -659,6 +697,17 @@ def read_pose_table(path: str, time_column: str = 't_s', time_unit: str = 's',
     if time_unit not in _TIME_FACTOR_NS:
         raise HeadMotionError(f'time_unit must be one of {sorted(_TIME_FACTOR_NS)}, '
                               f'got {time_unit!r}')
+    if time_scale is not None:
+        try:
+            scale = decimal.Decimal(str(time_scale))
+        except decimal.InvalidOperation:
+            scale = None
+        if scale is None or not scale.is_finite() or scale <= 0:
+            raise HeadMotionError(f'time_scale must be a positive number of seconds per tick, '
+                                  f'got {time_scale!r}')
+        ns_per_tick = scale * 10 ** 9
+    else:
+        ns_per_tick = decimal.Decimal(_TIME_FACTOR_NS[time_unit])
     if quat_order not in ('xyzw', 'wxyz'):
         raise HeadMotionError(f"quat_order must be 'xyzw' or 'wxyz', got {quat_order!r}")
     if len(quat_columns) != 4:
@@ -723,15 +772,28 @@ def read_pose_table(path: str, time_column: str = 't_s', time_unit: str = 's',
     t_ns = np.zeros(len(rows), dtype=np.int64)
     t_ok = np.ones(len(rows), dtype=bool)
     tc = col[time_column]
+    stamps = []
     for i, (r, ln_no) in enumerate(zip(rows, row_lines)):
         try:
-            v = _parse_time_ns(r[tc], time_unit)
+            d = decimal.Decimal(r[tc])
         except decimal.InvalidOperation:
             raise HeadMotionError(f'{path}:{ln_no}: time {r[tc]!r} is not a number') from None
-        if v is None:
-            t_ok[i] = False
-        else:
-            t_ns[i] = v
+        stamps.append(d if d.is_finite() else None)
+        t_ok[i] = d.is_finite()
+    first = next((d for d in stamps if d is not None), decimal.Decimal(0))
+    origin = int((first * ns_per_tick).to_integral_value(rounding=decimal.ROUND_HALF_EVEN))
+    absolute = 0 <= origin <= MAX_STAMP_NS // 2
+    for i, d in enumerate(stamps):
+        if d is None:
+            continue
+        rel = int(((d - first) * ns_per_tick).to_integral_value(
+            rounding=decimal.ROUND_HALF_EVEN))
+        v = rel + (origin if absolute else 0)
+        if not -MAX_STAMP_NS <= v <= MAX_STAMP_NS:
+            raise HeadMotionError(f'{path}:{row_lines[i]}: time {d} is {rel / 1e9:.3g} s from '
+                                  'the first row: more than a ROS time can hold (a wrong '
+                                  '--time-unit / --time-scale?)')
+        t_ns[i] = v
 
     q = vals[:, :4] if quat_order == 'xyzw' else vals[:, [1, 2, 3, 0]]
     norm = np.linalg.norm(q, axis=1)
@@ -760,7 +822,9 @@ def read_pose_table(path: str, time_column: str = 't_s', time_unit: str = 's',
         off = np.zeros(3) if neck_offset is None else np.asarray(neck_offset, float).reshape(3)
         piv = np.zeros(3) if pivot is None else np.asarray(pivot, float).reshape(3)
         pos = piv + quat_to_matrix(qk) @ off
-    desc = source or f'{path} (pose table, time {time_column!r} [{time_unit}])'
+    unit = f'{time_scale} s ticks' if time_scale is not None else time_unit
+    desc = source or (f'{path} (pose table, time {time_column!r} [{unit}]'
+                      + ('' if absolute else ', relative to the first row') + ')')
     return HeadMotion(t_ns[keep], pos, qk, source=desc, dropped=dropped)
 
 
