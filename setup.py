@@ -35,6 +35,7 @@ setup(
             'hair_sim_eval = hair_tracking.evaluation.cli:main',
             'hair_sim_demo = hair_tracking.evaluation.demo:main',
             'hair_sim_warmup = hair_tracking.ros.warmup:main',
+            'hair_sim_ctl = hair_tracking.ros.ctl:main',
         ],
     },
 )

@@ -1,0 +1,138 @@
+"""``hair_sim_ctl``: the ``ros2 param`` and ``ros2 service call ~/reset`` habits without ros2cli.
+
+    hair_sim_ctl param list /hair_sim
+    hair_sim_ctl param get /hair_sim solver.type
+    hair_sim_ctl param set /hair_sim gravity "[0.0, 0.0, -3.0]"
+    hair_sim_ctl param dump /hair_sim > my_hair.yaml
+    hair_sim_ctl reset /hair_sim
+
+It talks to a running node through rclpy's own parameter client
+(:class:`rclpy.parameter_client.AsyncParameterClient`, what ``ros2 param`` uses) and the node's
+``~/reset`` service.  Values are parsed as YAML, as ``ros2 param set`` does: ``-3`` is an
+integer, ``-3.0`` a double (hair_sim takes an integer for a double parameter; other nodes may
+refuse it, so write the decimal point).
+Exit codes: 0 done, 1 the node refused or did not answer, 2 bad command line.
+"""
+import argparse
+import sys
+from typing import List, Optional
+
+import yaml
+
+TIMEOUT_S = 10.0
+
+
+def _spin_until(node, future, timeout_s: float):
+    import rclpy
+    rclpy.spin_until_future_complete(node, future, timeout_sec=timeout_s)
+    if not future.done():
+        raise TimeoutError(f'no answer within {timeout_s:g} s')
+    return future.result()
+
+
+def _value(p):
+    """The Python value of an rcl_interfaces ParameterValue."""
+    from rclpy.parameter import parameter_value_to_python
+    return parameter_value_to_python(p)
+
+
+def run(args, node) -> int:
+    from rcl_interfaces.msg import ParameterType
+    from rclpy.parameter import Parameter
+    from rclpy.parameter_client import AsyncParameterClient
+    target = args.node
+    if args.cmd == 'reset':
+        from std_srvs.srv import Trigger
+        cli = node.create_client(Trigger, f'{target.rstrip("/")}/reset')
+        if not cli.wait_for_service(timeout_sec=args.timeout):
+            print(f'hair_sim_ctl: {target}/reset is not available', file=sys.stderr)
+            return 1
+        res = _spin_until(node, cli.call_async(Trigger.Request()), args.timeout)
+        print(res.message or ('reset' if res.success else 'refused'))
+        return 0 if res.success else 1
+    client = AsyncParameterClient(node, target)
+    if not client.wait_for_services(timeout_sec=args.timeout):
+        print(f'hair_sim_ctl: node {target} has no parameter services (is it running?)',
+              file=sys.stderr)
+        return 1
+    if args.action == 'list':
+        res = _spin_until(node, client.list_parameters(), args.timeout)
+        for name in sorted(res.result.names):
+            print(name)
+        return 0
+    if args.action in ('get', 'dump'):
+        if args.action == 'get':
+            names = [args.name]
+        else:
+            names = sorted(_spin_until(node, client.list_parameters(), args.timeout).result.names)
+        res = _spin_until(node, client.get_parameters(names), args.timeout)
+        got = list(res.values)
+        values = {}
+        for i, name in enumerate(names):
+            if i >= len(got) or got[i].type == ParameterType.PARAMETER_NOT_SET:
+                print(f'hair_sim_ctl: parameter {name} is not set', file=sys.stderr)
+                return 1
+            values[name] = _value(got[i])
+        if args.action == 'get':
+            print(yaml.safe_dump(values[args.name], default_flow_style=True).strip()
+                  .removesuffix('...').strip())
+        else:
+            key = target if target.startswith('/') else '/' + target
+            print(yaml.safe_dump({key: {'ros__parameters': values}}, sort_keys=False), end='')
+        return 0
+    # set
+    try:
+        value = yaml.safe_load(args.value)
+    except yaml.YAMLError as e:
+        print(f'hair_sim_ctl: value {args.value!r} is not YAML: {e}', file=sys.stderr)
+        return 2
+    if isinstance(value, list) and all(isinstance(v, (int, float)) for v in value) and \
+            any(isinstance(v, float) for v in value):
+        value = [float(v) for v in value]
+    res = _spin_until(node, client.set_parameters([Parameter(args.name, value=value)]),
+                      args.timeout)
+    result = res.results[0]
+    if not result.successful:
+        print(f'hair_sim_ctl: setting {args.name} failed: {result.reason}', file=sys.stderr)
+        return 1
+    print(f'set {args.name} = {value!r}')
+    return 0
+
+
+def main(argv: Optional[List[str]] = None) -> int:
+    ap = argparse.ArgumentParser(prog='hair_sim_ctl', description=__doc__.split('\n')[0])
+    ap.add_argument('--timeout', type=float, default=TIMEOUT_S,
+                    help=f'seconds to wait for the node (default {TIMEOUT_S:g})')
+    sub = ap.add_subparsers(dest='cmd', required=True)
+    p = sub.add_parser('param', help='list / get / set / dump parameters of a running node')
+    psub = p.add_subparsers(dest='action', required=True)
+    for action in ('list', 'dump'):
+        a = psub.add_parser(action)
+        a.add_argument('node', help='node name, e.g. /hair_sim')
+    a = psub.add_parser('get')
+    a.add_argument('node')
+    a.add_argument('name')
+    a = psub.add_parser('set', help='value as YAML: -3 is an integer, -3.0 a double')
+    a.add_argument('node')
+    a.add_argument('name')
+    a.add_argument('value')
+    r = sub.add_parser('reset', help="call the node's ~/reset service")
+    r.add_argument('node')
+    args = ap.parse_args(argv)
+    import rclpy
+    rclpy.init()
+    node = rclpy.create_node('hair_sim_ctl')
+    try:
+        return run(args, node)
+    except TimeoutError as e:
+        print(f'hair_sim_ctl: {e}', file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        return 130
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown()
+
+
+if __name__ == '__main__':
+    sys.exit(main())
