@@ -72,7 +72,7 @@ def test_kernels_match_the_numpy_reference(restore, collide):
     sim, tr, h, gx = _random_case(3)
     rot, pos = np.ascontiguousarray(h.rotation), np.ascontiguousarray(h.position)
     aff = np.empty((gx.shape[0], 12, tr.seg.shape[0]))
-    blend.guide_affines(gx, sim.guides.rest, rot, pos, tr.seg, tr.t, aff)
+    blend.guide_affines(gx, sim.guides.rest, rot, tr.seg, tr.t, aff)
     out = np.empty_like(sim.ghosts.rest)
     axes = tr._axes if collide else np.ones(3)
     blend.blend_strands(out, tr._rest32, tr._roots, tr._len32, tr.guide_of, tr.weight, aff,
@@ -91,7 +91,7 @@ def test_different_node_counts_match_the_reference():
     assert sim.guides.rest.shape[1] == 9
     rot, pos = np.ascontiguousarray(h.rotation), np.ascontiguousarray(h.position)
     aff = np.empty((gx.shape[0], 12, 9))
-    blend.guide_affines(gx, sim.guides.rest, rot, pos, tr.seg, tr.t, aff)
+    blend.guide_affines(gx, sim.guides.rest, rot, tr.seg, tr.t, aff)
     out = np.empty_like(sim.ghosts.rest)
     blend.blend_strands(out, tr._rest32, tr._roots, tr._len32, tr.guide_of, tr.weight, aff,
                         rot, pos, True, False, tr._center, tr._axes, tr.is_guide, gx)

@@ -153,11 +153,11 @@ def _node_affine(gx, grest, g, m, rot, out):
 
 
 @njit(cache=True, parallel=True)
-def guide_affines(gx, grest, rot, pos, seg, t, out):
+def guide_affines(gx, grest, rot, seg, t, out):
     """Kernel, step 1: ``out`` (G, 12, N) the map of every guide at every ghost node index
     (``seg``, ``t`` from :func:`node_map`: the maps of the two guide nodes around the node's
     fraction, interpolated linearly).  ``gx`` (G, M, 3) guides now, world [m]; ``grest``
-    (G, M, 3) their rest shapes, head frame; ``rot``, ``pos`` the head pose."""
+    (G, M, 3) their rest shapes, head frame; ``rot`` the head rotation."""
     m_nodes = gx.shape[1]
     for g in prange(gx.shape[0]):
         node = np.empty((m_nodes, 12))
@@ -431,7 +431,7 @@ class BlendTracker:
         accepted for the simulator's interface and not needed: the blend has no state)."""
         rot = np.ascontiguousarray(head.rotation, dtype=np.float64)
         pos = np.ascontiguousarray(head.position, dtype=np.float64)
-        guide_affines(self.guides.x, self.guides.rest, rot, pos, self.seg, self.t,
+        guide_affines(self.guides.x, self.guides.rest, rot, self.seg, self.t,
                       self._affine)
         x = self.ghosts.x
         self.stats['contacts'] = int(blend_strands(
