@@ -29,7 +29,7 @@ Time handling
   (docs/stability.md), up to 1500 % stretch.  The split count depends only on the state, so runs
   stay deterministic; ``counters.extra['split_substeps']`` counts the extra substeps.
 """
-from contextlib import contextmanager
+from contextlib import nullcontext
 from dataclasses import dataclass, field
 import math
 import time
@@ -374,11 +374,6 @@ class HairSimulator:
         self._last_speed = 0.0
 
 
-@contextmanager
-def _unchanged():
-    yield
-
-
 def _threshold_for(stages):
     """A node count ``T`` such that every ``(tiny_nodes, parallel)`` stage runs parallel in the
     tiny copy exactly when its full-size stage does (``tiny_nodes >= T``), or None."""
@@ -415,7 +410,7 @@ def warm_up(scene: Scene) -> HairSimulator:
         # each stage decides serial or parallel on its own node count, as GuideSolver and
         # GhostTracker do: the threshold puts every stage of the tiny copy on the side its
         # full-size stage is on, so exactly the variants the scene will run are compiled
-        with parallel_from(t) if t is not None else _unchanged():
+        with parallel_from(t) if t is not None else nullcontext():
             t0 = 1 + 8 * k * dt_ns
             sim.push_pose(t0, [0.0, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0])
             sim.push_pose(t0 + 4 * dt_ns, [0.01, 0.0, 0.0], [0.0, 0.0, 0.0871557, 0.9961947])

@@ -177,13 +177,13 @@ def guide_affines(gx, grest, rot, seg, t, out):
 def _push_out(nx, ny, nz, cw, quad):
     """A world point inside the ellipsoid ``(x - cw)^T Q (x - cw) < 1`` (``cw`` its centre in
     the world, ``quad`` the 6 entries of ``Q = R diag(1 / axes^2) R^T``: Q00 Q11 Q22 Q01 Q02
-    Q12) moved radially onto it; returns (x, y, z, moved)."""
+    Q12) moved radially onto it; a point outside is returned as it is."""
     dx, dy, dz = nx - cw[0], ny - cw[1], nz - cw[2]
     e = _quad_form(dx, dy, dz, quad)
     if not 0.0 < e < 1.0:
-        return nx, ny, nz, False
+        return nx, ny, nz
     f = 1.0 / math.sqrt(e)
-    return cw[0] + f * dx, cw[1] + f * dy, cw[2] + f * dz, True
+    return cw[0] + f * dx, cw[1] + f * dy, cw[2] + f * dz
 
 
 @njit(cache=True, inline='always')
@@ -296,7 +296,7 @@ def blend_strands(x, rest, roots, rest_length, guide, weight, affine, rot, pos, 
                         contacts += 1
                         if restore:
                             nx, ny, nz = _slide(nx, ny, nz, px, py, pz, length, cw, quad)
-                        nx, ny, nz, pushed = _push_out(nx, ny, nz, cw, quad)
+                        nx, ny, nz = _push_out(nx, ny, nz, cw, quad)
                     x[s, j, 0] = nx
                     x[s, j, 1] = ny
                     x[s, j, 2] = nz
@@ -386,9 +386,6 @@ class BlendTracker:
     (a :class:`~hair_tracking.guides.collision.Collider`).  The ghost state is ``ghosts.x``
     (world frame); ghosts carry no velocity of their own (``ghosts.v`` stays zero).
     """
-
-    #: Compiled kernels run once per frame, not every substep (the simulator asks this).
-    once_per_frame = True
 
     def __init__(self, ghosts: StrandSet, guides: StrandSet, guide_index, scene, collider=None,
                  k: int = DEFAULT_GUIDES_PER_GHOST):
