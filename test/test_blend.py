@@ -56,7 +56,7 @@ def test_node_map_is_node_to_node_for_equal_counts():
     assert seg.tolist() == [0, 2, 3] and np.allclose(t, [0.0, 0.0, 1.0])
 
 
-def _random_case(seed, ghosts=30, guides=7, nodes=12, guide_nodes=12):
+def _random_case(seed, guides=7, nodes=12, guide_nodes=12):
     rng = np.random.default_rng(seed)
     sim = HairSimulator(small_scene(groom__guides=guides, groom__ghosts_per_guide=5,
                                     groom__ghost_nodes=nodes, groom__guide_nodes=guide_nodes))
@@ -67,38 +67,84 @@ def _random_case(seed, ghosts=30, guides=7, nodes=12, guide_nodes=12):
     return sim, tr, h, gx
 
 
-@pytest.mark.parametrize('restore,collide', [(True, True), (False, False), (True, False)])
-def test_kernels_match_the_numpy_reference(restore, collide):
-    sim, tr, h, gx = _random_case(3)
+def _kernel(sim, tr, h, gx, restore=True, collide=True):
     rot, pos = np.ascontiguousarray(h.rotation), np.ascontiguousarray(h.position)
-    aff = np.empty((gx.shape[0], 12, tr.seg.shape[0]))
-    blend.guide_affines(gx, sim.guides.rest, rot, tr.seg, tr.t, aff)
+    gpos = gx
+    if gx.shape[1] != tr.seg.shape[0]:
+        gpos = np.empty((gx.shape[0], tr.seg.shape[0], 3))
+        blend.guide_points(gx, tr.seg, tr.t, gpos)
     out = np.empty_like(sim.ghosts.rest)
     axes = tr._axes if collide else np.ones(3)
-    blend.blend_strands(out, tr._rest32, tr._roots, tr._len32, tr.guide_of, tr.weight, aff,
-                        rot, pos, restore, collide, tr._center, axes, tr.is_guide, gx)
-    ref = blend.reference_blend(gx, sim.guides.rest, tr._rest32.transpose(0, 2, 1), tr._len32,
-                                tr.guide_of,
-                                tr.weight, h, restore, axes if collide else None, tr._center,
-                                tr.is_guide, tr._roots)
+    contacts = blend.blend_strands(out, tr._offset32, tr._roots, tr._len32, tr.guide_of,
+                                   tr.weight, gpos, rot, pos, restore, collide, tr._center,
+                                   axes, tr.is_guide)
+    return out, contacts
+
+
+@pytest.mark.parametrize('restore,collide', [(True, True), (False, False), (True, False),
+                                             (False, True)])
+def test_kernel_matches_the_numpy_reference(restore, collide):
+    sim, tr, h, gx = _random_case(3)
+    out, contacts = _kernel(sim, tr, h, gx, restore, collide)
+    ref = blend.reference_blend(gx, sim.guides.rest, sim.ghosts.rest, tr._len32, tr.guide_of,
+                                tr.weight, h, restore, tr._axes if collide else None,
+                                tr._center, tr.is_guide)
     assert (tr.is_guide >= 0).sum() == gx.shape[0]
-    np.testing.assert_allclose(out, ref, atol=1e-9)
+    # the kernel keeps the rest offsets in float32 (a few cm, so ~1e-9 m)
+    np.testing.assert_allclose(out, ref, atol=1e-8)
+    if not collide:
+        assert contacts == 0
+
+
+def test_every_lane_of_a_block_is_placed_and_guides_are_copied_exactly():
+    # 35 strands: four full blocks of 8 and a partial one, guides among them
+    sim, tr, h, gx = _random_case(5)
+    out, _ = _kernel(sim, tr, h, gx)
+    assert np.isfinite(out).all()
+    for s, g in enumerate(tr.is_guide):
+        if g >= 0:
+            np.testing.assert_array_equal(out[s], gx[g])
+    free = tr.is_guide < 0              # the guides here are noisy, the others restored
+    seg = np.linalg.norm(np.diff(out[free], axis=1), axis=2)
+    np.testing.assert_allclose(seg[:, 1:], tr._len32[free][:, 1:], rtol=1e-6)
+
+
+def test_nodes_pushed_into_the_head_slide_along_it():
+    sim, tr, h, gx = _random_case(6)
+    # every guide swung through the head: the blend would put ghosts inside it
+    center = h.to_world(tr._center[None])[0]
+    gx = center + 0.3 * (gx - center)
+    gx[:, :2] = h.to_world(sim.guides.rest[:, :2])
+    out, contacts = _kernel(sim, tr, h, gx)
+    ref = blend.reference_blend(gx, sim.guides.rest, sim.ghosts.rest, tr._len32, tr.guide_of,
+                                tr.weight, h, True, tr._axes, tr._center, tr.is_guide)
+    assert contacts > 0
+    # the float32 offsets' rounding, turned by the slide's geometry
+    np.testing.assert_allclose(out, ref, atol=1e-7)
+    free = tr.is_guide < 0
+    inside = ((h.to_head(out[free][:, 2:]) - tr._center) / tr._axes) ** 2
+    assert inside.sum(axis=-1).min() >= 1.0 - 1e-9
 
 
 def test_different_node_counts_match_the_reference():
     sim, tr, h, gx = _random_case(4, nodes=9, guide_nodes=17)
     # the blend's guides are ghost strands, so their node count is the ghosts' own
     assert sim.guides.rest.shape[1] == 9
-    rot, pos = np.ascontiguousarray(h.rotation), np.ascontiguousarray(h.position)
-    aff = np.empty((gx.shape[0], 12, 9))
-    blend.guide_affines(gx, sim.guides.rest, rot, tr.seg, tr.t, aff)
-    out = np.empty_like(sim.ghosts.rest)
-    blend.blend_strands(out, tr._rest32, tr._roots, tr._len32, tr.guide_of, tr.weight, aff,
-                        rot, pos, True, False, tr._center, tr._axes, tr.is_guide, gx)
-    ref = blend.reference_blend(gx, sim.guides.rest, tr._rest32.transpose(0, 2, 1), tr._len32,
-                                tr.guide_of,
-                                tr.weight, h, True, is_guide=tr.is_guide, roots=tr._roots)
-    np.testing.assert_allclose(out, ref, atol=1e-9)
+    out, _ = _kernel(sim, tr, h, gx, True, False)
+    ref = blend.reference_blend(gx, sim.guides.rest, sim.ghosts.rest, tr._len32, tr.guide_of,
+                                tr.weight, h, True, is_guide=tr.is_guide)
+    np.testing.assert_allclose(out, ref, atol=1e-8)
+
+
+def test_guides_at_other_node_counts_are_read_at_the_node_fractions():
+    rng = np.random.default_rng(2)
+    gx = rng.normal(size=(3, 7, 3))
+    seg, t = blend.node_map(13, 7)
+    out = np.empty((3, 13, 3))
+    blend.guide_points(gx, seg, t, out)
+    np.testing.assert_allclose(out, blend.at_fractions(gx, seg, t))
+    np.testing.assert_allclose(out[:, ::2], gx)
+    assert blend.at_fractions(gx, *blend.node_map(7, 7)) is gx
 
 
 def test_guides_carried_rigidly_carry_every_ghost_rigidly():

@@ -3,16 +3,16 @@ motions of a few nearby guides, evaluated once per output frame, without state o
 
 Guides are some of the strands themselves (:func:`choose_guides`), so a ratio of 1:1 is full
 simulation: a strand that is a guide has weight 1 on itself and is reproduced exactly.  Per
-frame, for ghost strand ``s`` and node ``j`` (rest position ``r`` in the head frame):
+frame, for ghost strand ``s`` with guides ``k`` and weights ``w_k`` (:func:`blend_weights`) and
+its node ``j`` (rest position ``r_j``, head frame):
 
-1. every guide node ``m`` gets an affine map ``A_m(r) = D_m r + c_m`` that carries the guide's
-   rest point onto its current point and turns vectors with the guide there:
-   ``D_m = Rot(R t_rest -> t_now) R`` (``R`` the head rotation, ``t`` the tangent of the segment
-   that ends at ``m``, ``Rot`` the smallest rotation between two directions) and
-   ``c_m = g_m - D_m g_rest_m`` (:func:`guide_affines`);
-2. the ghost node is the weighted sum over its ``K`` guides of their maps at the node's
-   arc-length fraction: ``x = sum_k w_k A_k,j(r)`` -- linear blend skinning with the guides as
-   bones, the weights fixed at start (:func:`blend_weights`);
+1. every guide is read at the node's arc-length fraction, ``g_k,j`` (world) and ``g0_k,j``
+   (rest, head frame) -- node to node when ghosts and guides have the same node count
+   (:func:`node_map`, :func:`guide_points`);
+2. the node is the blend of the guides' points plus its rest offset from that blend carried
+   rigidly by the head rotation ``R``:  ``x_j = sum_k w_k g_k,j + R o_j`` with
+   ``o_j = r_j - sum_k w_k g0_k,j`` fixed at start -- the same as adding the weighted guide
+   *deformations* ``g_k,j - (R g0_k,j + p)`` to the rigidly carried rest node ``R r_j + p``;
 3. roots (nodes 0 and 1) are pinned at ``R r + p``; one Follow-The-Leader pass (Mueller, Kim &
    Chentanez 2012) puts every further node back at its rest distance from its predecessor; a
    node that would end inside the head collider (radii + margin) is placed at its rest distance
@@ -20,16 +20,21 @@ frame, for ghost strand ``s`` and node ``j`` (rest position ``r`` in the head fr
    removed, so it slides along the head, and is moved radially onto the surface if the
    curvature still leaves it inside.
 
-Sources: linear blend skinning of interpolated hairs from guide hairs, with weights from the
-distance between roots, is how Unreal Engine's groom interpolation and AMD TressFX's follow hairs
-drive render strands from simulated guides (neither carries per-strand state; TressFX uses one
-guide, Unreal up to three); the weights are Shepard's inverse-distance weights (D. Shepard, "A
-two-dimensional interpolation function for irregularly-spaced data", ACM 1968).  Unlike the
-paper's tracker (:mod:`hair_tracking.ghosts.tracker`) nothing is integrated, so nothing drifts
-and nothing can gain energy: the ghost's motion is its guides' motion.
+Sources: blending the deformation of up to three guides, weighted by the distance between roots,
+with the interpolated strand otherwise rigid, is Unreal Engine's groom interpolation; AMD
+TressFX's follow hairs are the one-guide case (guide point plus a root offset).  The weights are
+Shepard's inverse-distance weights (D. Shepard, "A two-dimensional interpolation function for
+irregularly-spaced data", ACM 1968).  Unlike the paper's tracker
+(:mod:`hair_tracking.ghosts.tracker`) nothing is integrated, so nothing drifts and nothing can
+gain energy: the ghost's motion is its guides' motion.
+
+Layout: step 2 runs strand by strand; step 3, a chain along each strand, runs on blocks of
+:data:`STRAND_BLOCK` strands held node-major in a small scratch array, so the length pass and
+the inside test of a block's strands are one vector operation per node; the rare node inside
+the head is then fixed on its own.
 
 :func:`reference_blend` is the plain-numpy statement of steps 1-3; the tests hold the compiled
-kernels (:func:`guide_affines`, :func:`blend_strands`) to it.
+kernel (:func:`blend_strands`) to it.
 """
 import math
 from typing import Dict, Optional, Tuple
@@ -45,8 +50,8 @@ from hair_tracking.guides.collision import outside_distance
 DEFAULT_GUIDES_PER_GHOST = 3
 #: Exponent of the inverse-distance weights.
 WEIGHT_POWER = 2.0
-#: Strands one thread blends together: their length passes run node by node across the block,
-#: so the CPU overlaps the strands' dependency chains (each node is placed from its predecessor).
+#: Strands whose length passes run together, node by node: one vector register of float64 lanes
+#: on AVX-512 (two on AVX2), so each node of the chain is one vector step for the whole block.
 STRAND_BLOCK = 8
 #: Work items of the blend's parallel loop (each a run of blocks with its own scratch row).
 CHUNKS = 64
@@ -114,65 +119,6 @@ def _unit(x, y, z):
     return x, y, z
 
 
-@njit(cache=True)
-def _node_affine(gx, grest, g, m, rot, out):
-    """``out[m]`` (12,) = the map of guide ``g``'s node ``m`` (row-major D, then c)."""
-    a = m - 1 if m > 0 else 0
-    b = a + 1
-    # rest tangent, carried into the world by the head rotation
-    rx = grest[g, b, 0] - grest[g, a, 0]
-    ry = grest[g, b, 1] - grest[g, a, 1]
-    rz = grest[g, b, 2] - grest[g, a, 2]
-    ux, uy, uz = _unit(rot[0, 0] * rx + rot[0, 1] * ry + rot[0, 2] * rz,
-                       rot[1, 0] * rx + rot[1, 1] * ry + rot[1, 2] * rz,
-                       rot[2, 0] * rx + rot[2, 1] * ry + rot[2, 2] * rz)
-    vx, vy, vz = _unit(gx[g, b, 0] - gx[g, a, 0], gx[g, b, 1] - gx[g, a, 1],
-                       gx[g, b, 2] - gx[g, a, 2])
-    # smallest rotation taking u onto v: I + [k]x + [k]x^2 / (1 + c), k = u x v, c = u . v
-    kx, ky, kz = uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx
-    c = ux * vx + uy * vy + uz * vz
-    if c > -0.999999:
-        f = 1.0 / (1.0 + c)
-        q00, q01, q02 = 1.0 - (ky * ky + kz * kz) * f, -kz + kx * ky * f, ky + kx * kz * f
-        q10, q11, q12 = kz + kx * ky * f, 1.0 - (kx * kx + kz * kz) * f, -kx + ky * kz * f
-        q20, q21, q22 = -ky + kx * kz * f, kx + ky * kz * f, 1.0 - (kx * kx + ky * ky) * f
-    else:                    # opposite directions: half a turn about an axis normal to u
-        px, py, pz = (0.0, -uz, uy) if abs(ux) < 0.9 else (-uz, 0.0, ux)
-        px, py, pz = _unit(px, py, pz)
-        q00, q01, q02 = 2.0 * px * px - 1.0, 2.0 * px * py, 2.0 * px * pz
-        q10, q11, q12 = 2.0 * py * px, 2.0 * py * py - 1.0, 2.0 * py * pz
-        q20, q21, q22 = 2.0 * pz * px, 2.0 * pz * py, 2.0 * pz * pz - 1.0
-    for j in range(3):
-        out[m, j] = q00 * rot[0, j] + q01 * rot[1, j] + q02 * rot[2, j]
-        out[m, 3 + j] = q10 * rot[0, j] + q11 * rot[1, j] + q12 * rot[2, j]
-        out[m, 6 + j] = q20 * rot[0, j] + q21 * rot[1, j] + q22 * rot[2, j]
-    for i in range(3):
-        out[m, 9 + i] = gx[g, m, i] - (out[m, 3 * i] * grest[g, m, 0]
-                                       + out[m, 3 * i + 1] * grest[g, m, 1]
-                                       + out[m, 3 * i + 2] * grest[g, m, 2])
-
-
-@njit(cache=True, parallel=True)
-def guide_affines(gx, grest, rot, seg, t, out):
-    """Kernel, step 1: ``out`` (G, 12, N) the map of every guide at every ghost node index
-    (``seg``, ``t`` from :func:`node_map`: the maps of the two guide nodes around the node's
-    fraction, interpolated linearly).  ``gx`` (G, M, 3) guides now, world [m]; ``grest``
-    (G, M, 3) their rest shapes, head frame; ``rot`` the head rotation."""
-    m_nodes = gx.shape[1]
-    for g in prange(gx.shape[0]):
-        node = np.empty((m_nodes, 12))
-        for m in range(m_nodes):
-            _node_affine(gx, grest, g, m, rot, node)
-        for j in range(seg.shape[0]):
-            a, u = seg[j], t[j]
-            if u == 0.0:
-                for i in range(12):
-                    out[g, i, j] = node[a, i]
-            else:
-                for i in range(12):
-                    out[g, i, j] = node[a, i] + u * (node[a + 1, i] - node[a, i])
-
-
 @njit(cache=True, inline='always')
 def _push_out(nx, ny, nz, cw, quad):
     """A world point inside the ellipsoid ``(x - cw)^T Q (x - cw) < 1`` (``cw`` its centre in
@@ -190,11 +136,6 @@ def _push_out(nx, ny, nz, cw, quad):
 def _quad_form(dx, dy, dz, quad):
     return quad[0] * dx * dx + quad[1] * dy * dy + quad[2] * dz * dz + \
         2.0 * (quad[3] * dx * dy + quad[4] * dx * dz + quad[5] * dy * dz)
-
-
-@njit(cache=True, inline='always')
-def _inside(nx, ny, nz, cw, quad):
-    return _quad_form(nx - cw[0], ny - cw[1], nz - cw[2], quad) < 1.0
 
 
 @njit(cache=True, inline='always')
@@ -218,20 +159,124 @@ def _slide(nx, ny, nz, px, py, pz, length, cw, quad):
     return px + f * dx, py + f * dy, pz + f * dz
 
 
-@njit(cache=True, parallel=True)
-def blend_strands(x, rest, roots, rest_length, guide, weight, affine, rot, pos, restore,
-                  collide, center, axes, is_guide, gx):
-    """Kernel, steps 2-3: ``x`` (S, N, 3) world [m] receives every strand; ``rest`` (S, 3, N)
-    float32 head frame, component-major; ``roots`` (S, 2, 3) its first two nodes in float64
-    (pinned exactly); ``rest_length`` (S, N-1) float32; ``guide`` (S, K) int32 and ``weight``
-    (S, K) float32 from :func:`blend_weights`; ``affine`` (G, 12, N) from
-    :func:`guide_affines`; ``restore``: the FTL length pass; ``collide``: push nodes out of the
-    ellipsoid ``axes`` (radii + margin) around ``center`` (head frame).  A strand that is guide
-    ``is_guide[s] >= 0`` is that guide's positions ``gx`` (G, N, 3), copied.  Returns the number
-    of nodes pushed out."""
+@njit(cache=True)
+def guide_points(gx, seg, t, out):
+    """Kernel, step 1 for unequal node counts: ``out`` (G, N, 3) every guide ``gx`` (G, M, 3)
+    read at the ghosts' node fractions (``seg``, ``t`` from :func:`node_map`)."""
+    for g in range(gx.shape[0]):
+        for j in range(seg.shape[0]):
+            a, u = seg[j], t[j]
+            for i in range(3):
+                out[g, j, i] = gx[g, a, i] + u * (gx[g, a + 1, i] - gx[g, a, i])
+
+
+@njit(cache=True, error_model='numpy')
+def _blend_blocks(x, offset, roots, rest_length, guide, weight, gpos, rot, pos, restore,
+                  collide, cw, quad, is_guide, b0, b1):
+    """Steps 2-3 for the blocks ``b0 .. b1 - 1`` of :data:`STRAND_BLOCK` strands; returns the
+    number of nodes that were inside the collider."""
     n_strands, n_nodes = x.shape[0], x.shape[1]
     n_k = guide.shape[1]
     contacts = 0
+    r00, r01, r02 = rot[0, 0], rot[0, 1], rot[0, 2]
+    r10, r11, r12 = rot[1, 0], rot[1, 1], rot[1, 2]
+    r20, r21, r22 = rot[2, 0], rot[2, 1], rot[2, 2]
+    c0, c1, c2 = cw[0], cw[1], cw[2]
+    q0, q1, q2, q3, q4, q5 = quad[0], quad[1], quad[2], quad[3], quad[4], quad[5]
+    # a block node-major: x y z, rest length of the segment ending there, inside test
+    blk = np.empty((n_nodes, 5, STRAND_BLOCK))
+    lanes = blk.shape[2]       # not a compile-time constant: LLVM vectorises the lane loop
+    for b in range(b0, b1):
+        s0 = b * STRAND_BLOCK
+        for lane in range(STRAND_BLOCK):
+            s = s0 + lane
+            if s >= n_strands or is_guide[s] >= 0:
+                if s < n_strands:
+                    x[s] = gpos[is_guide[s]]
+                for j in range(n_nodes):         # a straight stand-in, never written back
+                    blk[j, 0, lane] = 0.0
+                    blk[j, 1, lane] = 0.0
+                    blk[j, 2, lane] = 1e3 + j
+                    blk[j, 3, lane] = 1.0
+                continue
+            for j in range(2):                   # roots ride with the head
+                u0, u1, u2 = roots[s, j, 0], roots[s, j, 1], roots[s, j, 2]
+                blk[j, 0, lane] = r00 * u0 + r01 * u1 + r02 * u2 + pos[0]
+                blk[j, 1, lane] = r10 * u0 + r11 * u1 + r12 * u2 + pos[1]
+                blk[j, 2, lane] = r20 * u0 + r21 * u1 + r22 * u2 + pos[2]
+            for j in range(2, n_nodes):          # step 2: R o_j + sum_k w_k g_k,j
+                o0, o1, o2 = float(offset[s, j, 0]), float(offset[s, j, 1]), \
+                    float(offset[s, j, 2])
+                a0 = r00 * o0 + r01 * o1 + r02 * o2
+                a1 = r10 * o0 + r11 * o1 + r12 * o2
+                a2 = r20 * o0 + r21 * o1 + r22 * o2
+                for k in range(n_k):
+                    w = float(weight[s, k])
+                    g = guide[s, k]
+                    a0 += w * gpos[g, j, 0]
+                    a1 += w * gpos[g, j, 1]
+                    a2 += w * gpos[g, j, 2]
+                blk[j, 0, lane] = a0
+                blk[j, 1, lane] = a1
+                blk[j, 2, lane] = a2
+                blk[j, 3, lane] = float(rest_length[s, j - 1])
+        if restore or collide:                   # step 3, node by node, all lanes at once
+            for j in range(2, n_nodes):
+                if restore:
+                    for lane in range(lanes):
+                        px, py, pz = blk[j - 1, 0, lane], blk[j - 1, 1, lane], \
+                            blk[j - 1, 2, lane]
+                        dx, dy, dz = blk[j, 0, lane] - px, blk[j, 1, lane] - py, \
+                            blk[j, 2, lane] - pz
+                        f = blk[j, 3, lane] / math.sqrt(dx * dx + dy * dy + dz * dz)
+                        nx, ny, nz = px + f * dx, py + f * dy, pz + f * dz
+                        blk[j, 0, lane] = nx
+                        blk[j, 1, lane] = ny
+                        blk[j, 2, lane] = nz
+                        ex, ey, ez = nx - c0, ny - c1, nz - c2
+                        blk[j, 4, lane] = q0 * ex * ex + q1 * ey * ey + q2 * ez * ez + \
+                            2.0 * (q3 * ex * ey + q4 * ex * ez + q5 * ey * ez)
+                else:
+                    for lane in range(lanes):
+                        blk[j, 4, lane] = _quad_form(blk[j, 0, lane] - c0, blk[j, 1, lane] - c1,
+                                                     blk[j, 2, lane] - c2, quad)
+                if not collide:
+                    continue
+                for lane in range(STRAND_BLOCK):
+                    if blk[j, 4, lane] >= 1.0:
+                        continue
+                    contacts += 1
+                    nx, ny, nz = blk[j, 0, lane], blk[j, 1, lane], blk[j, 2, lane]
+                    if restore:
+                        nx, ny, nz = _slide(nx, ny, nz, blk[j - 1, 0, lane],
+                                            blk[j - 1, 1, lane], blk[j - 1, 2, lane],
+                                            blk[j, 3, lane], cw, quad)
+                    nx, ny, nz = _push_out(nx, ny, nz, cw, quad)
+                    blk[j, 0, lane] = nx
+                    blk[j, 1, lane] = ny
+                    blk[j, 2, lane] = nz
+        for lane in range(STRAND_BLOCK):
+            s = s0 + lane
+            if s < n_strands and is_guide[s] < 0:
+                for j in range(n_nodes):
+                    x[s, j, 0] = blk[j, 0, lane]
+                    x[s, j, 1] = blk[j, 1, lane]
+                    x[s, j, 2] = blk[j, 2, lane]
+    return contacts
+
+
+@njit(cache=True, parallel=True)
+def blend_strands(x, offset, roots, rest_length, guide, weight, gpos, rot, pos, restore,
+                  collide, center, axes, is_guide):
+    """Kernel, steps 2-3: ``x`` (S, N, 3) world [m] receives every strand; ``offset`` (S, N, 3)
+    float32 the rest offsets ``o`` (head frame); ``roots`` (S, 2, 3) the first two rest nodes
+    in float64 (pinned exactly); ``rest_length`` (S, N-1) float32; ``guide`` (S, K) int32 and
+    ``weight`` (S, K) float32 from :func:`blend_weights`; ``gpos`` (G, N, 3) the guides at the
+    ghosts' node fractions (step 1); ``restore``: the FTL length pass; ``collide``: keep nodes
+    out of the ellipsoid ``axes`` (radii + margin) around ``center`` (head frame).  A strand
+    that is guide ``is_guide[s] >= 0`` is that guide's ``gpos``, copied.  Returns the number
+    of nodes that were inside the collider."""
+    n_strands = x.shape[0]
     cw = np.empty(3)                                  # the collider's centre in the world
     for i in range(3):
         cw[i] = rot[i, 0] * center[0] + rot[i, 1] * center[1] + rot[i, 2] * center[2] + pos[i]
@@ -242,133 +287,73 @@ def blend_strands(x, rest, roots, rest_length, guide, weight, affine, rot, pos, 
             rot[a, 2] * rot[b, 2] * inv[2]
     n_blocks = (n_strands + STRAND_BLOCK - 1) // STRAND_BLOCK
     n_chunks = min(n_blocks, CHUNKS)
+    contacts = 0
     for c in prange(n_chunks):
-        acc = np.empty((3, n_nodes))            # one strand's blended nodes, [axis][node]
-        for b in range(c * n_blocks // n_chunks, (c + 1) * n_blocks // n_chunks):
-            s0 = b * STRAND_BLOCK
-            s1 = min(n_strands, s0 + STRAND_BLOCK)
-            for s in range(s0, s1):          # the blend: every node on its own
-                if is_guide[s] >= 0:
-                    x[s] = gx[is_guide[s]]
-                    continue
-                acc[:, :] = 0.0
-                r = rest[s]
-                for k in range(n_k):
-                    w = float(weight[s, k])
-                    a = affine[guide[s, k]]
-                    # contiguous in j; unsigned, so numba adds no negative-index wraparound
-                    # and LLVM vectorises the loop
-                    for j in range(np.uint64(2), np.uint64(n_nodes)):
-                        r0, r1, r2 = r[0, j], r[1, j], r[2, j]
-                        acc[0, j] += w * (a[0, j] * r0 + a[1, j] * r1 + a[2, j] * r2
-                                          + a[9, j])
-                        acc[1, j] += w * (a[3, j] * r0 + a[4, j] * r1 + a[5, j] * r2
-                                          + a[10, j])
-                        acc[2, j] += w * (a[6, j] * r0 + a[7, j] * r1 + a[8, j] * r2
-                                          + a[11, j])
-                for j in range(2):           # roots ride with the head
-                    r0, r1, r2 = roots[s, j, 0], roots[s, j, 1], roots[s, j, 2]
-                    x[s, j, 0] = rot[0, 0] * r0 + rot[0, 1] * r1 + rot[0, 2] * r2 + pos[0]
-                    x[s, j, 1] = rot[1, 0] * r0 + rot[1, 1] * r1 + rot[1, 2] * r2 + pos[1]
-                    x[s, j, 2] = rot[2, 0] * r0 + rot[2, 1] * r1 + rot[2, 2] * r2 + pos[2]
-                for j in range(2, n_nodes):
-                    x[s, j, 0] = acc[0, j]
-                    x[s, j, 1] = acc[1, j]
-                    x[s, j, 2] = acc[2, j]
-            if not (restore or collide):
-                continue
-            # lengths and contacts: node by node across the block's strands, so that the
-            # chains of the strands (each node placed from its predecessor) overlap in the CPU
-            for j in range(2, n_nodes):
-                for s in range(s0, s1):
-                    if is_guide[s] >= 0:
-                        continue
-                    px, py, pz = x[s, j - 1, 0], x[s, j - 1, 1], x[s, j - 1, 2]
-                    nx, ny, nz = x[s, j, 0], x[s, j, 1], x[s, j, 2]
-                    length = float(rest_length[s, j - 1])
-                    if restore:
-                        dx, dy, dz = nx - px, ny - py, nz - pz
-                        d = math.sqrt(dx * dx + dy * dy + dz * dz)
-                        if d > 0.0:
-                            f = length / d
-                            nx, ny, nz = px + f * dx, py + f * dy, pz + f * dz
-                    if collide and _inside(nx, ny, nz, cw, quad):
-                        contacts += 1
-                        if restore:
-                            nx, ny, nz = _slide(nx, ny, nz, px, py, pz, length, cw, quad)
-                        nx, ny, nz = _push_out(nx, ny, nz, cw, quad)
-                    x[s, j, 0] = nx
-                    x[s, j, 1] = ny
-                    x[s, j, 2] = nz
+        contacts += _blend_blocks(x, offset, roots, rest_length, guide, weight, gpos, rot, pos,
+                                  restore, collide, cw, quad, is_guide,
+                                  c * n_blocks // n_chunks, (c + 1) * n_blocks // n_chunks)
     return contacts
 
 
 # ----------------------------------------------------------------------------- reference
-def _rotation_between(u: np.ndarray, v: np.ndarray) -> np.ndarray:
-    u = u / np.linalg.norm(u)
-    v = v / np.linalg.norm(v)
-    k = np.cross(u, v)
-    c = float(u @ v)
-    if c <= -0.999999:
-        p = np.array([0.0, -u[2], u[1]]) if abs(u[0]) < 0.9 else np.array([-u[2], 0.0, u[0]])
-        p /= np.linalg.norm(p)
-        return 2.0 * np.outer(p, p) - np.eye(3)
-    kx = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
-    return np.eye(3) + kx + kx @ kx / (1.0 + c)
+def at_fractions(points: np.ndarray, seg: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """Strands ``points`` (G, M, 3) read at the node fractions of :func:`node_map` (step 1);
+    equal node counts give ``points`` itself."""
+    if seg.shape[0] == points.shape[1] and not t[:-1].any():
+        return points
+    a = points[:, seg]
+    return a + t[None, :, None] * (points[:, seg + 1] - a)
+
+
+def rest_offsets(rest, guide_rest, guide, weight) -> np.ndarray:
+    """``o_j = r_j - sum_k w_k g0_k,j`` (step 2) of every strand (S, N, 3), head frame:
+    ``rest`` (S, N, 3) the strands, ``guide_rest`` (G, N, 3) the guides at the strands' node
+    fractions, ``guide``/``weight`` (S, K) from :func:`blend_weights`."""
+    w = np.asarray(weight, dtype=np.float64)
+    return np.asarray(rest, dtype=np.float64) - np.einsum('sk,skjc->sjc', w,
+                                                          guide_rest[guide])
 
 
 def reference_blend(gx, grest, rest, rest_length, guide, weight, head: HeadPose,
                     restore: bool = True, collider_axes=None, center=(0.0, 0.0, 0.0),
-                    is_guide=None, roots=None):
+                    is_guide=None):
     """Plain-numpy statement of one blend step (steps 1-3 of the module docstring); returns the
-    strands (S, N, 3), world frame; a strand that is guide ``is_guide[s] >= 0`` is that guide;
-    ``roots`` (S, 2, 3) the first two rest nodes (default: ``rest``'s).
-    Slow; for tests and for reading."""
+    strands (S, N, 3), world frame.  ``gx``/``grest`` (G, M, 3) the guides now (world) and at
+    rest (head frame); ``rest`` (S, N, 3) the strands at rest; a strand that is guide
+    ``is_guide[s] >= 0`` is that guide.  Slow; for tests and for reading."""
     rot, pos = head.rotation, head.position
-    g_count, m_nodes = gx.shape[:2]
     s_count, n_nodes = rest.shape[:2]
-    seg, t = node_map(n_nodes, m_nodes)
-    maps = np.empty((g_count, m_nodes, 3, 4))
-    for g in range(g_count):
-        for m in range(m_nodes):
-            a = max(m - 1, 0)
-            d = _rotation_between(rot @ (grest[g, a + 1] - grest[g, a]), gx[g, a + 1] - gx[g, a])
-            d = d @ rot
-            maps[g, m, :, :3] = d
-            maps[g, m, :, 3] = gx[g, m] - d @ grest[g, m]
-    at = maps[:, seg]
-    nxt = maps[:, np.minimum(seg + 1, m_nodes - 1)]
-    at = at + t[None, :, None, None] * (nxt - at)                       # (G, N, 3, 4)
+    seg, t = node_map(n_nodes, gx.shape[1])
+    g = at_fractions(gx, seg, t)                                          # step 1
+    offset = rest_offsets(rest, at_fractions(grest, seg, t), guide, weight)
     out = np.empty((s_count, n_nodes, 3))
     center = np.asarray(center, dtype=np.float64)
-    roots = np.asarray(rest[:, :2] if roots is None else roots, dtype=np.float64)
     for s in range(s_count):
         if is_guide is not None and is_guide[s] >= 0:
-            out[s] = gx[is_guide[s]]
+            out[s] = g[is_guide[s]]
             continue
-        r = rest[s].astype(np.float64)
         for j in range(n_nodes):
             if j < 2:
-                out[s, j] = rot @ roots[s, j] + pos
+                out[s, j] = rot @ rest[s, j] + pos
                 continue
-            p = np.zeros(3)
+            p = rot @ offset[s, j]                                          # step 2
             for k in range(guide.shape[1]):
-                a = at[guide[s, k], j]
-                p += float(weight[s, k]) * (a[:, :3] @ r[j] + a[:, 3])
+                p = p + float(weight[s, k]) * g[guide[s, k], j]
+            length = float(rest_length[s, j - 1])                           # step 3
+            prev = out[s, j - 1]
             if restore:
-                d = p - out[s, j - 1]
-                p = out[s, j - 1] + d * (float(rest_length[s, j - 1]) / np.linalg.norm(d))
+                d = p - prev
+                p = prev + d * (length / np.linalg.norm(d))
             if collider_axes is not None:
                 qm = rot @ np.diag(1.0 / np.asarray(collider_axes) ** 2) @ rot.T
                 cw = rot @ center + pos
                 if (p - cw) @ qm @ (p - cw) < 1.0:
-                    prev = out[s, j - 1]
                     if restore:                    # slide along the surface, not into it
                         n = qm @ (prev - cw)
                         n /= np.linalg.norm(n)
                         d = p - prev
                         d = d - min(0.0, float(d @ n)) * n
-                        p = prev + d * (float(rest_length[s, j - 1]) / np.linalg.norm(d))
+                        p = prev + d * (length / np.linalg.norm(d))
                     e = float((p - cw) @ qm @ (p - cw))
                     if 0.0 < e < 1.0:              # still inside: radially onto the surface
                         p = cw + (p - cw) / np.sqrt(e)
@@ -403,10 +388,13 @@ class BlendTracker:
         self.is_guide = np.full(ghosts.count, -1, dtype=np.int64)
         self.is_guide[self.guide_index] = np.arange(guides.count)
         self.seg, self.t = node_map(ghosts.rest.shape[1], guides.rest.shape[1])
-        self._rest32 = np.ascontiguousarray(ghosts.rest.transpose(0, 2, 1), dtype=np.float32)
+        self._same_nodes = guides.rest.shape[1] == ghosts.rest.shape[1]
+        self._offset32 = np.ascontiguousarray(rest_offsets(
+            ghosts.rest, at_fractions(guides.rest, self.seg, self.t), self.guide_of,
+            self.weight), dtype=np.float32)
         self._roots = np.ascontiguousarray(ghosts.rest[:, :2], dtype=np.float64)
         self._len32 = np.ascontiguousarray(ghosts.rest_length, dtype=np.float32)
-        self._affine = np.empty((guides.count, 12, ghosts.rest.shape[1]))
+        self._gpos = np.empty((guides.count,) + ghosts.rest.shape[1:])
         self.collide = bool(tr.collide and collider is not None)
         if self.collide:
             # as the guide solver does: no more margin than the rest clearance of any free node
@@ -428,13 +416,14 @@ class BlendTracker:
         accepted for the simulator's interface and not needed: the blend has no state)."""
         rot = np.ascontiguousarray(head.rotation, dtype=np.float64)
         pos = np.ascontiguousarray(head.position, dtype=np.float64)
-        guide_affines(self.guides.x, self.guides.rest, rot, self.seg, self.t,
-                      self._affine)
-        x = self.ghosts.x
+        gpos = self.guides.x
+        if not self._same_nodes:
+            guide_points(gpos, self.seg, self.t, self._gpos)
+            gpos = self._gpos
         self.stats['contacts'] = int(blend_strands(
-            x, self._rest32, self._roots, self._len32, self.guide_of, self.weight, self._affine,
-            rot, pos, self.restore, self.collide, self._center, self._axes, self.is_guide,
-            self.guides.x))
+            self.ghosts.x, self._offset32, self._roots, self._len32, self.guide_of, self.weight,
+            gpos, rot, pos, self.restore, self.collide, self._center, self._axes,
+            self.is_guide))
         self.stats['steps'] += 1
 
     def reset(self, head: HeadPose) -> None:
