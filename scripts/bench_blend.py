@@ -2,10 +2,10 @@
 bandwidth of this machine measured in the same run.
 
 For each ghost count (16 nodes a strand, one guide per 16 ghosts, the default scene otherwise),
-the blend tracker's frame (guide maps + blend + FTL pass + head contacts) and one step of the
+the blend tracker's frame (blend + FTL pass + head contacts) and one step of the
 paper tracker are timed in turns, after a warm-up that compiles them; medians of the rounds.
 The bandwidth is a numpy copy of a 64 MB float64 array (read + write counted).  The blend kernel
-reads the float32 rest shape and lengths (16 B a node) and writes float64 positions (24 B):
+reads the float32 rest offsets and lengths (16 B a node) and writes float64 positions (24 B):
 its share of the bandwidth is (40 B x nodes / time) / copy bandwidth.
 
     python scripts/bench_blend.py [--ghosts 10000 100000] [--threads 2] [--json out.json]

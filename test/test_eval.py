@@ -352,3 +352,39 @@ def test_perturbed_reference_measures_the_perturbation(workload):
     large = ea.perturbed_reference(workload, sched, ref, ref0, scene, perturbation=1e-4)
     assert 1e-7 < small[0] < 1e-5 and small.max() < 1e-5
     assert large[0] / small[0] == pytest.approx(100.0, rel=0.05)
+
+
+# ------------------------------------------------------------------ dominance study
+def test_dominance_scores_once_and_times_per_thread_count(tmp_path):
+    from hair_tracking.evaluation import dominance as dm
+    workload = make_workload(Scene(), 64)
+    tr = ea.Trajectory('walk', load_bundled_walk(), 'walk', 0.3)
+    reps = dm.study(workload, tr, 0.3, repeats=1, timing_frames=5, thread_counts=[1, 2],
+                    log=lambda s: None)
+    assert [r['threads'] for r in reps] == [1, 2]
+    names = [c.name for c in dm.candidates(workload.scene)]
+    for rep in reps:
+        rows = {r.name: r for r in rep['rows']}
+        assert list(rows) == names and not rows[dm.BASELINE].ghost
+        for r in rows.values():
+            assert len(r.frame_ms) == 1 and r.ms > 0
+            assert 0 < r.motion_err < 100 and r.stretch < 1e-6
+            share_ok = r.ms <= dm.TIME_SHARE * rows[dm.BASELINE].ms
+            err_ok = r.motion_err <= rows[dm.BASELINE].motion_err
+            assert r.dominates == (r.ghost and r.admitted and share_ok and err_ok)
+    # the errors are scored once: the same for every thread count
+    assert [r.motion_err for r in reps[0]['rows']] == [r.motion_err for r in reps[1]['rows']]
+    md = dm.markdown(reps[0], 1)
+    assert '| full FTL dt 1/60 |' in md and '1 thread(s)' in md
+    png = dm.plot(reps, str(tmp_path / 'dominance.png'))
+    assert open(png, 'rb').read(8) == b'\x89PNG\r\n\x1a\n'
+
+
+def test_dominance_cli_writes_tables_and_the_plot(tmp_path):
+    rc = eval_cli.main(['dominance', '--ghosts', '64', '--motions', 'walk', '--duration', '0.2',
+                        '--repeats', '1', '--thread-counts', '1', '--out', str(tmp_path / 'r'),
+                        '--figures', str(tmp_path / 'f')])
+    assert rc == 0
+    md = open(tmp_path / 'r' / 'dominance.md').read()
+    assert 'hair_sim_eval dominance --ghosts 64' in md and '#### walk, 64 strands' in md
+    assert os.path.getsize(tmp_path / 'f' / 'dominance.png') > 5_000

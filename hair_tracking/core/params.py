@@ -201,8 +201,9 @@ _SCENE_DOCS: Dict[str, Tuple[str, str, bool]] = {
                            's', False),
     'tracking.mode': ('ghost tracker: paper (Park & Kim: velocity transfer, weights (4)-(5), '
                       'centre-of-mass tracking, every substep) or blend (each ghost the '
-                      'skinned blend of tracking.blend_guides guides chosen among the strands, '
-                      'once per frame; see docs/blend.md)', '', True),
+                      'blended points of its tracking.blend_guides nearest guides, chosen among '
+                      'the strands, plus its rest offset carried by the head, once per frame; '
+                      'see docs/blend.md)', '', True),
     'tracking.blend_guides': ('blend: guides blended per ghost (nearest roots)', '', False),
     'tracking.candidates': ('guides with the nearest roots examined per ghost', '', False),
     'tracking.com_strength': ('centre-of-mass tracking strength per substep', '', False),

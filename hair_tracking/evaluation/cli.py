@@ -170,8 +170,6 @@ def recorded(paths, duration=None):
 def cmd_dominance(args) -> int:
     import json
 
-    import numba
-
     from hair_tracking.core.scene import Scene
     from hair_tracking.evaluation import dominance as dm
     from hair_tracking.evaluation.methods import make_workload
@@ -186,17 +184,16 @@ def cmd_dominance(args) -> int:
           '1/60 s) when it takes at most 1/3 of its time a frame with no more motion error, '
           'stretch <= 1 % and no penetration beyond the collider margin '
           '(`hair_tracking/evaluation/dominance.py`).', '']
-    dump = []
+    dump, reports = [], []
     for ghosts in args.ghosts:
         workload = make_workload(scene, ghosts)
         for tr in tracks:
-            for threads in args.thread_counts:
-                numba.set_num_threads(threads)
-                print(f'{tr.name}, {workload.count} strands, {threads} thread(s):', flush=True)
-                rep = dm.study(workload, tr, args.duration, repeats=args.repeats)
-                md.append(dm.markdown(rep, threads))
+            print(f'{tr.name}, {workload.count} strands:', flush=True)
+            for rep in dm.study(workload, tr, args.duration, repeats=args.repeats,
+                                thread_counts=args.thread_counts):
+                reports.append(rep)
+                md.append(dm.markdown(rep, rep['threads']))
                 dump.append({**{k: v for k, v in rep.items() if k != 'rows'},
-                             'threads': threads,
                              'rows': [dict(r.__dict__, ms=r.ms) for r in rep['rows']]})
                 print(md[-1], flush=True)
     os.makedirs(args.out, exist_ok=True)
@@ -204,7 +201,9 @@ def cmd_dominance(args) -> int:
         f.write('\n'.join(md))
     with open(os.path.join(args.out, 'dominance.json'), 'w', encoding='utf-8') as f:
         json.dump(dump, f, indent=1)
-    print(f"wrote {os.path.join(args.out, 'dominance.md')}")
+    os.makedirs(args.figures, exist_ok=True)
+    print(f"wrote {os.path.join(args.out, 'dominance.md')}, "
+          f"{dm.plot(reports, os.path.join(args.figures, 'dominance.png'))}")
     return 0
 
 
@@ -248,6 +247,7 @@ def main(argv=None) -> int:
                    help='numba thread counts to time (default 1)')
     d.add_argument('--scene', default='', help='scene YAML (default: the default scene)')
     d.add_argument('--out', default='docs/results', help='folder of dominance.md / .json')
+    d.add_argument('--figures', default='docs/figures', help='folder of dominance.png')
     s = sub.add_parser('stability', help='the matrix of stiff and extreme cases')
     s.add_argument('--quick', action='store_true', help='the reduced matrix (CI)')
     s.add_argument('--out', default='docs/results', help='folder of the tables')

@@ -20,11 +20,12 @@ is admitted, takes at most 1/3 of the baseline's ms per frame and has no more mo
 
     hair_sim_eval dominance --ghosts 4096 16384 [--motion FILE] [--threads 1 2]
 """
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 import math
 import time
 from typing import Callable, Dict, List
 
+import numba
 import numpy as np
 
 from hair_tracking.core.metrics import position_error
@@ -103,8 +104,10 @@ def first_moving_frame(schedule: HeadSchedule, tol: float = 1e-3) -> int:
 
 
 def study(workload: Workload, trajectory: Trajectory, duration_s: float, repeats: int = 2,
-          timing_frames: int = 120, log=print) -> Dict:
-    """Score and time every :func:`candidates` method on one motion; returns a report dict."""
+          timing_frames: int = 120, thread_counts=None, log=print) -> List[Dict]:
+    """Score every :func:`candidates` method on one motion once, then time them on each of
+    ``thread_counts`` (numba threads; default: as set); returns one report dict per thread
+    count (the errors do not depend on it)."""
     scene = workload.scene
     schedule = HeadSchedule(trajectory.motion, duration_s=duration_s)
     ref_scene = _ftl(scene, 1.0 / (60 * REFERENCE_SUBSTEPS))
@@ -139,20 +142,26 @@ def study(workload: Workload, trajectory: Trajectory, duration_s: float, repeats
             f'{100 * row.stretch:.3f} %, penetration {row.penetration_mm:.2f} mm '
             f'({time.perf_counter() - t0:.1f} s)')
     frames = min(timing_frames, schedule.frames)
-    built = {c.name: c.build(workload, scene) for c in cands}
-    for _ in range(repeats):                                  # timing runs, interleaved
-        for c in cands:
-            secs = run_frames(built[c.name], schedule, frames, None, 0.1)
-            rows[c.name].frame_ms.append(1e3 * float(np.median(secs)))
-    base = rows[BASELINE]
-    for r in rows.values():
-        r.admitted = r.stretch <= MAX_STRETCH and r.penetration_mm <= margin_mm + 1e-6
-        r.dominates = r.ghost and r.admitted and r.ms <= TIME_SHARE * base.ms and \
-            r.motion_err <= base.motion_err
-    return {'motion': trajectory.name, 'description': trajectory.description,
-            'strands': workload.count, 'frames': schedule.frames, 'moving_from': moving,
-            'reference': f'FTL dt 1/{60 * REFERENCE_SUBSTEPS} s, every strand',
-            'margin_mm': margin_mm, 'rows': list(rows.values())}
+    reports = []
+    for threads in thread_counts or [numba.get_num_threads()]:
+        numba.set_num_threads(threads)
+        timed = {c.name: replace(rows[c.name], frame_ms=[]) for c in cands}
+        built = {c.name: c.build(workload, scene) for c in cands}
+        for _ in range(repeats):                              # timing runs, interleaved
+            for c in cands:
+                secs = run_frames(built[c.name], schedule, frames, None, 0.1)
+                timed[c.name].frame_ms.append(1e3 * float(np.median(secs)))
+        base = timed[BASELINE]
+        for r in timed.values():
+            r.admitted = r.stretch <= MAX_STRETCH and r.penetration_mm <= margin_mm + 1e-6
+            r.dominates = r.ghost and r.admitted and r.ms <= TIME_SHARE * base.ms and \
+                r.motion_err <= base.motion_err
+        reports.append({'motion': trajectory.name, 'description': trajectory.description,
+                        'strands': workload.count, 'frames': schedule.frames,
+                        'moving_from': moving, 'threads': threads,
+                        'reference': f'FTL dt 1/{60 * REFERENCE_SUBSTEPS} s, every strand',
+                        'margin_mm': margin_mm, 'rows': list(timed.values())})
+    return reports
 
 
 def markdown(report: Dict, threads: int) -> str:
@@ -175,6 +184,45 @@ def markdown(report: Dict, threads: int) -> str:
                      f'{r.motion_err:.2f} | {r.settled_err:.2f} | {100 * r.stretch:.3f} | '
                      f'{r.penetration_mm:.2f} | {mark} |')
     return '\n'.join(lines) + '\n'
+
+
+def plot(reports: List[Dict], path: str) -> str:
+    """Every ghost setting of every report as a point: its share of the baseline's time against
+    its motion error relative to the baseline's; a point in the shaded box (time <= 1/3, error
+    <= 1) dominates.  One marker per thread count, one colour per method.  Writes a PNG."""
+    import matplotlib
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+    fig, ax = plt.subplots(figsize=(7.5, 4.8), dpi=110)
+    ax.add_patch(plt.Rectangle((0.0, 0.0), TIME_SHARE, 1.0, color='#d8f0d8', zorder=0))
+    names = [r.name for r in reports[0]['rows'] if r.ghost] if reports else []
+    colours = plt.cm.viridis(np.linspace(0.0, 0.85, max(1, len(names))))
+    markers = {1: 'o', 2: 's'}
+    seen = set()
+    for rep in reports:
+        base = next(r for r in rep['rows'] if r.name == BASELINE)
+        for r in rep['rows']:
+            if not r.ghost or not base.ms > 0 or not base.motion_err > 0:
+                continue
+            i = names.index(r.name) if r.name in names else 0
+            label = r.name if r.name not in seen else None
+            seen.add(r.name)
+            ax.scatter(r.ms / base.ms, r.motion_err / base.motion_err, color=colours[i],
+                       marker=markers.get(rep.get('threads'), '^'), s=28, label=label,
+                       edgecolors='k' if r.dominates else 'none', linewidths=0.6)
+    ax.axvline(TIME_SHARE, color='g', lw=0.8)
+    ax.axhline(1.0, color='g', lw=0.8)
+    ax.set_xlabel('ms per frame / full FTL dt 1/60 (circles 1 thread, squares 2)')
+    ax.set_ylabel('motion error / full FTL dt 1/60')
+    ax.set_xlim(left=0.0)
+    ax.set_title('Ghost settings against every strand simulated (shaded: dominates)',
+                 fontsize=10)
+    ax.legend(fontsize=7, loc='upper right')
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+    return path
 
 
 def load_motion(path: str):
