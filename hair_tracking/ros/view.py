@@ -33,6 +33,7 @@ import argparse
 import collections
 import math
 import sys
+import threading
 import time
 from typing import List, NamedTuple, Optional, Tuple
 
@@ -221,6 +222,13 @@ class HairScene:
         self._at = np.zeros(3)               # where /cloud/head is, in the cloud's frame
         self._lines = self._colors = self._head = self._head_shape = None
         self._framed_at = None
+        # Browsers to turn to the hair: a browser's camera can be set only after it has
+        # reported its own (viser's camera handle refuses before), so those that have not yet
+        # are turned when they do (viser calls back from its worker threads).
+        self._lock = threading.Lock()
+        self._reported, self._to_turn = set(), set()
+        server.on_client_connect(self._on_connect)
+        server.on_client_disconnect(self._on_disconnect)
         self._status = server.gui.add_markdown(f'waiting for `{topics[0]}` ...')
         self._status_text = None
         self.clouds_drawn = 0
@@ -305,8 +313,32 @@ class HairScene:
         cam.look_at, cam.position = tuple(look_at), tuple(position)
         if turn_browsers:
             for client in self.server.get_clients().values():
-                client.camera.look_at, client.camera.position = tuple(look_at), \
-                    tuple(position)
+                with self._lock:
+                    if client.client_id not in self._reported:
+                        self._to_turn.add(client.client_id)
+                        continue
+                self._turn(client.camera)
+
+    def _turn(self, camera) -> None:
+        look_at, position = self._framed_at
+        camera.look_at, camera.position = tuple(look_at), tuple(position)
+
+    def _on_connect(self, client) -> None:
+        client.camera.on_update(self._on_camera)
+
+    def _on_camera(self, camera) -> None:
+        cid = camera.client.client_id
+        with self._lock:
+            self._reported.add(cid)
+            turn = cid in self._to_turn and self._framed_at is not None
+            self._to_turn.discard(cid)
+        if turn:
+            self._turn(camera)
+
+    def _on_disconnect(self, client) -> None:
+        with self._lock:
+            self._reported.discard(client.client_id)
+            self._to_turn.discard(client.client_id)
 
     def _set_status(self, text: str) -> None:
         if text != self._status_text:
