@@ -7,6 +7,8 @@ PIP := $(VENV)/bin/pip
 # ROS 2 Jazzy from PyPI wheels (the [fastrtps] extra brings the RMW library); kept out of setup.py.
 ROS_WHEELS := ros-jazzy-rclpy[fastrtps] ros-jazzy-common-interfaces
 PY_DEPS := setuptools wheel numpy numba pyyaml rosbags matplotlib pytest flake8
+# hair_sim_view's optional web viewer, and Playwright, which drives Debian's chromium in its test.
+VIEW_DEPS := viser playwright
 # The rosidl/ament_cmake build wheels that generate tf2_msgs (no wheel of it exists; see
 # interfaces/build_tf2_msgs.sh), and colcon for the ROS-style build (make test-colcon).
 ROS_BUILD_WHEELS := ros-jazzy-ament-cmake ros-jazzy-ament-cmake-include-directories \
@@ -30,6 +32,10 @@ $(STAMP): setup.py Makefile package.xml interfaces/build_tf2_msgs.sh $(wildcard 
 	$(PIP) install -q --upgrade pip
 	$(PIP) install -q '$(firstword $(ROS_WHEELS))' $(wordlist 2,99,$(ROS_WHEELS)) $(PY_DEPS)
 	$(PIP) install -q $(ROS_BUILD_WHEELS) $(COLCON)
+	$(PIP) install -q $(VIEW_DEPS)
+	command -v chromium >/dev/null || { apt-get update -qq && \
+		DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium; } || \
+		echo 'no chromium (apt-get install chromium as root): the browser test is skipped'
 	interfaces/build_tf2_msgs.sh $(VENV)
 	$(PIP) install -q --no-deps --no-build-isolation -e .
 	$(PY) -c "import rclpy, numba, rosbags, yaml, matplotlib, tf2_msgs.msg, ament_index_python"

@@ -22,6 +22,7 @@ setup(
     ],
     package_data={package_name: ['data/*']},
     install_requires=['setuptools', 'numpy', 'numba', 'pyyaml', 'rosbags'],
+    extras_require={'view': ['viser']},        # hair_sim_view's web page
     zip_safe=True,
     maintainer='hair_tracking developers',
     maintainer_email='hair-tracking@example.invalid',
@@ -36,6 +37,7 @@ setup(
             'hair_sim_demo = hair_tracking.evaluation.demo:main',
             'hair_sim_warmup = hair_tracking.ros.warmup:main',
             'hair_sim_ctl = hair_tracking.ros.ctl:main',
+            'hair_sim_view = hair_tracking.ros.view:main',
         ],
     },
 )

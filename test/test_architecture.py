@@ -20,6 +20,8 @@ ROS_ROOTS = {'rclpy', 'rosidl_runtime_py', 'rosgraph_msgs', 'std_msgs', 'geometr
              'rcl_interfaces', 'builtin_interfaces', 'msg_adapters', 'rosbags'}
 #: At most this many modules at the top of hair_tracking/ (besides __init__.py).
 MAX_TOP_MODULES = 4
+#: Optional packages (not installed with the package) and the only modules that import them.
+OPTIONAL = {'viser': {'hair_tracking.ros.view'}}
 
 
 def modules():
@@ -80,6 +82,18 @@ def test_imports_point_down_the_layers(name, path):
             continue
         assert LAYERS.index(theirs) <= LAYERS.index(own), \
             f'{name} ({own}) imports {target} ({theirs}), a layer above it'
+
+
+def test_optional_packages_are_imported_only_where_they_are_used():
+    """viser (the browser viewer's library) stays out of the node and the simulation."""
+    users = {root: set() for root in OPTIONAL}
+    for name, path in modules():
+        for target in imports(path, name):
+            root = target.split('.')[0]
+            if root in OPTIONAL:
+                assert name in OPTIONAL[root], f'{name} imports the optional {root}'
+                users[root].add(name)
+    assert users == OPTIONAL            # the check looks at the modules that do use them
 
 
 def test_the_import_check_catches_an_upward_import(tmp_path):
