@@ -101,7 +101,8 @@ class PlayStats:
         lines = [f'played {total} messages ({self.clock} /clock) in {self.wall_s:.2f} s '
                  f'({self.bag_s:.2f} s of bag'
                  + (f', {self.loops} loops' if self.loops > 1 else '')
-                 + f'); worst lateness {self.max_lag_ms:.1f} ms']
+                 + f'); worst lateness {self.max_lag_ms:.1f} ms'
+                 + ('; interrupted' if self.interrupted else '')]
         for t, n in sorted(self.published.items()):
             lines.append(f'  {t}: {n}')
         for t in self.skipped_topics:
@@ -266,6 +267,7 @@ def main_play(args) -> int:
     """``hair_sim_bag play`` (arguments from :mod:`hair_tracking.bags.cli`)."""
     import rclpy
     from rclpy.executors import ExternalShutdownException
+    from rclpy.signals import SignalHandlerOptions
 
     from hair_tracking.bags.offline import Progress
 
@@ -275,7 +277,9 @@ def main_play(args) -> int:
     if args.delay < 0 or args.wait_for_subscribers < 0:
         raise BagError('--delay and --wait-for-subscribers must be >= 0', EXIT_USAGE)
     kwargs = {} if args.domain_id is None else {'domain_id': args.domain_id}
-    rclpy.init(args=None, **kwargs)
+    # Ctrl-C raises KeyboardInterrupt here (counted as an interrupted run) instead of
+    # rclpy's handler invalidating the context under a publish in progress
+    rclpy.init(args=None, signal_handler_options=SignalHandlerOptions.NO, **kwargs)
     node = player = None
     bar = None
     try:
