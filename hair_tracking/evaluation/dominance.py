@@ -189,7 +189,8 @@ def markdown(report: Dict, threads: int) -> str:
 def plot(reports: List[Dict], path: str) -> str:
     """Every ghost setting of every report as a point: its share of the baseline's time against
     its motion error relative to the baseline's; a point in the shaded box (time <= 1/3, error
-    <= 1) dominates.  One marker per thread count, one colour per method.  Writes a PNG."""
+    <= 1) dominates (drawn with a black edge).  One marker per thread count, one colour per
+    method.  Writes a PNG."""
     import matplotlib
     matplotlib.use('Agg')
     import matplotlib.pyplot as plt
@@ -199,6 +200,7 @@ def plot(reports: List[Dict], path: str) -> str:
     colours = plt.cm.viridis(np.linspace(0.0, 0.85, max(1, len(names))))
     markers = {1: 'o', 2: 's'}
     seen = set()
+    lowest = 1.0
     for rep in reports:
         base = next(r for r in rep['rows'] if r.name == BASELINE)
         for r in rep['rows']:
@@ -207,6 +209,7 @@ def plot(reports: List[Dict], path: str) -> str:
             i = names.index(r.name) if r.name in names else 0
             label = r.name if r.name not in seen else None
             seen.add(r.name)
+            lowest = min(lowest, r.motion_err / base.motion_err)
             ax.scatter(r.ms / base.ms, r.motion_err / base.motion_err, color=colours[i],
                        marker=markers.get(rep.get('threads'), '^'), s=28, label=label,
                        edgecolors='k' if r.dominates else 'none', linewidths=0.6)
@@ -215,6 +218,7 @@ def plot(reports: List[Dict], path: str) -> str:
     ax.set_xlabel('ms per frame / full FTL dt 1/60 (circles 1 thread, squares 2)')
     ax.set_ylabel('motion error / full FTL dt 1/60')
     ax.set_xlim(left=0.0)
+    ax.set_ylim(bottom=max(0.0, lowest - 0.1))
     ax.set_title('Ghost settings against every strand simulated (shaded: dominates)',
                  fontsize=10)
     ax.legend(fontsize=7, loc='upper right')
