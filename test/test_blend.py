@@ -77,7 +77,7 @@ def _kernel(sim, tr, h, gx, restore=True, collide=True):
     axes = tr._axes if collide else np.ones(3)
     contacts = blend.blend_strands(out, tr._offset32, tr._roots, tr._len32, tr.guide_of,
                                    tr.weight, gpos, rot, pos, restore, collide, tr._center,
-                                   axes, tr.is_guide)
+                                   axes, tr.is_guide, tr._guide_len)
     return out, contacts
 
 
@@ -88,7 +88,7 @@ def test_kernel_matches_the_numpy_reference(restore, collide):
     out, contacts = _kernel(sim, tr, h, gx, restore, collide)
     ref = blend.reference_blend(gx, sim.guides.rest, sim.ghosts.rest, tr._len32, tr.guide_of,
                                 tr.weight, h, restore, tr._axes if collide else None,
-                                tr._center, tr.is_guide)
+                                tr._center, tr.is_guide, tr._guide_len)
     assert (tr.is_guide >= 0).sum() == gx.shape[0]
     # the kernel keeps the rest offsets in float32 (a few cm, so ~1e-9 m)
     np.testing.assert_allclose(out, ref, atol=1e-8)
@@ -96,17 +96,19 @@ def test_kernel_matches_the_numpy_reference(restore, collide):
         assert contacts == 0
 
 
-def test_every_lane_of_a_block_is_placed_and_guides_are_copied_exactly():
+def test_every_lane_of_a_block_is_placed_and_guides_keep_their_points_or_lengths():
     # 35 strands: four full blocks of 8 and a partial one, guides among them
     sim, tr, h, gx = _random_case(5)
     out, _ = _kernel(sim, tr, h, gx)
     assert np.isfinite(out).all()
+    # every strand, guides included (their points here are noisy), at its rest lengths
+    seg = np.linalg.norm(np.diff(out, axis=1), axis=2)
+    np.testing.assert_allclose(seg[:, 1:], tr._len32[:, 1:], rtol=1e-6)
+    # without the length pass and contacts a guide strand is its guide, exactly
+    raw, _ = _kernel(sim, tr, h, gx, restore=False, collide=False)
     for s, g in enumerate(tr.is_guide):
         if g >= 0:
-            np.testing.assert_array_equal(out[s], gx[g])
-    free = tr.is_guide < 0              # the guides here are noisy, the others restored
-    seg = np.linalg.norm(np.diff(out[free], axis=1), axis=2)
-    np.testing.assert_allclose(seg[:, 1:], tr._len32[free][:, 1:], rtol=1e-6)
+            np.testing.assert_array_equal(raw[s], gx[g])
 
 
 def test_nodes_pushed_into_the_head_slide_along_it():
@@ -117,7 +119,8 @@ def test_nodes_pushed_into_the_head_slide_along_it():
     gx[:, :2] = h.to_world(sim.guides.rest[:, :2])
     out, contacts = _kernel(sim, tr, h, gx)
     ref = blend.reference_blend(gx, sim.guides.rest, sim.ghosts.rest, tr._len32, tr.guide_of,
-                                tr.weight, h, True, tr._axes, tr._center, tr.is_guide)
+                                tr.weight, h, True, tr._axes, tr._center, tr.is_guide,
+                                tr._guide_len)
     assert contacts > 0
     # the float32 offsets' rounding, turned by the slide's geometry
     np.testing.assert_allclose(out, ref, atol=1e-7)
@@ -132,7 +135,8 @@ def test_different_node_counts_match_the_reference():
     assert sim.guides.rest.shape[1] == 9
     out, _ = _kernel(sim, tr, h, gx, True, False)
     ref = blend.reference_blend(gx, sim.guides.rest, sim.ghosts.rest, tr._len32, tr.guide_of,
-                                tr.weight, h, True, is_guide=tr.is_guide)
+                                tr.weight, h, True, is_guide=tr.is_guide,
+                                guide_length=tr._guide_len)
     np.testing.assert_allclose(out, ref, atol=1e-8)
 
 
@@ -164,6 +168,7 @@ def test_one_guide_per_strand_is_full_simulation():
         sim.push_pose(t0 + k * 16_666_667, [0.02 * k, 0.0, 0.0], q)
         sim.advance_to(t0 + k * 16_666_667)
     f = sim.frame()
+    # FTL guides keep exact lengths: the strands' length pass leaves them as they are
     np.testing.assert_array_equal(f.ghosts, f.guides)
 
 
@@ -204,3 +209,18 @@ def test_guides_must_be_ghost_strands():
     other = StrandSet.from_rest(sim.ghosts.rest[:3] + 0.01)
     with pytest.raises(ValueError, match='must be some of the ghost strands'):
         blend.BlendTracker(sim.ghosts, other, np.arange(3), sim.scene)
+
+
+def test_stretching_guides_are_shown_at_their_rest_lengths():
+    sim = HairSimulator(small_scene(solver__type='pbd', solver__iterations=1,
+                                    groom__guides=8, groom__ghosts_per_guide=4,
+                                    tracking__collide=False))
+    t0 = 1_000_000_000
+    for k in range(20):
+        q = quat_from_axis_angle(np.array([0.0, 0.0, 1.0]), 1.5 * np.sin(0.6 * k))
+        sim.push_pose(t0 + k * 16_666_667, [0.05 * np.sin(k), 0.0, 0.0], q)
+        sim.advance_to(t0 + k * 16_666_667)
+    guide_len = np.linalg.norm(np.diff(sim.guides.x, axis=1), axis=2)
+    assert np.abs(guide_len / sim.guides.rest_length - 1).max() > 1e-3     # PBD stretches
+    ghost_len = np.linalg.norm(np.diff(sim.ghosts.x, axis=1), axis=2)
+    np.testing.assert_allclose(ghost_len, sim.ghosts.rest_length, rtol=2e-6)

@@ -2,7 +2,9 @@
 motions of a few nearby guides, evaluated once per output frame, without state of its own.
 
 Guides are some of the strands themselves (:func:`choose_guides`), so a ratio of 1:1 is full
-simulation: a strand that is a guide has weight 1 on itself and is reproduced exactly.  Per
+simulation: a strand that is a guide is its guide's points, exactly as simulated for FTL guides
+(exact lengths); the length pass puts PBD and XPBD guides' stretched segments back at their
+rest lengths (:data:`GUIDE_LENGTH_TOLERANCE`), so no shown strand stretches.  Per
 frame, for ghost strand ``s`` with guides ``k`` and weights ``w_k`` (:func:`blend_weights`) and
 its node ``j`` (rest position ``r_j``, head frame):
 
@@ -48,6 +50,9 @@ from hair_tracking.guides.collision import outside_distance
 
 #: Guides blended per ghost by default (Unreal's groom interpolation uses up to three).
 DEFAULT_GUIDES_PER_GHOST = 3
+#: A guide strand's segment is put back at its rest length only when it is off by more than
+#: this fraction (PBD, XPBD stretch), so FTL guides are shown exactly as simulated.
+GUIDE_LENGTH_TOLERANCE = 1e-9
 #: Exponent of the inverse-distance weights.
 WEIGHT_POWER = 2.0
 #: Strands whose length passes run together, node by node: one vector register of float64 lanes
@@ -172,7 +177,7 @@ def guide_points(gx, seg, t, out):
 
 @njit(cache=True, error_model='numpy')
 def _blend_blocks(x, offset, roots, rest_length, guide, weight, gpos, rot, pos, restore,
-                  collide, cw, quad, is_guide, b0, b1):
+                  collide, cw, quad, is_guide, guide_length, b0, b1):
     """Steps 2-3 for the blocks ``b0 .. b1 - 1`` of :data:`STRAND_BLOCK` strands; returns the
     number of nodes that were inside the collider."""
     n_strands, n_nodes = x.shape[0], x.shape[1]
@@ -183,21 +188,31 @@ def _blend_blocks(x, offset, roots, rest_length, guide, weight, gpos, rot, pos, 
     r20, r21, r22 = rot[2, 0], rot[2, 1], rot[2, 2]
     c0, c1, c2 = cw[0], cw[1], cw[2]
     q0, q1, q2, q3, q4, q5 = quad[0], quad[1], quad[2], quad[3], quad[4], quad[5]
-    # a block node-major: x y z, rest length of the segment ending there, inside test
-    blk = np.empty((n_nodes, 5, STRAND_BLOCK))
+    # a block node-major: x y z, rest length of the segment ending there, inside test, and
+    # the length tolerance (-1: always restored; a guide: GUIDE_LENGTH_TOLERANCE, and no
+    # contacts unless the length pass moved it: the guide solver has placed it)
+    blk = np.empty((n_nodes, 6, STRAND_BLOCK))
     lanes = blk.shape[2]       # not a compile-time constant: LLVM vectorises the lane loop
     for b in range(b0, b1):
         s0 = b * STRAND_BLOCK
         for lane in range(STRAND_BLOCK):
             s = s0 + lane
-            if s >= n_strands or is_guide[s] >= 0:
-                if s < n_strands:
-                    x[s] = gpos[is_guide[s]]
+            if s >= n_strands:
                 for j in range(n_nodes):         # a straight stand-in, never written back
                     blk[j, 0, lane] = 0.0
                     blk[j, 1, lane] = 0.0
                     blk[j, 2, lane] = 1e3 + j
                     blk[j, 3, lane] = 1.0
+                    blk[j, 5, lane] = -1.0
+                continue
+            if is_guide[s] >= 0:                 # a guide: its own points, then step 3
+                g = is_guide[s]
+                for j in range(n_nodes):
+                    blk[j, 0, lane] = gpos[g, j, 0]
+                    blk[j, 1, lane] = gpos[g, j, 1]
+                    blk[j, 2, lane] = gpos[g, j, 2]
+                    blk[j, 3, lane] = guide_length[g, j - 1] if j > 0 else 1.0
+                    blk[j, 5, lane] = GUIDE_LENGTH_TOLERANCE
                 continue
             for j in range(2):                   # roots ride with the head
                 u0, u1, u2 = roots[s, j, 0], roots[s, j, 1], roots[s, j, 2]
@@ -220,6 +235,7 @@ def _blend_blocks(x, offset, roots, rest_length, guide, weight, gpos, rot, pos, 
                 blk[j, 1, lane] = a1
                 blk[j, 2, lane] = a2
                 blk[j, 3, lane] = float(rest_length[s, j - 1])
+                blk[j, 5, lane] = -1.0
         if restore or collide:                   # step 3, node by node, all lanes at once
             for j in range(2, n_nodes):
                 if restore:
@@ -229,7 +245,10 @@ def _blend_blocks(x, offset, roots, rest_length, guide, weight, gpos, rot, pos, 
                         dx, dy, dz = blk[j, 0, lane] - px, blk[j, 1, lane] - py, \
                             blk[j, 2, lane] - pz
                         f = blk[j, 3, lane] / math.sqrt(dx * dx + dy * dy + dz * dz)
-                        nx, ny, nz = px + f * dx, py + f * dy, pz + f * dz
+                        nx, ny, nz = blk[j, 0, lane], blk[j, 1, lane], blk[j, 2, lane]
+                        if abs(f - 1.0) > blk[j, 5, lane]:
+                            nx, ny, nz = px + f * dx, py + f * dy, pz + f * dz
+                            blk[j, 5, lane] = -1.0       # moved: contacts apply from here
                         blk[j, 0, lane] = nx
                         blk[j, 1, lane] = ny
                         blk[j, 2, lane] = nz
@@ -243,7 +262,7 @@ def _blend_blocks(x, offset, roots, rest_length, guide, weight, gpos, rot, pos, 
                 if not collide:
                     continue
                 for lane in range(STRAND_BLOCK):
-                    if blk[j, 4, lane] >= 1.0:
+                    if blk[j, 4, lane] >= 1.0 or blk[j, 5, lane] >= 0.0:
                         continue
                     contacts += 1
                     nx, ny, nz = blk[j, 0, lane], blk[j, 1, lane], blk[j, 2, lane]
@@ -257,7 +276,7 @@ def _blend_blocks(x, offset, roots, rest_length, guide, weight, gpos, rot, pos, 
                     blk[j, 2, lane] = nz
         for lane in range(STRAND_BLOCK):
             s = s0 + lane
-            if s < n_strands and is_guide[s] < 0:
+            if s < n_strands:
                 for j in range(n_nodes):
                     x[s, j, 0] = blk[j, 0, lane]
                     x[s, j, 1] = blk[j, 1, lane]
@@ -267,14 +286,16 @@ def _blend_blocks(x, offset, roots, rest_length, guide, weight, gpos, rot, pos, 
 
 @njit(cache=True, parallel=True)
 def blend_strands(x, offset, roots, rest_length, guide, weight, gpos, rot, pos, restore,
-                  collide, center, axes, is_guide):
+                  collide, center, axes, is_guide, guide_length):
     """Kernel, steps 2-3: ``x`` (S, N, 3) world [m] receives every strand; ``offset`` (S, N, 3)
     float32 the rest offsets ``o`` (head frame); ``roots`` (S, 2, 3) the first two rest nodes
     in float64 (pinned exactly); ``rest_length`` (S, N-1) float32; ``guide`` (S, K) int32 and
     ``weight`` (S, K) float32 from :func:`blend_weights`; ``gpos`` (G, N, 3) the guides at the
     ghosts' node fractions (step 1); ``restore``: the FTL length pass; ``collide``: keep nodes
     out of the ellipsoid ``axes`` (radii + margin) around ``center`` (head frame).  A strand
-    that is guide ``is_guide[s] >= 0`` is that guide's ``gpos``, copied.  Returns the number
+    that is guide ``is_guide[s] >= 0`` enters step 3 as that guide's ``gpos``, its segments
+    held to ``guide_length`` (G, N-1) float64 within :data:`GUIDE_LENGTH_TOLERANCE` and
+    left to the guide solver's contacts until the length pass moves it.  Returns the number
     of nodes that were inside the collider."""
     n_strands = x.shape[0]
     cw = np.empty(3)                                  # the collider's centre in the world
@@ -290,7 +311,7 @@ def blend_strands(x, offset, roots, rest_length, guide, weight, gpos, rot, pos, 
     contacts = 0
     for c in prange(n_chunks):
         contacts += _blend_blocks(x, offset, roots, rest_length, guide, weight, gpos, rot, pos,
-                                  restore, collide, cw, quad, is_guide,
+                                  restore, collide, cw, quad, is_guide, guide_length,
                                   c * n_blocks // n_chunks, (c + 1) * n_blocks // n_chunks)
     return contacts
 
@@ -316,11 +337,13 @@ def rest_offsets(rest, guide_rest, guide, weight) -> np.ndarray:
 
 def reference_blend(gx, grest, rest, rest_length, guide, weight, head: HeadPose,
                     restore: bool = True, collider_axes=None, center=(0.0, 0.0, 0.0),
-                    is_guide=None):
+                    is_guide=None, guide_length=None):
     """Plain-numpy statement of one blend step (steps 1-3 of the module docstring); returns the
     strands (S, N, 3), world frame.  ``gx``/``grest`` (G, M, 3) the guides now (world) and at
     rest (head frame); ``rest`` (S, N, 3) the strands at rest; a strand that is guide
-    ``is_guide[s] >= 0`` is that guide.  Slow; for tests and for reading."""
+    ``is_guide[s] >= 0`` enters step 3 as that guide's points (segments held to
+    ``guide_length`` within :data:`GUIDE_LENGTH_TOLERANCE`; no contacts for a node the length
+    pass left where the guide solver put it).  Slow; for tests and for reading."""
     rot, pos = head.rotation, head.position
     s_count, n_nodes = rest.shape[:2]
     seg, t = node_map(n_nodes, gx.shape[1])
@@ -329,22 +352,32 @@ def reference_blend(gx, grest, rest, rest_length, guide, weight, head: HeadPose,
     out = np.empty((s_count, n_nodes, 3))
     center = np.asarray(center, dtype=np.float64)
     for s in range(s_count):
-        if is_guide is not None and is_guide[s] >= 0:
-            out[s] = g[is_guide[s]]
-            continue
+        own = is_guide is not None and is_guide[s] >= 0       # a guide: its own points
         for j in range(n_nodes):
-            if j < 2:
+            if own:
+                p = g[is_guide[s], j]
+                if j < 2:
+                    out[s, j] = p
+                    continue
+            elif j < 2:
                 out[s, j] = rot @ rest[s, j] + pos
                 continue
-            p = rot @ offset[s, j]                                          # step 2
-            for k in range(guide.shape[1]):
-                p = p + float(weight[s, k]) * g[guide[s, k], j]
+            else:
+                p = rot @ offset[s, j]                                      # step 2
+                for k in range(guide.shape[1]):
+                    p = p + float(weight[s, k]) * g[guide[s, k], j]
             length = float(rest_length[s, j - 1])                           # step 3
+            if own and guide_length is not None:
+                length = float(guide_length[is_guide[s], j - 1])
             prev = out[s, j - 1]
+            placed = own                  # a guide node as the solver placed it: no contacts
             if restore:
                 d = p - prev
-                p = prev + d * (length / np.linalg.norm(d))
-            if collider_axes is not None:
+                f = length / np.linalg.norm(d)
+                if not own or abs(f - 1.0) > GUIDE_LENGTH_TOLERANCE:
+                    p = prev + d * f
+                    placed = False
+            if collider_axes is not None and not placed:
                 qm = rot @ np.diag(1.0 / np.asarray(collider_axes) ** 2) @ rot.T
                 cw = rot @ center + pos
                 if (p - cw) @ qm @ (p - cw) < 1.0:
@@ -394,6 +427,8 @@ class BlendTracker:
             self.weight), dtype=np.float32)
         self._roots = np.ascontiguousarray(ghosts.rest[:, :2], dtype=np.float64)
         self._len32 = np.ascontiguousarray(ghosts.rest_length, dtype=np.float32)
+        self._guide_len = np.ascontiguousarray(ghosts.rest_length[self.guide_index],
+                                               dtype=np.float64)
         self._gpos = np.empty((guides.count,) + ghosts.rest.shape[1:])
         self.collide = bool(tr.collide and collider is not None)
         if self.collide:
@@ -423,7 +458,7 @@ class BlendTracker:
         self.stats['contacts'] = int(blend_strands(
             self.ghosts.x, self._offset32, self._roots, self._len32, self.guide_of, self.weight,
             gpos, rot, pos, self.restore, self.collide, self._center, self._axes,
-            self.is_guide))
+            self.is_guide, self._guide_len))
         self.stats['steps'] += 1
 
     def reset(self, head: HeadPose) -> None:
