@@ -300,3 +300,10 @@ def test_ghost_collision_keeps_lengths():
     assert contacts > 0
     c = Collider('ellipsoid', scene.collider.center, scene.collider.radii, 0.0, 0.0)
     assert c.penetration(sim.ghosts.x, sim.head, sim.ghosts.inv_mass) <= scene.collider.margin
+
+
+def test_the_matrix_runs_with_either_tracker():
+    for mode in ('paper', 'blend'):
+        cases = stability.matrix(quick=True, tracking_mode=mode)
+        assert [c.name for c in cases] == [c.name for c in QUICK]
+        assert {c.scene.tracking.mode for c in cases} == {mode}

@@ -138,7 +138,7 @@ TIME_SERIES = ('full FTL dt 1/240', 'full XPBD dt 1/240 4 it', 'ghost 1:16 all o
 
 def cmd_stability(args) -> int:
     from hair_tracking.evaluation import stability
-    cases = stability.matrix(quick=args.quick)
+    cases = stability.matrix(quick=args.quick, tracking_mode=args.tracking_mode)
     if args.only:
         cases = [c for c in cases if any(o in c.name for o in args.only)]
     t0 = time.perf_counter()
@@ -253,6 +253,8 @@ def main(argv=None) -> int:
     s.add_argument('--out', default='docs/results', help='folder of the tables')
     s.add_argument('--only', nargs='*', default=None, help='only cases whose name contains')
     s.add_argument('--threads', type=int, default=1, help='numba threads (default 1)')
+    s.add_argument('--tracking-mode', choices=['paper', 'blend'], default=None,
+                   help='run every case with this ghost tracker (default: the scene default)')
     args = p.parse_args(argv)
     args.argv = argv
     if args.cmd == 'dominance':

@@ -34,7 +34,7 @@ sign-flipped / unnormalised quaternions, a 1 kHz pose stream and one hour of sim
 the three solvers where the solver matters.
 """
 import csv
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 import math
 import os
 import time
@@ -278,8 +278,9 @@ def _walk(duration_s: Optional[float] = None) -> HeadMotion:
     return sm.window(w, 0.0, duration_s) if duration_s else w
 
 
-def matrix(quick: bool = False) -> List[Case]:
-    """The cases: the full matrix, or the reduced one for CI (``quick``)."""
+def matrix(quick: bool = False, tracking_mode: Optional[str] = None) -> List[Case]:
+    """The cases: the full matrix, or the reduced one for CI (``quick``); every scene with
+    ``tracking.mode`` set to ``tracking_mode`` when given."""
     d = 1.0 if quick else 2.0                      # length of the moving part [s]
     cases: List[Case] = []
 
@@ -378,6 +379,9 @@ def matrix(quick: bool = False) -> List[Case]:
             'one hour of smooth random motion at 60 Hz poses, dt 1/240 s; at the end the hair '
             'at rest must match freshly settled hair', check_every=12, tail_s=5.0,
             expect={'drift': 0.05})
+    if tracking_mode is not None:
+        cases = [replace(c, scene=c.scene.with_changes(tracking__mode=tracking_mode))
+                 for c in cases]
     return cases
 
 
