@@ -58,6 +58,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.qos import qos_profile_sensor_data
+from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import PointCloud2
 from std_srvs.srv import Trigger
 from visualization_msgs.msg import Marker, MarkerArray
@@ -851,7 +852,11 @@ def main(args=None) -> int:
     node = executor = None
     code = 0
     try:
-        rclpy.init(args=argv[:1] + argv[split:])
+        # Ctrl-C is Python's KeyboardInterrupt in the main thread (handled below), not rclpy's
+        # C-level handler shutting the context down under a running callback; rclpy still
+        # turns SIGTERM into a shutdown (ExternalShutdownException)
+        rclpy.init(args=argv[:1] + argv[split:],
+                   signal_handler_options=SignalHandlerOptions.SIGTERM)
         for line in done:
             rclpy.logging.get_logger(P.NODE_NAME).info(line)
         executor = SingleThreadedExecutor()   # before the node: Ctrl-C may come at any time
