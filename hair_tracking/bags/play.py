@@ -18,6 +18,7 @@ live demo play a bag in-process from a thread while an executor spins the node u
 """
 from dataclasses import dataclass, field
 import importlib
+import signal
 import sys
 import threading
 import time
@@ -278,7 +279,9 @@ def main_play(args) -> int:
         raise BagError('--delay and --wait-for-subscribers must be >= 0', EXIT_USAGE)
     kwargs = {} if args.domain_id is None else {'domain_id': args.domain_id}
     # Ctrl-C raises KeyboardInterrupt here (counted as an interrupted run) instead of
-    # rclpy's handler invalidating the context under a publish in progress
+    # rclpy's handler invalidating the context under a publish in progress (installed even
+    # where the parent left SIGINT ignored, as rclpy's handler would be)
+    signal.signal(signal.SIGINT, signal.default_int_handler)
     rclpy.init(args=None, signal_handler_options=SignalHandlerOptions.NO, **kwargs)
     node = player = None
     bar = None

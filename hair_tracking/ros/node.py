@@ -41,6 +41,7 @@ import argparse
 import collections
 import dataclasses
 import math
+import signal
 import sys
 import time
 from typing import Callable, Dict, List, Optional
@@ -854,7 +855,9 @@ def main(args=None) -> int:
     try:
         # Ctrl-C is Python's KeyboardInterrupt in the main thread (handled below), not rclpy's
         # C-level handler shutting the context down under a running callback; rclpy still
-        # turns SIGTERM into a shutdown (ExternalShutdownException)
+        # turns SIGTERM into a shutdown (ExternalShutdownException).  Installed even where the
+        # parent left SIGINT ignored (a background job), as rclpy's own handler would be.
+        signal.signal(signal.SIGINT, signal.default_int_handler)
         rclpy.init(args=argv[:1] + argv[split:],
                    signal_handler_options=SignalHandlerOptions.SIGTERM)
         for line in done:
