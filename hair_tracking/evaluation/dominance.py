@@ -206,7 +206,7 @@ def plot(reports: List[Dict], path: str) -> str:
         for r in rep['rows']:
             if not r.ghost or not base.ms > 0 or not base.motion_err > 0:
                 continue
-            i = names.index(r.name) if r.name in names else 0
+            i = names.index(r.name)
             label = r.name if r.name not in seen else None
             seen.add(r.name)
             lowest = min(lowest, r.motion_err / base.motion_err)

@@ -139,8 +139,15 @@ def _push_out(nx, ny, nz, cw, quad):
 
 @njit(cache=True, inline='always')
 def _quad_form(dx, dy, dz, quad):
-    return quad[0] * dx * dx + quad[1] * dy * dy + quad[2] * dz * dz + \
-        2.0 * (quad[3] * dx * dy + quad[4] * dx * dz + quad[5] * dy * dz)
+    return _ellipsoid_form(dx, dy, dz, quad[0], quad[1], quad[2], quad[3], quad[4], quad[5])
+
+
+@njit(cache=True, inline='always')
+def _ellipsoid_form(dx, dy, dz, q0, q1, q2, q3, q4, q5):
+    """``d^T Q d`` with ``Q``'s entries Q00 Q11 Q22 Q01 Q02 Q12 as scalars (in a vector loop they
+    stay in registers)."""
+    return q0 * dx * dx + q1 * dy * dy + q2 * dz * dz + \
+        2.0 * (q3 * dx * dy + q4 * dx * dz + q5 * dy * dz)
 
 
 @njit(cache=True, inline='always')
@@ -252,13 +259,13 @@ def _blend_blocks(x, offset, roots, rest_length, guide, weight, gpos, rot, pos, 
                         blk[j, 0, lane] = nx
                         blk[j, 1, lane] = ny
                         blk[j, 2, lane] = nz
-                        ex, ey, ez = nx - c0, ny - c1, nz - c2
-                        blk[j, 4, lane] = q0 * ex * ex + q1 * ey * ey + q2 * ez * ez + \
-                            2.0 * (q3 * ex * ey + q4 * ex * ez + q5 * ey * ez)
+                        blk[j, 4, lane] = _ellipsoid_form(nx - c0, ny - c1, nz - c2,
+                                                          q0, q1, q2, q3, q4, q5)
                 else:
                     for lane in range(lanes):
-                        blk[j, 4, lane] = _quad_form(blk[j, 0, lane] - c0, blk[j, 1, lane] - c1,
-                                                     blk[j, 2, lane] - c2, quad)
+                        blk[j, 4, lane] = _ellipsoid_form(
+                            blk[j, 0, lane] - c0, blk[j, 1, lane] - c1, blk[j, 2, lane] - c2,
+                            q0, q1, q2, q3, q4, q5)
                 if not collide:
                     continue
                 for lane in range(STRAND_BLOCK):
@@ -427,8 +434,7 @@ class BlendTracker:
             self.weight), dtype=np.float32)
         self._roots = np.ascontiguousarray(ghosts.rest[:, :2], dtype=np.float64)
         self._len32 = np.ascontiguousarray(ghosts.rest_length, dtype=np.float32)
-        self._guide_len = np.ascontiguousarray(ghosts.rest_length[self.guide_index],
-                                               dtype=np.float64)
+        self._guide_len = np.ascontiguousarray(guides.rest_length, dtype=np.float64)
         self._gpos = np.empty((guides.count,) + ghosts.rest.shape[1:])
         self.collide = bool(tr.collide and collider is not None)
         if self.collide:
