@@ -69,15 +69,13 @@ def _random_case(seed, guides=7, nodes=12, guide_nodes=12):
 
 def _kernel(sim, tr, h, gx, restore=True, collide=True):
     rot, pos = np.ascontiguousarray(h.rotation), np.ascontiguousarray(h.position)
-    gpos = gx
-    if gx.shape[1] != tr.seg.shape[0]:
-        gpos = np.empty((gx.shape[0], tr.seg.shape[0], 3))
-        blend.guide_points(gx, tr.seg, tr.t, gpos)
+    gcol = np.empty((gx.shape[0], 3, tr.seg.shape[0]))
+    blend.guide_columns(gx, tr.seg, tr.t, gcol)
     out = np.empty_like(sim.ghosts.rest)
     axes = tr._axes if collide else np.ones(3)
-    contacts = blend.blend_strands(out, tr._offset32, tr._roots, tr._len32, tr.guide_of,
-                                   tr.weight, gpos, rot, pos, restore, collide, tr._center,
-                                   axes, tr.is_guide, tr._guide_len)
+    contacts = blend.blend_strands(out, tr._offset32, tr._roots, tr._len32,
+                                   tr.guide_of, tr.weight, gcol, rot, pos, restore, collide,
+                                   tr._center, axes, tr.is_guide, tr._guide_len)
     return out, contacts
 
 
@@ -144,10 +142,13 @@ def test_guides_at_other_node_counts_are_read_at_the_node_fractions():
     rng = np.random.default_rng(2)
     gx = rng.normal(size=(3, 7, 3))
     seg, t = blend.node_map(13, 7)
-    out = np.empty((3, 13, 3))
-    blend.guide_points(gx, seg, t, out)
-    np.testing.assert_allclose(out, blend.at_fractions(gx, seg, t))
-    np.testing.assert_allclose(out[:, ::2], gx)
+    out = np.empty((3, 3, 13))
+    blend.guide_columns(gx, seg, t, out)
+    np.testing.assert_allclose(out.transpose(0, 2, 1), blend.at_fractions(gx, seg, t))
+    np.testing.assert_array_equal(out.transpose(0, 2, 1)[:, ::2], gx)
+    same = np.empty((3, 3, 7))
+    blend.guide_columns(gx, *blend.node_map(7, 7), same)
+    np.testing.assert_array_equal(same.transpose(0, 2, 1), gx)
     assert blend.at_fractions(gx, *blend.node_map(7, 7)) is gx
 
 

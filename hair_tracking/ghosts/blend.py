@@ -10,7 +10,7 @@ its node ``j`` (rest position ``r_j``, head frame):
 
 1. every guide is read at the node's arc-length fraction, ``g_k,j`` (world) and ``g0_k,j``
    (rest, head frame) -- node to node when ghosts and guides have the same node count
-   (:func:`node_map`, :func:`guide_points`);
+   (:func:`node_map`, :func:`guide_columns`);
 2. the node is the blend of the guides' points plus its rest offset from that blend carried
    rigidly by the head rotation ``R``:  ``x_j = sum_k w_k g_k,j + R o_j`` with
    ``o_j = r_j - sum_k w_k g0_k,j`` fixed at start -- the same as adding the weighted guide
@@ -172,23 +172,45 @@ def _slide(nx, ny, nz, px, py, pz, length, cw, quad):
 
 
 @njit(cache=True)
-def guide_points(gx, seg, t, out):
-    """Kernel, step 1 for unequal node counts: ``out`` (G, N, 3) every guide ``gx`` (G, M, 3)
-    read at the ghosts' node fractions (``seg``, ``t`` from :func:`node_map`)."""
+def guide_columns(gx, seg, t, out):
+    """Kernel, step 1: ``out`` (G, 3, N) every guide ``gx`` (G, M, 3) read at the ghosts' node
+    fractions (``seg``, ``t`` from :func:`node_map`), component-major, so a ghost's blend runs
+    along its nodes; a node fraction on a guide node copies it exactly."""
     for g in range(gx.shape[0]):
         for j in range(seg.shape[0]):
             a, u = seg[j], t[j]
             for i in range(3):
-                out[g, j, i] = gx[g, a, i] + u * (gx[g, a + 1, i] - gx[g, a, i])
+                if u == 0.0:
+                    out[g, i, j] = gx[g, a, i]
+                elif u == 1.0:
+                    out[g, i, j] = gx[g, a + 1, i]
+                else:
+                    out[g, i, j] = gx[g, a, i] + u * (gx[g, a + 1, i] - gx[g, a, i])
+
+
+@njit(cache=True, inline='always')
+def _deform(acc, offset, rot, guide, weight, gcol, s):
+    """Step 2 of strand ``s`` into ``acc`` (3, N): ``R o_j + sum_k w_k g_k,j`` for every node
+    ``j``, one component at a time along the nodes (contiguous rows: a vector loop)."""
+    n_nodes = acc.shape[1]
+    for c in range(3):
+        rc0, rc1, rc2 = rot[c, 0], rot[c, 1], rot[c, 2]
+        for j in range(n_nodes):
+            acc[c, j] = rc0 * offset[s, 0, j] + rc1 * offset[s, 1, j] + \
+                rc2 * offset[s, 2, j]
+        for k in range(guide.shape[1]):
+            w = float(weight[s, k])
+            g = guide[s, k]
+            for j in range(n_nodes):
+                acc[c, j] += w * gcol[g, c, j]
 
 
 @njit(cache=True, error_model='numpy')
-def _blend_blocks(x, offset, roots, rest_length, guide, weight, gpos, rot, pos, restore,
-                  collide, cw, quad, is_guide, guide_length, b0, b1):
+def _blend_blocks(x, offset, roots, rest_length, guide, weight, gcol, rot, pos,
+                  restore, collide, cw, quad, is_guide, guide_length, b0, b1):
     """Steps 2-3 for the blocks ``b0 .. b1 - 1`` of :data:`STRAND_BLOCK` strands; returns the
     number of nodes that were inside the collider."""
     n_strands, n_nodes = x.shape[0], x.shape[1]
-    n_k = guide.shape[1]
     contacts = 0
     r00, r01, r02 = rot[0, 0], rot[0, 1], rot[0, 2]
     r10, r11, r12 = rot[1, 0], rot[1, 1], rot[1, 2]
@@ -199,9 +221,13 @@ def _blend_blocks(x, offset, roots, rest_length, guide, weight, gpos, rot, pos, 
     # the length tolerance (-1: always restored; a guide: GUIDE_LENGTH_TOLERANCE, and no
     # contacts unless the length pass moved it: the guide solver has placed it)
     blk = np.empty((n_nodes, 6, STRAND_BLOCK))
+    acc = np.empty((3, n_nodes))
     lanes = blk.shape[2]       # not a compile-time constant: LLVM vectorises the lane loop
     for b in range(b0, b1):
         s0 = b * STRAND_BLOCK
+        for j in range(n_nodes):
+            for lane in range(lanes):
+                blk[j, 5, lane] = -1.0
         for lane in range(STRAND_BLOCK):
             s = s0 + lane
             if s >= n_strands:
@@ -210,39 +236,27 @@ def _blend_blocks(x, offset, roots, rest_length, guide, weight, gpos, rot, pos, 
                     blk[j, 1, lane] = 0.0
                     blk[j, 2, lane] = 1e3 + j
                     blk[j, 3, lane] = 1.0
-                    blk[j, 5, lane] = -1.0
                 continue
             if is_guide[s] >= 0:                 # a guide: its own points, then step 3
                 g = is_guide[s]
                 for j in range(n_nodes):
-                    blk[j, 0, lane] = gpos[g, j, 0]
-                    blk[j, 1, lane] = gpos[g, j, 1]
-                    blk[j, 2, lane] = gpos[g, j, 2]
+                    blk[j, 0, lane] = gcol[g, 0, j]
+                    blk[j, 1, lane] = gcol[g, 1, j]
+                    blk[j, 2, lane] = gcol[g, 2, j]
                     blk[j, 3, lane] = guide_length[g, j - 1] if j > 0 else 1.0
                     blk[j, 5, lane] = GUIDE_LENGTH_TOLERANCE
                 continue
+            _deform(acc, offset, rot, guide, weight, gcol, s)      # step 2
+            for j in range(2, n_nodes):
+                blk[j, 0, lane] = acc[0, j]
+                blk[j, 1, lane] = acc[1, j]
+                blk[j, 2, lane] = acc[2, j]
+                blk[j, 3, lane] = float(rest_length[s, j - 1])
             for j in range(2):                   # roots ride with the head
                 u0, u1, u2 = roots[s, j, 0], roots[s, j, 1], roots[s, j, 2]
                 blk[j, 0, lane] = r00 * u0 + r01 * u1 + r02 * u2 + pos[0]
                 blk[j, 1, lane] = r10 * u0 + r11 * u1 + r12 * u2 + pos[1]
                 blk[j, 2, lane] = r20 * u0 + r21 * u1 + r22 * u2 + pos[2]
-            for j in range(2, n_nodes):          # step 2: R o_j + sum_k w_k g_k,j
-                o0, o1, o2 = float(offset[s, j, 0]), float(offset[s, j, 1]), \
-                    float(offset[s, j, 2])
-                a0 = r00 * o0 + r01 * o1 + r02 * o2
-                a1 = r10 * o0 + r11 * o1 + r12 * o2
-                a2 = r20 * o0 + r21 * o1 + r22 * o2
-                for k in range(n_k):
-                    w = float(weight[s, k])
-                    g = guide[s, k]
-                    a0 += w * gpos[g, j, 0]
-                    a1 += w * gpos[g, j, 1]
-                    a2 += w * gpos[g, j, 2]
-                blk[j, 0, lane] = a0
-                blk[j, 1, lane] = a1
-                blk[j, 2, lane] = a2
-                blk[j, 3, lane] = float(rest_length[s, j - 1])
-                blk[j, 5, lane] = -1.0
         if restore or collide:                   # step 3, node by node, all lanes at once
             for j in range(2, n_nodes):
                 if restore:
@@ -268,6 +282,11 @@ def _blend_blocks(x, offset, roots, rest_length, guide, weight, gpos, rot, pos, 
                             q0, q1, q2, q3, q4, q5)
                 if not collide:
                     continue
+                inside = 0                       # any lane inside? (a vector test)
+                for lane in range(lanes):
+                    inside += 1 if blk[j, 4, lane] < 1.0 and blk[j, 5, lane] < 0.0 else 0
+                if inside == 0:
+                    continue
                 for lane in range(STRAND_BLOCK):
                     if blk[j, 4, lane] >= 1.0 or blk[j, 5, lane] >= 0.0:
                         continue
@@ -292,18 +311,19 @@ def _blend_blocks(x, offset, roots, rest_length, guide, weight, gpos, rot, pos, 
 
 
 @njit(cache=True, parallel=True)
-def blend_strands(x, offset, roots, rest_length, guide, weight, gpos, rot, pos, restore,
-                  collide, center, axes, is_guide, guide_length):
-    """Kernel, steps 2-3: ``x`` (S, N, 3) world [m] receives every strand; ``offset`` (S, N, 3)
-    float32 the rest offsets ``o`` (head frame); ``roots`` (S, 2, 3) the first two rest nodes
-    in float64 (pinned exactly); ``rest_length`` (S, N-1) float32; ``guide`` (S, K) int32 and
-    ``weight`` (S, K) float32 from :func:`blend_weights`; ``gpos`` (G, N, 3) the guides at the
-    ghosts' node fractions (step 1); ``restore``: the FTL length pass; ``collide``: keep nodes
-    out of the ellipsoid ``axes`` (radii + margin) around ``center`` (head frame).  A strand
-    that is guide ``is_guide[s] >= 0`` enters step 3 as that guide's ``gpos``, its segments
-    held to ``guide_length`` (G, N-1) float64 within :data:`GUIDE_LENGTH_TOLERANCE` and
-    left to the guide solver's contacts until the length pass moves it.  Returns the number
-    of nodes that were inside the collider."""
+def blend_strands(x, offset, roots, rest_length, guide, weight, gcol, rot, pos,
+                  restore, collide, center, axes, is_guide, guide_length):
+    """Kernel, steps 2-3: ``x`` (S, N, 3) world [m] receives every strand; ``offset``
+    (S, 3, N) float32 the rest offsets ``o`` (head frame), component-major; ``roots``
+    (S, 2, 3) the first two rest nodes in float64 (pinned exactly); ``rest_length`` (S, N-1)
+    float32; ``guide`` (S, K) int32 and ``weight`` (S, K) float32 from
+    :func:`blend_weights`; ``gcol`` (G, 3, N) the guides at the ghosts' node fractions,
+    component-major (step 1, :func:`guide_columns`); ``restore``: the FTL length pass;
+    ``collide``: keep nodes out of the ellipsoid ``axes`` (radii + margin) around ``center``
+    (head frame).  A strand that is guide ``is_guide[s] >= 0`` enters step 3 as that guide's
+    ``gcol``, its segments held to ``guide_length`` (G, N-1) float64 within
+    :data:`GUIDE_LENGTH_TOLERANCE` and left to the guide solver's contacts until the length
+    pass moves it.  Returns the number of nodes that were inside the collider."""
     n_strands = x.shape[0]
     cw = np.empty(3)                                  # the collider's centre in the world
     for i in range(3):
@@ -317,8 +337,8 @@ def blend_strands(x, offset, roots, rest_length, guide, weight, gpos, rot, pos, 
     n_chunks = min(n_blocks, CHUNKS)
     contacts = 0
     for c in prange(n_chunks):
-        contacts += _blend_blocks(x, offset, roots, rest_length, guide, weight, gpos, rot, pos,
-                                  restore, collide, cw, quad, is_guide, guide_length,
+        contacts += _blend_blocks(x, offset, roots, rest_length, guide, weight, gcol,
+                                  rot, pos, restore, collide, cw, quad, is_guide, guide_length,
                                   c * n_blocks // n_chunks, (c + 1) * n_blocks // n_chunks)
     return contacts
 
@@ -428,14 +448,13 @@ class BlendTracker:
         self.is_guide = np.full(ghosts.count, -1, dtype=np.int64)
         self.is_guide[self.guide_index] = np.arange(guides.count)
         self.seg, self.t = node_map(ghosts.rest.shape[1], guides.rest.shape[1])
-        self._same_nodes = guides.rest.shape[1] == ghosts.rest.shape[1]
         self._offset32 = np.ascontiguousarray(rest_offsets(
             ghosts.rest, at_fractions(guides.rest, self.seg, self.t), self.guide_of,
-            self.weight), dtype=np.float32)
+            self.weight).transpose(0, 2, 1), dtype=np.float32)
         self._roots = np.ascontiguousarray(ghosts.rest[:, :2], dtype=np.float64)
         self._len32 = np.ascontiguousarray(ghosts.rest_length, dtype=np.float32)
         self._guide_len = np.ascontiguousarray(guides.rest_length, dtype=np.float64)
-        self._gpos = np.empty((guides.count,) + ghosts.rest.shape[1:])
+        self._gcol = np.empty((guides.count, 3, ghosts.rest.shape[1]))
         self.collide = bool(tr.collide and collider is not None)
         if self.collide:
             # as the guide solver does: no more margin than the rest clearance of any free node
@@ -457,14 +476,11 @@ class BlendTracker:
         accepted for the simulator's interface and not needed: the blend has no state)."""
         rot = np.ascontiguousarray(head.rotation, dtype=np.float64)
         pos = np.ascontiguousarray(head.position, dtype=np.float64)
-        gpos = self.guides.x
-        if not self._same_nodes:
-            guide_points(gpos, self.seg, self.t, self._gpos)
-            gpos = self._gpos
+        guide_columns(self.guides.x, self.seg, self.t, self._gcol)
         self.stats['contacts'] = int(blend_strands(
-            self.ghosts.x, self._offset32, self._roots, self._len32, self.guide_of, self.weight,
-            gpos, rot, pos, self.restore, self.collide, self._center, self._axes,
-            self.is_guide, self._guide_len))
+            self.ghosts.x, self._offset32, self._roots, self._len32, self.guide_of,
+            self.weight, self._gcol, rot, pos, self.restore, self.collide, self._center,
+            self._axes, self.is_guide, self._guide_len))
         self.stats['steps'] += 1
 
     def reset(self, head: HeadPose) -> None:
