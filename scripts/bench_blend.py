@@ -2,11 +2,12 @@
 bandwidth of this machine measured in the same run.
 
 For each ghost count (16 nodes a strand, one guide per 16 ghosts, the default scene otherwise),
-the blend tracker's frame (blend + FTL pass + head contacts) and one step of the
-paper tracker are timed in turns, after a warm-up that compiles them; medians of the rounds.
-The bandwidth is a numpy copy of a 64 MB float64 array (read + write counted).  The blend kernel
-reads the float32 rest offsets and lengths (16 B a node) and writes float64 positions (24 B):
-its share of the bandwidth is (40 B x nodes / time) / copy bandwidth.
+the blend tracker's frame (blend + FTL pass + head contacts) and one step of the paper tracker,
+each with the read of the positions that a frame makes, are timed in turns, after a warm-up that
+compiles them; medians of the rounds. The bandwidth is a numpy copy of a 64 MB float64 array
+(read + write counted). The blend kernel reads the float32 rest offsets and lengths (16 B a
+node) and writes float64 positions (24 B): its share of the bandwidth is (40 B x nodes / time) /
+copy bandwidth.
 
     python scripts/bench_blend.py [--ghosts 10000 100000] [--threads 2] [--json out.json]
 """
@@ -74,6 +75,7 @@ def main(argv=None):
                 gx_old = sim.guides.x.copy()
                 t = time.perf_counter()
                 tr.step(sim.scene.solver.dt, gx_old, head)
+                tr.positions()
                 times[name].append(time.perf_counter() - t)
         nodes = sims['blend'].ghosts.count * sims['blend'].ghosts.rest.shape[1]
         row = {'ghosts': sims['blend'].ghosts.count, 'nodes': nodes, 'threads': args.threads,

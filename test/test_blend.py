@@ -196,6 +196,44 @@ def test_simulator_runs_the_blend_once_per_frame_with_exact_lengths_outside_the_
                                atol=1e-12)     # roots pinned
 
 
+def test_the_blend_runs_when_the_hair_is_read_from_the_guides_of_its_step():
+    sim, eager = (HairSimulator(small_scene(groom__guides=8, groom__ghosts_per_guide=8))
+                  for _ in range(2))
+    tr = sim.ghost_tracker
+    evaluated = tr.stats['evaluations']
+    assert evaluated <= 1                                 # the settling step at most
+    t0 = 1_000_000_000
+    for k in range(8):
+        t = t0 + k * 8_333_333
+        q = quat_from_axis_angle(np.array([0.0, 0.0, 1.0]), 0.2 * k)
+        for s in (sim, eager):
+            s.push_pose(t, [0.01 * k, 0.0, 0.0], q)
+            s.advance_to(t)
+        eager.ghosts.x                                    # read after every pose
+        if k == 3:
+            assert tr.stats['steps'] == 3 and tr.stats['evaluations'] == evaluated
+            first = sim.frame().ghosts
+            assert tr.stats['evaluations'] == evaluated + 1   # one blend for the frame
+            sim.frame()
+            sim.max_stretch()
+            assert tr.stats['evaluations'] == evaluated + 1   # the same hair: not again
+    # a step takes the guides and head of its own time: moving the guides later changes nothing
+    want = eager.frame().ghosts
+    saved = sim.guides.x.copy()
+    sim.guides.x[...] += 0.5
+    np.testing.assert_array_equal(sim.ghosts.x, want)
+    assert not np.array_equal(first, want)
+    sim.guides.x[...] = saved
+    # a pose reset carries the hair of the last step rigidly, as an evaluated one would be
+    for s in (sim, eager):
+        s.push_pose(t + 8_333_333, [0.07, 0.0, 0.0], q)
+        s.advance_to(t + 8_333_333)
+    eager.ghosts.x
+    for s in (sim, eager):
+        assert s.push_pose(t + 60_000_000_000, [1.0, 0.0, 0.0], q).is_reset
+    np.testing.assert_allclose(sim.ghosts.x, eager.ghosts.x, atol=1e-12)
+
+
 def test_the_mode_is_validated_and_a_change_rebuilds():
     with pytest.raises(SceneError, match='tracking.mode'):
         Scene().with_changes(tracking__mode='skin')

@@ -1,5 +1,6 @@
 """The blend tracker: every ghost strand is its rest shape carried by a weighted blend of the
-motions of a few nearby guides, evaluated once per output frame, without state of its own.
+motions of a few nearby guides, without state of its own: evaluated when the hair is read (once
+per output frame), however many head poses came in between.
 
 Guides are some of the strands themselves (:func:`choose_guides`), so a ratio of 1:1 is full
 simulation: a strand that is a guide is its guide's points, exactly as simulated for FTL guides
@@ -423,7 +424,7 @@ def reference_blend(gx, grest, rest, rest_length, guide, weight, head: HeadPose,
 
 # ----------------------------------------------------------------------------- tracker
 class BlendTracker:
-    """Moves ``ghosts`` after ``guides`` once per output frame (see the module docstring).
+    """Moves ``ghosts`` after ``guides`` when they are read (see the module docstring).
 
     ``guides`` must be some of the ghost strands: ``guide_index[i]`` is the ghost strand that
     guide ``i`` is (``ghosts.rest[guide_index] == guides.rest``).  ``k`` guides are blended per
@@ -455,6 +456,8 @@ class BlendTracker:
         self._len32 = np.ascontiguousarray(ghosts.rest_length, dtype=np.float32)
         self._guide_len = np.ascontiguousarray(guides.rest_length, dtype=np.float64)
         self._gcol = np.empty((guides.count, 3, ghosts.rest.shape[1]))
+        self._rot, self._pos = np.empty((3, 3)), np.empty(3)
+        self._pending = False         # a step not yet evaluated (see step and release)
         self.collide = bool(tr.collide and collider is not None)
         if self.collide:
             # as the guide solver does: no more margin than the rest clearance of any free node
@@ -467,24 +470,39 @@ class BlendTracker:
             self._center = np.ascontiguousarray(collider.center, dtype=np.float64)
         else:
             self._axes, self._center = np.ones(3), np.zeros(3)
-        self.stats: Dict[str, int] = {'ghosts': int(ghosts.count), 'steps': 0, 'contacts': 0,
-                                      'parallel': 1}
+        self.stats: Dict[str, int] = {'ghosts': int(ghosts.count), 'steps': 0, 'evaluations': 0,
+                                      'contacts': 0, 'parallel': 1}
 
     def step(self, dt: float, guide_x_old: Optional[np.ndarray], head: HeadPose,
              substeps: int = 1) -> None:
-        """Place every ghost from the guides now (``dt``, ``guide_x_old`` and ``substeps`` are
-        accepted for the simulator's interface and not needed: the blend has no state)."""
-        rot = np.ascontiguousarray(head.rotation, dtype=np.float64)
-        pos = np.ascontiguousarray(head.position, dtype=np.float64)
+        """Take the guides now and the head pose ``head``; every ghost is placed from them when
+        its positions are next read (``ghosts.x``, :meth:`positions`, :meth:`write_records`).
+        The blend has no state, so a step that no read follows costs only step 1 (``dt``,
+        ``guide_x_old`` and ``substeps`` are accepted for the simulator's interface and not
+        needed)."""
         guide_columns(self.guides.x, self.seg, self.t, self._gcol)
-        self.stats['contacts'] = int(blend_strands(
-            self.ghosts.x, self._offset32, self._roots, self._len32, self.guide_of,
-            self.weight, self._gcol, rot, pos, self.restore, self.collide, self._center,
-            self._axes, self.is_guide, self._guide_len))
+        np.copyto(self._rot, head.rotation)
+        np.copyto(self._pos, head.position)
+        self._pending = True
+        self.ghosts.hold(self)
         self.stats['steps'] += 1
+
+    def release(self) -> None:
+        """Steps 2-3 of the last :meth:`step` into ``ghosts.x``, if not done yet (called by
+        :class:`~hair_tracking.core.model.StrandSet` when ``ghosts.x`` or ``ghosts.v`` is
+        read or assigned)."""
+        if not self._pending:
+            return
+        self._pending = False
+        self.stats['contacts'] = int(blend_strands(
+            self.ghosts._x, self._offset32, self._roots, self._len32, self.guide_of,
+            self.weight, self._gcol, self._rot, self._pos, self.restore, self.collide,
+            self._center, self._axes, self.is_guide, self._guide_len))
+        self.stats['evaluations'] += 1
 
     def reset(self, head: HeadPose) -> None:
         """Rest shape carried by ``head``."""
+        self._pending = False
         self.ghosts.place_at(head)
 
     def positions(self) -> np.ndarray:
