@@ -31,7 +31,9 @@ irregularly-spaced data", ACM 1968).  Unlike the paper's tracker
 (:mod:`hair_tracking.ghosts.tracker`) nothing is integrated, so nothing drifts and nothing can
 gain energy: the ghost's motion is its guides' motion.
 
-Layout: step 2 runs strand by strand; step 3, a chain along each strand, runs on blocks of
+Layout: step 1 writes the guides component-major (G, 3, N) and the rest offsets are kept the
+same way (S, 3, N), so step 2 runs along a strand's nodes, one component at a time (a vector
+loop); step 3, a chain along each strand, runs on blocks of
 :data:`STRAND_BLOCK` strands held node-major in a small scratch array, so the length pass and
 the inside test of a block's strands are one vector operation per node; the rare node inside
 the head is then fixed on its own.
