@@ -48,7 +48,7 @@ def main(argv=None):
     idx = np.arange(0, len(poses), 2)
     n_frames = min(args.frames + WARM_FRAMES, len(idx))
     cloud = CloudBuffer()
-    rgb = None
+    rgb = pack_rgb_u32(np.ones((sim.ghosts.count, 4)))
     parts = {'guides': [], 'ghosts_cloud': [], 'frame': []}
     for k in range(n_frames):
         i = idx[k]
@@ -58,8 +58,6 @@ def main(argv=None):
         sim.advance_to(t)
         t1 = time.perf_counter()
         n_strands, n_points, write = sim.record_writer()
-        if rgb is None:
-            rgb = pack_rgb_u32(np.ones((n_strands, 4)))
         cloud.encode(n_strands, n_points, write, frame_id='world', stamp_ns=t, packed_rgb=rgb)
         t2 = time.perf_counter()
         if k >= WARM_FRAMES:
