@@ -32,6 +32,7 @@ command line.
 import argparse
 import collections
 import math
+import signal
 import sys
 import threading
 import time
@@ -395,6 +396,21 @@ def _check(options) -> Optional[str]:
     return None
 
 
+def interrupt_between_callbacks(node) -> None:
+    """Make Ctrl-C stop ``node``'s executor between callbacks (main thread only).
+
+    Python's own SIGINT handler raises KeyboardInterrupt at whatever the main thread is running;
+    inside rclpy's take of a message (pybind11 building the message object) it comes out as
+    "RuntimeError: Unable to convert call argument" instead, and the process dies with a
+    traceback.  Here SIGINT only triggers a guard condition of the node; the executor runs its
+    callback like any other, and that raises KeyboardInterrupt out of ``spin_once``."""
+    def stop():
+        raise KeyboardInterrupt
+
+    guard = node.create_guard_condition(stop)
+    signal.signal(signal.SIGINT, lambda signum, frame: guard.trigger())
+
+
 def serve(options, ros_args: List[str]) -> int:
     """Start the page and the subscriptions; spin until Ctrl-C or an external shutdown."""
     import viser
@@ -415,6 +431,7 @@ def serve(options, ros_args: List[str]) -> int:
         if options.head_topic:
             node.create_subscription(Marker, options.head_topic, latest.add_head, qos)
         executor.add_node(node)
+        interrupt_between_callbacks(node)
         server = viser.ViserServer(host=options.host, port=options.port, label=NAME,
                                    verbose=False)
         server.gui.configure_theme(show_share_button=False)
