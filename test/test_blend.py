@@ -74,8 +74,8 @@ def _kernel(sim, tr, h, gx, restore=True, collide=True):
     out = np.empty_like(sim.ghosts.rest)
     axes = tr._axes if collide else np.ones(3)
     contacts = blend.blend_strands(out, tr._offset32, tr._roots, tr._len32,
-                                   tr.guide_of, tr.weight, gcol, rot, pos, restore, collide,
-                                   tr._center, axes, tr.is_guide, tr._guide_len)
+                                   tr._guide_pad, tr._weight_pad, gcol, rot, pos, restore,
+                                   collide, tr._center, axes, tr.is_guide, tr._guide_len)
     return out, contacts
 
 

@@ -32,11 +32,11 @@ irregularly-spaced data", ACM 1968).  Unlike the paper's tracker
 gain energy: the ghost's motion is its guides' motion.
 
 Layout: step 1 writes the guides component-major (G, 3, N) and the rest offsets are kept the
-same way (S, 3, N), so step 2 runs along a strand's nodes, one component at a time (a vector
-loop); step 3, a chain along each strand, runs on blocks of
-:data:`STRAND_BLOCK` strands held node-major in a small scratch array, so the length pass and
-the inside test of a block's strands are one vector operation per node; the rare node inside
-the head is then fixed on its own.
+same way (S, 3, N); step 3, a chain along each strand, runs on blocks of :data:`STRAND_BLOCK`
+strands held node-major in a small scratch array, so the length pass and the inside test of a
+block's strands are one vector operation per node; step 2 writes each strand's nodes straight
+into its lane of that array, three guides and all three components in one pass along the
+strand; the rare node inside the head is then fixed on its own.
 
 :func:`reference_blend` is the plain-numpy statement of steps 1-3; the tests hold the compiled
 kernel (:func:`blend_strands`) to it.
@@ -63,6 +63,9 @@ WEIGHT_POWER = 2.0
 STRAND_BLOCK = 8
 #: Work items of the blend's parallel loop (each a run of blocks with its own scratch row).
 CHUNKS = 64
+#: Guides blended in one pass along a strand (the kernels' guide lists are padded to a multiple
+#: of it with zero weights).
+GUIDE_GROUP = 3
 
 
 # ----------------------------------------------------------------------------- set-up
@@ -105,6 +108,18 @@ def blend_weights(roots: np.ndarray, guide_roots: np.ndarray, k: int,
     w[exact, 0] = 1.0
     w /= w.sum(axis=1, keepdims=True)
     return near.astype(np.int32), w.astype(np.float32)
+
+
+def pad_guides(guide: np.ndarray, weight: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
+    """``guide``/``weight`` (S, K) of :func:`blend_weights` with columns added to a multiple of
+    :data:`GUIDE_GROUP`, repeating the first guide with weight 0 (the kernel's form; the blend
+    is unchanged, a zero-weight term adds exactly nothing)."""
+    k = guide.shape[1]
+    extra = -k % GUIDE_GROUP
+    guide = np.concatenate([guide, np.repeat(guide[:, :1], extra, axis=1)], axis=1)
+    weight = np.concatenate([weight, np.zeros((weight.shape[0], extra), weight.dtype)], axis=1)
+    return np.ascontiguousarray(guide, dtype=np.int32), np.ascontiguousarray(weight,
+                                                                             dtype=np.float32)
 
 
 def node_map(ghost_nodes: int, guide_nodes: int) -> Tuple[np.ndarray, np.ndarray]:
@@ -192,20 +207,32 @@ def guide_columns(gx, seg, t, out):
 
 
 @njit(cache=True, inline='always')
-def _deform(acc, offset, rot, guide, weight, gcol, s):
-    """Step 2 of strand ``s`` into ``acc`` (3, N): ``R o_j + sum_k w_k g_k,j`` for every node
-    ``j``, one component at a time along the nodes (contiguous rows: a vector loop)."""
-    n_nodes = acc.shape[1]
-    for c in range(3):
-        rc0, rc1, rc2 = rot[c, 0], rot[c, 1], rot[c, 2]
-        for j in range(n_nodes):
-            acc[c, j] = rc0 * offset[s, 0, j] + rc1 * offset[s, 1, j] + \
-                rc2 * offset[s, 2, j]
-        for k in range(guide.shape[1]):
-            w = float(weight[s, k])
-            g = guide[s, k]
-            for j in range(n_nodes):
-                acc[c, j] += w * gcol[g, c, j]
+def _deform(blk, lane, offset, rot, guide, weight, gcol, s):
+    """Step 2 of strand ``s`` into lane ``lane`` of the block ``blk`` (nodes 2 on):
+    ``R o_j + sum_k w_k g_k,j``, the guides three at a time (``guide``/``weight`` padded with
+    zero weights to a multiple of :data:`GUIDE_GROUP`), every node's three components in one
+    pass of straight-line arithmetic."""
+    n_nodes = blk.shape[0]
+    r00, r01, r02 = rot[0, 0], rot[0, 1], rot[0, 2]
+    r10, r11, r12 = rot[1, 0], rot[1, 1], rot[1, 2]
+    r20, r21, r22 = rot[2, 0], rot[2, 1], rot[2, 2]
+    for k in range(0, guide.shape[1], GUIDE_GROUP):
+        g0, g1, g2 = guide[s, k], guide[s, k + 1], guide[s, k + 2]
+        w0, w1, w2 = float(weight[s, k]), float(weight[s, k + 1]), float(weight[s, k + 2])
+        for j in range(2, n_nodes):
+            if k == 0:
+                o0, o1, o2 = offset[s, 0, j], offset[s, 1, j], offset[s, 2, j]
+                b0 = r00 * o0 + r01 * o1 + r02 * o2
+                b1 = r10 * o0 + r11 * o1 + r12 * o2
+                b2 = r20 * o0 + r21 * o1 + r22 * o2
+            else:
+                b0, b1, b2 = blk[j, 0, lane], blk[j, 1, lane], blk[j, 2, lane]
+            blk[j, 0, lane] = b0 + w0 * gcol[g0, 0, j] + w1 * gcol[g1, 0, j] + \
+                w2 * gcol[g2, 0, j]
+            blk[j, 1, lane] = b1 + w0 * gcol[g0, 1, j] + w1 * gcol[g1, 1, j] + \
+                w2 * gcol[g2, 1, j]
+            blk[j, 2, lane] = b2 + w0 * gcol[g0, 2, j] + w1 * gcol[g1, 2, j] + \
+                w2 * gcol[g2, 2, j]
 
 
 @njit(cache=True, error_model='numpy')
@@ -224,7 +251,6 @@ def _blend_blocks(x, offset, roots, rest_length, guide, weight, gcol, rot, pos,
     # the length tolerance (-1: always restored; a guide: GUIDE_LENGTH_TOLERANCE, and no
     # contacts unless the length pass moved it: the guide solver has placed it)
     blk = np.empty((n_nodes, 6, STRAND_BLOCK))
-    acc = np.empty((3, n_nodes))
     lanes = blk.shape[2]       # not a compile-time constant: LLVM vectorises the lane loop
     for b in range(b0, b1):
         s0 = b * STRAND_BLOCK
@@ -249,11 +275,8 @@ def _blend_blocks(x, offset, roots, rest_length, guide, weight, gcol, rot, pos,
                     blk[j, 3, lane] = guide_length[g, j - 1] if j > 0 else 1.0
                     blk[j, 5, lane] = GUIDE_LENGTH_TOLERANCE
                 continue
-            _deform(acc, offset, rot, guide, weight, gcol, s)      # step 2
+            _deform(blk, lane, offset, rot, guide, weight, gcol, s)      # step 2
             for j in range(2, n_nodes):
-                blk[j, 0, lane] = acc[0, j]
-                blk[j, 1, lane] = acc[1, j]
-                blk[j, 2, lane] = acc[2, j]
                 blk[j, 3, lane] = float(rest_length[s, j - 1])
             for j in range(2):                   # roots ride with the head
                 u0, u1, u2 = roots[s, j, 0], roots[s, j, 1], roots[s, j, 2]
@@ -320,13 +343,13 @@ def blend_strands(x, offset, roots, rest_length, guide, weight, gcol, rot, pos,
     (S, 3, N) float32 the rest offsets ``o`` (head frame), component-major; ``roots``
     (S, 2, 3) the first two rest nodes in float64 (pinned exactly); ``rest_length`` (S, N-1)
     float32; ``guide`` (S, K) int32 and ``weight`` (S, K) float32 from
-    :func:`blend_weights`; ``gcol`` (G, 3, N) the guides at the ghosts' node fractions,
-    component-major (step 1, :func:`guide_columns`); ``restore``: the FTL length pass;
-    ``collide``: keep nodes out of the ellipsoid ``axes`` (radii + margin) around ``center``
-    (head frame).  A strand that is guide ``is_guide[s] >= 0`` enters step 3 as that guide's
-    ``gcol``, its segments held to ``guide_length`` (G, N-1) float64 within
-    :data:`GUIDE_LENGTH_TOLERANCE` and left to the guide solver's contacts until the length
-    pass moves it.  Returns the number of nodes that were inside the collider."""
+    :func:`blend_weights`, padded by :func:`pad_guides`; ``gcol`` (G, 3, N) the guides at the
+    ghosts' node fractions, component-major (step 1, :func:`guide_columns`); ``restore``: the
+    FTL length pass; ``collide``: keep nodes out of the ellipsoid ``axes`` (radii + margin)
+    around ``center`` (head frame).  A strand that is guide ``is_guide[s] >= 0`` enters step 3
+    as that guide's ``gcol``, its segments held to ``guide_length`` (G, N-1) float64 within
+    :data:`GUIDE_LENGTH_TOLERANCE` and left to the guide solver's contacts until the length pass
+    moves it.  Returns the number of nodes that were inside the collider."""
     n_strands = x.shape[0]
     cw = np.empty(3)                                  # the collider's centre in the world
     for i in range(3):
@@ -447,6 +470,7 @@ class BlendTracker:
         tr = scene.tracking
         self.restore = bool(tr.length_restore)
         self.guide_of, self.weight = blend_weights(ghosts.rest[:, 0], guides.rest[:, 0], k)
+        self._guide_pad, self._weight_pad = pad_guides(self.guide_of, self.weight)
         #: the guide each strand is, -1 for the others (those copy their guide)
         self.is_guide = np.full(ghosts.count, -1, dtype=np.int64)
         self.is_guide[self.guide_index] = np.arange(guides.count)
@@ -497,8 +521,8 @@ class BlendTracker:
             return
         self._pending = False
         self.stats['contacts'] = int(blend_strands(
-            self.ghosts._x, self._offset32, self._roots, self._len32, self.guide_of,
-            self.weight, self._gcol, self._rot, self._pos, self.restore, self.collide,
+            self.ghosts._x, self._offset32, self._roots, self._len32, self._guide_pad,
+            self._weight_pad, self._gcol, self._rot, self._pos, self.restore, self.collide,
             self._center, self._axes, self.is_guide, self._guide_len))
         self.stats['evaluations'] += 1
 
