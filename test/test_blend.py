@@ -56,10 +56,11 @@ def test_node_map_is_node_to_node_for_equal_counts():
     assert seg.tolist() == [0, 2, 3] and np.allclose(t, [0.0, 0.0, 1.0])
 
 
-def _random_case(seed, guides=7, nodes=12, guide_nodes=12):
+def _random_case(seed, guides=7, nodes=12, guide_nodes=12, k=3):
     rng = np.random.default_rng(seed)
     sim = HairSimulator(small_scene(groom__guides=guides, groom__ghosts_per_guide=5,
-                                    groom__ghost_nodes=nodes, groom__guide_nodes=guide_nodes))
+                                    groom__ghost_nodes=nodes, groom__guide_nodes=guide_nodes,
+                                    tracking__blend_guides=k))
     tr = sim.ghost_tracker
     h = head()
     gx = h.to_world(sim.guides.rest) + rng.normal(scale=0.01, size=sim.guides.rest.shape)
@@ -92,6 +93,17 @@ def test_kernel_matches_the_numpy_reference(restore, collide):
     np.testing.assert_allclose(out, ref, atol=1e-8)
     if not collide:
         assert contacts == 0
+
+
+@pytest.mark.parametrize('k', [1, 2, 4, 7])
+def test_any_number_of_guides_a_ghost_matches_the_reference(k):
+    sim, tr, h, gx = _random_case(7, k=k)
+    assert tr.guide_of.shape[1] == k and tr._guide_pad.shape[1] % blend.GUIDE_GROUP == 0
+    out, _ = _kernel(sim, tr, h, gx)
+    ref = blend.reference_blend(gx, sim.guides.rest, sim.ghosts.rest, tr._len32, tr.guide_of,
+                                tr.weight, h, True, tr._axes, tr._center, tr.is_guide,
+                                tr._guide_len)
+    np.testing.assert_allclose(out, ref, atol=1e-7)
 
 
 def test_every_lane_of_a_block_is_placed_and_guides_keep_their_points_or_lengths():
