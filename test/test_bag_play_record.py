@@ -19,6 +19,7 @@ from hair_tracking.bags.record import BagRecorder
 
 DOMAIN_ROUNDTRIP = 51
 DOMAIN_LOOP = 53
+DOMAIN_SIGINT = 81
 WAIT_S = 20.0
 
 
@@ -151,6 +152,32 @@ def test_loop_stops_on_request_and_restarts_time(tmp_path, ros_context):
     assert len(got) >= 30
     back = [i for i in range(1, len(got)) if got[i] < got[i - 1]]
     assert back and all(got[i] == got[0] for i in back)           # each loop starts over
+
+
+def test_a_sigint_stops_playing_between_messages(ros_context):
+    """The player's SIGINT handler only sets a flag (no exception inside a publish, no lock
+    taken in the handler); play returns within its next message or 0.1 s of waiting."""
+    import signal
+    ctx = ros_context(DOMAIN_SIGINT)
+    node = rclpy.create_node('sigint_player', context=ctx)
+    player = BagPlayer(node, bag_io.bundled_bag(), loop=True, rate=2.0, clock=False)
+    saved = signal.getsignal(signal.SIGINT)
+    signal.signal(signal.SIGINT, lambda signum, frame: player.interrupt())
+    timer = threading.Timer(0.5, signal.raise_signal, (signal.SIGINT,))
+    backstop = threading.Timer(WAIT_S, player.stop)      # a failing test still ends
+    try:
+        timer.start()
+        backstop.start()
+        stats = player.play()          # in the main thread, where the handler runs
+    finally:
+        timer.cancel()
+        backstop.cancel()
+        signal.signal(signal.SIGINT, saved)
+        player.destroy()
+        node.destroy_node()
+    assert stats.interrupted and stats.loops == 1
+    assert 0 < sum(stats.published.values()) and stats.wall_s < WAIT_S
+    assert player.sleep(5.0) and player.stopping()      # stays stopped, no 5 s wait
 
 
 def test_play_and_record_bad_input(tmp_path, capsys):

@@ -161,30 +161,6 @@ def test_bad_options_exit_2():
     assert out.returncode == 2 and '--rate' in out.stderr
 
 
-def test_ctrl_c_stops_the_executor_between_callbacks_not_inside_one():
-    import rclpy
-    from rclpy.context import Context
-    from rclpy.executors import SingleThreadedExecutor
-    ctx = Context()
-    rclpy.init(context=ctx, domain_id=DOMAIN)
-    saved = signal.getsignal(signal.SIGINT)
-    try:
-        node = rclpy.create_node('view_test_interrupt', context=ctx)
-        ex = SingleThreadedExecutor(context=ctx)
-        ex.add_node(node)
-        view.interrupt_between_callbacks(node)
-        signal.raise_signal(signal.SIGINT)        # handled here without raising ...
-        with pytest.raises(KeyboardInterrupt):
-            for _ in range(20):                   # ... but by the executor's next turn
-                ex.spin_once(timeout_sec=0.1)
-        ex.spin_once(timeout_sec=0.0)             # one stop per Ctrl-C
-        ex.shutdown(timeout_sec=1.0)
-        node.destroy_node()
-    finally:
-        signal.signal(signal.SIGINT, saved)
-        rclpy.try_shutdown(context=ctx)
-
-
 def test_the_node_and_the_simulation_do_not_import_viser():
     code = ('import sys, hair_tracking.ros.node, hair_tracking.simulator, '
             'hair_tracking.ros.view; print("viser" in sys.modules)')

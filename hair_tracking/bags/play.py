@@ -139,6 +139,7 @@ class BagPlayer:
         self.remap = dict(remap or {})
         self.stats = PlayStats()
         self._stop = threading.Event()
+        self._interrupted = False        # set by a signal handler (see interrupt)
         with bag_io.open_bag(self.bag) as reader:
             self.is_ros1 = not reader.is2
             infos = bag_io.topics(reader)
@@ -190,6 +191,25 @@ class BagPlayer:
         """Ask a running :meth:`play` (in another thread) to stop soon."""
         self._stop.set()
 
+    def interrupt(self) -> None:
+        """Ask :meth:`play` to stop from a signal handler in its own thread: sets a flag only
+        (an Event takes a lock the interrupted code may hold), seen between messages and at
+        least every 0.1 s while waiting."""
+        self._interrupted = True
+
+    def stopping(self) -> bool:
+        return self._interrupted or self._stop.is_set()
+
+    def sleep(self, seconds: float) -> bool:
+        """Wait ``seconds`` unless asked to stop first; returns whether asked."""
+        deadline = time.monotonic() + seconds
+        while not self.stopping():
+            left = deadline - time.monotonic()
+            if left <= 0:
+                return False
+            self._stop.wait(min(left, 0.1))
+        return True
+
     def wait_for_subscribers(self, timeout_s: float, topics: Optional[Sequence[str]] = None
                              ) -> List[str]:
         """Wait up to ``timeout_s`` until each publisher has a subscriber; returns the topics
@@ -198,7 +218,7 @@ class BagPlayer:
         pubs = {t: p for t, p in self.publishers.items() if topics is None or t in topics}
         while True:
             lonely = [t for t, p in pubs.items() if p.get_subscription_count() == 0]
-            if not lonely or time.monotonic() >= deadline or self._stop.is_set():
+            if not lonely or time.monotonic() >= deadline or self.stopping():
                 return lonely
             time.sleep(0.02)
 
@@ -212,13 +232,13 @@ class BagPlayer:
         """Publish the bag (once, or until :meth:`stop` with ``loop``); returns the stats."""
         st = self.stats
         wall0 = time.monotonic()
-        while not self._stop.is_set():
+        while not self.stopping():
             st.loops += 1
             self._play_once(progress)
             if not self.loop:
                 break
         st.wall_s = time.monotonic() - wall0
-        st.interrupted = self._stop.is_set()
+        st.interrupted = self.stopping()
         return st
 
     def _play_once(self, progress) -> None:
@@ -230,7 +250,7 @@ class BagPlayer:
             wall0 = time.monotonic()
             done = 0
             for conn, t_ns, raw in bag_io.messages(reader, conns, self.start_ns, self.stop_ns):
-                if self._stop.is_set():
+                if self.stopping():
                     return
                 if first is None:
                     first = t_ns
@@ -239,7 +259,7 @@ class BagPlayer:
                     left = due - time.monotonic()
                     if left <= 0:
                         break
-                    if self._stop.wait(min(left, 0.1)):
+                    if self._stop.wait(min(left, 0.1)) or self._interrupted:
                         return
                 st.max_lag_ms = max(st.max_lag_ms, (time.monotonic() - due) * 1e3)
                 if self.clock_pub is not None:
@@ -278,9 +298,10 @@ def main_play(args) -> int:
     if args.delay < 0 or args.wait_for_subscribers < 0:
         raise BagError('--delay and --wait-for-subscribers must be >= 0', EXIT_USAGE)
     kwargs = {} if args.domain_id is None else {'domain_id': args.domain_id}
-    # Ctrl-C raises KeyboardInterrupt here (counted as an interrupted run) instead of
-    # rclpy's handler invalidating the context under a publish in progress (installed even
-    # where the parent left SIGINT ignored, as rclpy's handler would be)
+    # Ctrl-C: not rclpy's handler invalidating the context under a publish in progress; until
+    # the player exists Python's KeyboardInterrupt, then a flag the player checks between
+    # messages (a KeyboardInterrupt raised inside a publish comes out of pybind11 as a
+    # RuntimeError).  Installed even where the parent left SIGINT ignored, as rclpy's would be.
     signal.signal(signal.SIGINT, signal.default_int_handler)
     rclpy.init(args=None, signal_handler_options=SignalHandlerOptions.NO, **kwargs)
     node = player = None
@@ -290,13 +311,14 @@ def main_play(args) -> int:
         player = BagPlayer(node, bag, rate=args.rate, loop=args.loop,
                            start_offset_s=args.start_offset, duration_s=args.duration,
                            topics=args.topics, remap=remap, clock=not args.no_clock)
+        signal.signal(signal.SIGINT, lambda signum, frame: player.interrupt())
         if args.wait_for_subscribers > 0:
             lonely = player.wait_for_subscribers(args.wait_for_subscribers)
-            if lonely:
+            if lonely and not player.stopping():
                 print(f'note: no subscriber yet on {", ".join(lonely)}; playing anyway',
                       file=sys.stderr)
         if args.delay > 0:
-            time.sleep(args.delay)
+            player.sleep(args.delay)
 
         def progress(done, total):
             nonlocal bar
@@ -306,11 +328,7 @@ def main_play(args) -> int:
                 bar = Progress(total, label='play')
             bar.update(done)
 
-        try:
-            stats = player.play(progress)
-        except KeyboardInterrupt:
-            player.stats.interrupted = True
-            stats = player.stats
+        stats = player.play(progress)
         if bar is not None:
             bar.close()
         print(stats.text())

@@ -81,6 +81,7 @@ from hair_tracking.core.strand_colors import StrandColorCache
 from hair_tracking.core.tf_tree import compose as tf_compose, TfTree
 from hair_tracking.core.transforms import quat_to_matrix
 from hair_tracking.resources import config_path
+from hair_tracking.ros.interrupt import interrupt_between_callbacks
 from hair_tracking.ros.load_shedding import LoadShedder
 from hair_tracking.simulator import HairSimulator, warm_up as warm_up_simulator
 
@@ -853,10 +854,12 @@ def main(args=None) -> int:
     node = executor = None
     code = 0
     try:
-        # Ctrl-C is Python's KeyboardInterrupt in the main thread (handled below), not rclpy's
-        # C-level handler shutting the context down under a running callback; rclpy still
-        # turns SIGTERM into a shutdown (ExternalShutdownException).  Installed even where the
-        # parent left SIGINT ignored (a background job), as rclpy's own handler would be.
+        # Ctrl-C is a KeyboardInterrupt in the main thread (handled below), not rclpy's C-level
+        # handler shutting the context down under a running callback: until the node exists
+        # Python's own, then raised between the executor's callbacks
+        # (interrupt_between_callbacks); rclpy still turns SIGTERM into a shutdown
+        # (ExternalShutdownException).  Installed even where the parent left SIGINT ignored (a
+        # background job), as rclpy's own handler would be.
         signal.signal(signal.SIGINT, signal.default_int_handler)
         rclpy.init(args=argv[:1] + argv[split:],
                    signal_handler_options=SignalHandlerOptions.SIGTERM)
@@ -868,6 +871,7 @@ def main(args=None) -> int:
         if options.gc_freeze:
             process_tuning.freeze_heap()
         executor.add_node(node)
+        interrupt_between_callbacks(node)
         executor.spin()
     except (KeyboardInterrupt, ExternalShutdownException):
         pass

@@ -32,7 +32,6 @@ command line.
 import argparse
 import collections
 import math
-import signal
 import sys
 import threading
 import time
@@ -43,6 +42,8 @@ from sensor_msgs.msg import PointCloud2, PointField
 from visualization_msgs.msg import Marker
 
 from msg_adapters.pointcloud import pointcloud2_to_strands
+
+from hair_tracking.ros.interrupt import interrupt_between_callbacks
 
 DEFAULT_PORT = 8080
 #: The node's default ``marker_color`` as 8-bit RGB, for clouds without an ``rgb`` field.
@@ -394,21 +395,6 @@ def _check(options) -> Optional[str]:
     if not options.points_topic:
         return '--points-topic must not be empty'
     return None
-
-
-def interrupt_between_callbacks(node) -> None:
-    """Make Ctrl-C stop ``node``'s executor between callbacks (main thread only).
-
-    Python's own SIGINT handler raises KeyboardInterrupt at whatever the main thread is running;
-    inside rclpy's take of a message (pybind11 building the message object) it comes out as
-    "RuntimeError: Unable to convert call argument" instead, and the process dies with a
-    traceback.  Here SIGINT only triggers a guard condition of the node; the executor runs its
-    callback like any other, and that raises KeyboardInterrupt out of ``spin_once``."""
-    def stop():
-        raise KeyboardInterrupt
-
-    guard = node.create_guard_condition(stop)
-    signal.signal(signal.SIGINT, lambda signum, frame: guard.trigger())
 
 
 def serve(options, ros_args: List[str]) -> int:
