@@ -135,14 +135,6 @@ def node_map(ghost_nodes: int, guide_nodes: int) -> Tuple[np.ndarray, np.ndarray
 
 # ----------------------------------------------------------------------------- kernels
 @njit(cache=True, inline='always')
-def _unit(x, y, z):
-    n = math.sqrt(x * x + y * y + z * z)
-    if n > 0.0:
-        return x / n, y / n, z / n
-    return x, y, z
-
-
-@njit(cache=True, inline='always')
 def _push_out(nx, ny, nz, cw, quad):
     """A world point inside the ellipsoid ``(x - cw)^T Q (x - cw) < 1`` (``cw`` its centre in
     the world, ``quad`` the 6 entries of ``Q = R diag(1 / axes^2) R^T``: Q00 Q11 Q22 Q01 Q02
@@ -171,17 +163,21 @@ def _ellipsoid_form(dx, dy, dz, q0, q1, q2, q3, q4, q5):
 @njit(cache=True, inline='always')
 def _slide(nx, ny, nz, px, py, pz, length, cw, quad):
     """The node at ``length`` from its predecessor ``p`` in the direction of ``n`` with the
-    inward part (along the collider's normal at ``p``'s level) removed: it slides along the
-    surface instead of into it."""
+    inward part (along the collider's normal ``g = Q (p - c)`` at ``p``'s level) removed: it
+    slides along the surface instead of into it.  ``d - (d.g / g.g) g`` needs no unit normal,
+    so the slide costs one square root and two divisions.  For ``p`` outside the ellipsoid the
+    result is outside too (it lies on the outer side of the tangent plane of the convex level
+    set through ``p``)."""
     ex, ey, ez = px - cw[0], py - cw[1], pz - cw[2]
     gx = quad[0] * ex + quad[3] * ey + quad[4] * ez           # outward normal Q (p - c)
     gy = quad[3] * ex + quad[1] * ey + quad[5] * ez
     gz = quad[4] * ex + quad[5] * ey + quad[2] * ez
-    gx, gy, gz = _unit(gx, gy, gz)
     dx, dy, dz = nx - px, ny - py, nz - pz
     inward = dx * gx + dy * gy + dz * gz
-    if inward < 0.0:
-        dx, dy, dz = dx - inward * gx, dy - inward * gy, dz - inward * gz
+    gg = gx * gx + gy * gy + gz * gz
+    if inward < 0.0 and gg > 0.0:
+        a = inward / gg
+        dx, dy, dz = dx - a * gx, dy - a * gy, dz - a * gz
     d = math.sqrt(dx * dx + dy * dy + dz * dz)
     if d <= 0.0:
         return nx, ny, nz
