@@ -109,6 +109,12 @@ RESTORE_ITERATIONS = 8
 #: (then four) on sub-micrometre depths in most contacts (and still ended a few um inside).
 #: 10 um is 0.25 % of the default 4 mm margin.
 RESTORE_TOLERANCE = 1e-5
+#: A node of :func:`ftl_restore` whose squared distance from its predecessor is within this
+#: fraction of the rest length's square, and which lies outside (as :data:`RESTORE_TOLERANCE`
+#: accepts), is left where it is, and so is every node before the first that is not: the pass
+#: would put it back within about 1e-12 m of itself.  Only strands the collider pushed are walked
+#: again, from their first pushed node.
+RESTORE_LENGTH_TOLERANCE = 1e-10
 
 
 @njit(cache=True, inline='always', fastmath=FASTMATH, error_model='numpy')
@@ -152,8 +158,9 @@ def ftl_restore(x, rest, rest_length, rot, pos, center, axes, refine, corr):
 
     The collider projects single nodes out of the head, which stretches their segments (by up to
     ``margin / segment length``, and by tens of per cent in fast motion).  This pass walks every
-    strand from the root again and puts each node at its rest distance from its predecessor
-    (as the FTL pass does); if that point lies inside the collision ellipsoid (semi-axes
+    strand the collider changed again, from its first node off its rest distance or inside
+    (:data:`RESTORE_LENGTH_TOLERANCE`), and puts each node at its rest distance from its
+    predecessor (as the FTL pass does); if that point lies inside the collision ellipsoid (semi-axes
     ``axes`` = radii + margin, centre ``center``, head frame; head pose ``rot``, ``pos``) it is
     moved to the surface (:func:`hair_tracking.guides.collision.surface_point`, ``refine``
     refinements) and put back at the rest distance along the new direction, up to
@@ -178,9 +185,21 @@ def ftl_restore_block(x, rest, rest_length, rot, cx, cy, cz, axes, refine, corr,
     code (inlined into each, LLVM contracted the arithmetic differently: results differed in
     the last bits)."""
     ax, ay, az = axes[0], axes[1], axes[2]
+    ix, iy, iz = 1.0 / (ax * ax), 1.0 / (ay * ay), 1.0 / (az * az)
+    f_ok = restore_f_ok(ax, ay, az)
     n = x.shape[1]
     for s in range(s0, s1):
-        for i in range(2, n):
+        start = n                  # the first node the collider left off its rest distance
+        for i in range(2, n):      # or inside: the nodes before it are as the pass leaves them
+            dx, dy, dz = x[s, i, 0] - x[s, i - 1, 0], x[s, i, 1] - x[s, i - 1, 1], \
+                x[s, i, 2] - x[s, i - 1, 2]
+            r2 = rest_length[s, i - 1] * rest_length[s, i - 1]
+            qx, qy, qz = to_head(x[s, i, 0], x[s, i, 1], x[s, i, 2], rot, cx, cy, cz)
+            if abs(dx * dx + dy * dy + dz * dz - r2) > RESTORE_LENGTH_TOLERANCE * r2 or \
+                    qx * qx * ix + qy * qy * iy + qz * qz * iz < f_ok:
+                start = i
+                break
+        for i in range(start, n):
             ox, oy, oz = x[s, i, 0], x[s, i, 1], x[s, i, 2]
             px, py, pz = restore_node(
                 ox, oy, oz, x[s, i - 1, 0], x[s, i - 1, 1], x[s, i - 1, 2], rest_length[s, i - 1],
