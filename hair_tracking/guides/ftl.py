@@ -160,8 +160,8 @@ def ftl_restore(x, rest, rest_length, rot, pos, center, axes, refine, corr):
     ``margin / segment length``, and by tens of per cent in fast motion).  This pass walks every
     strand the collider changed again, from its first node off its rest distance or inside
     (:data:`RESTORE_LENGTH_TOLERANCE`), and puts each node at its rest distance from its
-    predecessor (as the FTL pass does); if that point lies inside the collision ellipsoid (semi-axes
-    ``axes`` = radii + margin, centre ``center``, head frame; head pose ``rot``, ``pos``) it is
+    predecessor (as the FTL pass does); if that point lies inside the collision ellipsoid
+    (semi-axes ``axes`` = radii + margin, centre ``center``, head frame; head pose ``rot``, ``pos``) it is
     moved to the surface (:func:`hair_tracking.guides.collision.surface_point`, ``refine``
     refinements) and put back at the rest distance along the new direction, up to
     :data:`RESTORE_ITERATIONS`
