@@ -161,11 +161,10 @@ def ftl_restore(x, rest, rest_length, rot, pos, center, axes, refine, corr):
     strand the collider changed again, from its first node off its rest distance or inside
     (:data:`RESTORE_LENGTH_TOLERANCE`), and puts each node at its rest distance from its
     predecessor (as the FTL pass does); if that point lies inside the collision ellipsoid
-    (semi-axes ``axes`` = radii + margin, centre ``center``, head frame; head pose ``rot``, ``pos``) it is
-    moved to the surface (:func:`hair_tracking.guides.collision.surface_point`, ``refine``
-    refinements) and put back at the rest distance along the new direction, up to
-    :data:`RESTORE_ITERATIONS`
-    times (see :func:`restore_node`).
+    (semi-axes ``axes`` = radii + margin, centre ``center``, head frame; head pose ``rot``,
+    ``pos``) it is moved to the surface (:func:`hair_tracking.guides.collision.surface_point`,
+    ``refine`` refinements) and put back at the rest distance along the new direction, up to
+    :data:`RESTORE_ITERATIONS` times (see :func:`restore_node`).
     For a predecessor outside the surface this converges to the point of the circle where the
     sphere of radius ``rest_length`` around it meets the surface, so lengths stay exact and a node
     ends at most a small fraction of a segment inside the margin layer.  The correction of every
