@@ -49,6 +49,19 @@ def test_weights_are_shepard_and_a_guide_follows_only_itself():
     np.testing.assert_allclose(w.sum(axis=1), 1.0, rtol=1e-6)
 
 
+def test_weights_are_computed_in_chunks_of_strands_with_the_same_result(monkeypatch):
+    rng = np.random.default_rng(4)
+    roots = rng.normal(size=(300, 3))
+    guides = roots[rng.choice(300, 40, replace=False)]
+    whole = blend.blend_weights(roots, guides, k=3)
+    monkeypatch.setattr(blend, 'WEIGHT_CHUNK', 40 * 7)         # 7 strands at a time
+    chunked = blend.blend_weights(roots, guides, k=3)
+    assert np.array_equal(whole[0], chunked[0]) and np.array_equal(whole[1], chunked[1])
+    # against the distances written out in full
+    d = np.sqrt(((roots[:, None] - guides[None]) ** 2).sum(-1))
+    np.testing.assert_array_equal(chunked[0], np.argsort(d, axis=1, kind='stable')[:, :3])
+
+
 def test_node_map_is_node_to_node_for_equal_counts():
     seg, t = blend.node_map(16, 16)
     assert seg.tolist() == list(range(15)) + [14] and t.tolist() == [0.0] * 15 + [1.0]

@@ -58,6 +58,8 @@ DEFAULT_GUIDES_PER_GHOST = 3
 GUIDE_LENGTH_TOLERANCE = 1e-9
 #: Exponent of the inverse-distance weights.
 WEIGHT_POWER = 2.0
+#: Strand-to-guide distances :func:`blend_weights` holds at a time.
+WEIGHT_CHUNK = 1 << 22
 #: Strands whose length passes run together, node by node: one vector register of float64 lanes
 #: on AVX-512 (two on AVX2), so each node of the chain is one vector step for the whole block.
 STRAND_BLOCK = 8
@@ -99,9 +101,16 @@ def blend_weights(roots: np.ndarray, guide_roots: np.ndarray, k: int,
     k = int(min(k, guide_roots.shape[0]))
     if k < 1:
         raise ValueError('blend_weights: need at least one guide')
-    d2 = np.sum((roots[:, None, :] - guide_roots[None, :, :]) ** 2, axis=2)      # (S, G)
-    near = np.argsort(d2, axis=1, kind='stable')[:, :k]
-    dn = np.sqrt(np.take_along_axis(d2, near, axis=1))
+    near = np.empty((roots.shape[0], k), dtype=np.int64)
+    dn = np.empty((roots.shape[0], k))
+    rows = max(1, WEIGHT_CHUNK // guide_roots.shape[0])     # bounded memory for 100 k strands
+    for a in range(0, roots.shape[0], rows):
+        r = roots[a:a + rows]
+        d2 = (r[:, None, 0] - guide_roots[None, :, 0]) ** 2                       # (rows, G)
+        d2 += (r[:, None, 1] - guide_roots[None, :, 1]) ** 2
+        d2 += (r[:, None, 2] - guide_roots[None, :, 2]) ** 2
+        near[a:a + rows] = np.argsort(d2, axis=1, kind='stable')[:, :k]
+        dn[a:a + rows] = np.sqrt(np.take_along_axis(d2, near[a:a + rows], axis=1))
     exact = dn[:, 0] <= 1e-12
     w = 1.0 / np.maximum(dn, 1e-12) ** power
     w[exact] = 0.0
