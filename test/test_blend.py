@@ -62,6 +62,14 @@ def test_weights_are_computed_in_chunks_of_strands_with_the_same_result(monkeypa
     np.testing.assert_array_equal(chunked[0], np.argsort(d, axis=1, kind='stable')[:, :3])
 
 
+def test_nearest_guides_break_ties_to_the_lower_index_as_a_stable_sort():
+    rng = np.random.default_rng(6)
+    d2 = rng.integers(0, 6, size=(400, 30)).astype(float)        # many ties
+    for k in (1, 3, 5, 30):
+        np.testing.assert_array_equal(blend._nearest(d2, k),
+                                      np.argsort(d2, axis=1, kind='stable')[:, :k])
+
+
 def test_node_map_is_node_to_node_for_equal_counts():
     seg, t = blend.node_map(16, 16)
     assert seg.tolist() == list(range(15)) + [14] and t.tolist() == [0.0] * 15 + [1.0]

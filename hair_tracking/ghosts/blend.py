@@ -109,7 +109,7 @@ def blend_weights(roots: np.ndarray, guide_roots: np.ndarray, k: int,
         d2 = (r[:, None, 0] - guide_roots[None, :, 0]) ** 2                       # (rows, G)
         d2 += (r[:, None, 1] - guide_roots[None, :, 1]) ** 2
         d2 += (r[:, None, 2] - guide_roots[None, :, 2]) ** 2
-        near[a:a + rows] = np.argsort(d2, axis=1, kind='stable')[:, :k]
+        near[a:a + rows] = _nearest(d2, k)
         dn[a:a + rows] = np.sqrt(np.take_along_axis(d2, near[a:a + rows], axis=1))
     exact = dn[:, 0] <= 1e-12
     w = 1.0 / np.maximum(dn, 1e-12) ** power
@@ -117,6 +117,24 @@ def blend_weights(roots: np.ndarray, guide_roots: np.ndarray, k: int,
     w[exact, 0] = 1.0
     w /= w.sum(axis=1, keepdims=True)
     return near.astype(np.int32), w.astype(np.float32)
+
+
+def _nearest(d2: np.ndarray, k: int) -> np.ndarray:
+    """Columns of the ``k`` smallest entries of each row of ``d2``, ascending, ties to the lower
+    column: ``np.argsort(d2, axis=1, kind='stable')[:, :k]`` without sorting whole rows (a
+    partition finds each row's k-th value; rows with a tie at it are sorted in full)."""
+    if k >= d2.shape[1]:
+        return np.argsort(d2, axis=1, kind='stable')[:, :k]
+    kth = np.partition(d2, k - 1, axis=1)[:, k - 1:k]
+    mask = d2 <= kth
+    plain = mask.sum(axis=1) == k
+    out = np.empty((d2.shape[0], k), dtype=np.int64)
+    cols = np.nonzero(mask[plain])[1].reshape(-1, k)             # ascending column order
+    vals = np.take_along_axis(d2[plain], cols, axis=1)
+    out[plain] = np.take_along_axis(cols, np.argsort(vals, axis=1, kind='stable'), axis=1)
+    if not plain.all():
+        out[~plain] = np.argsort(d2[~plain], axis=1, kind='stable')[:, :k]
+    return out
 
 
 def pad_guides(guide: np.ndarray, weight: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
