@@ -255,12 +255,8 @@ class BagPlayer:
                 if first is None:
                     first = t_ns
                 due = wall0 + (t_ns - first) * 1e-9 / self.rate
-                while True:
-                    left = due - time.monotonic()
-                    if left <= 0:
-                        break
-                    if self._stop.wait(min(left, 0.1)) or self._interrupted:
-                        return
+                if self.sleep(due - time.monotonic()):
+                    return
                 st.max_lag_ms = max(st.max_lag_ms, (time.monotonic() - due) * 1e3)
                 if self.clock_pub is not None:
                     self.clock_pub.publish(self._clock_msg(t_ns))
