@@ -348,7 +348,6 @@ def test_serial_twins_run_small_problems_with_the_same_results(monkeypatch, kind
                     return real(*args)
                 monkeypatch.setattr(module, variant, spy)
         monkeypatch.setattr(integrate, 'PARALLEL_MIN_NODES', threshold)
-        monkeypatch.setattr(integrate.numba, 'get_num_threads', lambda: 2)
         rest = np.zeros((6, 12, 3))
         rest[:, :, 0] = np.linspace(-0.05, 0.05, 6)[:, None]
         rest[:, :, 2] = 0.11 - 0.02 * np.arange(12)[None, :]
@@ -464,3 +463,18 @@ def test_max_stretch_agrees_with_numpy_and_never_hides_nan():
     assert max_stretch(x, np.zeros_like(rest)) == 0.0
     with pytest.raises(ValueError, match='rest_length'):
         max_stretch(x, rest[:, 1:])
+
+
+def test_the_kernel_variant_depends_on_the_size_not_on_the_thread_count():
+    """One numba thread runs the same (parallel) kernels as several from PARALLEL_MIN_NODES
+    nodes on, so a one-thread timing of every method measures the same code."""
+    import numba
+    before = numba.get_num_threads()
+    n = integrate.PARALLEL_MIN_NODES
+    try:
+        for threads in sorted({1, numba.config.NUMBA_NUM_THREADS}):
+            numba.set_num_threads(threads)
+            assert integrate.runs_parallel(n)
+            assert not integrate.runs_parallel(n - 1)
+    finally:
+        numba.set_num_threads(before)

@@ -183,7 +183,6 @@ def test_warm_up_loads_exactly_the_kernel_variants_the_full_scene_runs(
     from hair_tracking.guides import ftl
     from hair_tracking.guides import integrate
     threshold = integrate.PARALLEL_MIN_NODES
-    monkeypatch.setattr(integrate.numba, 'get_num_threads', lambda: 2)
     calls = set()
     for module, names in ((ftl, ('ftl_step', 'ftl_step_serial')),
                           (ghosts_mod, ('track_groups', 'track_groups_serial'))):
