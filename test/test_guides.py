@@ -4,6 +4,7 @@ roots, shock propagation, extreme inputs, kernel selection, input errors.
 Numbers quoted in docstrings were measured with this code (dt = 1/240 s, 4 strands x 16 nodes,
 0.25 m long, uniform masses).
 """
+import numba
 import numpy as np
 import pytest
 
@@ -468,7 +469,6 @@ def test_max_stretch_agrees_with_numpy_and_never_hides_nan():
 def test_the_kernel_variant_depends_on_the_size_not_on_the_thread_count():
     """One numba thread runs the same (parallel) kernels as several from PARALLEL_MIN_NODES
     nodes on, so a one-thread timing of every method measures the same code."""
-    import numba
     before = numba.get_num_threads()
     n = integrate.PARALLEL_MIN_NODES
     try:
