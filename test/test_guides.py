@@ -340,7 +340,8 @@ def test_serial_twins_run_small_problems_with_the_same_results(monkeypatch, kind
     for label, threshold in (('serial', 1 << 40), ('parallel', 0)):
         calls = []
         for module, name in ((pbd_constraints, 'pbd_step'), (pbd_constraints, 'xpbd_step'),
-                             (ftl, 'ftl_step'), (integrate, 'finalize')):
+                             (ftl, 'ftl_step'), (ftl, 'ftl_collide_step'),
+                             (integrate, 'finalize')):
             for variant in (name, name + '_serial'):
                 real = getattr(module, variant)
 
@@ -363,11 +364,64 @@ def test_serial_twins_run_small_problems_with_the_same_results(monkeypatch, kind
             h_prev = head
         assert g.stats['contacts_total'] > 0
         runs[label] = (st.x.copy(), st.v.copy(), set(calls))
-    kernel = {'pbd': 'pbd_step', 'xpbd': 'xpbd_step', 'ftl': 'ftl_step'}[kind]
-    assert runs['serial'][2] == {kernel + '_serial', 'finalize_serial'}
-    assert runs['parallel'][2] == {kernel, 'finalize'}
+    # FTL with a collider: one kernel a substep; PBD and XPBD: their step, then finalize
+    kernels = {'pbd': ['pbd_step', 'finalize'], 'xpbd': ['xpbd_step', 'finalize'],
+               'ftl': ['ftl_collide_step']}[kind]
+    assert runs['serial'][2] == {k + '_serial' for k in kernels}
+    assert runs['parallel'][2] == set(kernels)
     np.testing.assert_array_equal(runs['serial'][0], runs['parallel'][0])
     np.testing.assert_array_equal(runs['serial'][1], runs['parallel'][1])
+
+
+@pytest.mark.parametrize('friction', [0.0, 0.3])
+def test_ftl_collide_step_is_the_separate_kernels_in_one_block_loop(friction):
+    """The fused FTL substep with the head collider gives the hair, velocities, corrections and
+    counts of the kernels it fuses run one after another over all strands: FTL step without
+    finalize, the collider's projection (friction against the rigidly carried start), the
+    collision-aware second pass, finalize.  Bit for bit: the same compiled block bodies."""
+    sc = scene('ftl', collider__shape='ellipsoid', collider__friction=friction,
+               solver__shock_propagation=0.5, solver__max_displacement=0.004)
+    rest = np.zeros((40, 12, 3))
+    rest[:, :, 0] = np.linspace(-0.06, 0.06, 40)[:, None]
+    rest[:, :, 2] = 0.11 - 0.02 * np.arange(12)[None, :]
+    fused_st, split_st = StrandSet.from_rest(rest), StrandSet.from_rest(rest)
+    fused, split = GuideSolver(fused_st, sc), GuideSolver(split_st, sc)
+    c = split.collider
+    x_ref = np.empty_like(split_st.x)
+    dt = 1.0 / 120.0
+    h_prev = pose([0, 0, 0])
+    fused.reset(h_prev)
+    split.reset(h_prev)
+    contacts = clamped = 0
+    for k in range(1, 50):
+        head = pose([0.04 * np.sin(0.3 * k), 0.0, 0.01 * np.cos(0.2 * k)],
+                    quat_from_axis_angle([0, 0, 1], 0.6 * np.sin(0.2 * k)))
+        fused.step(dt, h_prev, head)
+        # the same substep as separate kernels
+        st = split_st
+        rot, pos = head.rotation, head.position
+        rot_rel = np.empty((3, 3))
+        integrate.head_motion(h_prev.rotation, h_prev.position, rot, pos, rot_rel)
+        integrate.carry_rigid(st.x, rot_rel, h_prev.position, pos, x_ref)
+        motion = (rot, pos, rot_rel, h_prev.position, split._gravity,
+                  np.exp(-sc.damping * dt), dt, split._shock)
+        params = (guides.FTL_BEND_PASSES, guides.ftl_bend_stiffness(sc.solver.bend_stiffness, dt),
+                  float(sc.solver.ftl_damping), split._max_disp, False)
+        ftl.ftl_step(split._model, (st.x, st.v, split._x_old), motion, params, split._corr)
+        ref = x_ref if friction > 0 else split._x_old
+        pushed = c.project(st.x, ref, st.inv_mass, rot, pos)
+        if pushed:
+            ftl.ftl_restore(st.x, st.rest, st.rest_length, rot, pos, c.center, c.radii + c.margin,
+                            c.refine, split._corr)
+        clamped += integrate.finalize(st.x, st.v, split._x_old, st.inv_mass, split._corr, dt,
+                                      split._max_disp, float(sc.solver.ftl_damping))
+        contacts += pushed
+        h_prev = head
+        np.testing.assert_array_equal(fused_st.x, split_st.x)
+        np.testing.assert_array_equal(fused_st.v, split_st.v)
+        np.testing.assert_array_equal(fused._corr, split._corr)
+    assert contacts > 0 and fused.stats['contacts_total'] == contacts
+    assert fused.stats['clamped_total'] == clamped
 
 
 def test_serial_twin_is_cached_apart_from_its_kernel():

@@ -4,6 +4,8 @@ import pytest
 
 from hair_tracking.guides import collision
 
+from hair_tracking.guides import ftl
+
 from hair_tracking.core import curves
 
 from hair_tracking.core.head_track import PoseResult
@@ -112,19 +114,21 @@ def _spy(monkeypatch, module, name):
 
 
 def test_stages_the_scene_does_not_need_are_not_built_or_run(monkeypatch):
+    # the collision runs in its own kernel, or inside FTL's substep with the collider
     coll = _spy(monkeypatch, collision, 'project_ellipsoid')
+    coll_ftl = _spy(monkeypatch, ftl, 'ftl_collide_step')
     curve = _spy(monkeypatch, curves, 'resample')
     sim = HairSimulator(scene(collider__shape='none', groom__ghosts_per_guide=0))
     assert sim.collider is None and sim.ghost_tracker is None and sim.ghosts is None
     drive(sim, 10)
     f = sim.frame()
     assert f.curves is None and f.strands is f.guides
-    assert coll == [] and curve == []
+    assert coll == [] and coll_ftl == [] and curve == []
     # and the same stages run when the scene asks for them
     sim = HairSimulator(scene(collider__shape='ellipsoid', output__curve='catmull_rom'))
     drive(sim, 10)
     assert sim.frame().curves.shape == (sim.ghosts.count, 16, 3)
-    assert coll and curve
+    assert (coll or coll_ftl) and curve
 
 
 def test_ghosts_tracked_once_per_pose_unless_every_substep(monkeypatch):
@@ -180,11 +184,11 @@ def test_warm_up_loads_exactly_the_kernel_variants_the_full_scene_runs(
     will call, so none is compiled or loaded from disk on the first real frame, and through no
     other (compiling a variant nobody calls only makes the start slower)."""
     from hair_tracking import simulator
-    from hair_tracking.guides import ftl
     from hair_tracking.guides import integrate
     threshold = integrate.PARALLEL_MIN_NODES
     calls = set()
-    for module, names in ((ftl, ('ftl_step', 'ftl_step_serial')),
+    for module, names in ((ftl, ('ftl_step', 'ftl_step_serial', 'ftl_collide_step',
+                                 'ftl_collide_step_serial')),
                           (ghosts_mod, ('track_groups', 'track_groups_serial'))):
         for name in names:
             real = getattr(module, name)
@@ -198,7 +202,8 @@ def test_warm_up_loads_exactly_the_kernel_variants_the_full_scene_runs(
     guides_parallel = integrate.runs_parallel(guides * 16)
     ghosts_parallel = integrate.runs_parallel(guides * per_guide * 16)
     simulator.warm_up(scene)
-    assert calls == {'ftl_step' if guides_parallel else 'ftl_step_serial',
+    assert scene.collider.shape != 'none'         # FTL's substep with the head collider
+    assert calls == {'ftl_collide_step' if guides_parallel else 'ftl_collide_step_serial',
                      'track_groups' if ghosts_parallel else 'track_groups_serial'}
     assert integrate.PARALLEL_MIN_NODES == threshold        # restored after warm-up
 

@@ -253,6 +253,7 @@ def test_kernel_bodies_compile_without_reference_counting():
     kernel's time.  A numba without the option is reported as a skip (the kernels then run,
     slower, with reference counting)."""
     from hair_tracking.ghosts import kernels as tk
+    from hair_tracking.guides import collision
     from hair_tracking.guides import ftl
     from hair_tracking.guides import integrate
     from hair_tracking.guides import pbd_constraints
@@ -260,7 +261,8 @@ def test_kernel_bodies_compile_without_reference_counting():
         pytest.skip('this numba has no _nrt option: kernels keep reference counting')
     assert integrate.NO_REFCOUNT == {'_nrt': False}
     bodies = (tk._track_chunk, tk.copy_blocks, integrate.head_motion, integrate.predict_block,
-              integrate.finalize_block, ftl.ftl_pass_block, ftl.ftl_restore_block,
+              integrate.finalize_block, integrate.carry_rigid_block, collision.project_block,
+              ftl.ftl_pass_block, ftl.ftl_restore_block,
               pbd_constraints.pbd_sweep_block, pbd_constraints.pbd_sweep_lanes,
               pbd_constraints.xpbd_sweep_lanes, pbd_constraints._pbd_block,
               pbd_constraints._xpbd_block, pbd_constraints.lanes_in, pbd_constraints.lanes_out)

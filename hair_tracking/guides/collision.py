@@ -37,7 +37,7 @@ from typing import Optional
 import numpy as np
 from numba import njit, prange
 
-from hair_tracking.guides.integrate import FASTMATH, runs_parallel, serial_twin
+from hair_tracking.guides.integrate import FASTMATH, NO_REFCOUNT, runs_parallel, serial_twin
 
 #: Normal-line refinements of the ellipsoid projection in :meth:`Collider.apply`.
 ELLIPSOID_REFINEMENTS = 2
@@ -142,6 +142,27 @@ def project_ellipsoid(x, x_prev, inv_mass, rot, pos, center, radii, margin, fric
     n = x.shape[1]
     contacts = 0
     for s in prange(x.shape[0]):
+        for i in range(n):
+            if inv_mass[s, i] <= 0.0:
+                continue
+            moved, y0, y1, y2 = push_out(x[s, i, 0], x[s, i, 1], x[s, i, 2], x_prev[s, i, 0],
+                                         x_prev[s, i, 1], x_prev[s, i, 2], rot, cx, cy, cz,
+                                         ax, ay, az, friction, refine)
+            if moved:
+                x[s, i, 0] = y0
+                x[s, i, 1] = y1
+                x[s, i, 2] = y2
+                contacts += 1
+    return contacts
+
+
+@njit(cache=True, fastmath=FASTMATH, error_model='numpy', **NO_REFCOUNT)
+def project_block(x, x_prev, inv_mass, rot, cx, cy, cz, ax, ay, az, friction, refine, s0, s1):
+    """:func:`project_ellipsoid` of the strands ``s0 <= s < s1`` (``c`` the world centre, ``a``
+    the semi-axes with the margin), for a kernel that runs a whole substep block by block."""
+    n = x.shape[1]
+    contacts = 0
+    for s in range(s0, s1):
         for i in range(n):
             if inv_mass[s, i] <= 0.0:
                 continue

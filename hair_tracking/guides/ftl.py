@@ -30,9 +30,9 @@ import math
 
 from numba import int64, njit, prange
 
-from hair_tracking.guides.collision import surface_point, to_head, world_center
-from hair_tracking.guides.integrate import (BLOCK, FASTMATH, finalize_block, NO_REFCOUNT,
-                                            predict_block, serial_twin)
+from hair_tracking.guides.collision import project_block, surface_point, to_head, world_center
+from hair_tracking.guides.integrate import (BLOCK, carry_rigid_block, FASTMATH, finalize_block,
+                                            NO_REFCOUNT, predict_block, serial_twin)
 from hair_tracking.guides.pbd_constraints import pbd_sweep_block
 
 #: Static data of :func:`ftl_step`: ``rest`` (S, N, 3) head frame [m], ``inv_mass`` (S, N),
@@ -243,5 +243,52 @@ def ftl_step(model, state, motion, params, corr):
     return clamped
 
 
+@njit(cache=True, nogil=True, parallel=True, fastmath=FASTMATH, error_model='numpy')
+def ftl_collide_step(model, state, motion, params, corr, collider, x_ref):
+    """Kernel: one FTL substep of all strands with the head collider, block by block (the
+    block's strands stay in cache): :func:`ftl_step`'s predict, bending and FTL pass, the
+    collider's projection with friction (:func:`~hair_tracking.guides.collision.project_block`),
+    when it moved a node of the block the collision-aware pass (:func:`ftl_restore_block`),
+    then finalize.  The same per-strand arithmetic as those kernels run one after another.
+
+    ``collider``: ``(center, radii, margin, friction, refine)`` of the
+    :class:`~hair_tracking.guides.collision.Collider`; ``x_ref`` (S, N, 3) receives the friction
+    reference (the start-of-substep positions carried rigidly with the head) when ``friction >
+    0``.  ``params``' ``do_finalize`` is ignored (always finalizes).  Returns ``(clamped,
+    contacts)``.
+    """
+    x, v, x_old = state                                                 # GuideState
+    rest, inv_mass, rest_length, bend_rest, bend_w = model              # FtlModel
+    rot, pos, rot_rel, pos_prev, gravity, damp, dt, shock = motion      # StepMotion
+    bend_passes, bend_stiffness, s_damp, max_disp, _ = params          # FtlParams
+    center, radii, margin, friction, refine = collider
+    cx, cy, cz = world_center(rot, pos, center)
+    ax, ay, az = radii[0] + margin, radii[1] + margin, radii[2] + margin
+    axes = radii + margin
+    ref = x_ref if friction > 0.0 else x_old
+    nblk = (x.shape[0] + BLOCK - 1) // BLOCK
+    clamped = 0
+    contacts = 0
+    for blk in prange(nblk):
+        s0 = blk * BLOCK
+        s1 = min(s0 + BLOCK, x.shape[0])
+        if friction > 0.0:
+            carry_rigid_block(x, rot_rel, pos_prev, pos, x_ref, s0, s1)
+        predict_block(x, v, x_old, rest, inv_mass, s0, s1, rot, pos, rot_rel, pos_prev,
+                      gravity, damp, dt, shock)
+        if bend_stiffness > 0.0:
+            for _ in range(bend_passes):
+                pbd_sweep_block(x, bend_rest, bend_w, 2, bend_stiffness, s0, s1)
+        ftl_pass_block(x, rest, rest_length, rot, corr, s0, s1)
+        pushed = project_block(x, ref, inv_mass, rot, cx, cy, cz, ax, ay, az, friction,
+                               refine, s0, s1)
+        if pushed:
+            contacts += pushed
+            ftl_restore_block(x, rest, rest_length, rot, cx, cy, cz, axes, refine, corr, s0, s1)
+        clamped += finalize_block(x, v, x_old, inv_mass, corr, s0, s1, dt, max_disp, s_damp)
+    return clamped, contacts
+
+
 ftl_step_serial = serial_twin(ftl_step)
+ftl_collide_step_serial = serial_twin(ftl_collide_step)
 ftl_restore_serial = serial_twin(ftl_restore)

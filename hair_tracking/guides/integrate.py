@@ -313,11 +313,19 @@ def carry_rigid(x, rot_rel, pos_prev, pos, out):
     Used as the friction reference of the collider: where a node would be had it stuck to the
     head during the substep.
     """
+    for s in prange(x.shape[0]):
+        i = np.int64(s)       # (the index as in the serial twin: one compiled block body)
+        carry_rigid_block(x, rot_rel, pos_prev, pos, out, i, i + 1)
+
+
+@njit(cache=True, fastmath=FASTMATH, error_model='numpy', **NO_REFCOUNT)
+def carry_rigid_block(x, rot_rel, pos_prev, pos, out, s0, s1):
+    """:func:`carry_rigid` of the strands ``s0 <= s < s1``."""
     q00, q01, q02 = rot_rel[0, 0], rot_rel[0, 1], rot_rel[0, 2]
     q10, q11, q12 = rot_rel[1, 0], rot_rel[1, 1], rot_rel[1, 2]
     q20, q21, q22 = rot_rel[2, 0], rot_rel[2, 1], rot_rel[2, 2]
     n = x.shape[1]
-    for s in prange(x.shape[0]):
+    for s in range(s0, s1):
         for i in range(n):
             ax = x[s, i, 0] - pos_prev[0]
             ay = x[s, i, 1] - pos_prev[1]

@@ -21,9 +21,11 @@ and their roots follow the head. One call of :meth:`GuideSolver.step` is one sub
    :mod:`~hair_tracking.guides.integrate`.
 
 Without a collider steps 1–6 run in one fused numba kernel per block of strands (the strands stay
-in cache); with a collider the kernel stops after step 4, the collision kernel runs, then the
-finalize kernel. Kernels are looked up on their modules at call time, so only the ones the scene
-needs are ever called (and compiled), and tests can spy on them.
+in cache), and so do FTL's with a collider (:func:`~hair_tracking.guides.ftl.ftl_collide_step`:
+the collision and the collision-aware second pass join the block's substep); PBD and XPBD with a
+collider stop after step 4, the collision kernel runs, then the finalize kernel. Kernels are
+looked up on their modules at call time, so only the ones the scene needs are ever called (and
+compiled), and tests can spy on them.
 
 Masses are uniform (``StrandSet.from_rest``: inverse mass 1 for free nodes, 0 for the two roots);
 general inverse masses are accepted by PBD/XPBD (a free node with 0 is static), FTL needs every
@@ -63,9 +65,10 @@ class GuideSolver:
     in use [m]: ``scene.collider.margin``, but at most the rest clearance of the closest free node
     and half the shortest segment (see ``_fit_margin``).
 
-    With FTL and a collider, a substep is predict, bend, FTL pass, collide and, when a node was
-    pushed, a collision-aware second FTL pass (:func:`~hair_tracking.guides.ftl.ftl_restore`):
-    lengths stay exact and nodes outside the bare collider (measured in the stability matrix,
+    With FTL and a collider, a substep is predict, bend, FTL pass, collide and, when a node of
+    the strand's block was pushed, a collision-aware second FTL pass
+    (:func:`~hair_tracking.guides.ftl.ftl_restore_block`), then finalize, in one kernel: lengths
+    stay exact and nodes outside the bare collider (measured in the stability matrix,
     ``docs/stability.md``).
     """
 
@@ -146,6 +149,9 @@ class GuideSolver:
         st = self.strands
         damp = math.exp(-self._damping * dt)
         fused = self.collider is None
+        if self.kind == 'ftl' and not fused:
+            self._ftl_collide(dt, rot, pos, rot_rel, pos_prev, damp, parallel)
+            return
         if self._x_ref is not None:
             carry = integrate.carry_rigid if parallel else integrate.carry_rigid_serial
             carry(st.x, rot_rel, pos_prev, pos, self._x_ref)
@@ -174,18 +180,28 @@ class GuideSolver:
         if not fused:
             ref = self._x_ref if self._x_ref is not None else self._x_old
             contacts = self.collider.project(st.x, ref, st.inv_mass, rot, pos, parallel)
-            corr, s_damp = self._x_old, 0.0
-            if self.kind == 'ftl':
-                corr, s_damp = self._corr, float(self.scene.solver.ftl_damping)
-                if contacts:
-                    # restore the lengths the collider's push broke, staying outside it
-                    c = self.collider
-                    restore = ftl.ftl_restore if parallel else ftl.ftl_restore_serial
-                    restore(st.x, st.rest, st.rest_length, rot, pos, c.center,
-                            c.radii + c.margin, c.refine, self._corr)
             finalize = integrate.finalize if parallel else integrate.finalize_serial
-            clamped = finalize(st.x, st.v, self._x_old, st.inv_mass, corr, dt,
-                               self._max_disp, s_damp)
+            clamped = finalize(st.x, st.v, self._x_old, st.inv_mass, self._x_old, dt,
+                               self._max_disp, 0.0)
+        self._count(clamped, contacts)
+
+    def _ftl_collide(self, dt, rot, pos, rot_rel, pos_prev, damp, parallel) -> None:
+        """An FTL substep with the collider: one kernel, block by block
+        (:func:`~hair_tracking.guides.ftl.ftl_collide_step`)."""
+        st = self.strands
+        sv = self.scene.solver
+        c = self.collider
+        kernel = ftl.ftl_collide_step if parallel else ftl.ftl_collide_step_serial
+        clamped, contacts = kernel(
+            self._model, (st.x, st.v, self._x_old),
+            (rot, pos, rot_rel, pos_prev, self._gravity, damp, dt, self._shock),
+            (FTL_BEND_PASSES, ftl_bend_stiffness(sv.bend_stiffness, dt),
+             float(sv.ftl_damping), self._max_disp, True),
+            self._corr, (c.center, c.radii, c.margin, c.friction, c.refine),
+            self._x_ref if self._x_ref is not None else self._x_old)
+        self._count(clamped, contacts)
+
+    def _count(self, clamped, contacts) -> None:
         c = self._counters
         c['substeps'] += 1
         c['clamped'] = int(clamped)
