@@ -119,7 +119,10 @@ def test_kernel_matches_the_numpy_reference(restore, collide):
 @pytest.mark.parametrize('k', [1, 2, 4, 7])
 def test_any_number_of_guides_a_ghost_matches_the_reference(k):
     sim, tr, h, gx = _random_case(7, k=k)
-    assert tr.guide_of.shape[1] == k and tr._guide_pad.shape[1] % blend.GUIDE_GROUP == 0
+    assert tr.guide_of.shape[1] == k
+    # padded to whole groups of three, but one guide runs its own pass (the follow-hair case)
+    assert tr._guide_pad.shape[1] == (1 if k == 1 else -(-k // blend.GUIDE_GROUP) *
+                                      blend.GUIDE_GROUP)
     out, _ = _kernel(sim, tr, h, gx)
     ref = blend.reference_blend(gx, sim.guides.rest, sim.ghosts.rest, tr._len32, tr.guide_of,
                                 tr.weight, h, True, tr._axes, tr._center, tr.is_guide,

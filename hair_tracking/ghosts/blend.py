@@ -65,8 +65,8 @@ WEIGHT_CHUNK = 1 << 22
 STRAND_BLOCK = 8
 #: Work items of the blend's parallel loop (each a run of blocks with its own scratch row).
 CHUNKS = 64
-#: Guides blended in one pass along a strand (the kernels' guide lists are padded to a multiple
-#: of it with zero weights).
+#: Guides blended in one pass along a strand (the kernels' guide lists of two or more guides are
+#: padded to a multiple of it with zero weights; one guide runs a pass of its own).
 GUIDE_GROUP = 3
 
 
@@ -140,9 +140,10 @@ def _nearest(d2: np.ndarray, k: int) -> np.ndarray:
 def pad_guides(guide: np.ndarray, weight: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
     """``guide``/``weight`` (S, K) of :func:`blend_weights` with columns added to a multiple of
     :data:`GUIDE_GROUP`, repeating the first guide with weight 0 (the kernel's form; the blend
-    is unchanged, a zero-weight term adds exactly nothing)."""
+    is unchanged, a zero-weight term adds exactly nothing).  One guide (K = 1) is left as it
+    is: the kernel follows it in a pass of its own."""
     k = guide.shape[1]
-    extra = -k % GUIDE_GROUP
+    extra = -k % GUIDE_GROUP if k > 1 else 0
     guide = np.concatenate([guide, np.repeat(guide[:, :1], extra, axis=1)], axis=1)
     weight = np.concatenate([weight, np.zeros((weight.shape[0], extra), weight.dtype)], axis=1)
     return np.ascontiguousarray(guide, dtype=np.int32), np.ascontiguousarray(weight,
@@ -234,11 +235,20 @@ def _deform(blk, lane, offset, rot, guide, weight, gcol, s):
     """Step 2 of strand ``s`` into lane ``lane`` of the block ``blk`` (nodes 2 on):
     ``R o_j + sum_k w_k g_k,j``, the guides three at a time (``guide``/``weight`` padded with
     zero weights to a multiple of :data:`GUIDE_GROUP`), every node's three components in one
-    pass of straight-line arithmetic."""
+    pass of straight-line arithmetic; a single guide (weight 1) is ``R o_j + g_j``, TressFX's
+    follow hair."""
     n_nodes = blk.shape[0]
     r00, r01, r02 = rot[0, 0], rot[0, 1], rot[0, 2]
     r10, r11, r12 = rot[1, 0], rot[1, 1], rot[1, 2]
     r20, r21, r22 = rot[2, 0], rot[2, 1], rot[2, 2]
+    if guide.shape[1] == 1:
+        g0 = guide[s, 0]
+        for j in range(2, n_nodes):
+            o0, o1, o2 = offset[s, 0, j], offset[s, 1, j], offset[s, 2, j]
+            blk[j, 0, lane] = r00 * o0 + r01 * o1 + r02 * o2 + gcol[g0, 0, j]
+            blk[j, 1, lane] = r10 * o0 + r11 * o1 + r12 * o2 + gcol[g0, 1, j]
+            blk[j, 2, lane] = r20 * o0 + r21 * o1 + r22 * o2 + gcol[g0, 2, j]
+        return
     for k in range(0, guide.shape[1], GUIDE_GROUP):
         g0, g1, g2 = guide[s, k], guide[s, k + 1], guide[s, k + 2]
         w0, w1, w2 = float(weight[s, k]), float(weight[s, k + 1]), float(weight[s, k + 2])
