@@ -59,7 +59,7 @@ def _ftl(scene: Scene, dt: float) -> Scene:
 
 def candidates(scene: Scene, ratio: int = 16) -> List[Candidate]:
     """The baseline, the paper's tracker once per frame and the blend tracker with guides at
-    three substeps."""
+    three substeps, and with one guide a ghost (TressFX's follow hair) at two substeps."""
     out = [Candidate(BASELINE, lambda w, s: FullSim(BASELINE, w, _ftl(s, 1 / 60)), 1 / 60,
                      ghost=False)]
     for sub in (1, 2, 4):
@@ -67,6 +67,9 @@ def candidates(scene: Scene, ratio: int = 16) -> List[Candidate]:
         name = f'blend 1:{ratio}, guides dt 1/{60 * sub}'
         out.append(Candidate(name, lambda w, s, dt=dt, name=name:
                              BlendTracking(name, w, _ftl(s, dt), ratio), dt))
+    name = f'blend 1:{ratio} one guide, guides dt 1/120'
+    out.append(Candidate(name, lambda w, s, name=name:
+                         BlendTracking(name, w, _ftl(s, 1 / 120), ratio, k=1), 1 / 120))
     name = f'paper 1:{ratio} once per frame, guides dt 1/240'
     out.append(Candidate(name, lambda w, s, name=name: GhostTracking(
         name, w, _ftl(s, 1 / 240).with_changes(tracking__every_substep=False), ratio),
