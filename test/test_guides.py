@@ -333,8 +333,9 @@ def test_only_the_chosen_solver_kernel_runs(monkeypatch, kind, kernel):
 @pytest.mark.parametrize('kind', SOLVERS)
 def test_serial_twins_run_small_problems_with_the_same_results(monkeypatch, kind):
     """Below PARALLEL_MIN_NODES the guide kernels run as serial twins (no parallel region to
-    launch); above it the parallel kernels.  Both give bit-identical hair, with the head
-    collider (collision, FTL restore, finalize and the friction reference) in play."""
+    launch); above it the parallel kernels.  Both give the same hair to rounding (LLVM may
+    contract a body inlined into each variant differently), with the head collider
+    (collision, FTL restore, finalize and the friction reference) in play."""
     sc = scene(kind, collider__shape='ellipsoid', solver__shock_propagation=0.5)
     runs = {}
     for label, threshold in (('serial', 1 << 40), ('parallel', 0)):
@@ -369,8 +370,8 @@ def test_serial_twins_run_small_problems_with_the_same_results(monkeypatch, kind
                'ftl': ['ftl_collide_step']}[kind]
     assert runs['serial'][2] == {k + '_serial' for k in kernels}
     assert runs['parallel'][2] == set(kernels)
-    np.testing.assert_array_equal(runs['serial'][0], runs['parallel'][0])
-    np.testing.assert_array_equal(runs['serial'][1], runs['parallel'][1])
+    np.testing.assert_allclose(runs['serial'][0], runs['parallel'][0], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(runs['serial'][1], runs['parallel'][1], rtol=0, atol=1e-9)
 
 
 @pytest.mark.parametrize('friction', [0.0, 0.3])
