@@ -139,27 +139,19 @@ def project_ellipsoid(x, x_prev, inv_mass, rot, pos, center, radii, margin, fric
     """
     ax, ay, az = radii[0] + margin, radii[1] + margin, radii[2] + margin
     cx, cy, cz = world_center(rot, pos, center)
-    n = x.shape[1]
     contacts = 0
     for s in prange(x.shape[0]):
-        for i in range(n):
-            if inv_mass[s, i] <= 0.0:
-                continue
-            moved, y0, y1, y2 = push_out(x[s, i, 0], x[s, i, 1], x[s, i, 2], x_prev[s, i, 0],
-                                         x_prev[s, i, 1], x_prev[s, i, 2], rot, cx, cy, cz,
-                                         ax, ay, az, friction, refine)
-            if moved:
-                x[s, i, 0] = y0
-                x[s, i, 1] = y1
-                x[s, i, 2] = y2
-                contacts += 1
+        i = np.int64(s)       # (the index as in the serial twin: one compiled block body)
+        contacts += project_block(x, x_prev, inv_mass, rot, cx, cy, cz, ax, ay, az, friction,
+                                  refine, i, i + 1)
     return contacts
 
 
 @njit(cache=True, fastmath=FASTMATH, error_model='numpy', **NO_REFCOUNT)
 def project_block(x, x_prev, inv_mass, rot, cx, cy, cz, ax, ay, az, friction, refine, s0, s1):
     """:func:`project_ellipsoid` of the strands ``s0 <= s < s1`` (``c`` the world centre, ``a``
-    the semi-axes with the margin), for a kernel that runs a whole substep block by block."""
+    the semi-axes with the margin): its loop body, and the collision of a kernel that runs a
+    whole substep block by block (:func:`~hair_tracking.guides.ftl.ftl_collide_step`)."""
     n = x.shape[1]
     contacts = 0
     for s in range(s0, s1):
