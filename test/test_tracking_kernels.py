@@ -262,7 +262,7 @@ def test_kernel_bodies_compile_without_reference_counting():
     assert integrate.NO_REFCOUNT == {'_nrt': False}
     bodies = (tk._track_chunk, tk.copy_blocks, integrate.head_motion, integrate.predict_block,
               integrate.finalize_block, integrate.carry_rigid_block, collision.project_block,
-              ftl.ftl_pass_block, ftl.ftl_restore_block,
+              ftl.ftl_block, ftl.ftl_pass_block, ftl.ftl_restore_block,
               pbd_constraints.pbd_sweep_block, pbd_constraints.pbd_sweep_lanes,
               pbd_constraints.xpbd_sweep_lanes, pbd_constraints._pbd_block,
               pbd_constraints._xpbd_block, pbd_constraints.lanes_in, pbd_constraints.lanes_out)

@@ -232,15 +232,25 @@ def ftl_step(model, state, motion, params, corr):
     for blk in prange(nblk):
         s0 = blk * BLOCK
         s1 = min(s0 + BLOCK, x.shape[0])
-        predict_block(x, v, x_old, rest, inv_mass, s0, s1, rot, pos, rot_rel, pos_prev,
-                      gravity, damp, dt, shock)
-        if bend_stiffness > 0.0:
-            for _ in range(bend_passes):
-                pbd_sweep_block(x, bend_rest, bend_w, 2, bend_stiffness, s0, s1)
-        ftl_pass_block(x, rest, rest_length, rot, corr, s0, s1)
+        ftl_block(model, state, motion, bend_passes, bend_stiffness, corr, s0, s1)
         if do_finalize:
             clamped += finalize_block(x, v, x_old, inv_mass, corr, s0, s1, dt, max_disp, s_damp)
     return clamped
+
+
+@njit(cache=True, fastmath=FASTMATH, error_model='numpy', **NO_REFCOUNT)
+def ftl_block(model, state, motion, bend_passes, bend_stiffness, corr, s0, s1):
+    """Predict, ``bend_passes`` bending sweeps and the FTL pass of the strands ``s0 <= s < s1``:
+    a substep up to the collision and finalize (:func:`ftl_step`, :func:`ftl_collide_step`)."""
+    x, v, x_old = state                                                 # GuideState
+    rest, inv_mass, rest_length, bend_rest, bend_w = model              # FtlModel
+    rot, pos, rot_rel, pos_prev, gravity, damp, dt, shock = motion      # StepMotion
+    predict_block(x, v, x_old, rest, inv_mass, s0, s1, rot, pos, rot_rel, pos_prev,
+                  gravity, damp, dt, shock)
+    if bend_stiffness > 0.0:
+        for _ in range(bend_passes):
+            pbd_sweep_block(x, bend_rest, bend_w, 2, bend_stiffness, s0, s1)
+    ftl_pass_block(x, rest, rest_length, rot, corr, s0, s1)
 
 
 @njit(cache=True, nogil=True, parallel=True, fastmath=FASTMATH, error_model='numpy')
@@ -274,12 +284,7 @@ def ftl_collide_step(model, state, motion, params, corr, collider, x_ref):
         s1 = min(s0 + BLOCK, x.shape[0])
         if friction > 0.0:
             carry_rigid_block(x, rot_rel, pos_prev, pos, x_ref, s0, s1)
-        predict_block(x, v, x_old, rest, inv_mass, s0, s1, rot, pos, rot_rel, pos_prev,
-                      gravity, damp, dt, shock)
-        if bend_stiffness > 0.0:
-            for _ in range(bend_passes):
-                pbd_sweep_block(x, bend_rest, bend_w, 2, bend_stiffness, s0, s1)
-        ftl_pass_block(x, rest, rest_length, rot, corr, s0, s1)
+        ftl_block(model, state, motion, bend_passes, bend_stiffness, corr, s0, s1)
         pushed = project_block(x, ref, inv_mass, rot, cx, cy, cz, ax, ay, az, friction,
                                refine, s0, s1)
         if pushed:

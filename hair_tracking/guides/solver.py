@@ -149,18 +149,28 @@ class GuideSolver:
         st = self.strands
         damp = math.exp(-self._damping * dt)
         fused = self.collider is None
-        if self.kind == 'ftl' and not fused:
-            self._ftl_collide(dt, rot, pos, rot_rel, pos_prev, damp, parallel)
-            return
-        if self._x_ref is not None:
-            carry = integrate.carry_rigid if parallel else integrate.carry_rigid_serial
-            carry(st.x, rot_rel, pos_prev, pos, self._x_ref)
         # the kernels' arguments, plain tuples in the fields' order of integrate.GuideState,
         # integrate.StepMotion and the solver's Params (built here each substep; the models in
         # __init__ / _xpbd_factors)
         state = (st.x, st.v, self._x_old)
         motion = (rot, pos, rot_rel, pos_prev, self._gravity, damp, dt, self._shock)
         sv = self.scene.solver
+        if self.kind == 'ftl':
+            params = (FTL_BEND_PASSES, ftl_bend_stiffness(sv.bend_stiffness, dt),
+                      float(sv.ftl_damping), self._max_disp, fused)
+            if not fused:
+                # one kernel: friction reference, collision and second pass in the block loop
+                c = self.collider
+                kernel = ftl.ftl_collide_step if parallel else ftl.ftl_collide_step_serial
+                clamped, contacts = kernel(
+                    self._model, state, motion, params, self._corr,
+                    (c.center, c.radii, c.margin, c.friction, c.refine),
+                    self._x_ref if self._x_ref is not None else self._x_old)
+                self._count(clamped, contacts)
+                return
+        if self._x_ref is not None:
+            carry = integrate.carry_rigid if parallel else integrate.carry_rigid_serial
+            carry(st.x, rot_rel, pos_prev, pos, self._x_ref)
         if self.kind == 'pbd':
             kernel = pbd_constraints.pbd_step if parallel else pbd_constraints.pbd_step_serial
             params = (self._iterations, float(sv.stiffness), float(sv.bend_stiffness),
@@ -173,8 +183,6 @@ class GuideSolver:
             clamped = kernel(self._model, state, motion, params, self._xpbd_work)
         else:
             kernel = ftl.ftl_step if parallel else ftl.ftl_step_serial
-            params = (FTL_BEND_PASSES, ftl_bend_stiffness(sv.bend_stiffness, dt),
-                      float(sv.ftl_damping), self._max_disp, fused)
             clamped = kernel(self._model, state, motion, params, self._corr)
         contacts = 0
         if not fused:
@@ -183,22 +191,6 @@ class GuideSolver:
             finalize = integrate.finalize if parallel else integrate.finalize_serial
             clamped = finalize(st.x, st.v, self._x_old, st.inv_mass, self._x_old, dt,
                                self._max_disp, 0.0)
-        self._count(clamped, contacts)
-
-    def _ftl_collide(self, dt, rot, pos, rot_rel, pos_prev, damp, parallel) -> None:
-        """An FTL substep with the collider: one kernel, block by block
-        (:func:`~hair_tracking.guides.ftl.ftl_collide_step`)."""
-        st = self.strands
-        sv = self.scene.solver
-        c = self.collider
-        kernel = ftl.ftl_collide_step if parallel else ftl.ftl_collide_step_serial
-        clamped, contacts = kernel(
-            self._model, (st.x, st.v, self._x_old),
-            (rot, pos, rot_rel, pos_prev, self._gravity, damp, dt, self._shock),
-            (FTL_BEND_PASSES, ftl_bend_stiffness(sv.bend_stiffness, dt),
-             float(sv.ftl_damping), self._max_disp, True),
-            self._corr, (c.center, c.radii, c.margin, c.friction, c.refine),
-            self._x_ref if self._x_ref is not None else self._x_old)
         self._count(clamped, contacts)
 
     def _count(self, clamped, contacts) -> None:
