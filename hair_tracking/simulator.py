@@ -43,9 +43,10 @@ from hair_tracking.core.head_track import HeadTrack, IDENTITY, PoseResult
 from hair_tracking.core.metrics import max_stretch
 from hair_tracking.core.model import HeadPose, StrandSet
 from hair_tracking.core.point_records import points_to_records
-from hair_tracking.core.scene import Scene
+from hair_tracking.core.scene import GUIDES_AMONG_STRANDS, Scene
 from hair_tracking.core.transforms import quat_angle, quat_to_matrix, slerp
 from hair_tracking.ghosts.blend import BlendTracker, choose_guides
+from hair_tracking.ghosts.turn import TurnTracker
 from hair_tracking.ghosts.tracker import GhostTracker
 from hair_tracking.guides.collision import make_collider
 from hair_tracking.guides.integrate import max_step_sq, parallel_from, runs_parallel
@@ -112,7 +113,7 @@ class HairSimulator:
         scene = self.scene
         groom = make_groom(scene.groom)
         self.guide_index = None
-        if self._blend(scene) and groom.ghost_rest.shape[0] > 0:
+        if self._stateless(scene) and groom.ghost_rest.shape[0] > 0:
             # the guides are some of the strands themselves (1:1 is full simulation)
             self.guide_index = choose_guides(groom.ghost_rest[:, 0], scene.groom.guides)
             self.guides = StrandSet.from_rest(groom.ghost_rest[self.guide_index])
@@ -161,12 +162,16 @@ class HairSimulator:
         return False
 
     @staticmethod
-    def _blend(scene: Scene) -> bool:
-        return scene.tracking.mode == 'blend'
+    def _stateless(scene: Scene) -> bool:
+        """Whether the scene's ghost tracker takes its guides among the strands (blend, turn)
+        and places every strand once per read, without state."""
+        return scene.tracking.mode in GUIDES_AMONG_STRANDS
 
     def _make_tracker(self, scene: Scene, keep_state: bool = False):
         collider = self.collider if scene.tracking.collide else None
-        if self._blend(scene):
+        if scene.tracking.mode == 'turn':
+            return TurnTracker(self.ghosts, self.guides, self.guide_index, scene, collider)
+        if self._stateless(scene):
             return BlendTracker(self.ghosts, self.guides, self.guide_index, scene, collider,
                                 k=scene.tracking.blend_guides)
         return GhostTracker(self.ghosts, self.guides, scene, collider, keep_state=keep_state)
@@ -333,7 +338,7 @@ class HairSimulator:
     # its stability on long strands).
     def _every_substep(self) -> bool:
         return self.scene.tracking.every_substep and not self.track_once_per_call \
-            and not self._blend(self.scene)
+            and not self._stateless(self.scene)
 
     def _begin_ghosts(self) -> None:
         if self.ghost_tracker is not None and not self._every_substep():
@@ -397,7 +402,7 @@ def warm_up(scene: Scene) -> HairSimulator:
     small = scene.with_changes(groom__guides=min(g.guides, 2),
                                groom__ghosts_per_guide=min(g.ghosts_per_guide, 2),
                                solver__settle_time=0.0)
-    guide_len = g.ghost_nodes if scene.tracking.mode == 'blend' else g.guide_nodes
+    guide_len = g.ghost_nodes if scene.tracking.mode in GUIDES_AMONG_STRANDS else g.guide_nodes
     stages = [(small.groom.guides * guide_len, runs_parallel(g.guides * guide_len))]
     if g.ghosts_per_guide > 0:
         stages.append((small.groom.guides * small.groom.ghosts_per_guide * g.ghost_nodes,

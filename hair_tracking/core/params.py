@@ -203,7 +203,9 @@ _SCENE_DOCS: Dict[str, Tuple[str, str, bool]] = {
                       'centre-of-mass tracking, every substep) or blend (each ghost the '
                       'blended points of its tracking.blend_guides nearest guides, chosen among '
                       'the strands, plus its rest offset carried by the head, once per frame; '
-                      'see docs/blend.md)', '', True),
+                      'see docs/blend.md) or turn (each ghost segment turned as the matching '
+                      'segment of the guide with the nearest root, once per frame; exact '
+                      'lengths; see docs/turn.md)', '', True),
     'tracking.blend_guides': ('blend: guides blended per ghost (nearest roots)', '', False),
     'tracking.candidates': ('guides with the nearest roots examined per ghost', '', False),
     'tracking.com_strength': ('centre-of-mass tracking strength per substep', '', False),

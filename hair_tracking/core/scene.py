@@ -28,7 +28,9 @@ SOLVERS = ('ftl', 'pbd', 'xpbd')
 COLLIDERS = ('none', 'sphere', 'ellipsoid')
 ELASTIC_MODES = ('kept', 'changed')
 CURVES = ('none', 'bezier', 'catmull_rom')
-TRACKING_MODES = ('paper', 'blend')
+TRACKING_MODES = ('paper', 'blend', 'turn')
+#: Trackers whose guides are some of the strands, each strand placed once per read (no state).
+GUIDES_AMONG_STRANDS = ('blend', 'turn')
 
 
 @dataclass(frozen=True)
@@ -82,7 +84,7 @@ class SolverSpec:
 
 @dataclass(frozen=True)
 class TrackingSpec:
-    mode: str = 'blend'               # blend: guides blended; paper: Park & Kim's tracker
+    mode: str = 'blend'               # blend, turn (guides among the strands) or paper
     blend_guides: int = 3             # blend: guides per ghost (nearest roots, Shepard weights)
     candidates: int = 8               # guides with nearest roots examined by equation (1)
     com_strength: float = 0.5         # centre-of-mass tracking strength per substep, 0..1

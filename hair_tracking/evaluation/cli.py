@@ -253,7 +253,7 @@ def main(argv=None) -> int:
     s.add_argument('--out', default='docs/results', help='folder of the tables')
     s.add_argument('--only', nargs='*', default=None, help='only cases whose name contains')
     s.add_argument('--threads', type=int, default=1, help='numba threads (default 1)')
-    s.add_argument('--tracking-mode', choices=['paper', 'blend'], default=None,
+    s.add_argument('--tracking-mode', choices=['paper', 'blend', 'turn'], default=None,
                    help='run every case with this ghost tracker (default: the scene default)')
     args = p.parse_args(argv)
     args.argv = argv

@@ -32,7 +32,8 @@ from hair_tracking.core.metrics import position_error
 from hair_tracking.core.scene import Scene
 from hair_tracking.evaluation.accuracy import (HeadSchedule, record_reference, run_frames,
                                                Scorer, Trajectory)
-from hair_tracking.evaluation.methods import BlendTracking, FullSim, GhostTracking, Workload
+from hair_tracking.evaluation.methods import (BlendTracking, FullSim, GhostTracking,
+                                              TurnTracking, Workload)
 
 #: Substeps per 60 Hz frame of the same-solver reference (FTL at dt 1/960 s).
 REFERENCE_SUBSTEPS = 16
@@ -58,8 +59,9 @@ def _ftl(scene: Scene, dt: float) -> Scene:
 
 
 def candidates(scene: Scene, ratio: int = 16) -> List[Candidate]:
-    """The baseline, the paper's tracker once per frame and the blend tracker with guides at
-    three substeps, and with one guide a ghost (TressFX's follow hair) at two substeps."""
+    """The baseline, the paper's tracker once per frame, the blend tracker with guides at
+    three substeps and with one guide a ghost (TressFX's follow hair) at two substeps, and the
+    turn tracker with guides at two substeps."""
     out = [Candidate(BASELINE, lambda w, s: FullSim(BASELINE, w, _ftl(s, 1 / 60)), 1 / 60,
                      ghost=False)]
     for sub in (1, 2, 4):
@@ -70,6 +72,11 @@ def candidates(scene: Scene, ratio: int = 16) -> List[Candidate]:
     name = f'blend 1:{ratio} one guide, guides dt 1/120'
     out.append(Candidate(name, lambda w, s, name=name:
                          BlendTracking(name, w, _ftl(s, 1 / 120), ratio, k=1), 1 / 120))
+    for sub in (1, 2):
+        dt = 1.0 / (60 * sub)
+        name = f'turn 1:{ratio}, guides dt 1/{60 * sub}'
+        out.append(Candidate(name, lambda w, s, dt=dt, name=name:
+                             TurnTracking(name, w, _ftl(s, dt), ratio), dt))
     name = f'paper 1:{ratio} once per frame, guides dt 1/240'
     out.append(Candidate(name, lambda w, s, name=name: GhostTracking(
         name, w, _ftl(s, 1 / 240).with_changes(tracking__every_substep=False), ratio),

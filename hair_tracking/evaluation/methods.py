@@ -14,6 +14,8 @@ head frame) node for node, so its output can be compared with the reference:
   simulator does once per pose).
 * :class:`BlendTracking` -- the blend tracker: guides chosen among the strands, every strand the
   skinned blend of its nearest guides once per output frame.
+* :class:`TurnTracking` -- the turn tracker: as the blend, every strand's segments turned as its
+  nearest guide's segments turned.
 * :class:`RigidOffset` -- the game-engine "follow hair" baseline: a ghost node is its guide's
   point at the same arc-length fraction plus the node's rest offset from that point rotated with
   the head (AMD TressFX follow hairs use an unrotated offset; rotating it with the head is the
@@ -41,6 +43,7 @@ from hair_tracking.core.groom import make_groom
 from hair_tracking.core.model import HeadPose, StrandSet
 from hair_tracking.core.scene import Scene
 from hair_tracking.ghosts.blend import BlendTracker, choose_guides
+from hair_tracking.ghosts.turn import TurnTracker
 from hair_tracking.ghosts.correspondence import assign_guides, node_correspondence
 from hair_tracking.ghosts.tracker import GhostTracker
 from hair_tracking.guides.collision import make_collider
@@ -235,8 +238,10 @@ class BlendTracking(Method):
         self.solver = GuideSolver(self.guides, scene)
         self.ghosts = StrandSet.from_rest(workload.ghost_rest)
         collider = make_collider(scene.collider) if scene.tracking.collide else None
-        self.tracker = BlendTracker(self.ghosts, self.guides, self.guide_index, scene, collider,
-                                    k=k)
+        self.tracker = self._tracker(scene, collider, k)
+
+    def _tracker(self, scene, collider, k):
+        return BlendTracker(self.ghosts, self.guides, self.guide_index, scene, collider, k=k)
 
     def reset(self, head):
         self.solver.reset(head)
@@ -248,6 +253,17 @@ class BlendTracking(Method):
     def output(self, head):
         self.tracker.step(self.dt, None, head)
         return self.ghosts.x
+
+
+class TurnTracking(BlendTracking):
+    """As :class:`BlendTracking`, every strand placed by the turn tracker
+    (:class:`~hair_tracking.ghosts.turn.TurnTracker`): its segments turned as the matching
+    segments of the guide with the nearest root.  At 1:1 this is :class:`FullSim`."""
+
+    family = 'turn'
+
+    def _tracker(self, scene, collider, k):
+        return TurnTracker(self.ghosts, self.guides, self.guide_index, scene, collider)
 
 
 class RigidOffset(_GuidedMethod):

@@ -161,6 +161,17 @@ def node_map(ghost_nodes: int, guide_nodes: int) -> Tuple[np.ndarray, np.ndarray
     return seg, t
 
 
+def collider_axes(ghosts: StrandSet, collider) -> Tuple[np.ndarray, np.ndarray]:
+    """``(centre, axes)`` of the ellipsoid the ghosts are kept out of (head frame): the head
+    collider's radii plus its margin, the margin capped as the guide solver caps it: by the rest
+    clearance of any free node and half the shortest segment, so no ghost is pushed out of its
+    own rest shape."""
+    clearance = outside_distance(ghosts.rest[:, 2:] - collider.center, collider.radii)
+    margin = min(collider.margin, float(clearance.min()), 0.5 * float(ghosts.rest_length.min()))
+    return (np.ascontiguousarray(collider.center, dtype=np.float64),
+            np.ascontiguousarray(collider.radii + max(0.0, margin), dtype=np.float64))
+
+
 # ----------------------------------------------------------------------------- kernels
 @njit(cache=True, inline='always')
 def _push_out(nx, ny, nz, cw, quad):
@@ -519,14 +530,7 @@ class BlendTracker:
         self._pending = False         # a step not yet evaluated (see step and release)
         self.collide = bool(tr.collide and collider is not None)
         if self.collide:
-            # as the guide solver does: no more margin than the rest clearance of any free node
-            # and half the shortest segment, so no ghost is pushed out of its own rest shape
-            clearance = outside_distance(ghosts.rest[:, 2:] - collider.center, collider.radii)
-            margin = min(collider.margin, float(clearance.min()),
-                         0.5 * float(ghosts.rest_length.min()))
-            self._axes = np.ascontiguousarray(collider.radii + max(0.0, margin),
-                                              dtype=np.float64)
-            self._center = np.ascontiguousarray(collider.center, dtype=np.float64)
+            self._center, self._axes = collider_axes(ghosts, collider)
         else:
             self._axes, self._center = np.ones(3), np.zeros(3)
         self.stats: Dict[str, int] = {'ghosts': int(ghosts.count), 'steps': 0, 'evaluations': 0,
