@@ -219,6 +219,9 @@ def _turn_blocks(x, seg, roots, kind, block_guide, block_strand, turns, gcol, ro
     r20, r21, r22 = rot[2, 0], rot[2, 1], rot[2, 2]
     c0, c1, c2 = cw[0], cw[1], cw[2]
     q0, q1, q2, q3, q4, q5 = quad[0], quad[1], quad[2], quad[3], quad[4], quad[5]
+    geo = np.empty(12)              # step 3's constants: collider centre, Q, the guide's node
+    geo[:3] = cw
+    geo[3:9] = quad
     contacts = 0
     for b in range(b0, b1):
         g = block_guide[b]
@@ -239,22 +242,17 @@ def _turn_blocks(x, seg, roots, kind, block_guide, block_strand, turns, gcol, ro
                 w[0, j + 1, 0, lane] = w[0, j, 0, lane] + m0 * s0 + m1 * s1 + m2 * s2
                 w[0, j + 1, 1, lane] = w[0, j, 1, lane] + m3 * s0 + m4 * s1 + m5 * s2
                 w[0, j + 1, 2, lane] = w[0, j, 2, lane] + m6 * s0 + m7 * s1 + m8 * s2
-            if not collide:
-                continue
-            g0, g1, g2 = gcol[g, 0, j + 1], gcol[g, 1, j + 1], gcol[g, 2, j + 1]
-            inside = 0                                       # step 3: any lane inside?
-            for lane in range(lanes):
-                nx, ny, nz = w[0, j + 1, 0, lane], w[0, j + 1, 1, lane], w[0, j + 1, 2, lane]
-                e = _form(nx - c0, ny - c1, nz - c2, q0, q1, q2, q3, q4, q5)
-                acts = _acts(kind[b, lane], nx - g0, ny - g1, nz - g2)
-                inside += 1 if e < 1.0 and acts else 0
-            if inside == 0:
-                continue
-            contacts += inside
-            for lane in range(lanes):                        # every lane, branch-free
-                acts = _acts(kind[b, lane], w[0, j + 1, 0, lane] - g0,
-                             w[0, j + 1, 1, lane] - g1, w[0, j + 1, 2, lane] - g2)
-                _slide_push(w, j, lane, acts, c0, c1, c2, q0, q1, q2, q3, q4, q5)
+            inside = 0
+            if collide:
+                for lane in range(lanes):
+                    e = _form(w[0, j + 1, 0, lane] - c0, w[0, j + 1, 1, lane] - c1,
+                              w[0, j + 1, 2, lane] - c2, q0, q1, q2, q3, q4, q5)
+                    inside += 1 if e < 1.0 else 0
+            if collide and inside > 0:                       # step 3
+                geo[9] = gcol[g, 0, j + 1]
+                geo[10] = gcol[g, 1, j + 1]
+                geo[11] = gcol[g, 2, j + 1]
+                contacts += _slide_push(w, kind, b, j, geo)
         for lane in range(lanes):
             s = block_strand[b, lane]
             if s >= 0:
@@ -270,35 +268,47 @@ def _acts(kind, dx, dy, dz):
     """Whether the collider acts on a node of a lane of ``kind`` that lies ``d`` from its
     guide's node (see :data:`GUIDE`)."""
     moved = dx * dx + dy * dy + dz * dz > GUIDE_TOLERANCE * GUIDE_TOLERANCE
-    return kind == GHOST or (kind == GUIDE and moved)
+    return (kind == GHOST) | ((kind == GUIDE) & moved)         # no branches: vectorises
 
 
-@njit(cache=True, inline='always', error_model='numpy')
-def _slide_push(w, j, lane, acts, c0, c1, c2, q0, q1, q2, q3, q4, q5):
-    """Step 3 for node ``j + 1`` of one lane of the scratch ``w``, written with selects so that
-    a loop over the lanes is one vector pass: a node inside the ellipsoid ``(x - c)^T Q (x - c)
-    < 1`` is placed at its rest length from node ``j`` along its step with the inward part (along
-    the normal ``Q (x_j - c)``) removed, then moved radially onto the surface if still inside;
-    a node outside, or one the collider does not act on (``acts``), is left as it is."""
-    nx, ny, nz = w[0, j + 1, 0, lane], w[0, j + 1, 1, lane], w[0, j + 1, 2, lane]
-    px, py, pz = w[0, j, 0, lane], w[0, j, 1, lane], w[0, j, 2, lane]
-    inside = _form(nx - c0, ny - c1, nz - c2, q0, q1, q2, q3, q4, q5) < 1.0 and acts
-    s0, s1, s2 = w[1, j, 0, lane], w[1, j, 1, lane], w[1, j, 2, lane]
-    length = math.sqrt(s0 * s0 + s1 * s1 + s2 * s2)
-    ex, ey, ez = px - c0, py - c1, pz - c2
-    gx = q0 * ex + q3 * ey + q4 * ez                          # outward normal Q (p - c)
-    gy = q3 * ex + q1 * ey + q5 * ez
-    gz = q4 * ex + q5 * ey + q2 * ez
-    dx, dy, dz = nx - px, ny - py, nz - pz
-    a = min(dx * gx + dy * gy + dz * gz, 0.0) / max(gx * gx + gy * gy + gz * gz, 1e-300)
-    dx, dy, dz = dx - a * gx, dy - a * gy, dz - a * gz
-    f = length / max(math.sqrt(dx * dx + dy * dy + dz * dz), 1e-300)
-    sx, sy, sz = px + f * dx - c0, py + f * dy - c1, pz + f * dz - c2
-    e = _form(sx, sy, sz, q0, q1, q2, q3, q4, q5)
-    k = 1.0 / math.sqrt(min(max(e, 1e-300), 1.0))             # radially onto the surface
-    w[0, j + 1, 0, lane] = c0 + k * sx if inside else nx
-    w[0, j + 1, 1, lane] = c1 + k * sy if inside else ny
-    w[0, j + 1, 2, lane] = c2 + k * sz if inside else nz
+@njit(cache=True, error_model='numpy')
+def _slide_push(w, kind, b, j, geo):
+    """Step 3 for node ``j + 1`` of every lane of the scratch ``w`` (block ``b``), one vector
+    pass (selects, no branches; a function of its own, so LLVM vectorises its loop on its own
+    terms): a node inside the ellipsoid ``(x - c)^T Q (x - c) < 1`` is placed at its rest
+    length from node ``j`` along its step with the inward part (along the normal
+    ``Q (x_j - c)``) removed, then moved radially onto the surface if still inside; a node
+    outside, or one the collider does not act on (:func:`_acts`), is left as it is.  ``geo``:
+    ``c`` (3), Q's entries Q00 Q11 Q22 Q01 Q02 Q12, the guide's node ``j + 1`` (3).  Returns
+    the number of nodes moved."""
+    c0, c1, c2 = geo[0], geo[1], geo[2]
+    q0, q1, q2, q3, q4, q5 = geo[3], geo[4], geo[5], geo[6], geo[7], geo[8]
+    g0, g1, g2 = geo[9], geo[10], geo[11]
+    moved = 0
+    for lane in range(w.shape[3]):
+        nx, ny, nz = w[0, j + 1, 0, lane], w[0, j + 1, 1, lane], w[0, j + 1, 2, lane]
+        px, py, pz = w[0, j, 0, lane], w[0, j, 1, lane], w[0, j, 2, lane]
+        acts = _acts(kind[b, lane], nx - g0, ny - g1, nz - g2)
+        inside = (_form(nx - c0, ny - c1, nz - c2, q0, q1, q2, q3, q4, q5) < 1.0) & acts
+        ex, ey, ez = px - c0, py - c1, pz - c2
+        gx = q0 * ex + q3 * ey + q4 * ez                      # outward normal Q (p - c)
+        gy = q3 * ex + q1 * ey + q5 * ez
+        gz = q4 * ex + q5 * ey + q2 * ez
+        dx, dy, dz = nx - px, ny - py, nz - pz                # the step: |d| = rest length
+        dd = dx * dx + dy * dy + dz * dz
+        dg = min(dx * gx + dy * gy + dz * gz, 0.0)
+        a = dg / max(gx * gx + gy * gy + gz * gz, 1e-300)
+        # |d - a g|^2 = dd - a dg: back to the rest length with one square root
+        f = math.sqrt(dd / max(dd - a * dg, 1e-300))
+        dx, dy, dz = dx - a * gx, dy - a * gy, dz - a * gz
+        sx, sy, sz = px + f * dx - c0, py + f * dy - c1, pz + f * dz - c2
+        e = _form(sx, sy, sz, q0, q1, q2, q3, q4, q5)
+        k = 1.0 / math.sqrt(min(max(e, 1e-300), 1.0))         # radially onto the surface
+        w[0, j + 1, 0, lane] = c0 + k * sx if inside else nx
+        w[0, j + 1, 1, lane] = c1 + k * sy if inside else ny
+        w[0, j + 1, 2, lane] = c2 + k * sz if inside else nz
+        moved += 1 if inside else 0
+    return moved
 
 
 @njit(cache=True, parallel=True)
