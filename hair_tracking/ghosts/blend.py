@@ -230,15 +230,21 @@ def guide_columns(gx, seg, t, out):
     fractions (``seg``, ``t`` from :func:`node_map`), component-major, so a ghost's blend runs
     along its nodes; a node fraction on a guide node copies it exactly."""
     for g in range(gx.shape[0]):
-        for j in range(seg.shape[0]):
-            a, u = seg[j], t[j]
-            for i in range(3):
-                if u == 0.0:
-                    out[g, i, j] = gx[g, a, i]
-                elif u == 1.0:
-                    out[g, i, j] = gx[g, a + 1, i]
-                else:
-                    out[g, i, j] = gx[g, a, i] + u * (gx[g, a + 1, i] - gx[g, a, i])
+        guide_column(gx, seg, t, out, g)
+
+
+@njit(cache=True, inline='always')
+def guide_column(gx, seg, t, out, g):
+    """:func:`guide_columns` for guide ``g``."""
+    for j in range(seg.shape[0]):
+        a, u = seg[j], t[j]
+        for i in range(3):
+            if u == 0.0:
+                out[g, i, j] = gx[g, a, i]
+            elif u == 1.0:
+                out[g, i, j] = gx[g, a + 1, i]
+            else:
+                out[g, i, j] = gx[g, a, i] + u * (gx[g, a + 1, i] - gx[g, a, i])
 
 
 @njit(cache=True, inline='always')

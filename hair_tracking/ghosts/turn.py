@@ -46,7 +46,7 @@ from numba import njit, prange
 from hair_tracking.core.model import HeadPose, StrandSet
 from hair_tracking.core.point_records import points_to_records
 from hair_tracking.ghosts.blend import (at_fractions, blend_weights, collider_axes,
-                                        guide_columns, node_map)
+                                        guide_column, node_map)
 
 #: Strands of one guide advanced together (one block): two AVX2 or one AVX-512 register of
 #: float64 lanes.
@@ -129,11 +129,14 @@ def _normal_to(a):
 
 # ----------------------------------------------------------------------------- kernels
 @njit(cache=True, parallel=True, error_model='numpy')
-def guide_turns(gcol, u0, rot, out):
-    """Kernel, step 1: ``out`` (G, 9, N - 1) the turn ``M_j`` of every guide segment, row-major
-    entries first, from ``gcol`` (G, 3, N) the guides at the ghosts' node fractions (world) and
-    ``u0`` (G, 3, N - 1) their unit rest directions (head frame, :func:`rest_directions`)."""
-    for g in prange(gcol.shape[0]):
+def guide_turns(gx, seg, t, u0, rot, gcol, out):
+    """Kernel, step 1: ``gcol`` (G, 3, N) the guides ``gx`` (G, M, 3, world) read at the ghosts'
+    node fractions (``seg``, ``t``; :func:`~hair_tracking.ghosts.blend.guide_columns`) and
+    ``out`` (G, 9, N - 1) the turn ``M_j`` of each of their segments, row-major entries first,
+    from ``u0`` (G, 3, N - 1) their unit rest directions (head frame, :func:`rest_directions`).
+    One parallel loop over the guides."""
+    for g in prange(gx.shape[0]):
+        guide_column(gx, seg, t, gcol, g)
         _guide_turns(gcol, u0, rot, out, g)
 
 
@@ -431,24 +434,24 @@ class TurnTracker:
 
     def step(self, dt: float, guide_x_old: Optional[np.ndarray], head: HeadPose,
              substeps: int = 1) -> None:
-        """Take the guides now and the head pose ``head``; every ghost is placed from them when
-        its positions are next read.  Nothing is integrated (``dt``, ``guide_x_old`` and
-        ``substeps`` are accepted for the simulator's interface and not needed)."""
-        guide_columns(self.guides.x, self.seg, self.t, self._gcol)
+        """Take the guides now and the head pose ``head`` (step 1); every ghost is placed from
+        them when its positions are next read.  Nothing is integrated (``dt``, ``guide_x_old``
+        and ``substeps`` are accepted for the simulator's interface and not needed)."""
         np.copyto(self._rot, head.rotation)
         np.copyto(self._pos, head.position)
+        guide_turns(self.guides.x, self.seg, self.t, self._u0, self._rot, self._gcol,
+                    self._turns)
         self._pending = True
         self.ghosts.hold(self)
         self.stats['steps'] += 1
 
     def release(self) -> None:
-        """Steps 1-3 of the last :meth:`step` into ``ghosts.x``, if not done yet (called by
+        """Steps 2-3 of the last :meth:`step` into ``ghosts.x``, if not done yet (called by
         :class:`~hair_tracking.core.model.StrandSet` when ``ghosts.x`` or ``ghosts.v`` is
         read or assigned)."""
         if not self._pending:
             return
         self._pending = False
-        guide_turns(self._gcol, self._u0, self._rot, self._turns)
         self.stats['contacts'] = int(turn_strands(
             self.ghosts._x, self._seg, self._roots, self._kind, self.block_guide,
             self.block_strand, self._turns, self._gcol, self._rot, self._pos, self.collide,
