@@ -45,6 +45,7 @@ from numba import njit, prange
 
 from hair_tracking.core.model import HeadPose, StrandSet
 from hair_tracking.core.point_records import points_to_records
+from hair_tracking.guides.integrate import FASTMATH, NO_REFCOUNT
 from hair_tracking.ghosts.blend import (at_fractions, blend_weights, collider_axes,
                                         guide_column, node_map)
 
@@ -128,7 +129,7 @@ def _normal_to(a):
 
 
 # ----------------------------------------------------------------------------- kernels
-@njit(cache=True, parallel=True, error_model='numpy')
+@njit(cache=True, parallel=True, fastmath=FASTMATH, error_model='numpy')
 def guide_turns(gx, seg, t, u0, rot, gcol, out):
     """Kernel, step 1: ``gcol`` (G, 3, N) the guides ``gx`` (G, M, 3, world) read at the ghosts'
     node fractions (``seg``, ``t``; :func:`~hair_tracking.ghosts.blend.guide_columns`) and
@@ -205,26 +206,23 @@ def _form(dx, dy, dz, q0, q1, q2, q3, q4, q5):
         2.0 * (q3 * dx * dy + q4 * dx * dz + q5 * dy * dz)
 
 
-@njit(cache=True, error_model='numpy')
+@njit(cache=True, fastmath=FASTMATH, error_model='numpy', **NO_REFCOUNT)
 def _turn_blocks(x, seg, roots, kind, block_guide, block_strand, turns, gcol, rot, pos, collide,
-                 cw, quad, b0, b1):
-    """Steps 2-3 for the blocks ``b0 .. b1 - 1``; returns the number of nodes that were inside
-    the collider."""
+                 flat, geo, b0, b1):
+    """Steps 2-3 for the blocks ``b0 .. b1 - 1``, ``flat`` (2 * N * 3 * lanes) the scratch and
+    ``geo`` the collider's constants (:func:`_slide_push`; the guide's node is written here);
+    returns the number of nodes moved by the collider."""
     n_nodes = x.shape[1]
     lanes = block_strand.shape[1]           # not a compile-time constant: LLVM vectorises
     slab = n_nodes * 3 * lanes
     # one scratch array for positions and segments, so the node loop reads and writes one
     # array (LLVM's overlap checks before the vector loop stay few)
-    flat = np.empty(2 * slab)
     w = flat.reshape((2, n_nodes, 3, lanes))
     r00, r01, r02 = rot[0, 0], rot[0, 1], rot[0, 2]
     r10, r11, r12 = rot[1, 0], rot[1, 1], rot[1, 2]
     r20, r21, r22 = rot[2, 0], rot[2, 1], rot[2, 2]
-    c0, c1, c2 = cw[0], cw[1], cw[2]
-    q0, q1, q2, q3, q4, q5 = quad[0], quad[1], quad[2], quad[3], quad[4], quad[5]
-    geo = np.empty(12)              # step 3's constants: collider centre, Q, the guide's node
-    geo[:3] = cw
-    geo[3:9] = quad
+    c0, c1, c2 = geo[0], geo[1], geo[2]
+    q0, q1, q2, q3, q4, q5 = geo[3], geo[4], geo[5], geo[6], geo[7], geo[8]
     contacts = 0
     for b in range(b0, b1):
         g = block_guide[b]
@@ -274,7 +272,7 @@ def _acts(kind, dx, dy, dz):
     return (kind == GHOST) | ((kind == GUIDE) & moved)         # no branches: vectorises
 
 
-@njit(cache=True, error_model='numpy')
+@njit(cache=True, fastmath=FASTMATH, error_model='numpy', **NO_REFCOUNT)
 def _slide_push(w, kind, b, j, geo):
     """Step 3 for node ``j + 1`` of every lane of the scratch ``w`` (block ``b``), one vector
     pass (selects, no branches; a function of its own, so LLVM vectorises its loop on its own
@@ -314,7 +312,7 @@ def _slide_push(w, kind, b, j, geo):
     return moved
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, parallel=True, fastmath=FASTMATH)
 def turn_strands(x, seg, roots, kind, block_guide, block_strand, turns, gcol, rot, pos,
                  collide, center, axes):
     """Kernel, steps 2-3: ``x`` (S, N, 3) world [m] receives every strand of a block
@@ -325,20 +323,22 @@ def turn_strands(x, seg, roots, kind, block_guide, block_strand, turns, gcol, ro
     ``pos`` the head pose; ``collide``: keep nodes out of the ellipsoid ``axes`` (radii +
     margin) around ``center`` (head frame).  Returns the number of nodes that were inside the
     collider."""
-    cw = np.empty(3)                                  # the collider's centre in the world
+    geo = np.empty(12)       # the collider's centre in the world, then Q's six entries
     for i in range(3):
-        cw[i] = rot[i, 0] * center[0] + rot[i, 1] * center[1] + rot[i, 2] * center[2] + pos[i]
+        geo[i] = rot[i, 0] * center[0] + rot[i, 1] * center[1] + rot[i, 2] * center[2] + pos[i]
     inv = 1.0 / (axes * axes)
-    quad = np.empty(6)
     for i, (a, b) in enumerate(((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))):
-        quad[i] = rot[a, 0] * rot[b, 0] * inv[0] + rot[a, 1] * rot[b, 1] * inv[1] + \
+        geo[3 + i] = rot[a, 0] * rot[b, 0] * inv[0] + rot[a, 1] * rot[b, 1] * inv[1] + \
             rot[a, 2] * rot[b, 2] * inv[2]
     n_blocks = block_guide.shape[0]
     n_chunks = min(n_blocks, CHUNKS)
+    slab = 2 * x.shape[1] * 3 * block_strand.shape[1]
     contacts = 0
     for c in prange(n_chunks):
+        flat = np.empty(slab)                 # the work item's scratch and constants
+        mine = geo.copy()
         contacts += _turn_blocks(x, seg, roots, kind, block_guide, block_strand, turns, gcol,
-                                 rot, pos, collide, cw, quad, c * n_blocks // n_chunks,
+                                 rot, pos, collide, flat, mine, c * n_blocks // n_chunks,
                                  (c + 1) * n_blocks // n_chunks)
     return contacts
 
