@@ -1,13 +1,15 @@
-"""Speed of the ghost trackers: the blend tracker against the paper's tracker, against the copy
-bandwidth of this machine measured in the same run.
+"""Speed of the ghost trackers: the blend and turn trackers against the paper's tracker, against
+the copy bandwidth of this machine measured in the same run.
 
 For each ghost count (16 nodes a strand, one guide per 16 ghosts, the default scene otherwise),
-the blend tracker's frame (blend + FTL pass + head contacts) and one step of the paper tracker,
-each with the read of the positions that a frame makes, are timed in turns, after a warm-up that
-compiles them; medians of the rounds. The bandwidth is a numpy copy of a 64 MB float64 array
-(read + write counted). The blend kernel reads the float32 rest offsets and lengths (16 B a
-node) and writes float64 positions (24 B): its share of the bandwidth is (40 B x nodes / time) /
-copy bandwidth.
+the blend tracker's frame (blend + FTL pass + head contacts), the turn tracker's frame (the
+guides' turns, the turned segments, head contacts) and one step of the paper tracker, each with
+the read of the positions that a frame makes, are timed in turns, after a warm-up that compiles
+them; medians of the rounds. The bandwidth is a numpy copy of a 64 MB float64 array (read +
+write counted). The blend kernel reads the float32 rest offsets and lengths (16 B a node) and
+writes float64 positions (24 B); the turn kernel reads float32 rest segments (12 B) and float64
+roots (3 B a node at 16 nodes) and writes the positions: a kernel's share of the bandwidth is
+(bytes a node x nodes / time) / copy bandwidth.
 
     python scripts/bench_blend.py [--ghosts 10000 100000] [--threads 2] [--json out.json]
 """
@@ -26,7 +28,7 @@ import numpy as np  # noqa: E402
 from hair_tracking.core.scene import Scene  # noqa: E402
 from hair_tracking.simulator import HairSimulator  # noqa: E402
 
-BYTES_PER_NODE = 16 + 24
+BYTES_PER_NODE = {'blend': 16 + 24, 'turn': 12 + 3 + 24}
 
 
 def copy_bandwidth(rounds=7):
@@ -63,8 +65,8 @@ def main(argv=None):
         guides = max(1, ghosts // 16)
         base = Scene().with_changes(groom__guides=guides, groom__ghosts_per_guide=16,
                                     solver__settle_time=0.0)
-        sims = {'blend': moved(HairSimulator(base.with_changes(tracking__mode='blend')), 1),
-                'paper': moved(HairSimulator(base.with_changes(tracking__mode='paper')), 1)}
+        sims = {mode: moved(HairSimulator(base.with_changes(tracking__mode=mode)), 1)
+                for mode in ('blend', 'turn', 'paper')}
         for k in range(2, 5):
             for sim in sims.values():
                 moved(sim, k)
@@ -84,15 +86,15 @@ def main(argv=None):
             med = statistics.median(ts)
             row[name] = {'median_ms': med * 1e3, 'min_ms': min(ts) * 1e3,
                          'Mnodes_per_s': nodes / med / 1e6}
-        row['blend']['bandwidth_share'] = BYTES_PER_NODE * nodes / statistics.median(
-            times['blend']) / bw
+        for name, size in BYTES_PER_NODE.items():
+            row[name]['bandwidth_share'] = size * nodes / statistics.median(times[name]) / bw
         results.append(row)
-        b, p = row['blend'], row['paper']
+        b, t, p = row['blend'], row['turn'], row['paper']
         print(f"{row['ghosts']:>7} ghosts x 16: blend {b['median_ms']:.2f} ms "
               f"({b['Mnodes_per_s']:.0f} M nodes/s, {100 * b['bandwidth_share']:.0f} % of the "
-              f"copy bandwidth); paper tracker step {p['median_ms']:.2f} ms "
-              f"({p['Mnodes_per_s']:.0f} M nodes/s); ratio {p['median_ms'] / b['median_ms']:.1f}x",
-              flush=True)
+              f"copy bandwidth); turn {t['median_ms']:.2f} ms ({t['Mnodes_per_s']:.0f} M "
+              f"nodes/s, {100 * t['bandwidth_share']:.0f} %); paper tracker step "
+              f"{p['median_ms']:.2f} ms ({p['Mnodes_per_s']:.0f} M nodes/s)", flush=True)
     if args.json:
         with open(args.json, 'w', encoding='utf-8') as f:
             json.dump({'results': results}, f, indent=2)

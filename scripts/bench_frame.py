@@ -2,15 +2,17 @@
 """Time of one output frame of the default scene at a large ghost count: the guides' substeps
 for one head pose, the ghosts, and the PointCloud2 bytes of every ghost node.
 
-    python scripts/bench_frame.py [--ghosts 100000] [--threads 2] [--frames 240] [--json F]
+    python scripts/bench_frame.py [--ghosts 100000] [--threads 2] [--frames 240] [--mode turn]
+                                  [--json F]
 
-The default scene (blend tracker, FTL guides at its dt) with ``--ghosts`` strands of 16 nodes,
-one guide per 16 strands, follows the bundled walk recording at 60 Hz (every second pose of the
-120 Hz recording); each frame is ``push_pose`` + ``advance_to`` + the cloud written into a
-:class:`msg_adapters.pointcloud.CloudBuffer` as the node does (``record_writer``).  Kernels are
-compiled (or loaded) and the first 30 frames run before timing.  Prints the median, p95 and
-worst frame and the median of each part: the guide substeps (``advance_to``) and the ghosts
-with the cloud's bytes (the blend runs when the cloud reads the ghosts).
+The default scene (blend tracker, or the tracker ``--mode``; FTL guides at its dt) with
+``--ghosts`` strands of 16 nodes, one guide per 16 strands, follows the bundled walk recording
+at 60 Hz (every second pose of the 120 Hz recording); each frame is ``push_pose`` +
+``advance_to`` + the cloud written into a :class:`msg_adapters.pointcloud.CloudBuffer` as the
+node does (``record_writer``). Kernels are compiled (or loaded) and the first 30 frames run
+before timing. Prints the median, p95 and worst frame and the median of each part: the guide
+substeps (``advance_to``) and the ghosts with the cloud's bytes (the blend or turn runs when
+the cloud reads the ghosts).
 """
 import argparse
 import json
@@ -37,11 +39,13 @@ def main(argv=None):
     ap.add_argument('--ghosts', type=int, default=100000)
     ap.add_argument('--threads', type=int, default=numba.config.NUMBA_NUM_THREADS)
     ap.add_argument('--frames', type=int, default=240)
+    ap.add_argument('--mode', choices=['blend', 'turn', 'paper'], default=Scene().tracking.mode,
+                    help='tracking.mode (default: the default scene\'s)')
     ap.add_argument('--json')
     args = ap.parse_args(argv)
     numba.set_num_threads(args.threads)
     scene = Scene().with_changes(groom__guides=max(1, args.ghosts // 16),
-                                 groom__ghosts_per_guide=16)
+                                 groom__ghosts_per_guide=16, tracking__mode=args.mode)
     warm_up(scene)
     sim = HairSimulator(scene)
     poses = bag_io.read_head_poses(bag_io.bundled_bag())
@@ -65,13 +69,14 @@ def main(argv=None):
             parts['ghosts_cloud'].append((t2 - t1) * 1e3)
             parts['frame'].append((t2 - t0) * 1e3)
     f = np.asarray(parts['frame'])
-    row = {'ghosts': int(sim.ghosts.count), 'guides': int(sim.guides.count),
+    row = {'mode': args.mode, 'ghosts': int(sim.ghosts.count), 'guides': int(sim.guides.count),
            'threads': args.threads, 'frames': len(f), 'median_ms': float(np.median(f)),
            'p95_ms': float(np.percentile(f, 95)), 'max_ms': float(f.max()),
            'guides_median_ms': statistics.median(parts['guides']),
            'ghosts_cloud_median_ms': statistics.median(parts['ghosts_cloud']),
            'substeps_per_frame': sim.counters.substeps / max(1, n_frames)}
-    print(f"{row['ghosts']} ghosts x 16 ({row['guides']} guides), {args.threads} thread(s), "
+    print(f"{args.mode}: {row['ghosts']} ghosts x 16 ({row['guides']} guides), "
+          f"{args.threads} thread(s), "
           f"{row['frames']} frames at 60 Hz: median {row['median_ms']:.2f} ms, p95 "
           f"{row['p95_ms']:.2f}, worst {row['max_ms']:.2f} (guide substeps "
           f"{row['guides_median_ms']:.2f}, ghosts + cloud bytes "

@@ -298,9 +298,9 @@ def test_split_never_below_min_dt():
     assert sim._split_count(0.1, head0, far) == simulator.MAX_SPLIT
 
 
-@pytest.mark.parametrize('mode,stretch', [('paper', 1e-9), ('blend', 1e-7)])
+@pytest.mark.parametrize('mode,stretch', [('paper', 1e-9), ('blend', 1e-7), ('turn', 1e-6)])
 def test_ghost_collision_keeps_lengths(mode, stretch):
-    # the blend keeps its rest lengths in float32
+    # the blend and the turn keep their rest lengths or segments in float32
     scene = stability.BASE.with_changes(tracking__collide=True, tracking__mode=mode)
     sim = HairSimulator(scene)
     motion = sm.shake(20.0, 4.0, duration_s=0.5)
@@ -315,8 +315,8 @@ def test_ghost_collision_keeps_lengths(mode, stretch):
     assert c.penetration(sim.ghosts.x, sim.head, sim.ghosts.inv_mass) <= scene.collider.margin
 
 
-def test_the_matrix_runs_with_either_tracker():
-    for mode in ('paper', 'blend'):
+def test_the_matrix_runs_with_any_tracker():
+    for mode in ('paper', 'blend', 'turn'):
         cases = stability.matrix(quick=True, tracking_mode=mode)
         assert [c.name for c in cases] == [c.name for c in QUICK]
         assert {c.scene.tracking.mode for c in cases} == {mode}

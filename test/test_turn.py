@@ -74,15 +74,12 @@ def _random_case(seed, guides=7, nodes=12, guide_nodes=12, scale=0.01):
 def _kernel(tr, h, gx, collide=True):
     rot, pos = np.ascontiguousarray(h.rotation), np.ascontiguousarray(h.position)
     gcol = np.empty((gx.shape[0], 3, tr.seg.shape[0]))
+    blend.guide_columns(gx, tr.seg, tr.t, gcol)
     turns = np.empty((gx.shape[0], 9, tr.seg.shape[0] - 1))
-    turn.guide_turns(gx, tr.seg, tr.t, tr._u0, rot, gcol, turns)
-    want = np.empty_like(gcol)
-    blend.guide_columns(gx, tr.seg, tr.t, want)
-    np.testing.assert_array_equal(gcol, want)
     out = np.full(tr.ghosts.rest.shape, np.nan)
     contacts = turn.turn_strands(out, tr._seg, tr._roots, tr._kind, tr.block_guide,
-                                 tr.block_strand, turns, gcol, rot, pos, collide, tr._center,
-                                 tr._axes)
+                                 tr.block_strand, gcol, tr._u0, turns, rot, pos, collide,
+                                 tr._center, tr._axes)
     return out, contacts
 
 

@@ -47,7 +47,7 @@ from hair_tracking.core.model import HeadPose, StrandSet
 from hair_tracking.core.point_records import points_to_records
 from hair_tracking.guides.integrate import FASTMATH, NO_REFCOUNT
 from hair_tracking.ghosts.blend import (at_fractions, blend_weights, collider_axes,
-                                        guide_column, node_map)
+                                        guide_columns, node_map)
 
 #: Strands of one guide advanced together (one block): two AVX2 or one AVX-512 register of
 #: float64 lanes.
@@ -129,20 +129,12 @@ def _normal_to(a):
 
 
 # ----------------------------------------------------------------------------- kernels
-@njit(cache=True, parallel=True, fastmath=FASTMATH, error_model='numpy')
-def guide_turns(gx, seg, t, u0, rot, gcol, out):
-    """Kernel, step 1: ``gcol`` (G, 3, N) the guides ``gx`` (G, M, 3, world) read at the ghosts'
-    node fractions (``seg``, ``t``; :func:`~hair_tracking.ghosts.blend.guide_columns`) and
-    ``out`` (G, 9, N - 1) the turn ``M_j`` of each of their segments, row-major entries first,
-    from ``u0`` (G, 3, N - 1) their unit rest directions (head frame, :func:`rest_directions`).
-    One parallel loop over the guides."""
-    for g in prange(gx.shape[0]):
-        guide_column(gx, seg, t, gcol, g)
-        _guide_turns(gcol, u0, rot, out, g)
-
-
-@njit(cache=True, inline='always', error_model='numpy')
-def _guide_turns(gcol, u0, rot, out, g):
+@njit(cache=True, inline='always', fastmath=FASTMATH, error_model='numpy')
+def guide_turns(gcol, u0, rot, out, g):
+    """Step 1 for guide ``g``: ``out[g]`` (9, N - 1) the turn ``M_j`` of each of its segments,
+    row-major entries first, from ``gcol`` (G, 3, N) the guides at the ghosts' node fractions
+    (world, :func:`~hair_tracking.ghosts.blend.guide_columns`) and ``u0`` (G, 3, N - 1) their
+    unit rest directions (head frame, :func:`rest_directions`)."""
     n_seg = u0.shape[2]
     r00, r01, r02 = rot[0, 0], rot[0, 1], rot[0, 2]
     r10, r11, r12 = rot[1, 0], rot[1, 1], rot[1, 2]
@@ -313,16 +305,19 @@ def _slide_push(w, kind, b, j, geo):
 
 
 @njit(cache=True, parallel=True, fastmath=FASTMATH)
-def turn_strands(x, seg, roots, kind, block_guide, block_strand, turns, gcol, rot, pos,
+def turn_strands(x, seg, roots, kind, block_guide, block_strand, gcol, u0, turns, rot, pos,
                  collide, center, axes):
-    """Kernel, steps 2-3: ``x`` (S, N, 3) world [m] receives every strand of a block
+    """Kernel, steps 1-3: ``x`` (S, N, 3) world [m] receives every strand of a block
     (``block_strand``, :func:`group_blocks`); ``seg`` and ``roots`` the blocks' rest shape
     (:func:`block_rest`); ``kind`` (B, lanes) int8 what each lane holds (:data:`GUIDE`);
-    ``turns`` (G, 9, N - 1) from :func:`guide_turns`; ``gcol`` (G, 3, N) the guides at the
-    ghosts' node fractions (:func:`~hair_tracking.ghosts.blend.guide_columns`); ``rot``,
-    ``pos`` the head pose; ``collide``: keep nodes out of the ellipsoid ``axes`` (radii +
-    margin) around ``center`` (head frame).  Returns the number of nodes that were inside the
-    collider."""
+    ``gcol`` (G, 3, N) the guides at the ghosts' node fractions
+    (:func:`~hair_tracking.ghosts.blend.guide_columns`), ``u0`` their unit rest directions
+    (:func:`rest_directions`) and ``turns`` (G, 9, N - 1) receives their turns (step 1, a
+    parallel loop over the guides before the one over the blocks); ``rot``, ``pos`` the head
+    pose; ``collide``: keep nodes out of the ellipsoid ``axes`` (radii + margin) around
+    ``center`` (head frame).  Returns the number of nodes the collider moved."""
+    for g in prange(gcol.shape[0]):
+        guide_turns(gcol, u0, rot, turns, g)
     geo = np.empty(12)       # the collider's centre in the world, then Q's six entries
     for i in range(3):
         geo[i] = rot[i, 0] * center[0] + rot[i, 1] * center[1] + rot[i, 2] * center[2] + pos[i]
@@ -434,19 +429,19 @@ class TurnTracker:
 
     def step(self, dt: float, guide_x_old: Optional[np.ndarray], head: HeadPose,
              substeps: int = 1) -> None:
-        """Take the guides now and the head pose ``head`` (step 1); every ghost is placed from
-        them when its positions are next read.  Nothing is integrated (``dt``, ``guide_x_old``
-        and ``substeps`` are accepted for the simulator's interface and not needed)."""
+        """Take the guides now and the head pose ``head``; every ghost is placed from them when
+        its positions are next read (a step that no read follows costs a copy of the guides).
+        Nothing is integrated (``dt``, ``guide_x_old`` and ``substeps`` are accepted for the
+        simulator's interface and not needed)."""
+        guide_columns(self.guides.x, self.seg, self.t, self._gcol)
         np.copyto(self._rot, head.rotation)
         np.copyto(self._pos, head.position)
-        guide_turns(self.guides.x, self.seg, self.t, self._u0, self._rot, self._gcol,
-                    self._turns)
         self._pending = True
         self.ghosts.hold(self)
         self.stats['steps'] += 1
 
     def release(self) -> None:
-        """Steps 2-3 of the last :meth:`step` into ``ghosts.x``, if not done yet (called by
+        """Steps 1-3 of the last :meth:`step` into ``ghosts.x``, if not done yet (called by
         :class:`~hair_tracking.core.model.StrandSet` when ``ghosts.x`` or ``ghosts.v`` is
         read or assigned)."""
         if not self._pending:
@@ -454,8 +449,8 @@ class TurnTracker:
         self._pending = False
         self.stats['contacts'] = int(turn_strands(
             self.ghosts._x, self._seg, self._roots, self._kind, self.block_guide,
-            self.block_strand, self._turns, self._gcol, self._rot, self._pos, self.collide,
-            self._center, self._axes))
+            self.block_strand, self._gcol, self._u0, self._turns, self._rot, self._pos,
+            self.collide, self._center, self._axes))
         self.stats['evaluations'] += 1
 
     def reset(self, head: HeadPose) -> None:
