@@ -54,10 +54,10 @@ def runs_parallel(nodes: int) -> bool:
 
 def serial_twin(kernel):
     """The parallel numba ``kernel`` compiled without ``parallel``: its ``prange`` loops run as
-    plain loops on the calling thread.  The results are bit-identical where the loop body is a
-    compiled function of its own (``*_block``); a body inlined into both variants may be
-    contracted differently by LLVM (it was in ``ftl_restore``: last-bit differences, hence
-    ``ftl_restore_block``).  For problems below :data:`PARALLEL_MIN_NODES`: even on one
+    plain loops on the calling thread.  The two agree to rounding, not always bit for bit: a
+    body compiled into both variants may be contracted (fused multiply-add) differently by
+    LLVM, as a cached and a fresh compilation may be (the tests compare them to 1e-12 m).  For
+    problems below :data:`PARALLEL_MIN_NODES`: even on one
     thread a parallel region costs a launch through the threading layer, at 64 guides of 16
     nodes a large part of a guide substep.
 
