@@ -45,7 +45,8 @@ from hair_tracking.core.model import HeadPose, StrandSet
 from hair_tracking.core.point_records import points_to_records
 from hair_tracking.core.scene import GUIDES_AMONG_STRANDS, Scene
 from hair_tracking.core.transforms import quat_angle, quat_to_matrix, slerp
-from hair_tracking.ghosts.blend import BlendTracker, choose_guides
+from hair_tracking.ghosts.blend import BlendTracker
+from hair_tracking.ghosts.stateless import choose_guides
 from hair_tracking.ghosts.turn import TurnTracker
 from hair_tracking.ghosts.tracker import GhostTracker
 from hair_tracking.guides.collision import make_collider

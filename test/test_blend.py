@@ -1,40 +1,33 @@
 """The blend tracker (hair_tracking.ghosts.blend): the compiled kernels against the plain-numpy
-reference, guides chosen among the strands (1:1 is full simulation), rigid motion carried
-exactly, and the simulator running it once per frame."""
+reference, guides chosen among the strands, and the simulator running it once per frame (1:1
+and rigid motion: test_stateless)."""
 import numpy as np
 import pytest
 
-from hair_tracking.core.model import HeadPose, StrandSet
+from hair_tracking.core.model import StrandSet
 from hair_tracking.core.scene import Scene, SceneError
-from hair_tracking.core.transforms import quat_from_axis_angle, quat_to_matrix
-from hair_tracking.ghosts import blend
+from hair_tracking.core.transforms import quat_from_axis_angle
+from hair_tracking.ghosts import blend, stateless
 from hair_tracking.simulator import HairSimulator
-
-
-def head(angle=0.4, axis=(0.2, 0.3, 1.0), position=(0.05, -0.02, 1.6)):
-    q = quat_from_axis_angle(np.asarray(axis) / np.linalg.norm(axis), angle)
-    return HeadPose(np.asarray(position, dtype=float), q, quat_to_matrix(q))
+from test_stateless import head, scene
 
 
 def small_scene(**changes):
-    base = {'groom__guides': 6, 'groom__ghosts_per_guide': 4, 'tracking__mode': 'blend',
-            'solver__settle_time': 0.0}
-    base.update(changes)
-    return Scene().with_changes(**base)
+    return scene('blend', **changes)
 
 
 def test_choose_guides_spreads_them_deterministically():
     rng = np.random.default_rng(1)
     roots = rng.normal(size=(200, 3))
-    a = blend.choose_guides(roots, 20)
-    assert np.array_equal(a, blend.choose_guides(roots, 20)) and len(set(a.tolist())) == 20
-    assert np.array_equal(blend.choose_guides(roots, 200), np.arange(200))
+    a = stateless.choose_guides(roots, 20)
+    assert np.array_equal(a, stateless.choose_guides(roots, 20)) and len(set(a.tolist())) == 20
+    assert np.array_equal(stateless.choose_guides(roots, 200), np.arange(200))
     # farthest-point sampling: every strand is closer to some guide than a random pick allows
     d = np.sqrt(((roots[:, None] - roots[a][None]) ** 2).sum(-1)).min(1).max()
     r = np.sqrt(((roots[:, None] - roots[:20][None]) ** 2).sum(-1)).min(1).max()
     assert d < r
     with pytest.raises(ValueError, match='need 1..200 guides'):
-        blend.choose_guides(roots, 0)
+        stateless.choose_guides(roots, 0)
 
 
 def test_weights_are_shepard_and_a_guide_follows_only_itself():
@@ -71,9 +64,9 @@ def test_nearest_guides_break_ties_to_the_lower_index_as_a_stable_sort():
 
 
 def test_node_map_is_node_to_node_for_equal_counts():
-    seg, t = blend.node_map(16, 16)
+    seg, t = stateless.node_map(16, 16)
     assert seg.tolist() == list(range(15)) + [14] and t.tolist() == [0.0] * 15 + [1.0]
-    seg, t = blend.node_map(3, 5)
+    seg, t = stateless.node_map(3, 5)
     assert seg.tolist() == [0, 2, 3] and np.allclose(t, [0.0, 0.0, 1.0])
 
 
@@ -92,7 +85,7 @@ def _random_case(seed, guides=7, nodes=12, guide_nodes=12, k=3):
 def _kernel(sim, tr, h, gx, restore=True, collide=True):
     rot, pos = np.ascontiguousarray(h.rotation), np.ascontiguousarray(h.position)
     gcol = np.empty((gx.shape[0], 3, tr.seg.shape[0]))
-    blend.guide_columns(gx, tr.seg, tr.t, gcol)
+    stateless.guide_columns(gx, tr.seg, tr.t, gcol)
     out = np.empty_like(sim.ghosts.rest)
     axes = tr._axes if collide else np.ones(3)
     contacts = blend.blend_strands(out, tr._offset32, tr._roots, tr._len32,
@@ -177,59 +170,15 @@ def test_different_node_counts_match_the_reference():
 def test_guides_at_other_node_counts_are_read_at_the_node_fractions():
     rng = np.random.default_rng(2)
     gx = rng.normal(size=(3, 7, 3))
-    seg, t = blend.node_map(13, 7)
+    seg, t = stateless.node_map(13, 7)
     out = np.empty((3, 3, 13))
-    blend.guide_columns(gx, seg, t, out)
-    np.testing.assert_allclose(out.transpose(0, 2, 1), blend.at_fractions(gx, seg, t))
+    stateless.guide_columns(gx, seg, t, out)
+    np.testing.assert_allclose(out.transpose(0, 2, 1), stateless.at_fractions(gx, seg, t))
     np.testing.assert_array_equal(out.transpose(0, 2, 1)[:, ::2], gx)
     same = np.empty((3, 3, 7))
-    blend.guide_columns(gx, *blend.node_map(7, 7), same)
+    stateless.guide_columns(gx, *stateless.node_map(7, 7), same)
     np.testing.assert_array_equal(same.transpose(0, 2, 1), gx)
-    assert blend.at_fractions(gx, *blend.node_map(7, 7)) is gx
-
-
-def test_guides_carried_rigidly_carry_every_ghost_rigidly():
-    sim = HairSimulator(small_scene(tracking__collide=False))
-    h = head(angle=1.1)
-    sim.guides.x[...] = h.to_world(sim.guides.rest)
-    sim.ghost_tracker.step(1 / 60, None, h)
-    np.testing.assert_allclose(sim.ghosts.x, h.to_world(sim.ghosts.rest), atol=2e-7)
-
-
-def test_one_guide_per_strand_is_full_simulation():
-    sim = HairSimulator(small_scene(groom__ghosts_per_guide=1, groom__guides=12))
-    assert np.array_equal(sim.guide_index, np.arange(12))
-    t0 = 1_000_000_000
-    for k in range(12):
-        q = quat_from_axis_angle(np.array([0.0, 0.0, 1.0]), 0.3 * np.sin(0.5 * k))
-        sim.push_pose(t0 + k * 16_666_667, [0.02 * k, 0.0, 0.0], q)
-        sim.advance_to(t0 + k * 16_666_667)
-    f = sim.frame()
-    # FTL guides keep exact lengths: the strands' length pass leaves them as they are
-    np.testing.assert_array_equal(f.ghosts, f.guides)
-
-
-def test_simulator_runs_the_blend_once_per_frame_with_exact_lengths_outside_the_head():
-    sim = HairSimulator(small_scene(groom__guides=8, groom__ghosts_per_guide=8))
-    assert isinstance(sim.ghost_tracker, blend.BlendTracker)
-    assert sim.guides.count == 8 and sim.ghosts.count == 64
-    np.testing.assert_array_equal(sim.guides.rest, sim.ghosts.rest[sim.guide_index])
-    t0 = 1_000_000_000
-    for k in range(30):
-        q = quat_from_axis_angle(np.array([0.0, 0.3, 1.0]) / np.hypot(0.3, 1.0),
-                                 0.6 * np.sin(0.4 * k))
-        sim.push_pose(t0 + k * 16_666_667, [0.03 * np.sin(0.3 * k), 0.0, 0.0], q)
-        sim.advance_to(t0 + k * 16_666_667)
-    assert sim.ghost_tracker.stats['steps'] == 29        # once per advance_to call
-    f = sim.frame()
-    assert np.all(np.isfinite(f.ghosts))
-    seg = np.linalg.norm(np.diff(f.ghosts, axis=1), axis=2)
-    stretch = np.abs(seg / sim.ghosts.rest_length - 1.0)
-    assert stretch.max() < 0.01                # nodes pressed onto the head: within 1 %
-    assert np.median(stretch) < 1e-6           # every other segment exact (float32 lengths)
-    assert sim.penetration() < 1e-6            # on the surface to rounding
-    np.testing.assert_allclose(f.ghosts[:, :2], f.head.to_world(sim.ghosts.rest[:, :2]),
-                               atol=1e-12)     # roots pinned
+    assert stateless.at_fractions(gx, *stateless.node_map(7, 7)) is gx
 
 
 def test_the_blend_runs_when_the_hair_is_read_from_the_guides_of_its_step():

@@ -1,26 +1,16 @@
 """The turn tracker (hair_tracking.ghosts.turn): ghosts grouped by guide into blocks, the
-compiled kernels against the plain-numpy reference, exact lengths, rigid motion carried exactly,
-1:1 is full simulation, nodes kept out of the head, and the simulator running it per frame."""
+compiled kernels against the plain-numpy reference, exact lengths, nodes kept out of the head,
+and the simulator running it per frame (1:1 and rigid motion: test_stateless)."""
 import numpy as np
 import pytest
 
-from hair_tracking.core.model import HeadPose
-from hair_tracking.core.scene import Scene
-from hair_tracking.core.transforms import quat_from_axis_angle, quat_to_matrix
-from hair_tracking.ghosts import blend, turn
+from hair_tracking.ghosts import stateless, turn
 from hair_tracking.simulator import HairSimulator
-
-
-def head(angle=0.4, axis=(0.2, 0.3, 1.0), position=(0.05, -0.02, 1.6)):
-    q = quat_from_axis_angle(np.asarray(axis) / np.linalg.norm(axis), angle)
-    return HeadPose(np.asarray(position, dtype=float), q, quat_to_matrix(q))
+from test_stateless import head, scene
 
 
 def small_scene(**changes):
-    base = {'groom__guides': 6, 'groom__ghosts_per_guide': 4, 'tracking__mode': 'turn',
-            'solver__settle_time': 0.0}
-    base.update(changes)
-    return Scene().with_changes(**base)
+    return scene('turn', **changes)
 
 
 def test_blocks_hold_each_guides_strands_and_only_theirs():
@@ -74,7 +64,7 @@ def _random_case(seed, guides=7, nodes=12, guide_nodes=12, scale=0.01):
 def _kernel(tr, h, gx, collide=True):
     rot, pos = np.ascontiguousarray(h.rotation), np.ascontiguousarray(h.position)
     gcol = np.empty((gx.shape[0], 3, tr.seg.shape[0]))
-    blend.guide_columns(gx, tr.seg, tr.t, gcol)
+    stateless.guide_columns(gx, tr.seg, tr.t, gcol)
     turns = np.empty((gx.shape[0], 9, tr.seg.shape[0] - 1))
     out = np.full(tr.ghosts.rest.shape, np.nan)
     contacts = turn.turn_strands(out, tr._seg, tr._roots, tr._kind, tr.block_guide,
@@ -130,50 +120,6 @@ def test_half_turns_and_other_node_counts_match_the_reference():
     cos = np.sum(d * want, axis=1) / np.linalg.norm(d, axis=1) / np.linalg.norm(want, axis=1)
     np.testing.assert_allclose(cos[1:], 1.0, atol=1e-12)
     assert np.dot(want[5] / np.linalg.norm(want[5]), g0[5] - g0[4]) < 0      # it did turn
-
-
-def test_guides_carried_rigidly_carry_every_ghost_rigidly():
-    sim = HairSimulator(small_scene(tracking__collide=False))
-    h = head(angle=1.1)
-    sim.guides.x[...] = h.to_world(sim.guides.rest)
-    sim.ghost_tracker.step(1 / 60, None, h)
-    np.testing.assert_allclose(sim.ghosts.x, h.to_world(sim.ghosts.rest), atol=1e-8)
-
-
-def test_one_guide_per_strand_is_full_simulation():
-    sim = HairSimulator(small_scene(groom__ghosts_per_guide=1, groom__guides=12))
-    assert np.array_equal(sim.guide_index, np.arange(12))
-    t0 = 1_000_000_000
-    for k in range(12):
-        q = quat_from_axis_angle(np.array([0.0, 0.0, 1.0]), 0.3 * np.sin(0.5 * k))
-        sim.push_pose(t0 + k * 16_666_667, [0.02 * k, 0.0, 0.0], q)
-        sim.advance_to(t0 + k * 16_666_667)
-    f = sim.frame()
-    # each strand its own guide's directions at its rest lengths (float32 segments), no
-    # contacts of its own
-    np.testing.assert_allclose(f.ghosts, f.guides, atol=1e-8)
-    assert sim.ghost_tracker.stats['contacts'] == 0
-
-
-def test_simulator_runs_the_turn_once_per_frame_outside_the_head():
-    sim = HairSimulator(small_scene(groom__guides=8, groom__ghosts_per_guide=8))
-    assert isinstance(sim.ghost_tracker, turn.TurnTracker)
-    np.testing.assert_array_equal(sim.guides.rest, sim.ghosts.rest[sim.guide_index])
-    t0 = 1_000_000_000
-    for k in range(30):
-        q = quat_from_axis_angle(np.array([0.0, 0.3, 1.0]) / np.hypot(0.3, 1.0),
-                                 0.6 * np.sin(0.4 * k))
-        sim.push_pose(t0 + k * 16_666_667, [0.03 * np.sin(0.3 * k), 0.0, 0.0], q)
-        sim.advance_to(t0 + k * 16_666_667)
-    assert sim.ghost_tracker.stats['steps'] == 29        # once per advance_to call
-    f = sim.frame()
-    assert sim.ghost_tracker.stats['evaluations'] <= 30
-    seg = np.linalg.norm(np.diff(f.ghosts, axis=1), axis=2)
-    stretch = np.abs(seg / sim.ghosts.rest_length - 1.0)
-    assert stretch.max() < 0.01 and np.median(stretch) < 1e-6
-    assert sim.penetration() < 1e-6
-    np.testing.assert_allclose(f.ghosts[:, :2], f.head.to_world(sim.ghosts.rest[:, :2]),
-                               atol=1e-12)
 
 
 def test_a_mode_change_rebuilds_and_guides_must_be_strands():

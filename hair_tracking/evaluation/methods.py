@@ -42,7 +42,8 @@ import numpy as np
 from hair_tracking.core.groom import make_groom
 from hair_tracking.core.model import HeadPose, StrandSet
 from hair_tracking.core.scene import Scene
-from hair_tracking.ghosts.blend import BlendTracker, choose_guides
+from hair_tracking.ghosts.blend import BlendTracker
+from hair_tracking.ghosts.stateless import choose_guides
 from hair_tracking.ghosts.turn import TurnTracker
 from hair_tracking.ghosts.correspondence import assign_guides, node_correspondence
 from hair_tracking.ghosts.tracker import GhostTracker

@@ -2,16 +2,18 @@
 motions of a few nearby guides, without state of its own: evaluated when the hair is read (once
 per output frame), however many head poses came in between.
 
-Guides are some of the strands themselves (:func:`choose_guides`), so a ratio of 1:1 is full
-simulation: a strand that is a guide is its guide's points, exactly as simulated for FTL guides
-(exact lengths); the length pass puts PBD and XPBD guides' stretched segments back at their
-rest lengths (:data:`GUIDE_LENGTH_TOLERANCE`), so no shown strand stretches.  Per
-frame, for ghost strand ``s`` with guides ``k`` and weights ``w_k`` (:func:`blend_weights`) and
-its node ``j`` (rest position ``r_j``, head frame):
+Guides are some of the strands themselves
+(:func:`~hair_tracking.ghosts.stateless.choose_guides`), so a ratio of 1:1 is full simulation:
+a strand that is a guide is its guide's points, exactly as simulated for FTL guides (exact
+lengths); the length pass puts PBD and XPBD guides' stretched segments back at their rest
+lengths (:data:`GUIDE_LENGTH_TOLERANCE`), so no shown strand stretches. Per frame, for ghost
+strand ``s`` with guides ``k`` and weights ``w_k`` (:func:`blend_weights`) and its node ``j``
+(rest position ``r_j``, head frame):
 
 1. every guide is read at the node's arc-length fraction, ``g_k,j`` (world) and ``g0_k,j``
    (rest, head frame) -- node to node when ghosts and guides have the same node count
-   (:func:`node_map`, :func:`guide_columns`);
+   (:func:`~hair_tracking.ghosts.stateless.node_map`,
+   :func:`~hair_tracking.ghosts.stateless.guide_columns`);
 2. the node is the blend of the guides' points plus its rest offset from that blend carried
    rigidly by the head rotation ``R``:  ``x_j = sum_k w_k g_k,j + R o_j`` with
    ``o_j = r_j - sum_k w_k g0_k,j`` fixed at start -- the same as adding the weighted guide
@@ -42,14 +44,13 @@ strand; the rare node inside the head is then fixed on its own.
 kernel (:func:`blend_strands`) to it.
 """
 import math
-from typing import Dict, Optional, Tuple
+from typing import Tuple
 
 import numpy as np
 from numba import njit, prange
 
 from hair_tracking.core.model import HeadPose, StrandSet
-from hair_tracking.core.point_records import points_to_records
-from hair_tracking.guides.collision import outside_distance
+from hair_tracking.ghosts.stateless import StatelessTracker, at_fractions, node_map
 
 #: Guides blended per ghost by default (Unreal's groom interpolation uses up to three).
 DEFAULT_GUIDES_PER_GHOST = 3
@@ -71,26 +72,6 @@ GUIDE_GROUP = 3
 
 
 # ----------------------------------------------------------------------------- set-up
-def choose_guides(roots: np.ndarray, count: int) -> np.ndarray:
-    """Indices of ``count`` strands spread evenly over the scalp: farthest-point sampling of the
-    root positions (S, 3), starting from the root nearest their centroid; deterministic.
-    Sorted ascending."""
-    roots = np.asarray(roots, dtype=np.float64)
-    s = roots.shape[0]
-    if not 1 <= count <= s:
-        raise ValueError(f'guides: need 1..{s} guides among {s} strands, got {count}')
-    if count == s:
-        return np.arange(s)
-    first = int(np.argmin(np.sum((roots - roots.mean(axis=0)) ** 2, axis=1)))
-    chosen = [first]
-    dist = np.sum((roots - roots[first]) ** 2, axis=1)
-    for _ in range(count - 1):
-        nxt = int(np.argmax(dist))
-        chosen.append(nxt)
-        dist = np.minimum(dist, np.sum((roots - roots[nxt]) ** 2, axis=1))
-    return np.sort(np.asarray(chosen, dtype=np.int64))
-
-
 def blend_weights(roots: np.ndarray, guide_roots: np.ndarray, k: int,
                   power: float = WEIGHT_POWER) -> Tuple[np.ndarray, np.ndarray]:
     """The ``k`` guides with the nearest roots of every strand and their Shepard weights
@@ -150,28 +131,6 @@ def pad_guides(guide: np.ndarray, weight: np.ndarray) -> Tuple[np.ndarray, np.nd
                                                                              dtype=np.float32)
 
 
-def node_map(ghost_nodes: int, guide_nodes: int) -> Tuple[np.ndarray, np.ndarray]:
-    """Guide segment and parameter of each ghost node index at its arc-length fraction
-    ``j / (N - 1)`` (the groom spaces nodes evenly along each strand): ``(seg (N,) int64,
-    t (N,) float64)``; equal node counts map node to node exactly."""
-    f = np.arange(ghost_nodes) / max(1, ghost_nodes - 1) * (guide_nodes - 1)
-    seg = np.minimum(np.floor(f).astype(np.int64), guide_nodes - 2)
-    t = f - seg
-    t[np.abs(t) < 1e-12] = 0.0
-    return seg, t
-
-
-def collider_axes(ghosts: StrandSet, collider) -> Tuple[np.ndarray, np.ndarray]:
-    """``(centre, axes)`` of the ellipsoid the ghosts are kept out of (head frame): the head
-    collider's radii plus its margin, the margin capped as the guide solver caps it: by the rest
-    clearance of any free node and half the shortest segment, so no ghost is pushed out of its
-    own rest shape."""
-    clearance = outside_distance(ghosts.rest[:, 2:] - collider.center, collider.radii)
-    margin = min(collider.margin, float(clearance.min()), 0.5 * float(ghosts.rest_length.min()))
-    return (np.ascontiguousarray(collider.center, dtype=np.float64),
-            np.ascontiguousarray(collider.radii + max(0.0, margin), dtype=np.float64))
-
-
 # ----------------------------------------------------------------------------- kernels
 @njit(cache=True, inline='always')
 def _push_out(nx, ny, nz, cw, quad):
@@ -222,29 +181,6 @@ def _slide(nx, ny, nz, px, py, pz, length, cw, quad):
         return nx, ny, nz
     f = length / d
     return px + f * dx, py + f * dy, pz + f * dz
-
-
-@njit(cache=True)
-def guide_columns(gx, seg, t, out):
-    """Kernel, step 1: ``out`` (G, 3, N) every guide ``gx`` (G, M, 3) read at the ghosts' node
-    fractions (``seg``, ``t`` from :func:`node_map`), component-major, so a ghost's blend runs
-    along its nodes; a node fraction on a guide node copies it exactly."""
-    for g in range(gx.shape[0]):
-        guide_column(gx, seg, t, out, g)
-
-
-@njit(cache=True, inline='always')
-def guide_column(gx, seg, t, out, g):
-    """:func:`guide_columns` for guide ``g``."""
-    for j in range(seg.shape[0]):
-        a, u = seg[j], t[j]
-        for i in range(3):
-            if u == 0.0:
-                out[g, i, j] = gx[g, a, i]
-            elif u == 1.0:
-                out[g, i, j] = gx[g, a + 1, i]
-            else:
-                out[g, i, j] = gx[g, a, i] + u * (gx[g, a + 1, i] - gx[g, a, i])
 
 
 @njit(cache=True, inline='always')
@@ -389,17 +325,17 @@ def _blend_blocks(x, offset, roots, rest_length, guide, weight, gcol, rot, pos,
 @njit(cache=True, parallel=True)
 def blend_strands(x, offset, roots, rest_length, guide, weight, gcol, rot, pos,
                   restore, collide, center, axes, is_guide, guide_length):
-    """Kernel, steps 2-3: ``x`` (S, N, 3) world [m] receives every strand; ``offset``
-    (S, 3, N) float32 the rest offsets ``o`` (head frame), component-major; ``roots``
-    (S, 2, 3) the first two rest nodes in float64 (pinned exactly); ``rest_length`` (S, N-1)
-    float32; ``guide`` (S, K) int32 and ``weight`` (S, K) float32 from
-    :func:`blend_weights`, padded by :func:`pad_guides`; ``gcol`` (G, 3, N) the guides at the
-    ghosts' node fractions, component-major (step 1, :func:`guide_columns`); ``restore``: the
-    FTL length pass; ``collide``: keep nodes out of the ellipsoid ``axes`` (radii + margin)
-    around ``center`` (head frame).  A strand that is guide ``is_guide[s] >= 0`` enters step 3
-    as that guide's ``gcol``, its segments held to ``guide_length`` (G, N-1) float64 within
-    :data:`GUIDE_LENGTH_TOLERANCE` and left to the guide solver's contacts until the length pass
-    moves it.  Returns the number of nodes that were inside the collider."""
+    """Kernel, steps 2-3: ``x`` (S, N, 3) world [m] receives every strand; ``offset`` (S, 3, N)
+    float32 the rest offsets ``o`` (head frame), component-major; ``roots`` (S, 2, 3) the first
+    two rest nodes in float64 (pinned exactly); ``rest_length`` (S, N-1) float32; ``guide`` (S,
+    K) int32 and ``weight`` (S, K) float32 from :func:`blend_weights`, padded by
+    :func:`pad_guides`; ``gcol`` (G, 3, N) the guides at the ghosts' node fractions, component-
+    major (step 1, :func:`~hair_tracking.ghosts.stateless.guide_columns`); ``restore``: the FTL
+    length pass; ``collide``: keep nodes out of the ellipsoid ``axes`` (radii + margin) around
+    ``center`` (head frame). A strand that is guide ``is_guide[s] >= 0`` enters step 3 as that
+    guide's ``gcol``, its segments held to ``guide_length`` (G, N-1) float64 within
+    :data:`GUIDE_LENGTH_TOLERANCE` and left to the guide solver's contacts until the length
+    pass moves it. Returns the number of nodes that were inside the collider."""
     n_strands = x.shape[0]
     cw = np.empty(3)                                  # the collider's centre in the world
     for i in range(3):
@@ -420,15 +356,6 @@ def blend_strands(x, offset, roots, rest_length, guide, weight, gcol, rot, pos,
 
 
 # ----------------------------------------------------------------------------- reference
-def at_fractions(points: np.ndarray, seg: np.ndarray, t: np.ndarray) -> np.ndarray:
-    """Strands ``points`` (G, M, 3) read at the node fractions of :func:`node_map` (step 1);
-    equal node counts give ``points`` itself."""
-    if seg.shape[0] == points.shape[1] and not t[:-1].any():
-        return points
-    a = points[:, seg]
-    return a + t[None, :, None] * (points[:, seg + 1] - a)
-
-
 def rest_offsets(rest, guide_rest, guide, weight) -> np.ndarray:
     """``o_j = r_j - sum_k w_k g0_k,j`` (step 2) of every strand (S, N, 3), head frame:
     ``rest`` (S, N, 3) the strands, ``guide_rest`` (G, N, 3) the guides at the strands' node
@@ -498,87 +425,30 @@ def reference_blend(gx, grest, rest, rest_length, guide, weight, head: HeadPose,
 
 
 # ----------------------------------------------------------------------------- tracker
-class BlendTracker:
-    """Moves ``ghosts`` after ``guides`` when they are read (see the module docstring).
-
-    ``guides`` must be some of the ghost strands: ``guide_index[i]`` is the ghost strand that
-    guide ``i`` is (``ghosts.rest[guide_index] == guides.rest``).  ``k`` guides are blended per
-    ghost; ``collider``, when given and ``scene.tracking.collide`` is true, is the head collider
-    (a :class:`~hair_tracking.guides.collision.Collider`).  The ghost state is ``ghosts.x``
-    (world frame); ghosts carry no velocity of their own (``ghosts.v`` stays zero).
-    """
+class BlendTracker(StatelessTracker):
+    """Moves ``ghosts`` after ``guides`` when they are read (see the module docstring and
+    :class:`~hair_tracking.ghosts.stateless.StatelessTracker`); ``k`` guides are blended per
+    ghost."""
 
     def __init__(self, ghosts: StrandSet, guides: StrandSet, guide_index, scene, collider=None,
                  k: int = DEFAULT_GUIDES_PER_GHOST):
-        self.ghosts = ghosts
-        self.guides = guides
-        self.guide_index = np.asarray(guide_index, dtype=np.int64)
-        if self.guide_index.shape != (guides.count,) or \
-                not np.allclose(ghosts.rest[self.guide_index], guides.rest):
-            raise ValueError('BlendTracker: the guides must be some of the ghost strands '
-                             '(guide_index names them)')
-        tr = scene.tracking
-        self.restore = bool(tr.length_restore)
+        super().__init__(ghosts, guides, guide_index, scene, collider)
+        self.restore = bool(scene.tracking.length_restore)
         self.guide_of, self.weight = blend_weights(ghosts.rest[:, 0], guides.rest[:, 0], k)
         self._guide_pad, self._weight_pad = pad_guides(self.guide_of, self.weight)
         #: the guide each strand is, -1 for the others (those copy their guide)
         self.is_guide = np.full(ghosts.count, -1, dtype=np.int64)
         self.is_guide[self.guide_index] = np.arange(guides.count)
-        self.seg, self.t = node_map(ghosts.rest.shape[1], guides.rest.shape[1])
         self._offset32 = np.ascontiguousarray(rest_offsets(
             ghosts.rest, at_fractions(guides.rest, self.seg, self.t), self.guide_of,
             self.weight).transpose(0, 2, 1), dtype=np.float32)
         self._roots = np.ascontiguousarray(ghosts.rest[:, :2], dtype=np.float64)
         self._len32 = np.ascontiguousarray(ghosts.rest_length, dtype=np.float32)
         self._guide_len = np.ascontiguousarray(guides.rest_length, dtype=np.float64)
-        self._gcol = np.empty((guides.count, 3, ghosts.rest.shape[1]))
-        self._rot, self._pos = np.empty((3, 3)), np.empty(3)
-        self._pending = False         # a step not yet evaluated (see step and release)
-        self.collide = bool(tr.collide and collider is not None)
-        if self.collide:
-            self._center, self._axes = collider_axes(ghosts, collider)
-        else:
-            self._axes, self._center = np.ones(3), np.zeros(3)
-        self.stats: Dict[str, int] = {'ghosts': int(ghosts.count), 'steps': 0, 'evaluations': 0,
-                                      'contacts': 0, 'parallel': 1}
 
-    def step(self, dt: float, guide_x_old: Optional[np.ndarray], head: HeadPose,
-             substeps: int = 1) -> None:
-        """Take the guides now and the head pose ``head``; every ghost is placed from them when
-        its positions are next read (``ghosts.x``, :meth:`positions`, :meth:`write_records`).
-        The blend has no state, so a step that no read follows costs only step 1 (``dt``,
-        ``guide_x_old`` and ``substeps`` are accepted for the simulator's interface and not
-        needed)."""
-        guide_columns(self.guides.x, self.seg, self.t, self._gcol)
-        np.copyto(self._rot, head.rotation)
-        np.copyto(self._pos, head.position)
-        self._pending = True
-        self.ghosts.hold(self)
-        self.stats['steps'] += 1
-
-    def release(self) -> None:
-        """Steps 2-3 of the last :meth:`step` into ``ghosts.x``, if not done yet (called by
-        :class:`~hair_tracking.core.model.StrandSet` when ``ghosts.x`` or ``ghosts.v`` is
-        read or assigned)."""
-        if not self._pending:
-            return
-        self._pending = False
-        self.stats['contacts'] = int(blend_strands(
+    def _place(self) -> int:
+        """Steps 2-3 of the module docstring."""
+        return blend_strands(
             self.ghosts._x, self._offset32, self._roots, self._len32, self._guide_pad,
             self._weight_pad, self._gcol, self._rot, self._pos, self.restore, self.collide,
-            self._center, self._axes, self.is_guide, self._guide_len))
-        self.stats['evaluations'] += 1
-
-    def reset(self, head: HeadPose) -> None:
-        """Rest shape carried by ``head``."""
-        self._pending = False
-        self.ghosts.place_at(head)
-
-    def positions(self) -> np.ndarray:
-        """The ghost positions (S, N, 3), world frame [m] (the live array: read only)."""
-        return self.ghosts.x
-
-    def write_records(self, words, stride, rot=None, origin=None) -> bool:
-        """float32 x y z of every ghost node into point records (as
-        :func:`~hair_tracking.core.point_records.points_to_records`)."""
-        return points_to_records(words, stride, self.ghosts.x, rot, origin)
+            self._center, self._axes, self.is_guide, self._guide_len)

@@ -3,10 +3,10 @@ guide's segment at the same arc-length fraction turned since rest, so its length
 construction and no length pass is needed.
 
 Guides are some of the strands themselves (as for the blend tracker,
-:func:`~hair_tracking.ghosts.blend.choose_guides`), each ghost follows the guide with the
+:func:`~hair_tracking.ghosts.stateless.choose_guides`), each ghost follows the guide with the
 nearest root.  Per output frame, with ``R``, ``p`` the head pose, for ghost strand ``s`` (rest
 nodes ``r_j``, head frame) and its guide read at the ghost's node fractions (``g_j`` now,
-world; ``g0_j`` at rest, head frame; :func:`~hair_tracking.ghosts.blend.guide_columns`):
+world; ``g0_j`` at rest, head frame; :func:`~hair_tracking.ghosts.stateless.guide_columns`):
 
 1. every guide segment's turn ``M_j = T(R a_j -> b_j) R``, with ``a_j`` and ``b_j`` the unit
    directions of ``g0_j+1 - g0_j`` and ``g_j+1 - g_j`` and ``T(a -> b)`` the shortest rotation
@@ -38,16 +38,15 @@ lanes at that node in one branch-free vector pass.
 kernel (:func:`turn_strands`) to it.
 """
 import math
-from typing import Dict, Optional, Tuple
+from typing import Tuple
 
 import numpy as np
 from numba import njit, prange
 
 from hair_tracking.core.model import HeadPose, StrandSet
-from hair_tracking.core.point_records import points_to_records
+from hair_tracking.ghosts.blend import blend_weights
+from hair_tracking.ghosts.stateless import StatelessTracker, at_fractions, node_map
 from hair_tracking.guides.integrate import FASTMATH, NO_REFCOUNT
-from hair_tracking.ghosts.blend import (at_fractions, blend_weights, collider_axes,
-                                        guide_columns, node_map)
 
 #: Strands of one guide advanced together (one block): two AVX2 or one AVX-512 register of
 #: float64 lanes.
@@ -133,7 +132,7 @@ def _normal_to(a):
 def guide_turns(gcol, u0, rot, out, g):
     """Step 1 for guide ``g``: ``out[g]`` (9, N - 1) the turn ``M_j`` of each of its segments,
     row-major entries first, from ``gcol`` (G, 3, N) the guides at the ghosts' node fractions
-    (world, :func:`~hair_tracking.ghosts.blend.guide_columns`) and ``u0`` (G, 3, N - 1) their
+    (world, :func:`~hair_tracking.ghosts.stateless.guide_columns`) and ``u0`` (G, 3, N - 1) their
     unit rest directions (head frame, :func:`rest_directions`)."""
     n_seg = u0.shape[2]
     r00, r01, r02 = rot[0, 0], rot[0, 1], rot[0, 2]
@@ -311,7 +310,7 @@ def turn_strands(x, seg, roots, kind, block_guide, block_strand, gcol, u0, turns
     (``block_strand``, :func:`group_blocks`); ``seg`` and ``roots`` the blocks' rest shape
     (:func:`block_rest`); ``kind`` (B, lanes) int8 what each lane holds (:data:`GUIDE`);
     ``gcol`` (G, 3, N) the guides at the ghosts' node fractions
-    (:func:`~hair_tracking.ghosts.blend.guide_columns`), ``u0`` their unit rest directions
+    (:func:`~hair_tracking.ghosts.stateless.guide_columns`), ``u0`` their unit rest directions
     (:func:`rest_directions`) and ``turns`` (G, 9, N - 1) receives their turns (step 1, a
     parallel loop over the guides before the one over the blocks); ``rot``, ``pos`` the head
     pose; ``collide``: keep nodes out of the ellipsoid ``axes`` (radii + margin) around
@@ -386,23 +385,12 @@ def _unit(v):
 
 
 # ----------------------------------------------------------------------------- tracker
-class TurnTracker:
-    """Moves ``ghosts`` after ``guides`` when they are read (see the module docstring).
-
-    ``guides`` must be some of the ghost strands: ``guide_index[i]`` is the ghost strand that
-    guide ``i`` is (``ghosts.rest[guide_index] == guides.rest``).  ``collider``, when given and
-    ``scene.tracking.collide`` is true, is the head collider.  The ghost state is ``ghosts.x``
-    (world frame); ghosts carry no velocity of their own (``ghosts.v`` stays zero).
-    """
+class TurnTracker(StatelessTracker):
+    """Moves ``ghosts`` after ``guides`` when they are read (see the module docstring and
+    :class:`~hair_tracking.ghosts.stateless.StatelessTracker`)."""
 
     def __init__(self, ghosts: StrandSet, guides: StrandSet, guide_index, scene, collider=None):
-        self.ghosts = ghosts
-        self.guides = guides
-        self.guide_index = np.asarray(guide_index, dtype=np.int64)
-        if self.guide_index.shape != (guides.count,) or \
-                not np.allclose(ghosts.rest[self.guide_index], guides.rest):
-            raise ValueError('TurnTracker: the guides must be some of the ghost strands '
-                             '(guide_index names them)')
+        super().__init__(ghosts, guides, guide_index, scene, collider)
         near, _ = blend_weights(ghosts.rest[:, 0], guides.rest[:, 0], 1)
         self.guide_of = near[:, 0].astype(np.int64)
         self.guide_of[self.guide_index] = np.arange(guides.count)    # a guide follows itself
@@ -411,58 +399,12 @@ class TurnTracker:
         #: what each lane holds (IDLE, GHOST, GUIDE)
         self._kind = np.where(self.block_strand >= 0, GHOST, IDLE).astype(np.int8)
         self._kind[np.isin(self.block_strand, self.guide_index)] = GUIDE
-        self.seg, self.t = node_map(ghosts.rest.shape[1], guides.rest.shape[1])
         self._u0 = rest_directions(at_fractions(guides.rest, self.seg, self.t))
-        self._gcol = np.empty((guides.count, 3, ghosts.rest.shape[1]))
         self._turns = np.empty((guides.count, 9, ghosts.rest.shape[1] - 1))
-        self._rot, self._pos = np.empty((3, 3)), np.empty(3)
-        self._pending = False
-        self.collide = bool(scene.tracking.collide and collider is not None)
-        if self.collide:
-            self._center, self._axes = collider_axes(ghosts, collider)
-        else:
-            self._center, self._axes = np.zeros(3), np.ones(3)
-        #: share of the blocks' lanes that are idle (the last block of a guide is padded)
-        self.idle_share = 1.0 - ghosts.count / self.block_strand.size
-        self.stats: Dict[str, int] = {'ghosts': int(ghosts.count), 'steps': 0, 'evaluations': 0,
-                                      'contacts': 0, 'parallel': 1}
 
-    def step(self, dt: float, guide_x_old: Optional[np.ndarray], head: HeadPose,
-             substeps: int = 1) -> None:
-        """Take the guides now and the head pose ``head``; every ghost is placed from them when
-        its positions are next read (a step that no read follows costs a copy of the guides).
-        Nothing is integrated (``dt``, ``guide_x_old`` and ``substeps`` are accepted for the
-        simulator's interface and not needed)."""
-        guide_columns(self.guides.x, self.seg, self.t, self._gcol)
-        np.copyto(self._rot, head.rotation)
-        np.copyto(self._pos, head.position)
-        self._pending = True
-        self.ghosts.hold(self)
-        self.stats['steps'] += 1
-
-    def release(self) -> None:
-        """Steps 1-3 of the last :meth:`step` into ``ghosts.x``, if not done yet (called by
-        :class:`~hair_tracking.core.model.StrandSet` when ``ghosts.x`` or ``ghosts.v`` is
-        read or assigned)."""
-        if not self._pending:
-            return
-        self._pending = False
-        self.stats['contacts'] = int(turn_strands(
+    def _place(self) -> int:
+        """Steps 1-3 of the module docstring."""
+        return turn_strands(
             self.ghosts._x, self._seg, self._roots, self._kind, self.block_guide,
             self.block_strand, self._gcol, self._u0, self._turns, self._rot, self._pos,
-            self.collide, self._center, self._axes))
-        self.stats['evaluations'] += 1
-
-    def reset(self, head: HeadPose) -> None:
-        """Rest shape carried by ``head``."""
-        self._pending = False
-        self.ghosts.place_at(head)
-
-    def positions(self) -> np.ndarray:
-        """The ghost positions (S, N, 3), world frame [m] (the live array: read only)."""
-        return self.ghosts.x
-
-    def write_records(self, words, stride, rot=None, origin=None) -> bool:
-        """float32 x y z of every ghost node into point records (as
-        :func:`~hair_tracking.core.point_records.points_to_records`)."""
-        return points_to_records(words, stride, self.ghosts.x, rot, origin)
+            self.collide, self._center, self._axes)

@@ -1,0 +1,166 @@
+"""What the trackers without state of their own share -- the blend tracker
+(:mod:`hair_tracking.ghosts.blend`) and the turn tracker (:mod:`hair_tracking.ghosts.turn`): the
+guides are some of the strands themselves (:func:`choose_guides`; a ratio of 1:1 is full
+simulation), every guide is read at the ghosts' node fractions (:func:`node_map`,
+:func:`guide_columns`), the ghosts are kept out of the head collider with the guide solver's
+margin rule (:func:`collider_axes`), and every strand is placed from the guides and head pose
+of the last step when the hair is next read (:class:`StatelessTracker`), once per output frame
+however many head poses came in between.
+"""
+from typing import Dict, Optional, Tuple
+
+import numpy as np
+from numba import njit
+
+from hair_tracking.core.model import HeadPose, StrandSet
+from hair_tracking.core.point_records import points_to_records
+from hair_tracking.guides.collision import outside_distance
+
+
+def choose_guides(roots: np.ndarray, count: int) -> np.ndarray:
+    """Indices of ``count`` strands spread evenly over the scalp: farthest-point sampling of the
+    root positions (S, 3), starting from the root nearest their centroid; deterministic.
+    Sorted ascending."""
+    roots = np.asarray(roots, dtype=np.float64)
+    s = roots.shape[0]
+    if not 1 <= count <= s:
+        raise ValueError(f'guides: need 1..{s} guides among {s} strands, got {count}')
+    if count == s:
+        return np.arange(s)
+    first = int(np.argmin(np.sum((roots - roots.mean(axis=0)) ** 2, axis=1)))
+    chosen = [first]
+    dist = np.sum((roots - roots[first]) ** 2, axis=1)
+    for _ in range(count - 1):
+        nxt = int(np.argmax(dist))
+        chosen.append(nxt)
+        dist = np.minimum(dist, np.sum((roots - roots[nxt]) ** 2, axis=1))
+    return np.sort(np.asarray(chosen, dtype=np.int64))
+
+
+def node_map(ghost_nodes: int, guide_nodes: int) -> Tuple[np.ndarray, np.ndarray]:
+    """Guide segment and parameter of each ghost node index at its arc-length fraction
+    ``j / (N - 1)`` (the groom spaces nodes evenly along each strand): ``(seg (N,) int64,
+    t (N,) float64)``; equal node counts map node to node exactly."""
+    f = np.arange(ghost_nodes) / max(1, ghost_nodes - 1) * (guide_nodes - 1)
+    seg = np.minimum(np.floor(f).astype(np.int64), guide_nodes - 2)
+    t = f - seg
+    t[np.abs(t) < 1e-12] = 0.0
+    return seg, t
+
+
+def collider_axes(ghosts: StrandSet, collider) -> Tuple[np.ndarray, np.ndarray]:
+    """``(centre, axes)`` of the ellipsoid the ghosts are kept out of (head frame): the head
+    collider's radii plus its margin, the margin capped as the guide solver caps it: by the rest
+    clearance of any free node and half the shortest segment, so no ghost is pushed out of its
+    own rest shape."""
+    clearance = outside_distance(ghosts.rest[:, 2:] - collider.center, collider.radii)
+    margin = min(collider.margin, float(clearance.min()), 0.5 * float(ghosts.rest_length.min()))
+    return (np.ascontiguousarray(collider.center, dtype=np.float64),
+            np.ascontiguousarray(collider.radii + max(0.0, margin), dtype=np.float64))
+
+
+def at_fractions(points: np.ndarray, seg: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """Strands ``points`` (G, M, 3) read at the node fractions of :func:`node_map` (step 1);
+    equal node counts give ``points`` itself."""
+    if seg.shape[0] == points.shape[1] and not t[:-1].any():
+        return points
+    a = points[:, seg]
+    return a + t[None, :, None] * (points[:, seg + 1] - a)
+
+
+@njit(cache=True)
+def guide_columns(gx, seg, t, out):
+    """Kernel, step 1: ``out`` (G, 3, N) every guide ``gx`` (G, M, 3) read at the ghosts' node
+    fractions (``seg``, ``t`` from :func:`node_map`), component-major, so a ghost's blend runs
+    along its nodes; a node fraction on a guide node copies it exactly."""
+    for g in range(gx.shape[0]):
+        guide_column(gx, seg, t, out, g)
+
+
+@njit(cache=True, inline='always')
+def guide_column(gx, seg, t, out, g):
+    """:func:`guide_columns` for guide ``g``."""
+    for j in range(seg.shape[0]):
+        a, u = seg[j], t[j]
+        for i in range(3):
+            if u == 0.0:
+                out[g, i, j] = gx[g, a, i]
+            elif u == 1.0:
+                out[g, i, j] = gx[g, a + 1, i]
+            else:
+                out[g, i, j] = gx[g, a, i] + u * (gx[g, a + 1, i] - gx[g, a, i])
+
+
+class StatelessTracker:
+    """Places ``ghosts`` from ``guides`` when they are read; a subclass supplies the placement
+    (:meth:`_place`).
+
+    ``guides`` must be some of the ghost strands: ``guide_index[i]`` is the ghost strand that
+    guide ``i`` is (``ghosts.rest[guide_index] == guides.rest``).  ``collider``, when given and
+    ``scene.tracking.collide`` is true, is the head collider (a
+    :class:`~hair_tracking.guides.collision.Collider`).  The ghost state is ``ghosts.x`` (world
+    frame); ghosts carry no velocity of their own (``ghosts.v`` stays zero).
+    """
+
+    def __init__(self, ghosts: StrandSet, guides: StrandSet, guide_index, scene, collider=None):
+        self.ghosts = ghosts
+        self.guides = guides
+        self.guide_index = np.asarray(guide_index, dtype=np.int64)
+        if self.guide_index.shape != (guides.count,) or \
+                not np.allclose(ghosts.rest[self.guide_index], guides.rest):
+            raise ValueError(f'{type(self).__name__}: the guides must be some of the ghost '
+                             'strands (guide_index names them)')
+        self.seg, self.t = node_map(ghosts.rest.shape[1], guides.rest.shape[1])
+        self._gcol = np.empty((guides.count, 3, ghosts.rest.shape[1]))
+        self._rot, self._pos = np.empty((3, 3)), np.empty(3)
+        self._pending = False         # a step not yet evaluated (see step and release)
+        self.collide = bool(scene.tracking.collide and collider is not None)
+        if self.collide:
+            self._center, self._axes = collider_axes(ghosts, collider)
+        else:
+            self._center, self._axes = np.zeros(3), np.ones(3)
+        self.stats: Dict[str, int] = {'ghosts': int(ghosts.count), 'steps': 0, 'evaluations': 0,
+                                      'contacts': 0, 'parallel': 1}
+
+    def step(self, dt: float, guide_x_old: Optional[np.ndarray], head: HeadPose,
+             substeps: int = 1) -> None:
+        """Take the guides now (read at the ghosts' node fractions) and the head pose ``head``;
+        every ghost is placed from them when its positions are next read (``ghosts.x``,
+        :meth:`positions`, :meth:`write_records`), so a step that no read follows costs this
+        copy only.  Nothing is integrated (``dt``, ``guide_x_old`` and ``substeps`` are accepted
+        for the simulator's interface and not needed)."""
+        guide_columns(self.guides.x, self.seg, self.t, self._gcol)
+        np.copyto(self._rot, head.rotation)
+        np.copyto(self._pos, head.position)
+        self._pending = True
+        self.ghosts.hold(self)
+        self.stats['steps'] += 1
+
+    def release(self) -> None:
+        """Place the ghosts from the last :meth:`step` into ``ghosts.x``, if not done yet
+        (called by :class:`~hair_tracking.core.model.StrandSet` when ``ghosts.x`` or
+        ``ghosts.v`` is read or assigned)."""
+        if not self._pending:
+            return
+        self._pending = False
+        self.stats['contacts'] = int(self._place())
+        self.stats['evaluations'] += 1
+
+    def _place(self) -> int:
+        """Every ghost into ``ghosts._x`` from ``_gcol``, ``_rot``, ``_pos``; returns the number
+        of head contacts."""
+        raise NotImplementedError
+
+    def reset(self, head: HeadPose) -> None:
+        """Rest shape carried by ``head``."""
+        self._pending = False
+        self.ghosts.place_at(head)
+
+    def positions(self) -> np.ndarray:
+        """The ghost positions (S, N, 3), world frame [m] (the live array: read only)."""
+        return self.ghosts.x
+
+    def write_records(self, words, stride, rot=None, origin=None) -> bool:
+        """float32 x y z of every ghost node into point records (as
+        :func:`~hair_tracking.core.point_records.points_to_records`)."""
+        return points_to_records(words, stride, self.ghosts.x, rot, origin)

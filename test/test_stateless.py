@@ -1,0 +1,81 @@
+"""What the blend and the turn tracker share (hair_tracking.ghosts.stateless): guides chosen
+among the strands, so one guide per strand is full simulation, and a head that carries the guides
+rigidly carries every ghost rigidly."""
+import numpy as np
+import pytest
+
+from hair_tracking.core.model import HeadPose
+from hair_tracking.core.scene import Scene
+from hair_tracking.core.transforms import quat_from_axis_angle, quat_to_matrix
+from hair_tracking.ghosts import blend, turn
+from hair_tracking.simulator import HairSimulator
+
+#: tracking.mode -> (its tracker, how close 1:1 is to full simulation [m], how close a rigidly
+#: carried ghost is to its carried rest shape [m]): the blend copies a guide strand exactly; the
+#: turn rebuilds it from float32 rest segments; both keep their rest data in float32
+TRACKERS = {'blend': (blend.BlendTracker, 0.0, 2e-7), 'turn': (turn.TurnTracker, 1e-8, 1e-8)}
+
+
+def head(angle=0.4, axis=(0.2, 0.3, 1.0), position=(0.05, -0.02, 1.6)):
+    """A head pose turned by ``angle`` about ``axis``, at ``position``."""
+    q = quat_from_axis_angle(np.asarray(axis) / np.linalg.norm(axis), angle)
+    return HeadPose(np.asarray(position, dtype=float), q, quat_to_matrix(q))
+
+
+def scene(mode, **changes):
+    """The default scene with a small groom, tracker ``mode``, no settling, ``changes``."""
+    base = {'groom__guides': 6, 'groom__ghosts_per_guide': 4, 'tracking__mode': mode,
+            'solver__settle_time': 0.0}
+    base.update(changes)
+    return Scene().with_changes(**base)
+
+
+@pytest.mark.parametrize('mode', sorted(TRACKERS))
+def test_guides_carried_rigidly_carry_every_ghost_rigidly(mode):
+    sim = HairSimulator(scene(mode, tracking__collide=False))
+    assert isinstance(sim.ghost_tracker, TRACKERS[mode][0])
+    h = head(angle=1.1)
+    sim.guides.x[...] = h.to_world(sim.guides.rest)
+    sim.ghost_tracker.step(1 / 60, None, h)
+    np.testing.assert_allclose(sim.ghosts.x, h.to_world(sim.ghosts.rest), rtol=0,
+                               atol=TRACKERS[mode][2])
+
+
+@pytest.mark.parametrize('mode', sorted(TRACKERS))
+def test_one_guide_per_strand_is_full_simulation(mode):
+    sim = HairSimulator(scene(mode, groom__ghosts_per_guide=1, groom__guides=12))
+    assert np.array_equal(sim.guide_index, np.arange(12))
+    t0 = 1_000_000_000
+    for k in range(12):
+        q = quat_from_axis_angle(np.array([0.0, 0.0, 1.0]), 0.3 * np.sin(0.5 * k))
+        sim.push_pose(t0 + k * 16_666_667, [0.02 * k, 0.0, 0.0], q)
+        sim.advance_to(t0 + k * 16_666_667)
+    f = sim.frame()
+    # FTL guides keep exact lengths: every strand is its guide, and no contact of its own moves
+    # it (the guide solver placed it)
+    np.testing.assert_allclose(f.ghosts, f.guides, rtol=0, atol=TRACKERS[mode][1])
+    assert sim.ghost_tracker.stats['contacts'] == 0
+
+
+@pytest.mark.parametrize('mode', sorted(TRACKERS))
+def test_the_simulator_runs_it_once_per_frame_at_rest_lengths_outside_the_head(mode):
+    sim = HairSimulator(scene(mode, groom__guides=8, groom__ghosts_per_guide=8))
+    assert isinstance(sim.ghost_tracker, TRACKERS[mode][0])
+    assert sim.guides.count == 8 and sim.ghosts.count == 64
+    np.testing.assert_array_equal(sim.guides.rest, sim.ghosts.rest[sim.guide_index])
+    t0 = 1_000_000_000
+    for k in range(30):
+        q = quat_from_axis_angle(np.array([0.0, 0.3, 1.0]) / np.hypot(0.3, 1.0),
+                                 0.6 * np.sin(0.4 * k))
+        sim.push_pose(t0 + k * 16_666_667, [0.03 * np.sin(0.3 * k), 0.0, 0.0], q)
+        sim.advance_to(t0 + k * 16_666_667)
+    assert sim.ghost_tracker.stats['steps'] == 29        # once per advance_to call
+    f = sim.frame()
+    assert np.all(np.isfinite(f.ghosts))
+    seg = np.linalg.norm(np.diff(f.ghosts, axis=1), axis=2)
+    stretch = np.abs(seg / sim.ghosts.rest_length - 1.0)
+    assert stretch.max() < 0.01                # nodes pressed onto the head: within 1 %
+    assert np.median(stretch) < 1e-6           # every other segment exact (float32 rest data)
+    assert sim.penetration() < 1e-6            # on the surface to rounding
+    np.testing.assert_allclose(f.ghosts[:, :2], f.head.to_world(sim.ghosts.rest[:, :2]),
+                               atol=1e-12)     # roots pinned
