@@ -50,7 +50,8 @@ import numpy as np
 from numba import njit, prange
 
 from hair_tracking.core.model import HeadPose, StrandSet
-from hair_tracking.ghosts.stateless import StatelessTracker, at_fractions, node_map
+from hair_tracking.ghosts.stateless import (StatelessTracker, at_fractions, ellipsoid_form,
+                                            node_map, reference_contact, world_collider)
 
 #: Guides blended per ghost by default (Unreal's groom interpolation uses up to three).
 DEFAULT_GUIDES_PER_GHOST = 3
@@ -147,15 +148,7 @@ def _push_out(nx, ny, nz, cw, quad):
 
 @njit(cache=True, inline='always')
 def _quad_form(dx, dy, dz, quad):
-    return _ellipsoid_form(dx, dy, dz, quad[0], quad[1], quad[2], quad[3], quad[4], quad[5])
-
-
-@njit(cache=True, inline='always')
-def _ellipsoid_form(dx, dy, dz, q0, q1, q2, q3, q4, q5):
-    """``d^T Q d`` with ``Q``'s entries Q00 Q11 Q22 Q01 Q02 Q12 as scalars (in a vector loop they
-    stay in registers)."""
-    return q0 * dx * dx + q1 * dy * dy + q2 * dz * dz + \
-        2.0 * (q3 * dx * dy + q4 * dx * dz + q5 * dy * dz)
+    return ellipsoid_form(dx, dy, dz, quad[0], quad[1], quad[2], quad[3], quad[4], quad[5])
 
 
 @njit(cache=True, inline='always')
@@ -285,11 +278,11 @@ def _blend_blocks(x, offset, roots, rest_length, guide, weight, gcol, rot, pos,
                         blk[j, 0, lane] = nx
                         blk[j, 1, lane] = ny
                         blk[j, 2, lane] = nz
-                        blk[j, 4, lane] = _ellipsoid_form(nx - c0, ny - c1, nz - c2,
-                                                          q0, q1, q2, q3, q4, q5)
+                        blk[j, 4, lane] = ellipsoid_form(nx - c0, ny - c1, nz - c2,
+                                                         q0, q1, q2, q3, q4, q5)
                 else:
                     for lane in range(lanes):
-                        blk[j, 4, lane] = _ellipsoid_form(
+                        blk[j, 4, lane] = ellipsoid_form(
                             blk[j, 0, lane] - c0, blk[j, 1, lane] - c1, blk[j, 2, lane] - c2,
                             q0, q1, q2, q3, q4, q5)
                 if not collide:
@@ -337,14 +330,9 @@ def blend_strands(x, offset, roots, rest_length, guide, weight, gcol, rot, pos,
     :data:`GUIDE_LENGTH_TOLERANCE` and left to the guide solver's contacts until the length
     pass moves it. Returns the number of nodes that were inside the collider."""
     n_strands = x.shape[0]
-    cw = np.empty(3)                                  # the collider's centre in the world
-    for i in range(3):
-        cw[i] = rot[i, 0] * center[0] + rot[i, 1] * center[1] + rot[i, 2] * center[2] + pos[i]
-    inv = 1.0 / (axes * axes)
-    quad = np.empty(6)
-    for i, (a, b) in enumerate(((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))):
-        quad[i] = rot[a, 0] * rot[b, 0] * inv[0] + rot[a, 1] * rot[b, 1] * inv[1] + \
-            rot[a, 2] * rot[b, 2] * inv[2]
+    geo = np.empty(9)                    # the collider in the world: centre, then Q
+    world_collider(rot, pos, center, axes, geo)
+    cw, quad = geo[:3], geo[3:]
     n_blocks = (n_strands + STRAND_BLOCK - 1) // STRAND_BLOCK
     n_chunks = min(n_blocks, CHUNKS)
     contacts = 0
@@ -380,7 +368,6 @@ def reference_blend(gx, grest, rest, rest_length, guide, weight, head: HeadPose,
     g = at_fractions(gx, seg, t)                                          # step 1
     offset = rest_offsets(rest, at_fractions(grest, seg, t), guide, weight)
     out = np.empty((s_count, n_nodes, 3))
-    center = np.asarray(center, dtype=np.float64)
     for s in range(s_count):
         own = is_guide is not None and is_guide[s] >= 0       # a guide: its own points
         for j in range(n_nodes):
@@ -408,18 +395,7 @@ def reference_blend(gx, grest, rest, rest_length, guide, weight, head: HeadPose,
                     p = prev + d * f
                     placed = False
             if collider_axes is not None and not placed:
-                qm = rot @ np.diag(1.0 / np.asarray(collider_axes) ** 2) @ rot.T
-                cw = rot @ center + pos
-                if (p - cw) @ qm @ (p - cw) < 1.0:
-                    if restore:                    # slide along the surface, not into it
-                        n = qm @ (prev - cw)
-                        n /= np.linalg.norm(n)
-                        d = p - prev
-                        d = d - min(0.0, float(d @ n)) * n
-                        p = prev + d * (length / np.linalg.norm(d))
-                    e = float((p - cw) @ qm @ (p - cw))
-                    if 0.0 < e < 1.0:              # still inside: radially onto the surface
-                        p = cw + (p - cw) / np.sqrt(e)
+                p = reference_contact(p, prev, length, head, collider_axes, center, restore)
             out[s, j] = p
     return out
 

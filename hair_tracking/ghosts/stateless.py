@@ -14,7 +14,7 @@ from numba import njit
 
 from hair_tracking.core.model import HeadPose, StrandSet
 from hair_tracking.core.point_records import points_to_records
-from hair_tracking.guides.collision import outside_distance
+from hair_tracking.guides.collision import outside_distance, world_center
 
 
 def choose_guides(roots: np.ndarray, count: int) -> np.ndarray:
@@ -57,6 +57,50 @@ def collider_axes(ghosts: StrandSet, collider) -> Tuple[np.ndarray, np.ndarray]:
     margin = min(collider.margin, float(clearance.min()), 0.5 * float(ghosts.rest_length.min()))
     return (np.ascontiguousarray(collider.center, dtype=np.float64),
             np.ascontiguousarray(collider.radii + max(0.0, margin), dtype=np.float64))
+
+
+@njit(cache=True, inline='always')
+def ellipsoid_form(dx, dy, dz, q0, q1, q2, q3, q4, q5):
+    """``d^T Q d`` with ``Q``'s entries Q00 Q11 Q22 Q01 Q02 Q12 as scalars (in a vector loop they
+    stay in registers)."""
+    return q0 * dx * dx + q1 * dy * dy + q2 * dz * dz + \
+        2.0 * (q3 * dx * dy + q4 * dx * dz + q5 * dy * dz)
+
+
+@njit(cache=True, inline='always')
+def world_collider(rot, pos, center, axes, out):
+    """The collider ellipsoid (``center``, ``axes``: head frame) in the world for the head pose
+    ``rot``, ``pos``: ``out[0:3]`` its centre, ``out[3:9]`` the entries Q00 Q11 Q22 Q01 Q02 Q12
+    of ``Q = R diag(1 / axes^2) R^T`` (a point ``x`` is inside when ``(x - c)^T Q (x - c) <
+    1``)."""
+    out[0], out[1], out[2] = world_center(rot, pos, center)
+    inv = 1.0 / (axes * axes)
+    for i, (a, b) in enumerate(((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))):
+        out[3 + i] = rot[a, 0] * rot[b, 0] * inv[0] + rot[a, 1] * rot[b, 1] * inv[1] + \
+            rot[a, 2] * rot[b, 2] * inv[2]
+
+
+def reference_contact(p, prev, length, head: HeadPose, axes, center, slide=True):
+    """Plain-numpy statement of the trackers' head contact for node ``p`` (world) after its
+    predecessor ``prev``: inside the ellipsoid ``axes`` around ``center`` (head frame), it is
+    placed at ``length`` from ``prev`` along its step with the inward part (along the normal at
+    ``prev``) removed (``slide``), then moved radially onto the surface if still inside; a node
+    outside is returned as it is.  For the tests and for reading."""
+    rot, pos = head.rotation, head.position
+    qm = rot @ np.diag(1.0 / np.asarray(axes, dtype=np.float64) ** 2) @ rot.T
+    cw = rot @ np.asarray(center, dtype=np.float64) + pos
+    if (p - cw) @ qm @ (p - cw) >= 1.0:
+        return p
+    if slide:                                  # slide along the surface, not into it
+        n = qm @ (prev - cw)
+        n /= np.linalg.norm(n)
+        d = p - prev
+        d = d - min(0.0, float(d @ n)) * n
+        p = prev + d * (length / np.linalg.norm(d))
+    e = float((p - cw) @ qm @ (p - cw))
+    if 0.0 < e < 1.0:                          # still inside: radially onto the surface
+        p = cw + (p - cw) / np.sqrt(e)
+    return p
 
 
 def at_fractions(points: np.ndarray, seg: np.ndarray, t: np.ndarray) -> np.ndarray:

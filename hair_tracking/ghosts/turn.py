@@ -45,7 +45,8 @@ from numba import njit, prange
 
 from hair_tracking.core.model import HeadPose, StrandSet
 from hair_tracking.ghosts.blend import blend_weights
-from hair_tracking.ghosts.stateless import StatelessTracker, at_fractions, node_map
+from hair_tracking.ghosts.stateless import (StatelessTracker, at_fractions, ellipsoid_form,
+                                            node_map, reference_contact, world_collider)
 from hair_tracking.guides.integrate import FASTMATH, NO_REFCOUNT
 
 #: Strands of one guide advanced together (one block): two AVX2 or one AVX-512 register of
@@ -190,13 +191,6 @@ def _store_turn(out, g, j, rot, t00, t01, t02, t10, t11, t12, t20, t21, t22):
         out[g, 6 + k, j] = t20 * c0 + t21 * c1 + t22 * c2
 
 
-@njit(cache=True, inline='always', error_model='numpy')
-def _form(dx, dy, dz, q0, q1, q2, q3, q4, q5):
-    """``d^T Q d`` with ``Q``'s entries Q00 Q11 Q22 Q01 Q02 Q12."""
-    return q0 * dx * dx + q1 * dy * dy + q2 * dz * dz + \
-        2.0 * (q3 * dx * dy + q4 * dx * dz + q5 * dy * dz)
-
-
 @njit(cache=True, fastmath=FASTMATH, error_model='numpy', **NO_REFCOUNT)
 def _turn_blocks(x, seg, roots, kind, block_guide, block_strand, turns, gcol, rot, pos, collide,
                  flat, geo, b0, b1):
@@ -237,8 +231,8 @@ def _turn_blocks(x, seg, roots, kind, block_guide, block_strand, turns, gcol, ro
             inside = 0
             if collide:
                 for lane in range(lanes):
-                    e = _form(w[0, j + 1, 0, lane] - c0, w[0, j + 1, 1, lane] - c1,
-                              w[0, j + 1, 2, lane] - c2, q0, q1, q2, q3, q4, q5)
+                    e = ellipsoid_form(w[0, j + 1, 0, lane] - c0, w[0, j + 1, 1, lane] - c1,
+                                       w[0, j + 1, 2, lane] - c2, q0, q1, q2, q3, q4, q5)
                     inside += 1 if e < 1.0 else 0
             if collide and inside > 0:                       # step 3
                 geo[9] = gcol[g, 0, j + 1]
@@ -281,7 +275,7 @@ def _slide_push(w, kind, b, j, geo):
         nx, ny, nz = w[0, j + 1, 0, lane], w[0, j + 1, 1, lane], w[0, j + 1, 2, lane]
         px, py, pz = w[0, j, 0, lane], w[0, j, 1, lane], w[0, j, 2, lane]
         acts = _acts(kind[b, lane], nx - g0, ny - g1, nz - g2)
-        inside = (_form(nx - c0, ny - c1, nz - c2, q0, q1, q2, q3, q4, q5) < 1.0) & acts
+        inside = (ellipsoid_form(nx - c0, ny - c1, nz - c2, q0, q1, q2, q3, q4, q5) < 1.0) & acts
         ex, ey, ez = px - c0, py - c1, pz - c2
         gx = q0 * ex + q3 * ey + q4 * ez                      # outward normal Q (p - c)
         gy = q3 * ex + q1 * ey + q5 * ez
@@ -294,7 +288,7 @@ def _slide_push(w, kind, b, j, geo):
         f = math.sqrt(dd / max(dd - a * dg, 1e-300))
         dx, dy, dz = dx - a * gx, dy - a * gy, dz - a * gz
         sx, sy, sz = px + f * dx - c0, py + f * dy - c1, pz + f * dz - c2
-        e = _form(sx, sy, sz, q0, q1, q2, q3, q4, q5)
+        e = ellipsoid_form(sx, sy, sz, q0, q1, q2, q3, q4, q5)
         k = 1.0 / math.sqrt(min(max(e, 1e-300), 1.0))         # radially onto the surface
         w[0, j + 1, 0, lane] = c0 + k * sx if inside else nx
         w[0, j + 1, 1, lane] = c1 + k * sy if inside else ny
@@ -317,13 +311,8 @@ def turn_strands(x, seg, roots, kind, block_guide, block_strand, gcol, u0, turns
     ``center`` (head frame).  Returns the number of nodes the collider moved."""
     for g in prange(gcol.shape[0]):
         guide_turns(gcol, u0, rot, turns, g)
-    geo = np.empty(12)       # the collider's centre in the world, then Q's six entries
-    for i in range(3):
-        geo[i] = rot[i, 0] * center[0] + rot[i, 1] * center[1] + rot[i, 2] * center[2] + pos[i]
-    inv = 1.0 / (axes * axes)
-    for i, (a, b) in enumerate(((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))):
-        geo[3 + i] = rot[a, 0] * rot[b, 0] * inv[0] + rot[a, 1] * rot[b, 1] * inv[1] + \
-            rot[a, 2] * rot[b, 2] * inv[2]
+    geo = np.empty(12)       # the collider in the world (centre, Q), then the guide's node
+    world_collider(rot, pos, center, axes, geo)
     n_blocks = block_guide.shape[0]
     n_chunks = min(n_blocks, CHUNKS)
     slab = 2 * x.shape[1] * 3 * block_strand.shape[1]
@@ -351,7 +340,6 @@ def reference_turn(gx, grest, rest, guide_of, head: HeadPose, collider_axes=None
     seg, t = node_map(n_nodes, gx.shape[1])
     g = at_fractions(gx, seg, t)
     g0 = at_fractions(grest, seg, t)
-    center = np.asarray(center, dtype=np.float64)
     out = np.empty((s_count, n_nodes, 3))
     guides = set(int(i) for i in guide_index)
     for s in range(s_count):
@@ -364,18 +352,8 @@ def reference_turn(gx, grest, rest, guide_of, head: HeadPose, collider_axes=None
             p = out[s, j] + step
             acts = s not in guides or np.linalg.norm(p - g[k, j + 1]) > GUIDE_TOLERANCE
             if collider_axes is not None and acts:                               # step 3
-                qm = rot @ np.diag(1.0 / np.asarray(collider_axes) ** 2) @ rot.T
-                cw = rot @ center + pos
-                if (p - cw) @ qm @ (p - cw) < 1.0:
-                    prev = out[s, j]
-                    n = qm @ (prev - cw)
-                    n /= np.linalg.norm(n)
-                    d = p - prev
-                    d = d - min(0.0, float(d @ n)) * n
-                    p = prev + d * (np.linalg.norm(step) / np.linalg.norm(d))
-                    e = float((p - cw) @ qm @ (p - cw))
-                    if 0.0 < e < 1.0:
-                        p = cw + (p - cw) / np.sqrt(e)
+                p = reference_contact(p, out[s, j], np.linalg.norm(step), head, collider_axes,
+                                      center)
             out[s, j + 1] = p
     return out
 
