@@ -18,6 +18,9 @@ Time handling
 * Ghosts are tracked after every guide substep, or - with ``tracking.every_substep: false`` or
   while ``track_once_per_call`` is set (the live node's load shedding) - once per
   ``advance_to`` call (one head pose) over all its substeps, 2-4x cheaper.
+* The guide solver takes a run of substeps in one call
+  (:meth:`~hair_tracking.guides.solver.GuideSolver.advance`) where none of them needs splitting
+  (below): the substeps of a pose, or of a whole settle, without Python between them.
 * A substep in which a hair node would move farther than half the per-substep displacement clamp
   (``solver.max_displacement``; 2.5 cm when the clamp is off) is *split* into equal shorter
   substeps, at most :data:`MAX_SPLIT` and none shorter than :data:`MIN_SPLIT_DT`, with the head
@@ -50,7 +53,7 @@ from hair_tracking.ghosts.stateless import choose_guides
 from hair_tracking.ghosts.turn import TurnTracker
 from hair_tracking.ghosts.tracker import GhostTracker
 from hair_tracking.guides.collision import make_collider
-from hair_tracking.guides.integrate import max_step_sq, parallel_from, runs_parallel
+from hair_tracking.guides.integrate import parallel_from, runs_parallel
 from hair_tracking.guides.solver import GuideSolver
 
 #: Most parts one substep is split into when the hair moves fast (see the module docstring).
@@ -62,6 +65,10 @@ MIN_SPLIT_DT = 1.0 / 960.0
 SPLIT_FRACTION = 0.5
 #: ... or this distance [m] when the clamp is off (``solver.max_displacement = 0``).
 SPLIT_DISTANCE = 0.025
+#: Substeps run in one call of the guide solver while the split estimate of each stays below
+#: the limit with the last measured node speed times this (the speeds inside the run are
+#: measured only after it; a substep that they would have split counts as a late split).
+SPEED_GROWTH = 2.0
 
 
 @dataclass
@@ -212,10 +219,10 @@ class HairSimulator:
         dt = self.scene.solver.dt
         self.counters.last_track_ms = 0.0
         self._begin_ghosts()
-        for t in times:
-            head = self.track.sample(t)
-            self._substep(dt, self.head, head)
-            self.head = head
+        heads = [self.track.sample(t) for t in times]
+        if heads:
+            self._run(dt, self.head, heads)
+            self.head = heads[-1]
         self._track_ghosts(dt * len(times), len(times))
         self.counters.substeps += len(times)
         self.counters.last_substeps = len(times)
@@ -289,27 +296,60 @@ class HairSimulator:
             return self.ghost_tracker.positions()
         return self.ghosts.x if self.ghosts is not None else None
 
+    def _run(self, dt: float, head_prev: HeadPose, heads) -> None:
+        """Substeps ``dt`` from ``head_prev`` through ``heads``: as many at a time as
+        :meth:`_unsplit_run` allows in one call of the guide solver, the others one by one
+        (:meth:`_substep`, which splits them where needed)."""
+        prev, k = head_prev, 0
+        while k < len(heads):
+            run = self._unsplit_run(dt, prev, heads[k:])
+            if run == 0:
+                self._substep(dt, prev, heads[k])
+                run = 1
+            else:
+                steps = self.guide_solver.advance(dt, prev, heads[k:k + run], measure=True)
+                late = sum(self._split_count(dt, a, b, math.sqrt(s) / dt) > 1 for a, b, s in
+                           zip(heads[k:k + run - 1], heads[k + 1:k + run], steps[:-1]))
+                if late:
+                    self.counters.extra['late_splits'] = \
+                        self.counters.extra.get('late_splits', 0) + late
+                self._last_speed = math.sqrt(steps[-1]) / dt
+            prev, k = heads[k + run - 1], k + run
+
+    def _unsplit_run(self, dt: float, head_prev: HeadPose, heads) -> int:
+        """How many of the substeps ending at ``heads`` go through in one call: none when the
+        ghosts are tracked every substep or the first substep needs splitting
+        (:meth:`_split_count`); else the first and every next one whose split estimate stays
+        below the limit with :data:`SPEED_GROWTH` times the last measured node speed."""
+        if (self.ghost_tracker is not None and self._every_substep()) or \
+                self._split_count(dt, head_prev, heads[0], self._last_speed) > 1:
+            return 0
+        run, prev = 1, heads[0]
+        for head in heads[1:]:
+            if self._split_count(dt, prev, head, SPEED_GROWTH * self._last_speed) > 1:
+                break
+            run, prev = run + 1, head
+        return run
+
     def _substep(self, dt: float, head_prev: HeadPose, head: HeadPose) -> None:
-        parts = self._split_count(dt, head_prev, head)
+        parts = self._split_count(dt, head_prev, head, self._last_speed)
         if parts == 1:
-            self._step(dt, head_prev, head)
+            self._step(dt, head_prev, (head,))
             return
         self.counters.extra['split_substeps'] = \
             self.counters.extra.get('split_substeps', 0) + parts - 1
-        prev = head_prev
-        for k in range(1, parts + 1):
+        heads = []
+        for k in range(1, parts):
             u = k / parts
-            if k == parts:
-                cur = head
-            else:
-                q = slerp(head_prev.quaternion, head.quaternion, u)
-                cur = HeadPose((1.0 - u) * head_prev.position + u * head.position, q,
-                               quat_to_matrix(q))
-            self._step(dt / parts, prev, cur)
-            prev = cur
+            q = slerp(head_prev.quaternion, head.quaternion, u)
+            heads.append(HeadPose((1.0 - u) * head_prev.position + u * head.position, q,
+                                  quat_to_matrix(q)))
+        self._step(dt / parts, head_prev, heads + [head])
 
-    def _split_count(self, dt: float, head_prev: HeadPose, head: HeadPose) -> int:
-        """Parts to split a substep into so that no node moves farther than the split limit."""
+    def _split_count(self, dt: float, head_prev: HeadPose, head: HeadPose,
+                     speed: float) -> int:
+        """Parts to split a substep into so that no node moves farther than the split limit,
+        with ``speed`` [m/s] the nodes' largest speed."""
         sv = self.scene.solver
         limit = SPLIT_FRACTION * sv.max_displacement if sv.max_displacement > 0 else \
             SPLIT_DISTANCE
@@ -317,20 +357,26 @@ class HairSimulator:
         dx, dy, dz = (head.position - head_prev.position).tolist()
         rigid = math.sqrt(dx * dx + dy * dy + dz * dz) + \
             2.0 * math.sin(0.5 * angle) * self._reach
-        motion = max(rigid, self._last_speed * dt) + self._gravity_norm * dt * dt
+        motion = max(rigid, speed * dt) + self._gravity_norm * dt * dt
         if not motion > limit:          # also False for NaN: never split on bad numbers
             return 1
         floor = max(1, int(dt / MIN_SPLIT_DT + 1e-9))
         return int(min(MAX_SPLIT, floor, math.ceil(motion / limit)))
 
-    def _step(self, dt: float, head_prev: HeadPose, head: HeadPose) -> None:
-        np.copyto(self._x_old, self.guides.x)
-        self.guide_solver.step(dt, head_prev, head)
-        if self.ghost_tracker is not None and self._every_substep():
-            start = self.clock()
-            self.ghost_tracker.step(dt, self._x_old, head)
-            self.counters.last_track_ms += (self.clock() - start) * 1e3
-        self._last_speed = math.sqrt(max_step_sq(self.guides.x, self._x_old)) / dt
+    def _step(self, dt: float, head_prev: HeadPose, heads) -> None:
+        """Substeps ``dt`` through ``heads`` (the parts of one split substep, or one), each
+        followed by the ghosts when they are tracked every substep."""
+        if self.ghost_tracker is None or not self._every_substep():
+            steps = self.guide_solver.advance(dt, head_prev, heads, measure=True)
+        else:
+            for head in heads:
+                np.copyto(self._x_old, self.guides.x)
+                steps = self.guide_solver.advance(dt, head_prev, (head,), measure=True)
+                start = self.clock()
+                self.ghost_tracker.step(dt, self._x_old, head)
+                self.counters.last_track_ms += (self.clock() - start) * 1e3
+                head_prev = head
+        self._last_speed = math.sqrt(steps[-1]) / dt
 
     # Ghost tracking schedule.  With ``tracking.every_substep: false`` the ghosts are tracked
     # once per advance_to() call (one head pose), over all the guide substeps of that call, with
@@ -360,8 +406,7 @@ class HairSimulator:
         try:
             self._begin_ghosts()
             settle = int(round(self.scene.solver.settle_time / self.scene.solver.dt))
-            for _ in range(settle):
-                self._substep(self.scene.solver.dt, head, head)
+            self._run(self.scene.solver.dt, head, [head] * settle)
             self._track_ghosts(self.scene.solver.dt * settle, settle)
         finally:
             self.track_once_per_call = once

@@ -430,6 +430,76 @@ def test_ftl_collide_step_is_the_separate_kernels_in_one_block_loop(friction):
     assert fused.stats['clamped_total'] == clamped
 
 
+def turning_heads(count, start=0):
+    """Head poses of a head swaying and turning (substeps ``start + 1 .. start + count``)."""
+    return [pose([0.04 * np.sin(0.3 * k), 0.0, 0.01 * np.cos(0.2 * k)],
+                 quat_from_axis_angle([0, 0, 1], 0.6 * np.sin(0.2 * k)))
+            for k in range(start + 1, start + count + 1)]
+
+
+@pytest.mark.parametrize('kind, changes', [
+    ('ftl', dict(collider__shape='ellipsoid', collider__friction=0.3)),
+    ('ftl', dict(collider__shape='ellipsoid', collider__friction=0.0,
+                 solver__max_displacement=0.004)),
+    ('ftl', dict(collider__shape='none')),
+    ('pbd', dict(collider__shape='ellipsoid'))])
+@pytest.mark.parametrize('strands', [40, 600])          # serial twin, parallel kernel
+def test_advance_is_its_substeps_one_after_another(kind, changes, strands):
+    """A run of substeps in one call (FTL: every block through all of them in turn) gives the
+    state, corrections, counters and per-substep displacements of the same substeps taken one
+    by one, bit for bit: strands do not interact, and each block's arithmetic is the same
+    (:func:`ftl.ftl_collide_block`)."""
+    sc = scene(kind, solver__shock_propagation=0.5, **changes)
+    rest = np.zeros((strands, 12, 3))
+    rest[:, :, 0] = np.linspace(-0.06, 0.06, strands)[:, None]
+    rest[:, :, 2] = 0.11 - 0.02 * np.arange(12)[None, :]
+    one_st, run_st = StrandSet.from_rest(rest), StrandSet.from_rest(rest)
+    one, run = GuideSolver(one_st, sc), GuideSolver(run_st, sc)
+    dt = 1.0 / 120.0
+    prev = pose([0, 0, 0])
+    one.reset(prev)
+    run.reset(prev)
+    for frame in range(6):
+        heads = turning_heads(4, 4 * frame)
+        want = []
+        p = prev
+        for head in heads:
+            before = one_st.x.copy()
+            one.step(dt, p, head)
+            want.append(integrate.max_step_sq(one_st.x, before))
+            p = head
+        steps = run.advance(dt, prev, heads, measure=True)
+        prev = heads[-1]
+        assert np.array_equal(run_st.x, one_st.x) and np.array_equal(run_st.v, one_st.v)
+        assert np.array_equal(steps, want)
+        a, b = one.stats, run.stats
+        for key in ('substeps', 'clamped', 'clamped_total', 'contacts', 'contacts_total'):
+            assert a[key] == b[key], key
+    if 'friction' in changes:
+        assert one.stats['contacts_total'] > 0
+    assert run.advance(dt, prev, []) is None and run.stats['substeps'] == 24
+
+
+def test_advance_rejects_a_bad_pose_before_moving_anything():
+    sc = scene('ftl', collider__shape='ellipsoid')
+    st = down_strands()
+    g = GuideSolver(st, sc)
+    head = pose([0, 0, 0])
+    g.reset(head)
+    g.advance(0.01, head, [head] * 3)
+    x, v = st.x.copy(), st.v.copy()
+    heads = turning_heads(4)
+    heads[2] = pose([0.0, np.nan, 0.0])
+    with pytest.raises(ValueError, match='head: pose must be finite'):
+        g.advance(0.01, head, heads)
+    with pytest.raises(ValueError, match='head_prev: pose must be finite'):
+        g.advance(0.01, pose([np.nan, 0, 0]), turning_heads(2))
+    with pytest.raises(ValueError, match='dt'):
+        g.advance(-0.01, head, turning_heads(2))
+    assert np.array_equal(st.x, x) and np.array_equal(st.v, v)
+    assert g.stats['substeps'] == 3
+
+
 def test_serial_twin_is_cached_apart_from_its_kernel():
     """The twin is a separate numba function (own name, hence own cache index), not parallel."""
     twin = ftl.ftl_step_serial

@@ -114,9 +114,15 @@ def _spy(monkeypatch, module, name):
 
 
 def test_stages_the_scene_does_not_need_are_not_built_or_run(monkeypatch):
-    # the collision runs in its own kernel, or inside FTL's substep with the collider
+    # the collision runs in its own kernel, or inside FTL's substeps with the collider
     coll = _spy(monkeypatch, collision, 'project_ellipsoid')
-    coll_ftl = _spy(monkeypatch, ftl, 'ftl_collide_step')
+    coll_ftl = []
+    for variant in ('ftl_advance', 'ftl_advance_serial'):
+        def spy(*a, real=getattr(ftl, variant)):
+            if a[5]:                                  # collide
+                coll_ftl.append(1)
+            return real(*a)
+        monkeypatch.setattr(ftl, variant, spy)
     curve = _spy(monkeypatch, curves, 'resample')
     sim = HairSimulator(scene(collider__shape='none', groom__ghosts_per_guide=0))
     assert sim.collider is None and sim.ghost_tracker is None and sim.ghosts is None
@@ -188,7 +194,8 @@ def test_warm_up_loads_exactly_the_kernel_variants_the_full_scene_runs(
     threshold = integrate.PARALLEL_MIN_NODES
     calls = set()
     for module, names in ((ftl, ('ftl_step', 'ftl_step_serial', 'ftl_collide_step',
-                                 'ftl_collide_step_serial')),
+                                 'ftl_collide_step_serial', 'ftl_advance',
+                                 'ftl_advance_serial')),
                           (ghosts_mod, ('track_groups', 'track_groups_serial'))):
         for name in names:
             real = getattr(module, name)
@@ -202,8 +209,8 @@ def test_warm_up_loads_exactly_the_kernel_variants_the_full_scene_runs(
     guides_parallel = integrate.runs_parallel(guides * 16)
     ghosts_parallel = integrate.runs_parallel(guides * per_guide * 16)
     simulator.warm_up(scene)
-    assert scene.collider.shape != 'none'         # FTL's substep with the head collider
-    assert calls == {'ftl_collide_step' if guides_parallel else 'ftl_collide_step_serial',
+    assert scene.collider.shape != 'none'         # FTL's substeps with the head collider
+    assert calls == {'ftl_advance' if guides_parallel else 'ftl_advance_serial',
                      'track_groups' if ghosts_parallel else 'track_groups_serial'}
     assert integrate.PARALLEL_MIN_NODES == threshold        # restored after warm-up
 

@@ -61,25 +61,27 @@ def _case(scene, stream, **kw):
 
 
 def test_check_catches_non_finite_state(monkeypatch):
-    real = GuideSolver.step
+    real = GuideSolver.advance
 
-    def poisoned(self, dt, head_prev, head):
-        real(self, dt, head_prev, head)
+    def poisoned(self, dt, head_prev, heads, **kw):
+        out = real(self, dt, head_prev, heads, **kw)
         if self._counters['substeps'] > 200:
             self.strands.x[0, 5, 0] = np.nan
-    monkeypatch.setattr(GuideSolver, 'step', poisoned)
+        return out
+    monkeypatch.setattr(GuideSolver, 'advance', poisoned)
     r = stability.run_case(_case(stability.BASE, lambda: sm.shake(5.0, 2.0, duration_s=0.5)))
     assert not r.passed
     assert any('non-finite' in f for f in r.failures)
 
 
 def test_check_catches_detached_roots_and_stretch(monkeypatch):
-    real = GuideSolver.step
+    real = GuideSolver.advance
 
-    def dragged(self, dt, head_prev, head):
-        real(self, dt, head_prev, head)
+    def dragged(self, dt, head_prev, heads, **kw):
+        out = real(self, dt, head_prev, heads, **kw)
         self.strands.x[:, :, 0] += 0.01 * np.arange(self.strands.nodes)
-    monkeypatch.setattr(GuideSolver, 'step', dragged)
+        return out
+    monkeypatch.setattr(GuideSolver, 'advance', dragged)
     r = stability.run_case(_case(stability.BASE, lambda: sm.still(0.3), tail_s=0.0))
     assert not r.passed
     assert any('roots detached' in f for f in r.failures)
@@ -87,13 +89,17 @@ def test_check_catches_detached_roots_and_stretch(monkeypatch):
 
 
 def test_check_catches_energy_growth(monkeypatch):
-    real = GuideSolver.step
+    real = GuideSolver.advance
 
-    def pumped(self, dt, head_prev, head):
-        real(self, dt, head_prev, head)
-        self.strands.v[:, 2:] *= 1.05
-        self.strands.v[:, 2:, 2] += 0.5
-    monkeypatch.setattr(GuideSolver, 'step', pumped)
+    def pumped(self, dt, head_prev, heads, **kw):         # every substep
+        out = []
+        for head in heads:
+            out.extend(real(self, dt, head_prev, (head,), **kw))
+            self.strands.v[:, 2:] *= 1.2
+            self.strands.v[:, 2:, 0] += 0.2
+            head_prev = head
+        return np.array(out)
+    monkeypatch.setattr(GuideSolver, 'advance', pumped)
     r = stability.run_case(_case(stability.BASE, lambda: sm.still(0.5)))
     assert not r.passed
     assert any('kinetic energy' in f for f in r.failures)
@@ -113,12 +119,16 @@ def test_glitch_expectation_is_checked():
 
 
 def test_check_catches_energy_gained_over_the_still_tail(monkeypatch):
-    real = GuideSolver.step
+    real = GuideSolver.advance
 
-    def lifted(self, dt, head_prev, head):        # a slow, steady gain: within the KE bound
-        real(self, dt, head_prev, head)
-        self.strands.v[:, 2:, 0] += 0.02
-    monkeypatch.setattr(GuideSolver, 'step', lifted)
+    def lifted(self, dt, head_prev, heads, **kw):   # a slow, steady gain: within the KE bound
+        out = []
+        for head in heads:
+            out.extend(real(self, dt, head_prev, (head,), **kw))
+            self.strands.v[:, 2:, 0] += 0.02
+            head_prev = head
+        return np.array(out)
+    monkeypatch.setattr(GuideSolver, 'advance', lifted)
     r = stability.run_case(_case(stability.BASE, lambda: sm.still(0.5), tail_s=1.0))
     assert any('energy rose' in f for f in r.failures), r.failures
 
@@ -293,9 +303,9 @@ def test_split_never_below_min_dt():
     from hair_tracking.core.model import HeadPose
     far = HeadPose(np.array([0.5, 0.0, 0.0]), q, quat_to_matrix(q))
     dt = sim.scene.solver.dt
-    n = sim._split_count(dt, head0, far)
+    n = sim._split_count(dt, head0, far, 0.0)
     assert n == int(dt / simulator.MIN_SPLIT_DT + 1e-9) and n > 1
-    assert sim._split_count(0.1, head0, far) == simulator.MAX_SPLIT
+    assert sim._split_count(0.1, head0, far, 0.0) == simulator.MAX_SPLIT
 
 
 @pytest.mark.parametrize('mode,stretch', [('paper', 1e-9), ('blend', 1e-7), ('turn', 1e-6)])
@@ -320,3 +330,42 @@ def test_the_matrix_runs_with_any_tracker():
         cases = stability.matrix(quick=True, tracking_mode=mode)
         assert [c.name for c in cases] == [c.name for c in QUICK]
         assert {c.scene.tracking.mode for c in cases} == {mode}
+
+
+def _one_by_one(sim):
+    """``sim`` taking every substep in a call of its own (no runs)."""
+    sim._unsplit_run = lambda dt, head_prev, heads: 0
+    return sim
+
+
+@pytest.mark.parametrize('speed, collider', [(5.0, 'none'), (5.0, 'ellipsoid'),
+                                             (1.0, 'ellipsoid')])
+def test_runs_of_substeps_are_the_substeps_one_by_one(speed, collider):
+    """The substeps of a pose go to the guide solver in one call where none needs splitting;
+    the hair, and the splits where the motion is fast, are those of taking them one by one."""
+    scene = stability.BASE.with_changes(collider__shape=collider)
+    runs, single = HairSimulator(scene), _one_by_one(HairSimulator(scene))
+    motion = sm.oscillate(speed, 0.5, duration_s=0.6)
+    calls = []
+    real = runs.guide_solver.advance
+    runs.guide_solver.advance = lambda dt, prev, heads, **k: (calls.append(len(heads)),
+                                                              real(dt, prev, heads, **k))[1]
+    for t, p, q in zip(motion.t_ns, motion.position, motion.quaternion):
+        for sim in (runs, single):
+            sim.push_pose(int(t), p, q)
+            sim.advance_to(int(t))
+        assert np.array_equal(runs.guides.x, single.guides.x)
+        assert np.array_equal(runs.frame().strands, single.frame().strands)
+    assert runs.counters.extra == single.counters.extra
+    assert 'late_splits' not in runs.counters.extra
+    assert max(calls) > 1                           # a pose's substeps in one call
+    if speed > 2.0:
+        assert runs.counters.extra['split_substeps'] > 10
+
+
+def test_a_split_that_a_run_missed_is_counted(monkeypatch):
+    """Inside a run the node speeds are measured only after it; a substep that they would
+    have split is counted (here with no growth allowed to the last measured speed)."""
+    monkeypatch.setattr(simulator, 'SPEED_GROWTH', 0.0)
+    sim, _ = _translate(stability.BASE.with_changes(collider__shape='none'), 5.0)
+    assert sim.counters.extra.get('late_splits', 0) >= 1

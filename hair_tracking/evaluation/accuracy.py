@@ -231,8 +231,7 @@ class RunResult:
 def settle(method: Method, head: HeadPose, seconds: float) -> None:
     """Rest shape at ``head``, ``seconds`` of substeps with the head still, velocities zeroed."""
     method.reset(head)
-    for _ in range(int(round(seconds / method.dt))):
-        method.step(method.dt, head, head)
+    method.advance(method.dt, head, [head] * int(round(seconds / method.dt)))
     method.output(head)             # methods that work per frame catch up here
     v = method.velocities()
     if v is not None:
@@ -260,9 +259,8 @@ def run_frames(method: Method, schedule: HeadSchedule, frames: int,
     for j in range(frames):
         excluded = method.excluded_seconds
         t0 = perf()
-        for head in poses[j]:
-            method.step(dt, prev, head)
-            prev = head
+        method.advance(dt, prev, poses[j])
+        prev = poses[j][-1]
         x = method.output(prev)
         secs[j] = perf() - t0 - (method.excluded_seconds - excluded)
         if on_frame is not None:

@@ -31,8 +31,11 @@ head frame) node for node, so its output can be compared with the reference:
 
 The interface: ``reset(head)`` puts the hair in its rest shape at ``head``, at rest;
 ``step(dt, head_prev, head)`` advances one substep of ``dt`` seconds while the head moves from
-``head_prev`` to ``head``; ``output(head)`` returns the ghost positions (S, N, 3), world frame
-[m], at the end of the frame (a view that stays valid until the next ``step``).
+``head_prev`` to ``head``; ``advance(dt, head_prev, heads)`` advances one substep a pose of
+``heads`` (a frame's substeps; the guide solver's one compiled call,
+:meth:`~hair_tracking.guides.solver.GuideSolver.advance`, where the method allows it: the
+same engineering for every method); ``output(head)`` returns the ghost positions (S, N, 3),
+world frame [m], at the end of the frame (a view that stays valid until the next ``step``).
 """
 from dataclasses import dataclass, field, replace
 from typing import Dict, Optional
@@ -125,6 +128,12 @@ class Method:
     def step(self, dt: float, head_prev: HeadPose, head: HeadPose) -> None:
         raise NotImplementedError
 
+    def advance(self, dt: float, head_prev: HeadPose, heads) -> None:
+        """One :meth:`step` a pose of ``heads``, the first from ``head_prev``."""
+        for head in heads:
+            self.step(dt, head_prev, head)
+            head_prev = head
+
     def output(self, head: HeadPose) -> np.ndarray:
         raise NotImplementedError
 
@@ -151,6 +160,9 @@ class FullSim(Method):
 
     def step(self, dt, head_prev, head):
         self.solver.step(dt, head_prev, head)
+
+    def advance(self, dt, head_prev, heads):
+        self.solver.advance(dt, head_prev, heads)
 
     def output(self, head):
         return self.strands.x
@@ -205,6 +217,13 @@ class GhostTracking(_GuidedMethod):
             self.solver.step(dt, head_prev, head)
             self._pending += 1
 
+    def advance(self, dt, head_prev, heads):
+        if self.every_substep:
+            super().advance(dt, head_prev, heads)
+        else:
+            self.solver.advance(dt, head_prev, heads)
+            self._pending += len(heads)
+
     def output(self, head):
         if self._pending:
             self.tracker.step(self._pending * self.dt, self._x_old, head,
@@ -251,6 +270,9 @@ class BlendTracking(Method):
     def step(self, dt, head_prev, head):
         self.solver.step(dt, head_prev, head)
 
+    def advance(self, dt, head_prev, heads):
+        self.solver.advance(dt, head_prev, heads)
+
     def output(self, head):
         self.tracker.step(self.dt, None, head)
         return self.ghosts.x
@@ -289,6 +311,9 @@ class RigidOffset(_GuidedMethod):
 
     def step(self, dt, head_prev, head):
         self.solver.step(dt, head_prev, head)
+
+    def advance(self, dt, head_prev, heads):
+        self.solver.advance(dt, head_prev, heads)
 
     def output(self, head):
         gx = self.guides.x

@@ -28,11 +28,12 @@ zero rest length places the node on its predecessor. No NaN can arise.
 from collections import namedtuple
 import math
 
+import numpy as np
 from numba import int64, njit, prange
 
 from hair_tracking.guides.collision import project_block, surface_point, to_head, world_center
 from hair_tracking.guides.integrate import (BLOCK, carry_rigid_block, FASTMATH, finalize_block,
-                                            NO_REFCOUNT, predict_block, serial_twin)
+                                            max_step_sq, NO_REFCOUNT, predict_block, serial_twin)
 from hair_tracking.guides.pbd_constraints import pbd_sweep_block
 
 #: Static data of :func:`ftl_step`: ``rest`` (S, N, 3) head frame [m], ``inv_mass`` (S, N),
@@ -44,6 +45,8 @@ FtlModel = namedtuple('FtlModel', ['rest', 'inv_mass', 'rest_length', 'bend_rest
 FtlParams = namedtuple('FtlParams', ['bend_passes', 'bend_stiffness', 's_damp', 'max_disp',
                                      'do_finalize'])
 
+#: Work items of :func:`ftl_advance`'s parallel loop (each a run of blocks).
+CHUNKS = 64
 #: Below this squared segment length [m²] the current direction is unreliable.
 FTL_TINY_SQ = 1e-24
 
@@ -267,33 +270,130 @@ def ftl_collide_step(model, state, motion, params, corr, collider, x_ref):
     0``.  ``params``' ``do_finalize`` is ignored (always finalizes).  Returns ``(clamped,
     contacts)``.
     """
+    rot, pos = motion[0], motion[1]
+    center, radii, margin, friction, refine = collider
+    cx, cy, cz = world_center(rot, pos, center)
+    axes = radii + margin
+    nblk = (state[0].shape[0] + BLOCK - 1) // BLOCK
+    clamped = 0
+    contacts = 0
+    for blk in prange(nblk):
+        s0 = blk * BLOCK
+        s1 = min(s0 + BLOCK, state[0].shape[0])
+        c, p = ftl_collide_block(model, state, motion, params, corr, collider, x_ref,
+                                 cx, cy, cz, axes, s0, s1)
+        clamped += c
+        contacts += p
+    return clamped, contacts
+
+
+@njit(cache=True, fastmath=FASTMATH, error_model='numpy', **NO_REFCOUNT)
+def ftl_collide_block(model, state, motion, params, corr, collider, x_ref, cx, cy, cz, axes,
+                      s0, s1):
+    """One FTL substep with the head collider of the strands ``s0 <= s < s1``
+    (:func:`ftl_collide_step`'s loop body; ``c`` the collider's centre in the world, ``axes``
+    its semi-axes with the margin); returns ``(clamped, contacts)``."""
     x, v, x_old = state                                                 # GuideState
     rest, inv_mass, rest_length, bend_rest, bend_w = model              # FtlModel
     rot, pos, rot_rel, pos_prev, gravity, damp, dt, shock = motion      # StepMotion
     bend_passes, bend_stiffness, s_damp, max_disp, _ = params          # FtlParams
     center, radii, margin, friction, refine = collider
-    cx, cy, cz = world_center(rot, pos, center)
-    ax, ay, az = radii[0] + margin, radii[1] + margin, radii[2] + margin
-    axes = radii + margin
+    ax, ay, az = axes[0], axes[1], axes[2]
     ref = x_ref if friction > 0.0 else x_old
+    if friction > 0.0:
+        carry_rigid_block(x, rot_rel, pos_prev, pos, x_ref, s0, s1)
+    ftl_block(model, state, motion, bend_passes, bend_stiffness, corr, s0, s1)
+    pushed = project_block(x, ref, inv_mass, rot, cx, cy, cz, ax, ay, az, friction,
+                           refine, s0, s1)
+    if pushed:
+        ftl_restore_block(x, rest, rest_length, rot, cx, cy, cz, axes, refine, corr, s0, s1)
+    return finalize_block(x, v, x_old, inv_mass, corr, s0, s1, dt, max_disp, s_damp), pushed
+
+
+@njit(cache=True, nogil=True, parallel=True, fastmath=FASTMATH, error_model='numpy')
+def ftl_advance(model, state, drive, params, corr, collide, collider, x_ref, counts, steps,
+                before):
+    """Kernel: ``K`` FTL substeps of all strands in one call, block by block: every block of
+    :data:`~hair_tracking.guides.integrate.BLOCK` strands runs all ``K`` substeps before the
+    next (its strands stay in cache, one parallel region for the whole run).  Strands do not
+    interact, so this is exactly ``K`` calls of :func:`ftl_collide_step` (with a collider) or of
+    :func:`ftl_step` finalizing (without), one after another.
+
+    ``drive``: ``(rots (K + 1, 3, 3), poss (K + 1, 3), rels (K, 3, 3), gravity, damp, dt,
+    shock)``: the head poses at the start and at the end of every substep, ``rels[k] =
+    rots[k + 1] rots[k]^T``, and :data:`~hair_tracking.guides.integrate.StepMotion`'s constant
+    fields; ``params``: :data:`FtlParams` (``do_finalize`` ignored: always finalizes);
+    ``collide``: whether the head collider acts (``collider``, ``x_ref`` as for
+    :func:`ftl_collide_step`).  ``counts`` (B, K, 2) int64, ``steps`` (B, K) (``B`` the block
+    count) and ``before`` (S, N, 3) are work space; on return ``steps[0]`` holds every
+    substep's largest squared node displacement [m^2] (NaN when one is NaN; not measured, and
+    ``before`` not touched, when ``steps`` is (B, 0)).
+    Returns the clamped and the collider-moved node counts of the last substep and of all
+    ``K``: ``(clamped, clamped_total, contacts, contacts_total)``.
+    """
+    x = state[0]
+    axes = collider[1] + collider[2]
+    n_sub = drive[2].shape[0]
+    measure = steps.shape[1] == n_sub
     nblk = (x.shape[0] + BLOCK - 1) // BLOCK
-    clamped = 0
-    contacts = 0
-    for blk in prange(nblk):
-        s0 = blk * BLOCK
-        s1 = min(s0 + BLOCK, x.shape[0])
-        if friction > 0.0:
-            carry_rigid_block(x, rot_rel, pos_prev, pos, x_ref, s0, s1)
-        ftl_block(model, state, motion, bend_passes, bend_stiffness, corr, s0, s1)
-        pushed = project_block(x, ref, inv_mass, rot, cx, cy, cz, ax, ay, az, friction,
-                               refine, s0, s1)
-        if pushed:
-            contacts += pushed
-            ftl_restore_block(x, rest, rest_length, rot, cx, cy, cz, axes, refine, corr, s0, s1)
-        clamped += finalize_block(x, v, x_old, inv_mass, corr, s0, s1, dt, max_disp, s_damp)
-    return clamped, contacts
+    chunks = min(nblk, CHUNKS)
+    for c in prange(chunks):
+        ftl_advance_blocks(model, state, drive, params, corr, collide, collider, x_ref, axes,
+                           counts, steps, before, measure, c * nblk // chunks,
+                           (c + 1) * nblk // chunks)
+    totals = np.zeros((n_sub, 2), dtype=np.int64)
+    for blk in range(nblk):
+        for k in range(n_sub):
+            totals[k, 0] += counts[blk, k, 0]
+            totals[k, 1] += counts[blk, k, 1]
+            if measure and blk > 0 and not steps[blk, k] <= steps[0, k]:
+                steps[0, k] = steps[blk, k]          # the larger, or NaN
+    return (totals[n_sub - 1, 0], totals[:, 0].sum(), totals[n_sub - 1, 1],
+            totals[:, 1].sum())
+
+
+@njit(cache=True, fastmath=FASTMATH, error_model='numpy', **NO_REFCOUNT)
+def ftl_advance_blocks(model, state, drive, params, corr, collide, collider, x_ref, axes,
+                       counts, steps, before, measure, b0, b1):
+    """:func:`ftl_advance` for the blocks ``b0 .. b1 - 1``, each through all the substeps (a
+    function of its own without reference counting: the poses it slices per substep cost no
+    atomic counter updates shared between the threads)."""
+    for blk in range(b0, b1):
+        ftl_advance_block(model, state, drive, params, corr, collide, collider, x_ref, axes,
+                          counts, steps, before, measure, blk)
+
+
+@njit(cache=True, inline='always')
+def ftl_advance_block(model, state, drive, params, corr, collide, collider, x_ref, axes, counts,
+                      steps, before, measure, blk):
+    """:func:`ftl_advance_blocks` for block ``blk``."""
+    x, v, x_old = state
+    rots, poss, rels, gravity, damp, dt, shock = drive
+    s0 = blk * BLOCK
+    s1 = min(s0 + BLOCK, x.shape[0])
+    for k in range(rels.shape[0]):
+        rot, pos = rots[k + 1], poss[k + 1]
+        motion = (rot, pos, rels[k], poss[k], gravity, damp, dt, shock)
+        if measure:
+            for s in range(s0, s1):
+                for i in range(x.shape[1]):
+                    for d in range(3):
+                        before[s, i, d] = x[s, i, d]
+        if collide:
+            cx, cy, cz = world_center(rot, pos, collider[0])
+            c, p = ftl_collide_block(model, state, motion, params, corr, collider, x_ref,
+                                     cx, cy, cz, axes, s0, s1)
+        else:
+            ftl_block(model, state, motion, params[0], params[1], corr, s0, s1)
+            c = finalize_block(x, v, x_old, model[1], corr, s0, s1, dt, params[3], params[2])
+            p = 0
+        counts[blk, k, 0] = c
+        counts[blk, k, 1] = p
+        if measure:
+            steps[blk, k] = max_step_sq(x[s0:s1], before[s0:s1])
 
 
 ftl_step_serial = serial_twin(ftl_step)
 ftl_collide_step_serial = serial_twin(ftl_collide_step)
+ftl_advance_serial = serial_twin(ftl_advance)
 ftl_restore_serial = serial_twin(ftl_restore)

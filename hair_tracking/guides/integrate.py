@@ -161,6 +161,17 @@ def head_motion(rot_prev, pos_prev, rot, pos, rot_rel):
     return ok
 
 
+@njit(cache=True, **NO_REFCOUNT)
+def head_motions(rots, poss, rels):
+    """:func:`head_motion` of every substep of a run: ``rels[k]`` (K, 3, 3) from the poses
+    ``rots`` (K + 1, 3, 3), ``poss`` (K + 1, 3) at the start and at the end of each substep;
+    True if all are finite."""
+    ok = True
+    for k in range(rels.shape[0]):
+        ok = head_motion(rots[k], poss[k], rots[k + 1], poss[k + 1], rels[k]) and ok
+    return ok
+
+
 @njit(cache=True, fastmath=FASTMATH, error_model='numpy', **NO_REFCOUNT)
 def predict_block(x, v, x_old, rest, inv_mass, s0, s1, rot, pos, rot_rel, pos_prev, gravity,
                   damp, dt, shock):

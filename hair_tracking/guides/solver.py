@@ -32,7 +32,7 @@ general inverse masses are accepted by PBD/XPBD (a free node with 0 is static), 
 free node to be movable. ``strands.inv_mass`` is read when the solver is built.
 """
 import math
-from typing import Any, Dict
+from typing import Any, Dict, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -51,6 +51,8 @@ FTL_BEND_PASSES = 1
 #: Substep [s] at which ``solver.bend_stiffness`` applies as given to FTL (the default dt); see
 #: :func:`ftl_bend_stiffness`.
 BEND_REFERENCE_DT = 1.0 / 240.0
+#: What the FTL kernels take as the collider where there is none (not read).
+NO_COLLIDER = (np.zeros(3), np.ones(3), 0.0, 0.0, 0)
 
 
 class GuideSolver:
@@ -119,6 +121,8 @@ class GuideSolver:
                 self._xpbd_dt = None          # the model, with its dt-dependent gains: later
         need_ref = self.collider is not None and self.collider.friction > 0.0
         self._x_ref = np.empty_like(strands.x) if need_ref else None
+        self._spaces: Dict[Tuple[int, bool], tuple] = {}
+        self._x_before = np.empty_like(strands.x)      # advance(measure=True)'s work space
         self._counters = {'substeps': 0, 'clamped': 0, 'clamped_total': 0,
                           'contacts': 0, 'contacts_total': 0}
 
@@ -134,10 +138,78 @@ class GuideSolver:
         nodes = self.strands.x.shape[0] * self.strands.x.shape[1]
         self._step(dt, head_prev, head, integrate.runs_parallel(nodes))
 
+    def advance(self, dt: float, head_prev: HeadPose, heads: Sequence[HeadPose],
+                measure: bool = False) -> Optional[np.ndarray]:
+        """Advance ``len(heads)`` substeps ``dt`` [s], the head moving from ``head_prev`` to
+        ``heads[0]``, then on to each next pose: the same as :meth:`step` for each pose in turn.
+        FTL runs them in one compiled call (:func:`~hair_tracking.guides.ftl.ftl_advance`:
+        every block of strands through all the substeps while it is in cache); PBD and XPBD
+        take one :meth:`step` a substep, and so does a single substep not measured.  With
+        ``measure``, returns every substep's largest squared node displacement (K,) [m^2] (the
+        simulator's speed estimate)."""
+        heads = list(heads)
+        if not heads:
+            return np.zeros(0) if measure else None
+        if len(heads) == 1 and not measure:
+            self.step(dt, head_prev, heads[0])      # one substep: the one-substep kernels
+            return None
+        nodes = self.strands.x.shape[0] * self.strands.x.shape[1]
+        parallel = integrate.runs_parallel(nodes)
+        if self.kind != 'ftl':
+            out = np.empty(len(heads))
+            prev, x0 = head_prev, np.empty_like(self.strands.x)
+            for k, head in enumerate(heads):
+                if measure:
+                    np.copyto(x0, self.strands.x)
+                self._step(dt, prev, head, parallel)
+                if measure:
+                    out[k] = integrate.max_step_sq(self.strands.x, x0)
+                prev = head
+            return out if measure else None
+        dt = _check_dt(dt)
+        n_sub = len(heads)
+        rots, poss, rels, counts, steps = self._advance_space(n_sub, measure)
+        rots[0], poss[0] = _pose('head_prev', head_prev)
+        for k, head in enumerate(heads, 1):
+            rots[k], poss[k] = _pose('head', head)
+        if not integrate.head_motions(rots, poss, rels):
+            bad = int(np.flatnonzero(~(np.isfinite(rots).all(axis=(1, 2))
+                                       & np.isfinite(poss).all(axis=1)))[0])
+            raise ValueError(f'{"head_prev" if bad == 0 else "head"}: pose must be finite, '
+                             f'got position {poss[bad]}')
+        st = self.strands
+        drive = (rots, poss, rels, self._gravity, math.exp(-self._damping * dt), dt, self._shock)
+        params = (FTL_BEND_PASSES, ftl_bend_stiffness(self.scene.solver.bend_stiffness, dt),
+                  float(self.scene.solver.ftl_damping), self._max_disp, True)
+        c = self.collider
+        collider = (c.center, c.radii, c.margin, c.friction, c.refine) if c is not None else \
+            NO_COLLIDER
+        kernel = ftl.ftl_advance if parallel else ftl.ftl_advance_serial
+        clamped, clamped_total, contacts, contacts_total = kernel(
+            self._model, (st.x, st.v, self._x_old), drive, params, self._corr, c is not None,
+            collider, self._x_ref if self._x_ref is not None else self._x_old, counts, steps,
+            self._x_before if measure else self._x_before[:0])
+        c = self._counters
+        c['substeps'] += n_sub
+        c['clamped'], c['contacts'] = int(clamped), int(contacts)
+        c['clamped_total'] += int(clamped_total)
+        c['contacts_total'] += int(contacts_total)
+        return steps[0].copy() if measure else None
+
+    def _advance_space(self, n_sub: int, measure: bool):
+        """:meth:`advance`'s work arrays for ``n_sub`` substeps (kept for the next call)."""
+        key = (n_sub, measure)
+        space = self._spaces.get(key)
+        if space is None:
+            blocks = integrate.block_count(self.strands.x.shape[0])
+            space = self._spaces[key] = (
+                np.empty((n_sub + 1, 3, 3)), np.empty((n_sub + 1, 3)), np.empty((n_sub, 3, 3)),
+                np.empty((blocks, n_sub, 2), dtype=np.int64),
+                np.empty((blocks, n_sub if measure else 0)))
+        return space
+
     def _step(self, dt: float, head_prev: HeadPose, head: HeadPose, parallel: bool) -> None:
-        dt = float(dt)
-        if not (math.isfinite(dt) and dt > 0.0):
-            raise ValueError(f'dt: must be a positive finite number of seconds, got {dt!r}')
+        dt = _check_dt(dt)
         rot_prev, pos_prev = _pose('head_prev', head_prev)
         rot, pos = _pose('head', head)
         rot_rel = self._rot_rel
@@ -270,6 +342,13 @@ def ftl_bend_stiffness(k: float, dt: float) -> float:
     if dt == BEND_REFERENCE_DT or k <= 0.0 or k >= 1.0:
         return k
     return 1.0 - (1.0 - k) ** (dt / BEND_REFERENCE_DT)
+
+
+def _check_dt(dt) -> float:
+    dt = float(dt)
+    if not (math.isfinite(dt) and dt > 0.0):
+        raise ValueError(f'dt: must be a positive finite number of seconds, got {dt!r}')
+    return dt
 
 
 def _pose(name, head):
