@@ -244,7 +244,7 @@ class HairSimulator:
             s = self.head.to_head(s) if s is not None else None
         elif copy:
             g = g.copy()
-            s = s.copy() if s is not None else None
+            s = s.astype(np.float64) if s is not None else None
         out = self.scene.output
         smooth = None
         if out.curve != 'none':

@@ -368,7 +368,7 @@ def test_dominance_scores_once_and_times_per_thread_count(tmp_path):
         assert list(rows) == names and not rows[dm.BASELINE].ghost
         for r in rows.values():
             assert len(r.frame_ms) == 1 and r.ms > 0
-            assert 0 < r.motion_err < 100 and r.stretch < 1e-6
+            assert 0 < r.motion_err < 100 and r.stretch < 2e-5   # float32 ghost positions
             share_ok = r.ms <= dm.TIME_SHARE * rows[dm.BASELINE].ms
             err_ok = r.motion_err <= rows[dm.BASELINE].motion_err
             assert r.dominates == (r.ghost and r.admitted and share_ok and err_ok)

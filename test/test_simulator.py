@@ -52,8 +52,9 @@ def test_roots_follow_the_head():
     sim = HairSimulator(scene())
     drive(sim, 40)
     f = sim.frame()
-    for strands, s in ((f.guides, sim.guides), (f.ghosts, sim.ghosts)):
-        assert np.abs(strands[:, :2] - f.head.to_world(s.rest[:, :2])).max() < 1e-9
+    # the ghosts are placed in float32 (half an ulp near 1.6 m: 6e-8 m)
+    for strands, s, tol in ((f.guides, sim.guides, 1e-9), (f.ghosts, sim.ghosts, 2e-7)):
+        assert np.abs(strands[:, :2] - f.head.to_world(s.rest[:, :2])).max() < tol
 
 
 def test_substeps_are_capped_and_dropped_ones_counted():

@@ -310,7 +310,8 @@ def test_split_never_below_min_dt():
 
 @pytest.mark.parametrize('mode,stretch', [('paper', 1e-9), ('blend', 1e-7), ('turn', 1e-6)])
 def test_ghost_collision_keeps_lengths(mode, stretch):
-    # the blend and the turn keep their rest lengths or segments in float32
+    # the blend and the turn keep their rest lengths or segments, and their positions, in
+    # float32: beyond the rounding of the positions (stability.float32_slack)
     scene = stability.BASE.with_changes(tracking__collide=True, tracking__mode=mode)
     sim = HairSimulator(scene)
     motion = sm.shake(20.0, 4.0, duration_s=0.5)
@@ -319,7 +320,9 @@ def test_ghost_collision_keeps_lengths(mode, stretch):
         sim.push_pose(int(t), p, q)
         sim.advance_to(int(t))
         contacts += sim.ghost_tracker.stats['contacts']
-        assert max_stretch(sim.ghosts.x, sim.ghosts.rest_length) < stretch
+        x, rl = sim.ghosts.x, sim.ghosts.rest_length
+        slack = 0.0 if mode == 'paper' else 2.0 * stability.float32_slack(x) / rl.min()
+        assert max_stretch(x, rl) < stretch + slack
     assert contacts > 0
     c = Collider('ellipsoid', scene.collider.center, scene.collider.radii, 0.0, 0.0)
     assert c.penetration(sim.ghosts.x, sim.head, sim.ghosts.inv_mass) <= scene.collider.margin

@@ -10,10 +10,12 @@ from hair_tracking.core.transforms import quat_from_axis_angle, quat_to_matrix
 from hair_tracking.ghosts import blend, turn
 from hair_tracking.simulator import HairSimulator
 
+#: Both trackers place the ghosts in float32: near 1.6 m from the origin half an ulp is 6e-8 m.
+F32 = 2e-7
 #: tracking.mode -> (its tracker, how close 1:1 is to full simulation [m], how close a rigidly
-#: carried ghost is to its carried rest shape [m]): the blend copies a guide strand exactly; the
-#: turn rebuilds it from float32 rest segments; both keep their rest data in float32
-TRACKERS = {'blend': (blend.BlendTracker, 0.0, 2e-7), 'turn': (turn.TurnTracker, 1e-8, 1e-8)}
+#: carried ghost is to its carried rest shape [m]): the blend copies a guide strand; the turn
+#: rebuilds it from float32 rest segments; both keep their rest data and positions in float32
+TRACKERS = {'blend': (blend.BlendTracker, F32, F32), 'turn': (turn.TurnTracker, F32, F32)}
 
 
 def head(angle=0.4, axis=(0.2, 0.3, 1.0), position=(0.05, -0.02, 1.6)):
@@ -75,7 +77,7 @@ def test_the_simulator_runs_it_once_per_frame_at_rest_lengths_outside_the_head(m
     seg = np.linalg.norm(np.diff(f.ghosts, axis=1), axis=2)
     stretch = np.abs(seg / sim.ghosts.rest_length - 1.0)
     assert stretch.max() < 0.01                # nodes pressed onto the head: within 1 %
-    assert np.median(stretch) < 1e-6           # every other segment exact (float32 rest data)
+    assert np.median(stretch) < 2e-5           # every other segment exact to float32 rounding
     assert sim.penetration() < 1e-6            # on the surface to rounding
     np.testing.assert_allclose(f.ghosts[:, :2], f.head.to_world(sim.ghosts.rest[:, :2]),
-                               atol=1e-12)     # roots pinned
+                               atol=F32)       # roots pinned

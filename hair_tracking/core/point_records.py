@@ -97,14 +97,15 @@ def points_to_records(words: np.ndarray, stride: int, x: np.ndarray, rot=None,
     """``x`` (S, N, 3) -> float32 x y z at the start of ``words``' records (``stride`` words
     each, S * N of them), as ``rot (x - origin)`` when either is given.  Returns True when every
     coordinate written is finite."""
-    x = np.ascontiguousarray(x, dtype=np.float64)
+    if not (isinstance(x, np.ndarray) and x.dtype == np.float32 and x.flags.c_contiguous):
+        x = np.ascontiguousarray(x, dtype=np.float64)       # float32 positions as they are
     if x.ndim != 3 or x.shape[2] != 3:
         raise ValueError(f'x must be shaped (S, N, 3), got {x.shape}')
     s, n = x.shape[:2]
     words = _check_words(words, int(stride), s * n)
     rot, origin, moved = _transform(rot, origin)
     flat = x.reshape(-1)
-    flat.flags.writeable = False     # always read-only: one specialisation (frames are views)
+    flat.flags.writeable = False     # always read-only: one specialisation a float type
     return bool(_points_to_records(words, np.int64(stride), flat, np.int64(s), np.int64(n),
                                    rot, origin, moved))
 

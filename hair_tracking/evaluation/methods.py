@@ -275,7 +275,7 @@ class BlendTracking(Method):
 
     def output(self, head):
         self.tracker.step(self.dt, None, head)
-        return self.ghosts.x
+        return self.tracker.positions()
 
 
 class TurnTracking(BlendTracking):

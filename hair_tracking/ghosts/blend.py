@@ -425,6 +425,6 @@ class BlendTracker(StatelessTracker):
     def _place(self) -> int:
         """Steps 2-3 of the module docstring."""
         return blend_strands(
-            self.ghosts._x, self._offset32, self._roots, self._len32, self._guide_pad,
+            self._x32, self._offset32, self._roots, self._len32, self._guide_pad,
             self._weight_pad, self._gcol, self._rot, self._pos, self.restore, self.collide,
             self._center, self._axes, self.is_guide, self._guide_len)

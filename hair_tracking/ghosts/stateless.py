@@ -142,8 +142,13 @@ class StatelessTracker:
     ``guides`` must be some of the ghost strands: ``guide_index[i]`` is the ghost strand that
     guide ``i`` is (``ghosts.rest[guide_index] == guides.rest``).  ``collider``, when given and
     ``scene.tracking.collide`` is true, is the head collider (a
-    :class:`~hair_tracking.guides.collision.Collider`).  The ghost state is ``ghosts.x`` (world
-    frame); ghosts carry no velocity of their own (``ghosts.v`` stays zero).
+    :class:`~hair_tracking.guides.collision.Collider`).  Ghosts carry no velocity of their
+    own (``ghosts.v`` stays zero).
+
+    The ghost positions are placed in float32 (:meth:`positions`, world frame): the precision
+    of the point cloud they are published in, and half the bytes a frame writes and the cloud
+    reads.  ``ghosts.x`` (float64) receives them when it is read or assigned; what is assigned
+    there is taken back on the next read.
     """
 
     def __init__(self, ghosts: StrandSet, guides: StrandSet, guide_index, scene, collider=None):
@@ -158,6 +163,8 @@ class StatelessTracker:
         self._gcol = np.empty((guides.count, 3, ghosts.rest.shape[1]))
         self._rot, self._pos = np.empty((3, 3)), np.empty(3)
         self._pending = False         # a step not yet evaluated (see step and release)
+        self._x32 = ghosts.x.astype(np.float32)
+        self._in_x32 = True           # whether _x32 (else ghosts._x) holds the positions
         self.collide = bool(scene.tracking.collide and collider is not None)
         if self.collide:
             self._center, self._axes = collider_axes(ghosts, collider)
@@ -181,18 +188,25 @@ class StatelessTracker:
         self.stats['steps'] += 1
 
     def release(self) -> None:
-        """Place the ghosts from the last :meth:`step` into ``ghosts.x``, if not done yet
-        (called by :class:`~hair_tracking.core.model.StrandSet` when ``ghosts.x`` or
-        ``ghosts.v`` is read or assigned)."""
+        """Hand the positions to ``ghosts.x``, placing the ghosts from the last :meth:`step`
+        first if not done yet (called by :class:`~hair_tracking.core.model.StrandSet` when
+        ``ghosts.x`` or ``ghosts.v`` is read or assigned)."""
+        self._evaluate()
+        if self._in_x32:
+            np.copyto(self.ghosts._x, self._x32)
+            self._in_x32 = False
+
+    def _evaluate(self) -> None:
         if not self._pending:
             return
         self._pending = False
         self.stats['contacts'] = int(self._place())
         self.stats['evaluations'] += 1
+        self._in_x32 = True
 
     def _place(self) -> int:
-        """Every ghost into ``ghosts._x`` from ``_gcol``, ``_rot``, ``_pos``; returns the number
-        of head contacts."""
+        """Every ghost into ``_x32`` from ``_gcol``, ``_rot``, ``_pos``; returns the number of
+        head contacts."""
         raise NotImplementedError
 
     def reset(self, head: HeadPose) -> None:
@@ -201,10 +215,15 @@ class StatelessTracker:
         self.ghosts.place_at(head)
 
     def positions(self) -> np.ndarray:
-        """The ghost positions (S, N, 3), world frame [m] (the live array: read only)."""
-        return self.ghosts.x
+        """The ghost positions (S, N, 3) float32, world frame [m] (the live array: read
+        only)."""
+        self._evaluate()
+        if not self._in_x32:
+            np.copyto(self._x32, self.ghosts._x)
+            self._in_x32 = True
+        return self._x32
 
     def write_records(self, words, stride, rot=None, origin=None) -> bool:
         """float32 x y z of every ghost node into point records (as
         :func:`~hair_tracking.core.point_records.points_to_records`)."""
-        return points_to_records(words, stride, self.ghosts.x, rot, origin)
+        return points_to_records(words, stride, self.positions(), rot, origin)

@@ -383,6 +383,6 @@ class TurnTracker(StatelessTracker):
     def _place(self) -> int:
         """Steps 1-3 of the module docstring."""
         return turn_strands(
-            self.ghosts._x, self._seg, self._roots, self._kind, self.block_guide,
+            self._x32, self._seg, self._roots, self._kind, self.block_guide,
             self.block_strand, self._gcol, self._u0, self._turns, self._rot, self._pos,
             self.collide, self._center, self._axes)

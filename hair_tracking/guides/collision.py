@@ -195,11 +195,12 @@ def penetration_ellipsoid(x, inv_mass, use_mass, rot, pos, center, radii, refine
         out[s] = deepest
 
 
-def _points(name, arr, ndim=3):
-    if not isinstance(arr, np.ndarray) or arr.dtype != np.float64 or arr.ndim != ndim or \
+def _points(name, arr, ndim=3, types=(np.float64,)):
+    if not isinstance(arr, np.ndarray) or arr.dtype not in types or arr.ndim != ndim or \
             not arr.flags.c_contiguous or (ndim == 3 and arr.shape[2] != 3):
         shape = '(S, N, 3)' if ndim == 3 else '(S, N)'
-        raise ValueError(f'{name}: must be a C-contiguous float64 array shaped {shape}, got '
+        kind = '/'.join(np.dtype(t).name for t in types)
+        raise ValueError(f'{name}: must be a C-contiguous {kind} array shaped {shape}, got '
                          f'{type(arr).__name__} {getattr(arr, "dtype", "")} '
                          f'{getattr(arr, "shape", "")}')
     return arr
@@ -272,9 +273,10 @@ class Collider:
         """Deepest distance [m] of a point of ``x`` (S, N, 3) inside the bare surface; 0 if none.
 
         With ``inv_mass`` only the free nodes (``inv_mass > 0``) count (attached roots lie on the
-        scalp, which may be inside the collider).
+        scalp, which may be inside the collider).  ``x`` may be float32 (the stateless trackers'
+        ghost positions).
         """
-        _points('x', x)
+        _points('x', x, types=(np.float64, np.float32))
         if inv_mass is None:
             mass, use = np.zeros((0, 0)), False
         else:
