@@ -18,9 +18,10 @@ Time handling
 * Ghosts are tracked after every guide substep, or - with ``tracking.every_substep: false`` or
   while ``track_once_per_call`` is set (the live node's load shedding) - once per
   ``advance_to`` call (one head pose) over all its substeps, 2-4x cheaper.
-* The guide solver takes a run of substeps in one call
-  (:meth:`~hair_tracking.guides.solver.GuideSolver.advance`) where none of them needs splitting
-  (below): the substeps of a pose, or of a whole settle, without Python between them.
+* The guide solver takes the substeps of a pose (or of a whole settle) in one call
+  (:meth:`~hair_tracking.guides.solver.GuideSolver.advance`), up to the first that needs
+  splitting (below): it applies the split rule after every substep, so the hair is that of
+  the substeps taken one by one.
 * A substep in which a hair node would move farther than half the per-substep displacement clamp
   (``solver.max_displacement``; 2.5 cm when the clamp is off) is *split* into equal shorter
   substeps, at most :data:`MAX_SPLIT` and none shorter than :data:`MIN_SPLIT_DT`, with the head
@@ -65,10 +66,6 @@ MIN_SPLIT_DT = 1.0 / 960.0
 SPLIT_FRACTION = 0.5
 #: ... or this distance [m] when the clamp is off (``solver.max_displacement = 0``).
 SPLIT_DISTANCE = 0.025
-#: Substeps run in one call of the guide solver while the split estimate of each stays below
-#: the limit with the last measured node speed times this (the speeds inside the run are
-#: measured only after it; a substep that they would have split counts as a late split).
-SPEED_GROWTH = 2.0
 
 
 @dataclass
@@ -297,39 +294,25 @@ class HairSimulator:
         return self.ghosts.x if self.ghosts is not None else None
 
     def _run(self, dt: float, head_prev: HeadPose, heads) -> None:
-        """Substeps ``dt`` from ``head_prev`` through ``heads``: as many at a time as
-        :meth:`_unsplit_run` allows in one call of the guide solver, the others one by one
-        (:meth:`_substep`, which splits them where needed)."""
+        """Substeps ``dt`` from ``head_prev`` through ``heads``: the guide solver takes them in
+        one call up to the first that needs splitting (it applies the split rule after every
+        substep: :meth:`~hair_tracking.guides.solver.GuideSolver.advance`'s ``stop``), which
+        :meth:`_substep` splits; so exactly as if they were taken one by one."""
         prev, k = head_prev, 0
         while k < len(heads):
-            run = self._unsplit_run(dt, prev, heads[k:])
-            if run == 0:
+            if (self.ghost_tracker is not None and self._every_substep()) or \
+                    self._split_count(dt, prev, heads[k], self._last_speed) > 1:
                 self._substep(dt, prev, heads[k])
-                run = 1
-            else:
-                steps = self.guide_solver.advance(dt, prev, heads[k:k + run], measure=True)
-                late = sum(self._split_count(dt, a, b, math.sqrt(s) / dt) > 1 for a, b, s in
-                           zip(heads[k:k + run - 1], heads[k + 1:k + run], steps[:-1]))
-                if late:
-                    self.counters.extra['late_splits'] = \
-                        self.counters.extra.get('late_splits', 0) + late
-                self._last_speed = math.sqrt(steps[-1]) / dt
-            prev, k = heads[k + run - 1], k + run
-
-    def _unsplit_run(self, dt: float, head_prev: HeadPose, heads) -> int:
-        """How many of the substeps ending at ``heads`` go through in one call: none when the
-        ghosts are tracked every substep or the first substep needs splitting
-        (:meth:`_split_count`); else the first and every next one whose split estimate stays
-        below the limit with :data:`SPEED_GROWTH` times the last measured node speed."""
-        if (self.ghost_tracker is not None and self._every_substep()) or \
-                self._split_count(dt, head_prev, heads[0], self._last_speed) > 1:
-            return 0
-        run, prev = 1, heads[0]
-        for head in heads[1:]:
-            if self._split_count(dt, prev, head, SPEED_GROWTH * self._last_speed) > 1:
-                break
-            run, prev = run + 1, head
-        return run
+                prev, k = heads[k], k + 1
+                continue
+            rest = heads[k:]
+            limit, floor = self._split_limit(dt)
+            rigid = [self._rigid(a, b) for a, b in zip([prev] + rest[:-1], rest)]
+            steps = self.guide_solver.advance(
+                dt, prev, rest, measure=True,
+                stop=(rigid, limit if floor > 1 else 0.0, self._gravity_norm * dt * dt))
+            self._last_speed = math.sqrt(steps[-1]) / dt
+            prev, k = rest[len(steps) - 1], k + len(steps)
 
     def _substep(self, dt: float, head_prev: HeadPose, head: HeadPose) -> None:
         parts = self._split_count(dt, head_prev, head, self._last_speed)
@@ -349,19 +332,28 @@ class HairSimulator:
     def _split_count(self, dt: float, head_prev: HeadPose, head: HeadPose,
                      speed: float) -> int:
         """Parts to split a substep into so that no node moves farther than the split limit,
-        with ``speed`` [m/s] the nodes' largest speed."""
+        with ``speed`` [m/s] the nodes' largest speed (the rule
+        :func:`~hair_tracking.guides.integrate.split_due` applies inside a run)."""
+        limit, floor = self._split_limit(dt)
+        motion = max(self._rigid(head_prev, head), speed * dt) + self._gravity_norm * dt * dt
+        if not motion > limit:          # also False for NaN: never split on bad numbers
+            return 1
+        return int(min(MAX_SPLIT, floor, math.ceil(motion / limit)))
+
+    def _split_limit(self, dt: float):
+        """``(limit, floor)``: the node motion [m] above which a substep ``dt`` is split, and
+        the most parts it may be split into without going below :data:`MIN_SPLIT_DT`."""
         sv = self.scene.solver
         limit = SPLIT_FRACTION * sv.max_displacement if sv.max_displacement > 0 else \
             SPLIT_DISTANCE
+        return limit, max(1, int(dt / MIN_SPLIT_DT + 1e-9))
+
+    def _rigid(self, head_prev: HeadPose, head: HeadPose) -> float:
+        """How far [m] the head's motion from ``head_prev`` to ``head`` carries the farthest
+        hair node."""
         angle = quat_angle(head_prev.quaternion, head.quaternion)
         dx, dy, dz = (head.position - head_prev.position).tolist()
-        rigid = math.sqrt(dx * dx + dy * dy + dz * dz) + \
-            2.0 * math.sin(0.5 * angle) * self._reach
-        motion = max(rigid, speed * dt) + self._gravity_norm * dt * dt
-        if not motion > limit:          # also False for NaN: never split on bad numbers
-            return 1
-        floor = max(1, int(dt / MIN_SPLIT_DT + 1e-9))
-        return int(min(MAX_SPLIT, floor, math.ceil(motion / limit)))
+        return math.sqrt(dx * dx + dy * dy + dz * dz) + 2.0 * math.sin(0.5 * angle) * self._reach
 
     def _step(self, dt: float, head_prev: HeadPose, heads) -> None:
         """Substeps ``dt`` through ``heads`` (the parts of one split substep, or one), each

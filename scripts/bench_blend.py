@@ -7,7 +7,7 @@ guides' turns, the turned segments, head contacts) and one step of the paper tra
 the read of the positions that a frame makes, are timed in turns, after a warm-up that compiles
 them; medians of the rounds. The bandwidth is a numpy copy of a 64 MB float64 array (read +
 write counted). The blend kernel reads the float32 rest offsets and lengths (16 B a node) and
-writes float64 positions (24 B); the turn kernel reads float32 rest segments (12 B) and float64
+writes float32 positions (12 B); the turn kernel reads float32 rest segments (12 B) and float64
 roots (3 B a node at 16 nodes) and writes the positions: a kernel's share of the bandwidth is
 (bytes a node x nodes / time) / copy bandwidth.
 
@@ -28,7 +28,7 @@ import numpy as np  # noqa: E402
 from hair_tracking.core.scene import Scene  # noqa: E402
 from hair_tracking.simulator import HairSimulator  # noqa: E402
 
-BYTES_PER_NODE = {'blend': 16 + 24, 'turn': 12 + 3 + 24}
+BYTES_PER_NODE = {'blend': 16 + 12, 'turn': 12 + 3 + 12}
 
 
 def copy_bandwidth(rounds=7):

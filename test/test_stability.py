@@ -337,38 +337,40 @@ def test_the_matrix_runs_with_any_tracker():
 
 def _one_by_one(sim):
     """``sim`` taking every substep in a call of its own (no runs)."""
-    sim._unsplit_run = lambda dt, head_prev, heads: 0
+    def run(dt, head_prev, heads):
+        for head in heads:
+            sim._substep(dt, head_prev, head)
+            head_prev = head
+    sim._run = run
     return sim
 
 
-@pytest.mark.parametrize('speed, collider', [(5.0, 'none'), (5.0, 'ellipsoid'),
-                                             (1.0, 'ellipsoid')])
-def test_runs_of_substeps_are_the_substeps_one_by_one(speed, collider):
-    """The substeps of a pose go to the guide solver in one call where none needs splitting;
-    the hair, and the splits where the motion is fast, are those of taking them one by one."""
-    scene = stability.BASE.with_changes(collider__shape=collider)
+@pytest.mark.parametrize('solver, dt, motion, splits', [
+    ('ftl', None, lambda: sm.oscillate(5.0, 0.5, duration_s=0.6), True),
+    ('ftl', None, lambda: sm.oscillate(1.0, 0.5, duration_s=0.6), False),
+    ('ftl', 1 / 30, lambda: sm.shake(10.0, 2.0, duration_s=0.6), True),
+    ('pbd', 1 / 30, lambda: sm.shake(10.0, 2.0, duration_s=0.6), True)])
+@pytest.mark.parametrize('collider', ['none', 'ellipsoid'])
+def test_runs_of_substeps_are_the_substeps_one_by_one(solver, dt, motion, splits, collider):
+    """The substeps of a pose go to the guide solver in one call, which stops before the
+    first substep after one that needs splitting: the hair, and the splits, are those of
+    taking them one by one, bit for bit (fast motion, long substeps, PBD)."""
+    changes = dict(collider__shape=collider, solver__type=solver)
+    if dt is not None:
+        changes['solver__dt'] = dt
+    scene = stability.BASE.with_changes(**changes)
     runs, single = HairSimulator(scene), _one_by_one(HairSimulator(scene))
-    motion = sm.oscillate(speed, 0.5, duration_s=0.6)
+    m = motion()
     calls = []
     real = runs.guide_solver.advance
     runs.guide_solver.advance = lambda dt, prev, heads, **k: (calls.append(len(heads)),
                                                               real(dt, prev, heads, **k))[1]
-    for t, p, q in zip(motion.t_ns, motion.position, motion.quaternion):
+    for t, p, q in zip(m.t_ns, m.position, m.quaternion):
         for sim in (runs, single):
             sim.push_pose(int(t), p, q)
             sim.advance_to(int(t))
         assert np.array_equal(runs.guides.x, single.guides.x)
         assert np.array_equal(runs.frame().strands, single.frame().strands)
     assert runs.counters.extra == single.counters.extra
-    assert 'late_splits' not in runs.counters.extra
     assert max(calls) > 1                           # a pose's substeps in one call
-    if speed > 2.0:
-        assert runs.counters.extra['split_substeps'] > 10
-
-
-def test_a_split_that_a_run_missed_is_counted(monkeypatch):
-    """Inside a run the node speeds are measured only after it; a substep that they would
-    have split is counted (here with no growth allowed to the last measured speed)."""
-    monkeypatch.setattr(simulator, 'SPEED_GROWTH', 0.0)
-    sim, _ = _translate(stability.BASE.with_changes(collider__shape='none'), 5.0)
-    assert sim.counters.extra.get('late_splits', 0) >= 1
+    assert (runs.counters.extra.get('split_substeps', 0) > 10) == splits

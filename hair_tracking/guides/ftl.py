@@ -33,7 +33,8 @@ from numba import int64, njit, prange
 
 from hair_tracking.guides.collision import project_block, surface_point, to_head, world_center
 from hair_tracking.guides.integrate import (BLOCK, carry_rigid_block, FASTMATH, finalize_block,
-                                            max_step_sq, NO_REFCOUNT, predict_block, serial_twin)
+                                            max_step_sq, NO_REFCOUNT, predict_block, serial_twin,
+                                            split_due)
 from hair_tracking.guides.pbd_constraints import pbd_sweep_block
 
 #: Static data of :func:`ftl_step`: ``rest`` (S, N, 3) head frame [m], ``inv_mass`` (S, N),
@@ -312,12 +313,14 @@ def ftl_collide_block(model, state, motion, params, corr, collider, x_ref, cx, c
 
 @njit(cache=True, nogil=True, parallel=True, fastmath=FASTMATH, error_model='numpy')
 def ftl_advance(model, state, drive, params, corr, collide, collider, x_ref, counts, steps,
-                before):
-    """Kernel: ``K`` FTL substeps of all strands in one call, block by block: every block of
+                before, stop):
+    """Kernel: ``K`` FTL substeps of all strands in one call.  Strands do not interact, so this
+    is exactly ``K`` calls of :func:`ftl_collide_step` (with a collider) or of :func:`ftl_step`
+    finalizing (without), one after another.  Without a stop rule every block of
     :data:`~hair_tracking.guides.integrate.BLOCK` strands runs all ``K`` substeps before the
-    next (its strands stay in cache, one parallel region for the whole run).  Strands do not
-    interact, so this is exactly ``K`` calls of :func:`ftl_collide_step` (with a collider) or of
-    :func:`ftl_step` finalizing (without), one after another.
+    next (its strands stay in cache; one parallel region for the whole run); with one, all
+    blocks take a substep before the next, and the run stops before the first substep whose
+    split estimate (``stop``) exceeds the limit.
 
     ``drive``: ``(rots (K + 1, 3, 3), poss (K + 1, 3), rels (K, 3, 3), gravity, damp, dt,
     shock)``: the head poses at the start and at the end of every substep, ``rels[k] =
@@ -327,51 +330,81 @@ def ftl_advance(model, state, drive, params, corr, collide, collider, x_ref, cou
     :func:`ftl_collide_step`).  ``counts`` (B, K, 2) int64, ``steps`` (B, K) (``B`` the block
     count) and ``before`` (S, N, 3) are work space; on return ``steps[0]`` holds every
     substep's largest squared node displacement [m^2] (NaN when one is NaN; not measured, and
-    ``before`` not touched, when ``steps`` is (B, 0)).
-    Returns the clamped and the collider-moved node counts of the last substep and of all
-    ``K``: ``(clamped, clamped_total, contacts, contacts_total)``.
+    ``before`` not touched, when ``steps`` is (B, 0)).  ``stop``: ``(rigid (K,), limit,
+    gdt2)``, active when ``limit > 0`` and the displacements are measured: substep ``k + 1``
+    is not taken when ``max(rigid[k + 1], speed dt) + gdt2 > limit`` with ``speed`` the
+    largest displacement of substep ``k`` over ``dt`` (the simulator's split estimate,
+    :meth:`~hair_tracking.simulator.HairSimulator._split_count`).
+    Returns the substeps taken, then the clamped and the collider-moved node counts of the
+    last of them and of all: ``(done, clamped, clamped_total, contacts, contacts_total)``.
     """
     x = state[0]
+    dt = drive[5]
     axes = collider[1] + collider[2]
     n_sub = drive[2].shape[0]
     measure = steps.shape[1] == n_sub
+    rigid, limit, gdt2 = stop
     nblk = (x.shape[0] + BLOCK - 1) // BLOCK
     chunks = min(nblk, CHUNKS)
-    for c in prange(chunks):
-        ftl_advance_blocks(model, state, drive, params, corr, collide, collider, x_ref, axes,
-                           counts, steps, before, measure, c * nblk // chunks,
-                           (c + 1) * nblk // chunks)
-    totals = np.zeros((n_sub, 2), dtype=np.int64)
-    for blk in range(nblk):
+    done = n_sub
+    if measure and limit > 0.0:
         for k in range(n_sub):
+            for c in prange(chunks):
+                ftl_advance_blocks(model, state, drive, params, corr, collide, collider, x_ref,
+                                   axes, counts, steps, before, measure,
+                                   c * nblk // chunks, (c + 1) * nblk // chunks, k, k + 1)
+            far = _column_max(steps, k, nblk)
+            if k + 1 < n_sub and split_due(far, dt, rigid[k + 1], gdt2, limit):
+                done = k + 1
+                break
+    else:
+        for c in prange(chunks):
+            ftl_advance_blocks(model, state, drive, params, corr, collide, collider, x_ref, axes,
+                               counts, steps, before, measure, c * nblk // chunks,
+                               (c + 1) * nblk // chunks, 0, n_sub)
+        if measure:
+            for k in range(n_sub):
+                _column_max(steps, k, nblk)
+    totals = np.zeros((done, 2), dtype=np.int64)
+    for blk in range(nblk):
+        for k in range(done):
             totals[k, 0] += counts[blk, k, 0]
             totals[k, 1] += counts[blk, k, 1]
-            if measure and blk > 0 and not steps[blk, k] <= steps[0, k]:
-                steps[0, k] = steps[blk, k]          # the larger, or NaN
-    return (totals[n_sub - 1, 0], totals[:, 0].sum(), totals[n_sub - 1, 1],
+    return (done, totals[done - 1, 0], totals[:, 0].sum(), totals[done - 1, 1],
             totals[:, 1].sum())
+
+
+@njit(cache=True)
+def _column_max(steps, k, nblk):
+    """``steps[0, k]`` = the largest of ``steps[:nblk, k]`` (NaN when one is); returned."""
+    far = steps[0, k]
+    for blk in range(1, nblk):
+        if not steps[blk, k] <= far:
+            far = steps[blk, k]
+    steps[0, k] = far
+    return far
 
 
 @njit(cache=True, fastmath=FASTMATH, error_model='numpy', **NO_REFCOUNT)
 def ftl_advance_blocks(model, state, drive, params, corr, collide, collider, x_ref, axes,
-                       counts, steps, before, measure, b0, b1):
-    """:func:`ftl_advance` for the blocks ``b0 .. b1 - 1``, each through all the substeps (a
-    function of its own without reference counting: the poses it slices per substep cost no
-    atomic counter updates shared between the threads)."""
+                       counts, steps, before, measure, b0, b1, k0, k1):
+    """:func:`ftl_advance` for the blocks ``b0 .. b1 - 1``, each through the substeps
+    ``k0 .. k1 - 1`` (a function of its own without reference counting: the poses it slices
+    per substep cost no atomic counter updates shared between the threads)."""
     for blk in range(b0, b1):
         ftl_advance_block(model, state, drive, params, corr, collide, collider, x_ref, axes,
-                          counts, steps, before, measure, blk)
+                          counts, steps, before, measure, blk, k0, k1)
 
 
 @njit(cache=True, inline='always')
 def ftl_advance_block(model, state, drive, params, corr, collide, collider, x_ref, axes, counts,
-                      steps, before, measure, blk):
+                      steps, before, measure, blk, k0, k1):
     """:func:`ftl_advance_blocks` for block ``blk``."""
     x, v, x_old = state
     rots, poss, rels, gravity, damp, dt, shock = drive
     s0 = blk * BLOCK
     s1 = min(s0 + BLOCK, x.shape[0])
-    for k in range(rels.shape[0]):
+    for k in range(k0, k1):
         rot, pos = rots[k + 1], poss[k + 1]
         motion = (rot, pos, rels[k], poss[k], gravity, damp, dt, shock)
         if measure:

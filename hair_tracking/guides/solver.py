@@ -53,6 +53,9 @@ FTL_BEND_PASSES = 1
 BEND_REFERENCE_DT = 1.0 / 240.0
 #: What the FTL kernels take as the collider where there is none (not read).
 NO_COLLIDER = (np.zeros(3), np.ones(3), 0.0, 0.0, 0)
+#: What :func:`~hair_tracking.guides.ftl.ftl_advance` takes as its stop rule where there is
+#: none (a limit of 0: not applied).
+NO_STOP = (np.zeros(1), 0.0, 0.0)
 
 
 class GuideSolver:
@@ -139,14 +142,17 @@ class GuideSolver:
         self._step(dt, head_prev, head, integrate.runs_parallel(nodes))
 
     def advance(self, dt: float, head_prev: HeadPose, heads: Sequence[HeadPose],
-                measure: bool = False) -> Optional[np.ndarray]:
+                measure: bool = False, stop=None) -> Optional[np.ndarray]:
         """Advance ``len(heads)`` substeps ``dt`` [s], the head moving from ``head_prev`` to
         ``heads[0]``, then on to each next pose: the same as :meth:`step` for each pose in turn.
-        FTL runs them in one compiled call (:func:`~hair_tracking.guides.ftl.ftl_advance`:
-        every block of strands through all the substeps while it is in cache); PBD and XPBD
-        take one :meth:`step` a substep, and so does a single substep not measured.  With
-        ``measure``, returns every substep's largest squared node displacement (K,) [m^2] (the
-        simulator's speed estimate)."""
+        FTL runs them in one compiled call (:func:`~hair_tracking.guides.ftl.ftl_advance`);
+        PBD and XPBD take one :meth:`step` a substep, and so does a single substep not
+        measured.  With ``measure``, returns every substep's largest squared node displacement
+        [m^2] (the simulator's speed estimate).  ``stop`` (with ``measure``): ``(rigid, limit,
+        gdt2)``, the simulator's split rule (:func:`~hair_tracking.guides.integrate.split_due`,
+        ``rigid`` one value a substep): the run stops before the first substep after the first
+        that the rule would split, and the displacements returned are those of the substeps
+        taken."""
         heads = list(heads)
         if not heads:
             return np.zeros(0) if measure else None
@@ -155,17 +161,21 @@ class GuideSolver:
             return None
         nodes = self.strands.x.shape[0] * self.strands.x.shape[1]
         parallel = integrate.runs_parallel(nodes)
+        rule = stop is not None and measure and stop[1] > 0.0
         if self.kind != 'ftl':
-            out = np.empty(len(heads))
+            out = []
             prev, x0 = head_prev, np.empty_like(self.strands.x)
             for k, head in enumerate(heads):
                 if measure:
                     np.copyto(x0, self.strands.x)
                 self._step(dt, prev, head, parallel)
                 if measure:
-                    out[k] = integrate.max_step_sq(self.strands.x, x0)
+                    out.append(integrate.max_step_sq(self.strands.x, x0))
+                    if rule and k + 1 < len(heads) and \
+                            integrate.split_due(out[-1], dt, stop[0][k + 1], stop[2], stop[1]):
+                        break
                 prev = head
-            return out if measure else None
+            return np.array(out) if measure else None
         dt = _check_dt(dt)
         n_sub = len(heads)
         rots, poss, rels, counts, steps = self._advance_space(n_sub, measure)
@@ -184,17 +194,19 @@ class GuideSolver:
         c = self.collider
         collider = (c.center, c.radii, c.margin, c.friction, c.refine) if c is not None else \
             NO_COLLIDER
+        rule_args = (np.ascontiguousarray(stop[0], dtype=np.float64), float(stop[1]),
+                     float(stop[2])) if rule else NO_STOP
         kernel = ftl.ftl_advance if parallel else ftl.ftl_advance_serial
-        clamped, clamped_total, contacts, contacts_total = kernel(
+        done, clamped, clamped_total, contacts, contacts_total = kernel(
             self._model, (st.x, st.v, self._x_old), drive, params, self._corr, c is not None,
             collider, self._x_ref if self._x_ref is not None else self._x_old, counts, steps,
-            self._x_before if measure else self._x_before[:0])
-        c = self._counters
-        c['substeps'] += n_sub
-        c['clamped'], c['contacts'] = int(clamped), int(contacts)
-        c['clamped_total'] += int(clamped_total)
-        c['contacts_total'] += int(contacts_total)
-        return steps[0].copy() if measure else None
+            self._x_before if measure else self._x_before[:0], rule_args)
+        cn = self._counters
+        cn['substeps'] += int(done)
+        cn['clamped'], cn['contacts'] = int(clamped), int(contacts)
+        cn['clamped_total'] += int(clamped_total)
+        cn['contacts_total'] += int(contacts_total)
+        return steps[0, :done].copy() if measure else None
 
     def _advance_space(self, n_sub: int, measure: bool):
         """:meth:`advance`'s work arrays for ``n_sub`` substeps (kept for the next call)."""
