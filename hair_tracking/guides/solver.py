@@ -23,7 +23,9 @@ and their roots follow the head. One call of :meth:`GuideSolver.step` is one sub
 Without a collider steps 1–6 run in one fused numba kernel per block of strands (the strands stay
 in cache), and so do FTL's with a collider (:func:`~hair_tracking.guides.ftl.ftl_collide_step`:
 the collision and the collision-aware second pass join the block's substep); PBD and XPBD with a
-collider stop after step 4, the collision kernel runs, then the finalize kernel. Kernels are
+collider stop after step 4, the collision kernel runs, then the finalize kernel.
+:meth:`GuideSolver.advance` takes a run of substeps in one call: for FTL one compiled call for
+all of them (:func:`~hair_tracking.guides.ftl.ftl_advance`). Kernels are
 looked up on their modules at call time, so only the ones the scene needs are ever called (and
 compiled), and tests can spy on them.
 
