@@ -166,7 +166,7 @@ class GuideSolver:
         rule = stop is not None and measure and stop[1] > 0.0
         if self.kind != 'ftl':
             out = []
-            prev, x0 = head_prev, np.empty_like(self.strands.x)
+            prev, x0 = head_prev, self._x_before
             for k, head in enumerate(heads):
                 if measure:
                     np.copyto(x0, self.strands.x)
@@ -191,17 +191,13 @@ class GuideSolver:
                              f'got position {poss[bad]}')
         st = self.strands
         drive = (rots, poss, rels, self._gravity, math.exp(-self._damping * dt), dt, self._shock)
-        params = (FTL_BEND_PASSES, ftl_bend_stiffness(self.scene.solver.bend_stiffness, dt),
-                  float(self.scene.solver.ftl_damping), self._max_disp, True)
-        c = self.collider
-        collider = (c.center, c.radii, c.margin, c.friction, c.refine) if c is not None else \
-            NO_COLLIDER
         rule_args = (np.ascontiguousarray(stop[0], dtype=np.float64), float(stop[1]),
                      float(stop[2])) if rule else NO_STOP
         kernel = ftl.ftl_advance if parallel else ftl.ftl_advance_serial
+        collider, x_ref = self._collider_args()
         done, clamped, clamped_total, contacts, contacts_total = kernel(
-            self._model, (st.x, st.v, self._x_old), drive, params, self._corr, c is not None,
-            collider, self._x_ref if self._x_ref is not None else self._x_old, counts, steps,
+            self._model, (st.x, st.v, self._x_old), drive, self._ftl_params(dt, True),
+            self._corr, self.collider is not None, collider, x_ref, counts, steps,
             self._x_before if measure else self._x_before[:0], rule_args)
         cn = self._counters
         cn['substeps'] += int(done)
@@ -242,16 +238,12 @@ class GuideSolver:
         motion = (rot, pos, rot_rel, pos_prev, self._gravity, damp, dt, self._shock)
         sv = self.scene.solver
         if self.kind == 'ftl':
-            params = (FTL_BEND_PASSES, ftl_bend_stiffness(sv.bend_stiffness, dt),
-                      float(sv.ftl_damping), self._max_disp, fused)
+            params = self._ftl_params(dt, fused)
             if not fused:
                 # one kernel: friction reference, collision and second pass in the block loop
-                c = self.collider
                 kernel = ftl.ftl_collide_step if parallel else ftl.ftl_collide_step_serial
-                clamped, contacts = kernel(
-                    self._model, state, motion, params, self._corr,
-                    (c.center, c.radii, c.margin, c.friction, c.refine),
-                    self._x_ref if self._x_ref is not None else self._x_old)
+                clamped, contacts = kernel(self._model, state, motion, params, self._corr,
+                                           *self._collider_args())
                 self._count(clamped, contacts)
                 return
         if self._x_ref is not None:
@@ -278,6 +270,21 @@ class GuideSolver:
             clamped = finalize(st.x, st.v, self._x_old, st.inv_mass, self._x_old, dt,
                                self._max_disp, 0.0)
         self._count(clamped, contacts)
+
+    def _ftl_params(self, dt: float, finalize: bool) -> tuple:
+        """The FTL kernels' :data:`~hair_tracking.guides.ftl.FtlParams` for a substep ``dt``."""
+        sv = self.scene.solver
+        return (FTL_BEND_PASSES, ftl_bend_stiffness(sv.bend_stiffness, dt),
+                float(sv.ftl_damping), self._max_disp, finalize)
+
+    def _collider_args(self) -> tuple:
+        """``(collider, x_ref)`` as the FTL kernels take them: the collider's fields (a
+        stand-in without one) and the friction reference's array (``x_old`` without
+        friction)."""
+        c = self.collider
+        collider = (c.center, c.radii, c.margin, c.friction, c.refine) if c is not None else \
+            NO_COLLIDER
+        return collider, self._x_ref if self._x_ref is not None else self._x_old
 
     def _count(self, clamped, contacts) -> None:
         c = self._counters
