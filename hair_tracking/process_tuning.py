@@ -123,15 +123,20 @@ def set_omp_wait_policy(policy: str) -> str:
     return f'OpenMP worker threads wait {policy} (OMP_WAIT_POLICY={policy.upper()})'
 
 
-def add_arguments(parser) -> None:
-    """Add the process settings to an executable's ``argparse`` parser."""
+def add_arguments(parser, omp_wait_policy: str = 'passive') -> None:
+    """Add the process settings to an executable's ``argparse`` parser; ``omp_wait_policy`` is
+    the default of ``--omp-wait-policy`` (``active`` for an executable whose only other busy
+    thread is its own loop, as ``hair_sim_bag run``'s: no executor or DDS threads wait for the
+    cores, and a sleeping worker costs a wake-up at every parallel region)."""
+    if omp_wait_policy not in OMP_WAIT_POLICIES:
+        raise ValueError(f'omp_wait_policy must be one of {", ".join(OMP_WAIT_POLICIES)}')
     g = parser.add_argument_group(
         'process settings', 'process-wide, applied once at start by this executable')
     g.add_argument('--malloc-retain-mb', type=int, default=DEFAULT_RETAIN_MB, metavar='MB',
                    help='freed memory glibc keeps mapped for reuse, so large message buffers '
                         'are not faulted in again page by page; 0 keeps glibc\'s defaults; '
                         'GLIBC_TUNABLES wins (default: %(default)s)')
-    g.add_argument('--omp-wait-policy', choices=OMP_WAIT_POLICIES, default='passive',
+    g.add_argument('--omp-wait-policy', choices=OMP_WAIT_POLICIES, default=omp_wait_policy,
                    help='how idle OpenMP worker threads of the numba kernels wait: passive '
                         'sleeps, active spins first (libgomp\'s default), environment leaves '
                         'OMP_WAIT_POLICY alone; an OMP_WAIT_POLICY in the environment wins '

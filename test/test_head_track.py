@@ -73,3 +73,22 @@ def test_repeated_stamp_updates_sample():
     tr.push(0, [0, 0, 0], [0, 0, 0, 1])
     tr.push(0, [0.1, 0, 0], [0, 0, 0, 1])
     assert np.allclose(tr.latest().position, [0.1, 0, 0])
+
+
+def test_sampled_orientation_is_the_slerp_of_its_neighbours():
+    """The track's interpolation on Python floats agrees with transforms.slerp to rounding,
+    for nearly equal, far apart and opposite-signed neighbours (shortest arc)."""
+    from hair_tracking.core.head_track import _slerp
+    from hair_tracking.core.transforms import slerp
+    rng = np.random.default_rng(3)
+    for spread in (1e-4, 0.05, 1.0, 3.0):
+        for _ in range(200):
+            a = rng.normal(size=4)
+            a /= np.linalg.norm(a)
+            b = a + spread * rng.normal(size=4)
+            b /= np.linalg.norm(b)
+            if rng.random() < 0.5:
+                b = -b
+            u = rng.random()
+            np.testing.assert_allclose(_slerp(tuple(a), tuple(b), u), slerp(a, b, u),
+                                       rtol=0, atol=1e-14)

@@ -3,6 +3,7 @@ OpenMP wait policy and the executables' options for them.
 
 Each runs in a fresh interpreter: they change the whole process, as an executable's main() does.
 """
+import argparse
 import os
 import subprocess
 import sys
@@ -141,3 +142,17 @@ def test_process_options_parse_and_apply():
     args.malloc_retain_mb = -1
     with pytest.raises(ValueError, match=r'--malloc-retain-mb must be in \[0, 2047\], got -1'):
         process_tuning.apply(args)
+
+
+def test_offline_run_waits_active_and_the_live_executables_passive():
+    """``hair_sim_bag run`` has no executor or DDS threads to leave the cores to, so its OpenMP
+    workers spin between parallel regions by default; play and record (which run DDS) sleep."""
+    from hair_tracking.bags.cli import build_parser
+    parser = build_parser()
+    assert parser.parse_args(['run', '-o', 'x.mcap']).omp_wait_policy == 'active'
+    assert parser.parse_args(['run', '-o', 'x.mcap', '--omp-wait-policy', 'passive']) \
+        .omp_wait_policy == 'passive'
+    assert parser.parse_args(['play']).omp_wait_policy == 'passive'
+    assert parser.parse_args(['record', '-a', '-o', 'x.mcap']).omp_wait_policy == 'passive'
+    with pytest.raises(ValueError, match='omp_wait_policy must be one of'):
+        process_tuning.add_arguments(argparse.ArgumentParser(), omp_wait_policy='spin')

@@ -389,7 +389,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--no-head-pose', action='store_true', help='do not copy /head_pose')
     p.add_argument('--overwrite', action='store_true', help='replace an existing output')
     p.add_argument('-q', '--quiet', action='store_true', help='no progress bar')
-    process_tuning.add_arguments(p)
+    process_tuning.add_arguments(p, omp_wait_policy='active')
     p.set_defaults(func=cmd_run)
 
     # ---- play

@@ -17,8 +17,10 @@ or preset name) and/or a ROS 2 params file of the node (``hair_sim: ros__paramet
 ``name=value`` overrides, validated by :mod:`hair_tracking.core.params`.
 """
 from dataclasses import dataclass, field
+import functools
 import math
 import os
+import struct
 import sys
 import time
 from typing import Callable, Dict, List, Optional, Sequence
@@ -31,6 +33,7 @@ from hair_tracking.bags.io import BagError, EXIT_CONTENT, EXIT_FAILURE, EXIT_USA
 from hair_tracking.core.params import make_settings, NODE_NAME, ParamError, Settings
 from hair_tracking.core.scene import Scene, SceneError
 from hair_tracking.core.strand_colors import StrandColorCache
+from msg_adapters.cdr import CdrWriter, ENCAPSULATION_LE
 
 POINTS_TOPIC = '/hair/points'
 MARKERS_TOPIC = '/hair/markers'
@@ -169,16 +172,28 @@ def diagnostics_bytes(stamp_ns: int, level: int, message: str, values: Dict[str,
 
 
 def pose_stamped_bytes(t_ns, position, quaternion, frame_id) -> bytes:
-    """A serialized geometry_msgs/PoseStamped, written field by field with
-    :class:`msg_adapters.cdr.CdrWriter` (byte-identical to the rosbags serializer, tested; no
-    message objects are built)."""
-    from msg_adapters.cdr import CdrWriter, ENCAPSULATION_LE
+    """A serialized geometry_msgs/PoseStamped (byte-identical to the rosbags serializer,
+    tested; no message objects are built): one ``struct`` pack of a layout made once per frame
+    name (:func:`_pose_stamped_layout`)."""
+    layout, frame = _pose_stamped_layout(frame_id)
+    sec, nanosec = bag_io.stamp_parts(t_ns)
+    px, py, pz = position
+    qx, qy, qz, qw = quaternion
+    return layout.pack(ENCAPSULATION_LE, sec, nanosec, frame, float(px), float(py), float(pz),
+                       float(qx), float(qy), float(qz), float(qw))
+
+
+@functools.lru_cache(maxsize=16)
+def _pose_stamped_layout(frame_id: str):
+    """``(struct, frame bytes)`` of a PoseStamped in ``frame_id``: encapsulation, stamp, the
+    frame name as a CDR string with the padding that aligns the seven float64 after it (laid
+    out by :class:`msg_adapters.cdr.CdrWriter`)."""
     w = CdrWriter()
-    w.time(*bag_io.stamp_parts(t_ns))
+    w.time(0, 0)
     w.string(frame_id)
-    for value in (*position, *quaternion):
-        w.float64(float(value))
-    return ENCAPSULATION_LE + w.template()
+    w.align(8)
+    frame = w.template()[8:]
+    return struct.Struct(f'<4siI{len(frame)}s7d'), frame
 
 
 # ================================================================ schedule

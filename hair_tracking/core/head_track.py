@@ -22,7 +22,6 @@ import numpy as np
 
 from hair_tracking.core.model import HeadPose
 from hair_tracking.core.scene import HeadTrackSpec
-from hair_tracking.core.transforms import quat_angle, quat_to_matrix, slerp
 
 
 class PoseResult(enum.Enum):
@@ -54,24 +53,23 @@ class HeadTrack:
     # ----------------------------------------------------------------- input
     def push(self, t_ns: int, position, quaternion) -> PoseResult:
         """Add one pose; returns what happened to it (see module doc)."""
-        reason = _invalid_reason(t_ns, position, quaternion)
-        if reason:
+        pose = _parse_pose(t_ns, position, quaternion)
+        if isinstance(pose, str):
             self.counters['rejected'] += 1
-            self.last_rejection = reason
+            self.last_rejection = pose
             return PoseResult.REJECTED
         t_ns = int(t_ns)
-        p = np.asarray(position, dtype=np.float64).reshape(3).copy()
-        q = np.asarray(quaternion, dtype=np.float64).reshape(4)
-        q = q / np.linalg.norm(q)
+        p, q = pose
         result = PoseResult.ACCEPTED
         if self._t:
-            if q @ self._q[-1] < 0.0:
-                q = -q
+            d = _dot(q, self._q[-1])
+            if d < 0.0:
+                q, d = tuple(-c for c in q), -d
             t_last = self._t[-1]
             if t_ns < t_last:
                 result = PoseResult.RESET_BACKWARDS
-            elif (np.linalg.norm(p - self._p[-1]) > self.spec.teleport_distance
-                  or math.degrees(quat_angle(q, self._q[-1])) > self.spec.teleport_angle_deg
+            elif (math.dist(p, self._p[-1]) > self.spec.teleport_distance
+                  or math.degrees(2.0 * math.acos(min(1.0, d))) > self.spec.teleport_angle_deg
                   or (t_ns - t_last) * 1e-9 > self.spec.max_gap):
                 result = PoseResult.RESET_TELEPORT
             elif t_ns == t_last:            # a repeated stamp updates the newest sample
@@ -109,7 +107,7 @@ class HeadTrack:
     def latest(self) -> HeadPose:
         if not self._t:
             return IDENTITY
-        return HeadPose(self._p[-1].copy(), self._q[-1].copy(), quat_to_matrix(self._q[-1]))
+        return _head_pose(self._p[-1], self._q[-1])
 
     def sample(self, t_ns: int) -> HeadPose:
         """Head pose at ``t_ns``: interpolated between samples, held outside them."""
@@ -117,15 +115,43 @@ class HeadTrack:
             return IDENTITY
         ts = self._t
         if t_ns <= ts[0]:
-            p, q = self._p[0], self._q[0]
-        elif t_ns >= ts[-1]:
-            p, q = self._p[-1], self._q[-1]
-        else:
-            i = _bisect(ts, t_ns)           # ts[i-1] <= t < ts[i]
-            u = (t_ns - ts[i - 1]) / (ts[i] - ts[i - 1])
-            p = (1.0 - u) * self._p[i - 1] + u * self._p[i]
-            q = slerp(self._q[i - 1], self._q[i], u)
-        return HeadPose(np.array(p), np.array(q), quat_to_matrix(q))
+            return _head_pose(self._p[0], self._q[0])
+        if t_ns >= ts[-1]:
+            return _head_pose(self._p[-1], self._q[-1])
+        i = _bisect(ts, t_ns)           # ts[i-1] <= t < ts[i]
+        u = (t_ns - ts[i - 1]) / (ts[i] - ts[i - 1])
+        a, b = self._p[i - 1], self._p[i]
+        return _head_pose(tuple((1.0 - u) * a[k] + u * b[k] for k in range(3)),
+                          _slerp(self._q[i - 1], self._q[i], u))
+
+
+def _head_pose(p, q) -> HeadPose:
+    """A HeadPose of position ``p`` and unit quaternion ``q`` (tuples of floats)."""
+    x, y, z, w = q
+    rot = np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+                    [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+                    [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
+    return HeadPose(np.array(p), np.array(q), rot)
+
+
+def _dot(a, b) -> float:
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2] + a[3] * b[3]
+
+
+def _slerp(a, b, u):
+    """:func:`~hair_tracking.core.transforms.slerp` of two unit quaternions (tuples) on Python
+    floats, shortest arc: the head track samples one pose a substep."""
+    d = _dot(a, b)
+    if d < 0.0:
+        b, d = tuple(-c for c in b), -d
+    if d > 0.9995:
+        q = tuple(a[k] + u * (b[k] - a[k]) for k in range(4))
+        n = math.hypot(*q)
+        return tuple(c / n for c in q)
+    theta = math.acos(min(1.0, d))
+    s = math.sin(theta)
+    wa, wb = math.sin((1 - u) * theta) / s, math.sin(u * theta) / s
+    return tuple(wa * a[k] + wb * b[k] for k in range(4))
 
 
 def _bisect(ts, t):
@@ -139,7 +165,9 @@ def _bisect(ts, t):
     return hi
 
 
-def _invalid_reason(t_ns, position, quaternion) -> str:
+def _parse_pose(t_ns, position, quaternion):
+    """``(position, unit quaternion)`` as tuples of floats, or why the pose is rejected (a
+    string)."""
     try:
         p = np.asarray(position, dtype=np.float64)
         q = np.asarray(quaternion, dtype=np.float64)
@@ -149,11 +177,12 @@ def _invalid_reason(t_ns, position, quaternion) -> str:
         return f'expected 3 position and 4 quaternion values, got {p.size} and {q.size}'
     if isinstance(t_ns, float) and not math.isfinite(t_ns):
         return f'timestamp is {t_ns}'
-    if not np.all(np.isfinite(p)):
-        return f'position has non-finite values {p.tolist()}'
-    if not np.all(np.isfinite(q)):
-        return f'quaternion has non-finite values {q.tolist()}'
-    n = float(np.linalg.norm(q))
+    p, q = p.reshape(3).tolist(), q.reshape(4).tolist()
+    if not all(map(math.isfinite, p)):
+        return f'position has non-finite values {p}'
+    if not all(map(math.isfinite, q)):
+        return f'quaternion has non-finite values {q}'
+    n = math.hypot(*q)
     if n < 1e-6:
         return f'quaternion has (near) zero norm {n:.3g}'
-    return ''
+    return tuple(p), tuple(c / n for c in q)
