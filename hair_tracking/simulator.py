@@ -299,23 +299,24 @@ class HairSimulator:
         substep: :meth:`~hair_tracking.guides.solver.GuideSolver.advance`'s ``stop``), which
         :meth:`_substep` splits; so exactly as if they were taken one by one."""
         prev, k = head_prev, 0
+        every = self.ghost_tracker is not None and self._every_substep()
+        rigid = [self._rigid(a, b) for a, b in zip([head_prev] + heads[:-1], heads)]
         while k < len(heads):
-            if (self.ghost_tracker is not None and self._every_substep()) or \
-                    self._split_count(dt, prev, heads[k], self._last_speed) > 1:
-                self._substep(dt, prev, heads[k])
+            if every or self._split_count(dt, rigid[k], self._last_speed) > 1:
+                self._substep(dt, prev, heads[k], rigid[k])
                 prev, k = heads[k], k + 1
                 continue
-            rest = heads[k:]
             limit, floor = self._split_limit(dt)
-            rigid = [self._rigid(a, b) for a, b in zip([prev] + rest[:-1], rest)]
             steps = self.guide_solver.advance(
-                dt, prev, rest, measure=True,
-                stop=(rigid, limit if floor > 1 else 0.0, self._gravity_norm * dt * dt))
+                dt, prev, heads[k:], measure=True,
+                stop=(rigid[k:], limit if floor > 1 else 0.0, self._gravity_norm * dt * dt))
             self._last_speed = math.sqrt(steps[-1]) / dt
-            prev, k = rest[len(steps) - 1], k + len(steps)
+            prev, k = heads[k + len(steps) - 1], k + len(steps)
 
-    def _substep(self, dt: float, head_prev: HeadPose, head: HeadPose) -> None:
-        parts = self._split_count(dt, head_prev, head, self._last_speed)
+    def _substep(self, dt: float, head_prev: HeadPose, head: HeadPose, rigid: float) -> None:
+        """One substep, split into parts when the head's motion (``rigid``, :meth:`_rigid`) or
+        the hair's speed would carry a node past the split limit."""
+        parts = self._split_count(dt, rigid, self._last_speed)
         if parts == 1:
             self._step(dt, head_prev, (head,))
             return
@@ -329,13 +330,13 @@ class HairSimulator:
                                   quat_to_matrix(q)))
         self._step(dt / parts, head_prev, heads + [head])
 
-    def _split_count(self, dt: float, head_prev: HeadPose, head: HeadPose,
-                     speed: float) -> int:
+    def _split_count(self, dt: float, rigid: float, speed: float) -> int:
         """Parts to split a substep into so that no node moves farther than the split limit,
-        with ``speed`` [m/s] the nodes' largest speed (the rule
+        with ``rigid`` [m] how far the head's motion carries the farthest node (:meth:`_rigid`)
+        and ``speed`` [m/s] the nodes' largest speed (the rule
         :func:`~hair_tracking.guides.integrate.split_due` applies inside a run)."""
         limit, floor = self._split_limit(dt)
-        motion = max(self._rigid(head_prev, head), speed * dt) + self._gravity_norm * dt * dt
+        motion = max(rigid, speed * dt) + self._gravity_norm * dt * dt
         if not motion > limit:          # also False for NaN: never split on bad numbers
             return 1
         return int(min(MAX_SPLIT, floor, math.ceil(motion / limit)))
@@ -380,7 +381,10 @@ class HairSimulator:
             and not self._stateless(self.scene)
 
     def _begin_ghosts(self) -> None:
-        if self.ghost_tracker is not None and not self._every_substep():
+        """Keep the guides where the paper's once-per-call tracker starts from (its ``x_old``;
+        the stateless trackers read only the guides' new positions)."""
+        if self.ghost_tracker is not None and not self._every_substep() and \
+                not self._stateless(self.scene):
             np.copyto(self._ghost_guide_x, self.guides.x)
 
     def _track_ghosts(self, dt: float, substeps: int) -> None:

@@ -303,9 +303,9 @@ def test_split_never_below_min_dt():
     from hair_tracking.core.model import HeadPose
     far = HeadPose(np.array([0.5, 0.0, 0.0]), q, quat_to_matrix(q))
     dt = sim.scene.solver.dt
-    n = sim._split_count(dt, head0, far, 0.0)
+    n = sim._split_count(dt, sim._rigid(head0, far), 0.0)
     assert n == int(dt / simulator.MIN_SPLIT_DT + 1e-9) and n > 1
-    assert sim._split_count(0.1, head0, far, 0.0) == simulator.MAX_SPLIT
+    assert sim._split_count(0.1, sim._rigid(head0, far), 0.0) == simulator.MAX_SPLIT
 
 
 @pytest.mark.parametrize('mode,stretch', [('paper', 1e-9), ('blend', 1e-7), ('turn', 1e-6)])
@@ -339,7 +339,7 @@ def _one_by_one(sim):
     """``sim`` taking every substep in a call of its own (no runs)."""
     def run(dt, head_prev, heads):
         for head in heads:
-            sim._substep(dt, head_prev, head)
+            sim._substep(dt, head_prev, head, sim._rigid(head_prev, head))
             head_prev = head
     sim._run = run
     return sim

@@ -122,28 +122,37 @@ def load_settings(scene: Optional[str] = None, params_file: Optional[str] = None
 # ================================================================ encoding
 class FrameEncoder:
     """Serialized output messages of one frame, exactly as the node builds them (CDR bytes):
-    per-strand colours from :func:`hair_tracking.core.strand_colors.strand_colors`,
-    ``line_list``/``line_strips`` markers with a DELETEALL in front of the first array (and
-    whenever the strand count
-    changes), marker lifetime of ``marker_lifetime_periods`` publishing periods."""
+    per-strand colours from :func:`hair_tracking.core.strand_colors.strand_colors`, clouds
+    rewritten in place in a buffer kept per namespace (the node's
+    :class:`msg_adapters.pointcloud.CloudBuffer`, the coordinates written straight from the
+    simulator's state), ``line_list``/``line_strips`` markers with a DELETEALL in front of the
+    first array (and whenever the strand count changes), marker lifetime of
+    ``marker_lifetime_periods`` publishing periods."""
 
     def __init__(self, settings: Settings):
         self.settings = settings
         from msg_adapters.pointcloud import pack_rgb_u32
         self._colors = StrandColorCache(pack_rgb_u32)
         self._shapes: Dict[str, tuple] = {}
+        self._clouds: Dict[str, object] = {}
         self.lifetime_ns = int(round(settings.marker_lifetime * 1e9))
 
     def colors(self, ns: str, n: int, rgba) -> np.ndarray:
         """(n,) uint32 packed per-strand colours of the cloud (cached)."""
         return self._colors.get(ns, n, rgba)
 
-    def points(self, strands, frame_id, stamp_ns, ns='hair', rgba=None) -> bytes:
-        from msg_adapters.pointcloud import strands_to_pointcloud2_cdr
-        rgba = rgba or self.settings.marker_color
-        return strands_to_pointcloud2_cdr(
-            strands, frame_id=frame_id, stamp_ns=stamp_ns,
-            packed_rgb=self.colors(ns, strands.shape[0], rgba))
+    def cloud(self, n_strands, n_points, write_xyz, frame_id, stamp_ns, ns='hair',
+              rgba=None) -> np.ndarray:
+        """The cloud whose coordinates ``write_xyz(words, stride)`` writes (as
+        :meth:`hair_tracking.simulator.HairSimulator.record_writer`'s), in the buffer of
+        ``ns``: valid until the next cloud of ``ns``."""
+        from msg_adapters.pointcloud import CloudBuffer
+        buf = self._clouds.get(ns)
+        if buf is None:
+            buf = self._clouds[ns] = CloudBuffer()
+        return buf.encode(n_strands, n_points, write_xyz, frame_id=frame_id, stamp_ns=stamp_ns,
+                          packed_rgb=self.colors(ns, n_strands,
+                                                 rgba or self.settings.marker_color))
 
     def markers(self, strands, frame_id, stamp_ns, ns='hair', rgba=None) -> bytes:
         from msg_adapters.marker_cdr import strands_to_marker_array_cdr
@@ -365,11 +374,12 @@ def run_bag(input_path: str, output_path: str, settings: Settings,
         raise BagError('the output frame is empty (set fixed_frame / head_frame)', EXIT_CONTENT)
 
     t_setup = time.perf_counter()
-    warm_up(scene)      # compile or load every kernel here, not inside the timed loop
+    tiny = warm_up(scene)       # compile or load every kernel here, not inside the timed loop
+    if opt.points:              # and the clouds' point writers, on the tiny copy's hair
+        for guides in (False, True):
+            FrameEncoder(settings).cloud(*tiny.record_writer(guides, head_out), 'warmup', 1)
     sim = HairSimulator(scene)
     enc = FrameEncoder(settings)
-    if opt.points:      # load (or compile) the cloud's compiled point writer outside the loop
-        enc.points(np.zeros((1, 2, 3)), 'warmup', 1)
     if after_setup is not None:
         after_setup()
     summary.setup_s = time.perf_counter() - t_setup
@@ -423,14 +433,17 @@ def run_bag(input_path: str, output_path: str, settings: Settings,
                                    f'(pose {i}); no output written', EXIT_FAILURE)
                 stamp = frame.t_ns              # the time the hair state is at (node: same)
                 if opt.points:
-                    writer.write(POINTS_TOPIC, log_t, enc.points(strands, out_frame, stamp))
+                    writer.write(POINTS_TOPIC, log_t,
+                                 enc.cloud(*sim.record_writer(False, head_out), out_frame,
+                                           stamp))
                 if opt.markers:
                     writer.write(MARKERS_TOPIC, log_t, enc.markers(strands, out_frame, stamp))
                 if guides:
                     g, gc = frame.guides, settings.guide_color
                     if opt.points:
                         writer.write(GUIDE_POINTS_TOPIC, log_t,
-                                     enc.points(g, out_frame, stamp, 'guides', gc))
+                                     enc.cloud(*sim.record_writer(True, head_out), out_frame,
+                                               stamp, 'guides', gc))
                     if opt.markers:
                         writer.write(GUIDE_MARKERS_TOPIC, log_t,
                                      enc.markers(g, out_frame, stamp, 'guides', gc))
