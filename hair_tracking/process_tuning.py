@@ -7,7 +7,9 @@ command line (:func:`add_arguments`, :func:`apply`):
 * ``--malloc-retain-mb`` (:func:`retain_freed_memory`): glibc keeps freed memory mapped for reuse,
   so the large message buffers a cloud is copied through are not faulted in page by page again;
 * ``--omp-wait-policy`` (:func:`set_omp_wait_policy`): numba's idle OpenMP workers sleep instead of
-  spinning, leaving the cores to the executor and DDS threads;
+  spinning, leaving the cores to the executor and DDS threads (``passive``, the default), or
+  spin between parallel regions (``active``, the default of ``hair_sim_bag run``, which has no
+  such threads);
 * ``--no-gc-freeze`` (:func:`freeze_heap`, on by default): the objects made at start-up are taken
   out of the cyclic garbage collector's reach once the process is set up.
 """
@@ -101,10 +103,11 @@ def _openmp_started() -> bool:
 def set_omp_wait_policy(policy: str) -> str:
     """How numba's idle OpenMP worker threads wait for the next parallel region.
 
-    libgomp's default (``active`` for a while) spins: after each parallel region the worker
-    burns its core until the next one or a spin limit, CPU time a node needs for its executor
-    and DDS threads.  ``passive`` sets ``OMP_WAIT_POLICY=PASSIVE`` before the OpenMP layer
-    starts: workers sleep at once.
+    libgomp's default (the variable unset) spins a while after each parallel region, then
+    sleeps: CPU time a node needs for its executor and DDS threads.  ``passive`` sets
+    ``OMP_WAIT_POLICY=PASSIVE`` before the OpenMP layer starts: workers sleep at once, and each
+    parallel region pays a wake-up.  ``active`` sets ``ACTIVE``: workers spin between regions
+    (for an executable whose own loop is its only other busy thread).
 
     Only takes effect before numba launches its threads (call it before ``set_num_threads``
     or any parallel kernel) and only when the environment does not set the variable already
@@ -138,9 +141,9 @@ def add_arguments(parser, omp_wait_policy: str = 'passive') -> None:
                         'GLIBC_TUNABLES wins (default: %(default)s)')
     g.add_argument('--omp-wait-policy', choices=OMP_WAIT_POLICIES, default=omp_wait_policy,
                    help='how idle OpenMP worker threads of the numba kernels wait: passive '
-                        'sleeps, active spins first (libgomp\'s default), environment leaves '
-                        'OMP_WAIT_POLICY alone; an OMP_WAIT_POLICY in the environment wins '
-                        '(default: %(default)s)')
+                        'sleeps, active spins between parallel regions, environment leaves '
+                        'OMP_WAIT_POLICY alone (unset: libgomp spins a while, then sleeps); '
+                        'an OMP_WAIT_POLICY in the environment wins (default: %(default)s)')
     g.add_argument('--no-gc-freeze', dest='gc_freeze', action='store_false',
                    help='do not freeze the objects made at start-up out of the garbage '
                         "collector's reach once set up (default: freeze)")

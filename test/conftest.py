@@ -22,3 +22,16 @@ def one_numba_thread():
     numba.set_num_threads(1)
     yield
     numba.set_num_threads(before)
+
+
+@pytest.fixture(autouse=True)
+def _keep_omp_wait_policy():
+    """A test that runs an executable's main() in this process (``hair_sim_bag run``) sets
+    OMP_WAIT_POLICY as that executable would; the processes later tests start must not inherit
+    it."""
+    before = os.environ.get('OMP_WAIT_POLICY')
+    yield
+    if before is None:
+        os.environ.pop('OMP_WAIT_POLICY', None)
+    else:
+        os.environ['OMP_WAIT_POLICY'] = before

@@ -33,7 +33,6 @@ from hair_tracking.bags.io import BagError, EXIT_CONTENT, EXIT_FAILURE, EXIT_USA
 from hair_tracking.core.params import make_settings, NODE_NAME, ParamError, Settings
 from hair_tracking.core.scene import Scene, SceneError
 from hair_tracking.core.strand_colors import StrandColorCache
-from msg_adapters.cdr import CdrWriter, ENCAPSULATION_LE
 
 POINTS_TOPIC = '/hair/points'
 MARKERS_TOPIC = '/hair/markers'
@@ -184,25 +183,26 @@ def pose_stamped_bytes(t_ns, position, quaternion, frame_id) -> bytes:
     """A serialized geometry_msgs/PoseStamped (byte-identical to the rosbags serializer,
     tested; no message objects are built): one ``struct`` pack of a layout made once per frame
     name (:func:`_pose_stamped_layout`)."""
-    layout, frame = _pose_stamped_layout(frame_id)
+    layout, head, frame = _pose_stamped_layout(frame_id)
     sec, nanosec = bag_io.stamp_parts(t_ns)
     px, py, pz = position
     qx, qy, qz, qw = quaternion
-    return layout.pack(ENCAPSULATION_LE, sec, nanosec, frame, float(px), float(py), float(pz),
-                       float(qx), float(qy), float(qz), float(qw))
+    return layout.pack(head, sec, nanosec, frame, float(px), float(py), float(pz), float(qx),
+                       float(qy), float(qz), float(qw))
 
 
 @functools.lru_cache(maxsize=16)
 def _pose_stamped_layout(frame_id: str):
-    """``(struct, frame bytes)`` of a PoseStamped in ``frame_id``: encapsulation, stamp, the
-    frame name as a CDR string with the padding that aligns the seven float64 after it (laid
-    out by :class:`msg_adapters.cdr.CdrWriter`)."""
+    """``(struct, encapsulation, frame bytes)`` of a PoseStamped in ``frame_id``: the frame
+    name as a CDR string with the padding that aligns the seven float64 after it (laid out by
+    :class:`msg_adapters.cdr.CdrWriter`)."""
+    from msg_adapters.cdr import CdrWriter, ENCAPSULATION_LE
     w = CdrWriter()
     w.time(0, 0)
     w.string(frame_id)
     w.align(8)
     frame = w.template()[8:]
-    return struct.Struct(f'<4siI{len(frame)}s7d'), frame
+    return struct.Struct(f'<4siI{len(frame)}s7d'), ENCAPSULATION_LE, frame
 
 
 # ================================================================ schedule

@@ -22,6 +22,7 @@ import numpy as np
 
 from hair_tracking.core.model import HeadPose
 from hair_tracking.core.scene import HeadTrackSpec
+from hair_tracking.core.transforms import matrix_of_quat
 
 
 class PoseResult(enum.Enum):
@@ -44,8 +45,8 @@ class HeadTrack:
     def __init__(self, spec: HeadTrackSpec = HeadTrackSpec(), history: int = 256):
         self.spec = spec
         self._t = deque(maxlen=history)      # int ns
-        self._p = deque(maxlen=history)      # (3,)
-        self._q = deque(maxlen=history)      # (4,) unit, sign-continuous
+        self._p = deque(maxlen=history)      # (x, y, z) floats
+        self._q = deque(maxlen=history)      # (x, y, z, w) floats, unit, sign-continuous
         self.counters = {'accepted': 0, 'rejected': 0, 'reset_backwards': 0,
                          'reset_teleport': 0}
         self.last_rejection = ''
@@ -127,11 +128,7 @@ class HeadTrack:
 
 def _head_pose(p, q) -> HeadPose:
     """A HeadPose of position ``p`` and unit quaternion ``q`` (tuples of floats)."""
-    x, y, z, w = q
-    rot = np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-                    [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-                    [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
-    return HeadPose(np.array(p), np.array(q), rot)
+    return HeadPose(np.array(p), np.array(q), matrix_of_quat(*q))
 
 
 def _dot(a, b) -> float:
