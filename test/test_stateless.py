@@ -81,3 +81,16 @@ def test_the_simulator_runs_it_once_per_frame_at_rest_lengths_outside_the_head(m
     assert sim.penetration() < 1e-6            # on the surface to rounding
     np.testing.assert_allclose(f.ghosts[:, :2], f.head.to_world(sim.ghosts.rest[:, :2]),
                                atol=F32)       # roots pinned
+
+
+@pytest.mark.parametrize('mode', sorted(TRACKERS))
+def test_the_first_pose_places_the_ghosts_before_any_step(mode):
+    """Without settling the first pose carries the hair rigidly and no step follows: what is
+    read (positions, frame, cloud) is that carried rest shape, not the one at build time."""
+    sim = HairSimulator(scene(mode))
+    h = head(angle=0.8, position=(0.3, 0.1, 1.2))
+    sim.push_pose(1000, h.position, h.quaternion)
+    sim.advance_to(1000)
+    want = h.to_world(sim.ghosts.rest)
+    np.testing.assert_allclose(sim.ghost_tracker.positions(), want, rtol=0, atol=F32)
+    np.testing.assert_allclose(sim.frame(copy=False).strands, want, rtol=0, atol=F32)

@@ -165,6 +165,7 @@ class StatelessTracker:
         self._pending = False         # a step not yet evaluated (see step and release)
         self._x32 = ghosts.x.astype(np.float32)
         self._in_x32 = True           # whether _x32 (else ghosts._x) holds the positions
+        ghosts.hold(self)             # so a write to ghosts.x before the first step is seen
         self.collide = bool(scene.tracking.collide and collider is not None)
         if self.collide:
             self._center, self._axes = collider_axes(ghosts, collider)
