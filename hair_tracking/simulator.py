@@ -301,12 +301,12 @@ class HairSimulator:
         prev, k = head_prev, 0
         every = self.ghost_tracker is not None and self._every_substep()
         rigid = [self._rigid(a, b) for a, b in zip([head_prev] + heads[:-1], heads)]
+        limit, floor = self._split_limit(dt)
         while k < len(heads):
             if every or self._split_count(dt, rigid[k], self._last_speed) > 1:
                 self._substep(dt, prev, heads[k], rigid[k])
                 prev, k = heads[k], k + 1
                 continue
-            limit, floor = self._split_limit(dt)
             steps = self.guide_solver.advance(
                 dt, prev, heads[k:], measure=True,
                 stop=(rigid[k:], limit if floor > 1 else 0.0, self._gravity_norm * dt * dt))

@@ -264,8 +264,8 @@ class GuideSolver:
             clamped = kernel(self._model, state, motion, params, self._corr)
         contacts = 0
         if not fused:
-            ref = self._x_ref if self._x_ref is not None else self._x_old
-            contacts = self.collider.project(st.x, ref, st.inv_mass, rot, pos, parallel)
+            contacts = self.collider.project(st.x, self._friction_ref(), st.inv_mass, rot, pos,
+                                             parallel)
             finalize = integrate.finalize if parallel else integrate.finalize_serial
             clamped = finalize(st.x, st.v, self._x_old, st.inv_mass, self._x_old, dt,
                                self._max_disp, 0.0)
@@ -284,7 +284,12 @@ class GuideSolver:
         c = self.collider
         collider = (c.center, c.radii, c.margin, c.friction, c.refine) if c is not None else \
             NO_COLLIDER
-        return collider, self._x_ref if self._x_ref is not None else self._x_old
+        return collider, self._friction_ref()
+
+    def _friction_ref(self) -> np.ndarray:
+        """The collider's friction reference: the start-of-substep positions carried with the
+        head (``_x_ref``) when there is friction, else ``x_old`` (not read)."""
+        return self._x_ref if self._x_ref is not None else self._x_old
 
     def _count(self, clamped, contacts) -> None:
         c = self._counters
