@@ -22,7 +22,7 @@ import numpy as np
 
 from hair_tracking.core.model import HeadPose
 from hair_tracking.core.scene import HeadTrackSpec
-from hair_tracking.core.transforms import matrix_of_quat
+from hair_tracking.core.transforms import matrix_of_quat, quat_dot, slerp_floats
 
 
 class PoseResult(enum.Enum):
@@ -63,7 +63,7 @@ class HeadTrack:
         p, q = pose
         result = PoseResult.ACCEPTED
         if self._t:
-            d = _dot(q, self._q[-1])
+            d = quat_dot(q, self._q[-1])
             if d < 0.0:
                 q, d = tuple(-c for c in q), -d
             t_last = self._t[-1]
@@ -123,32 +123,12 @@ class HeadTrack:
         u = (t_ns - ts[i - 1]) / (ts[i] - ts[i - 1])
         a, b = self._p[i - 1], self._p[i]
         return _head_pose(tuple((1.0 - u) * a[k] + u * b[k] for k in range(3)),
-                          _slerp(self._q[i - 1], self._q[i], u))
+                          slerp_floats(self._q[i - 1], self._q[i], u))
 
 
 def _head_pose(p, q) -> HeadPose:
     """A HeadPose of position ``p`` and unit quaternion ``q`` (tuples of floats)."""
     return HeadPose(np.array(p), np.array(q), matrix_of_quat(*q))
-
-
-def _dot(a, b) -> float:
-    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2] + a[3] * b[3]
-
-
-def _slerp(a, b, u):
-    """:func:`~hair_tracking.core.transforms.slerp` of two unit quaternions (tuples) on Python
-    floats, shortest arc: the head track samples one pose a substep."""
-    d = _dot(a, b)
-    if d < 0.0:
-        b, d = tuple(-c for c in b), -d
-    if d > 0.9995:
-        q = tuple(a[k] + u * (b[k] - a[k]) for k in range(4))
-        n = math.hypot(*q)
-        return tuple(c / n for c in q)
-    theta = math.acos(min(1.0, d))
-    s = math.sin(theta)
-    wa, wb = math.sin((1 - u) * theta) / s, math.sin(u * theta) / s
-    return tuple(wa * a[k] + wb * b[k] for k in range(4))
 
 
 def _bisect(ts, t):

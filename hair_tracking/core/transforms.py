@@ -3,6 +3,8 @@
 A head pose maps head-frame points to the world (the fixed frame of the pose stream):
 ``p_world = position + R(q) @ p_head``.
 """
+import math
+
 import numpy as np
 
 
@@ -102,6 +104,27 @@ def slerp(a, b, u):
     theta = np.arccos(d)
     s = np.sin(theta)
     return (np.sin((1 - u) * theta) * a + np.sin(u * theta) * b) / s
+
+
+def quat_dot(a, b) -> float:
+    """Dot product of two quaternions given as sequences of four floats."""
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2] + a[3] * b[3]
+
+
+def slerp_floats(a, b, u):
+    """:func:`slerp` of two unit quaternions given as sequences of four floats, on Python floats
+    (a tuple; the head track samples one pose a substep); shortest arc."""
+    d = quat_dot(a, b)
+    if d < 0.0:
+        b, d = tuple(-c for c in b), -d
+    if d > 0.9995:
+        q = tuple(a[k] + u * (b[k] - a[k]) for k in range(4))
+        n = math.hypot(*q)
+        return tuple(c / n for c in q)
+    theta = math.acos(min(1.0, d))
+    s = math.sin(theta)
+    wa, wb = math.sin((1 - u) * theta) / s, math.sin(u * theta) / s
+    return tuple(wa * a[k] + wb * b[k] for k in range(4))
 
 
 def rotation_between(a, b):
