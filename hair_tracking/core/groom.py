@@ -7,7 +7,11 @@ front_max_polar) * max(0, cos phi)`` with ``phi`` the azimuth from +x (forward, 
 * Guide roots are spread evenly: a spherical Fibonacci lattice (Gonzalez 2010, "Measurement of
   areas on a sphere using Fibonacci and latitude-longitude lattices") restricted to the cap, evenly
   sub-sampled to the requested count, with a small seeded jitter.
-* Ghost roots are uniform random on the cap (seeded), ``guides * ghosts_per_guide`` of them.
+* Ghost roots are uniform random on the cap (seeded), ``guides * ghosts_per_guide`` of them,
+  stored in the order of a Morton (Z-order) curve through their positions (:func:`scalp_order`),
+  so strands near each other on the scalp are near each other in memory: a ghost tracker that
+  reads each strand's nearby guides then finds them in cache (the blend tracker at 100 k strands
+  runs about 1.35x faster than on the random order, ``scripts/bench_blend.py``).
 * Each strand leaves the scalp along the surface normal (the first segment fixes the root
   direction) and bends toward -z (head frame) by ``droop``; nodes that would fall inside the scalp
   are pushed out radially.  Lengths vary uniformly by ``length_variation``.
@@ -31,8 +35,28 @@ def make_groom(spec: GroomSpec) -> Groom:
     s_dirs = _random_cap(spec.guides * spec.ghosts_per_guide, spec.scalp, rng)
     g_len = _lengths(spec, spec.guides, rng)
     s_len = _lengths(spec, len(s_dirs), rng)
+    ghosts = strand_shapes(s_dirs, s_len, spec.ghost_nodes, spec)
     return Groom(guide_rest=strand_shapes(g_dirs, g_len, spec.guide_nodes, spec),
-                 ghost_rest=strand_shapes(s_dirs, s_len, spec.ghost_nodes, spec))
+                 ghost_rest=ghosts[scalp_order(ghosts[:, 0])])
+
+
+def scalp_order(points: np.ndarray, bits: int = 21) -> np.ndarray:
+    """The permutation that sorts ``points`` (S, 3) along a Morton (Z-order) curve: coordinates
+    quantised to ``bits`` bits over their bounding box, the bits interleaved x y z, codes sorted
+    (stable).  G. M. Morton, "A computer oriented geodetic data base and a new technique in file
+    sequencing", IBM, 1966."""
+    p = np.asarray(points, dtype=np.float64)
+    if p.shape[0] == 0:
+        return np.zeros(0, dtype=np.int64)
+    lo = p.min(axis=0)
+    span = np.maximum(p.max(axis=0) - lo, 1e-300)
+    q = np.floor((p - lo) / span * ((1 << bits) - 1)).astype(np.uint64)
+    code = np.zeros(p.shape[0], dtype=np.uint64)
+    for b in range(bits):
+        for axis in range(3):
+            bit = (q[:, axis] >> np.uint64(b)) & np.uint64(1)
+            code |= bit << np.uint64(3 * b + axis)
+    return np.argsort(code, kind='stable')
 
 
 def _lengths(spec, n, rng):
