@@ -86,11 +86,13 @@ def _kernel(sim, tr, h, gx, restore=True, collide=True):
     rot, pos = np.ascontiguousarray(h.rotation), np.ascontiguousarray(h.position)
     gcol = np.empty((gx.shape[0], 3, tr.seg.shape[0]))
     stateless.guide_columns(gx, tr.seg, tr.t, gcol)
-    out = np.empty_like(sim.ghosts.rest)
+    out = np.empty_like(sim.ghosts.rest)        # float64 records of stride 3: x as computed
     axes = tr._axes if collide else np.ones(3)
-    contacts = blend.blend_strands(out, tr._offset32, tr._roots, tr._len32,
-                                   tr._guide_pad, tr._weight_pad, gcol, rot, pos, restore,
-                                   collide, tr._center, axes, tr.is_guide, tr._guide_len)
+    contacts, finite = blend.blend_strands(
+        out.reshape(-1), 3, np.eye(3), np.zeros(3), False, tr._offset32, tr._roots, tr._len32,
+        tr._guide_pad, tr._weight_pad, gcol, rot, pos, restore, collide, tr._center, axes,
+        tr.is_guide, tr._guide_len)
+    assert finite == bool(np.isfinite(out).all())
     return out, contacts
 
 

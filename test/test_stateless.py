@@ -94,3 +94,58 @@ def test_the_first_pose_places_the_ghosts_before_any_step(mode):
     want = h.to_world(sim.ghosts.rest)
     np.testing.assert_allclose(sim.ghost_tracker.positions(), want, rtol=0, atol=F32)
     np.testing.assert_allclose(sim.frame(copy=False).strands, want, rtol=0, atol=F32)
+
+
+def _moved(mode, **changes):
+    """A simulator of ``mode`` after a few head poses (guides bent, nodes pressed on the head),
+    its last step not read yet."""
+    sim = HairSimulator(scene(mode, groom__guides=8, groom__ghosts_per_guide=8, **changes))
+    t0 = 1_000_000_000
+    for k in range(20):
+        q = quat_from_axis_angle(np.array([0.0, 0.3, 1.0]) / np.hypot(0.3, 1.0),
+                                 0.6 * np.sin(0.4 * k))
+        sim.push_pose(t0 + k * 16_666_667, [0.03 * np.sin(0.3 * k), 0.0, 0.0], q)
+        sim.advance_to(t0 + k * 16_666_667)
+    return sim
+
+
+def _records(sim, head_frame, stride=5):
+    """The ghosts' point records as the node writes them (fill words kept), and is_dense."""
+    n_strands, n_points, write = sim.record_writer(False, head_frame)
+    words = np.full(n_strands * n_points * stride, 7.0, dtype=np.float32)
+    dense = write(words, stride)
+    return words.reshape(-1, stride), dense
+
+
+@pytest.mark.parametrize('head_frame', [False, True])
+@pytest.mark.parametrize('mode', sorted(TRACKERS))
+def test_a_cloud_written_before_any_read_is_the_one_written_from_the_positions(mode, head_frame):
+    """The kernel writes the records itself when nothing has read the step yet: the points are
+    those written from the placed positions (in the world frame bit for bit), and the positions
+    are placed from the same step when read afterwards."""
+    fused, after = _moved(mode), _moved(mode)
+    assert fused.ghost_tracker._pending
+    words, dense = _records(fused, head_frame)
+    assert dense and fused.ghost_tracker._pending         # written without placing _x32
+    after.ghost_tracker.positions()
+    assert not after.ghost_tracker._pending
+    want, want_dense = _records(after, head_frame)
+    assert want_dense
+    if head_frame:      # carried to the head frame before its one rounding to float32
+        np.testing.assert_allclose(words[:, :3], want[:, :3], rtol=0, atol=F32)
+    else:
+        np.testing.assert_array_equal(words[:, :3], want[:, :3])
+    assert (words[:, 3:] == 7.0).all()                   # the other words untouched
+    np.testing.assert_array_equal(fused.ghost_tracker.positions(),
+                                  after.ghost_tracker.positions())
+    assert fused.ghost_tracker.stats['contacts'] == after.ghost_tracker.stats['contacts'] > 0
+
+
+@pytest.mark.parametrize('mode', sorted(TRACKERS))
+def test_a_cloud_written_from_guides_that_are_not_finite_is_not_dense(mode):
+    sim = _moved(mode, tracking__collide=False)
+    sim.guides.x[3, 5:] = np.nan
+    sim.ghost_tracker.step(1 / 60, None, sim.head)
+    words, dense = _records(sim, False)
+    assert not dense and np.isnan(words[:, :3]).any()
+    assert np.isfinite(words[:, :3]).any()

@@ -8,11 +8,11 @@ transform ``y = rot (x - origin)`` (world -> head frame: ``rot`` = R^T, ``origin
 position, as :meth:`hair_tracking.core.model.HeadPose.to_head`), and report whether every
 coordinate written is finite (a cloud's ``is_dense``).
 
-:func:`blocks_to_records` reads the ghost tracker's own layout (block by block,
-[node][axis][ghost], see :mod:`hair_tracking.ghosts.kernels`) directly: publishing a frame
-used to write the positions back into ``(S, N, 3)`` float64 first (3.8 MB at 10 k ghosts x 16
-nodes) and read them again to encode them.  :func:`points_to_records` takes ``(S, N, 3)``
-arrays (the guides, or ghosts without a tracker).  No ROS here.
+:func:`blocks_to_records` reads the paper tracker's own layout (block by block,
+[node][axis][ghost], see :mod:`hair_tracking.ghosts.kernels`) directly, without a write-back
+into ``(S, N, 3)`` first; :func:`points_to_records` takes ``(S, N, 3)`` arrays (the guides, or
+ghosts placed already).  The stateless trackers' kernels write records themselves, point by
+point with :func:`put_point` (arguments checked by :func:`record_target`).  No ROS here.
 """
 import numpy as np
 from numba import njit, prange
@@ -24,9 +24,10 @@ _MAX32 = float(np.finfo(np.float32).max)
 
 
 @njit(cache=True, inline='always')
-def _put(words, w, x0, x1, x2, rot, origin, moved):
+def put_point(words, w, x0, x1, x2, rot, origin, moved):
     """Write one point (transformed if ``moved``) at word ``w``; 1 if a coordinate is not a
-    finite float32, else 0."""
+    finite float32, else 0.  Inlined into the kernels that write records, these and the ghost
+    trackers' (:meth:`hair_tracking.ghosts.stateless.StatelessTracker.write_records`)."""
     if moved:
         d0, d1, d2 = x0 - origin[0], x1 - origin[1], x2 - origin[2]
         y0 = rot[0, 0] * d0 + rot[0, 1] * d1 + rot[0, 2] * d2
@@ -51,7 +52,7 @@ def _blocks_to_records(words, stride, xb, order, block_rows, n_nodes, rot, origi
             w = order[k0 + kk] * n_nodes * stride
             i = base + kk
             for _ in range(n_nodes):
-                bad += _put(words, w, xb[i], xb[i + n], xb[i + 2 * n], rot, origin, moved)
+                bad += put_point(words, w, xb[i], xb[i + n], xb[i + 2 * n], rot, origin, moved)
                 w += stride
                 i += 3 * n
     return bad == 0
@@ -64,7 +65,7 @@ def _points_to_records(words, stride, x, n_strands, n_nodes, rot, origin, moved)
         w = s * n_nodes * stride
         i = s * n_nodes * 3
         for _ in range(n_nodes):
-            bad += _put(words, w, x[i], x[i + 1], x[i + 2], rot, origin, moved)
+            bad += put_point(words, w, x[i], x[i + 1], x[i + 2], rot, origin, moved)
             w += stride
             i += 3
     return bad == 0
@@ -90,6 +91,15 @@ def _transform(rot, origin):
     if rot.shape != (3, 3) or origin.shape != (3,):
         raise ValueError(f'rot must be (3, 3) and origin (3,), got {rot.shape} and {origin.shape}')
     return rot, origin, True
+
+
+def record_target(words: np.ndarray, stride: int, points: int, rot=None, origin=None):
+    """The checked arguments of a kernel that writes ``points`` records with
+    :func:`put_point`: ``(words, stride, rot, origin, moved)``, as :func:`points_to_records`
+    takes them."""
+    words = _check_words(words, int(stride), int(points))
+    rot, origin, moved = _transform(rot, origin)
+    return words, np.int64(stride), rot, origin, moved
 
 
 def points_to_records(words: np.ndarray, stride: int, x: np.ndarray, rot=None,

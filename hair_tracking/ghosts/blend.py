@@ -50,6 +50,7 @@ import numpy as np
 from numba import njit, prange
 
 from hair_tracking.core.model import HeadPose, StrandSet
+from hair_tracking.core.point_records import put_point
 from hair_tracking.ghosts.stateless import (StatelessTracker, at_fractions, ellipsoid_form,
                                             node_map, reference_contact, world_collider)
 
@@ -215,12 +216,15 @@ def _deform(blk, lane, offset, rot, guide, weight, gcol, s):
 
 
 @njit(cache=True, error_model='numpy')
-def _blend_blocks(x, offset, roots, rest_length, guide, weight, gcol, rot, pos,
-                  restore, collide, cw, quad, is_guide, guide_length, b0, b1):
+def _blend_blocks(words, stride, out_rot, out_origin, moved, offset, roots, rest_length, guide,
+                  weight, gcol, rot, pos, restore, collide, cw, quad, is_guide, guide_length,
+                  b0, b1):
     """Steps 2-3 for the blocks ``b0 .. b1 - 1`` of :data:`STRAND_BLOCK` strands; returns the
-    number of nodes that were inside the collider."""
-    n_strands, n_nodes = x.shape[0], x.shape[1]
+    number of nodes that were inside the collider and the number of points written that are
+    not finite."""
+    n_strands, n_nodes = offset.shape[0], offset.shape[2]
     contacts = 0
+    bad = 0
     r00, r01, r02 = rot[0, 0], rot[0, 1], rot[0, 2]
     r10, r11, r12 = rot[1, 0], rot[1, 1], rot[1, 2]
     r20, r21, r22 = rot[2, 0], rot[2, 1], rot[2, 2]
@@ -308,17 +312,22 @@ def _blend_blocks(x, offset, roots, rest_length, guide, weight, gcol, rot, pos,
         for lane in range(STRAND_BLOCK):
             s = s0 + lane
             if s < n_strands:
+                w = s * n_nodes * stride
                 for j in range(n_nodes):
-                    x[s, j, 0] = blk[j, 0, lane]
-                    x[s, j, 1] = blk[j, 1, lane]
-                    x[s, j, 2] = blk[j, 2, lane]
-    return contacts
+                    bad += put_point(words, w, blk[j, 0, lane], blk[j, 1, lane],
+                                     blk[j, 2, lane], out_rot, out_origin, moved)
+                    w += stride
+    return contacts, bad
 
 
 @njit(cache=True, parallel=True)
-def blend_strands(x, offset, roots, rest_length, guide, weight, gcol, rot, pos,
-                  restore, collide, center, axes, is_guide, guide_length):
-    """Kernel, steps 2-3: ``x`` (S, N, 3) world [m] receives every strand; ``offset`` (S, 3, N)
+def blend_strands(words, stride, out_rot, out_origin, moved, offset, roots, rest_length, guide,
+                  weight, gcol, rot, pos, restore, collide, center, axes, is_guide,
+                  guide_length):
+    """Kernel, steps 2-3: every strand's nodes written as float32 x y z into the records of
+    ``words`` (``stride`` words each, strand ``s``'s node ``j`` at record ``s * N + j``, world
+    [m], or ``out_rot (x - out_origin)`` when ``moved``; arguments as
+    :func:`~hair_tracking.core.point_records.record_target` makes them); ``offset`` (S, 3, N)
     float32 the rest offsets ``o`` (head frame), component-major; ``roots`` (S, 2, 3) the first
     two rest nodes in float64 (pinned exactly); ``rest_length`` (S, N-1) float32; ``guide`` (S,
     K) int32 and ``weight`` (S, K) float32 from :func:`blend_weights`, padded by
@@ -328,19 +337,24 @@ def blend_strands(x, offset, roots, rest_length, guide, weight, gcol, rot, pos,
     ``center`` (head frame). A strand that is guide ``is_guide[s] >= 0`` enters step 3 as that
     guide's ``gcol``, its segments held to ``guide_length`` (G, N-1) float64 within
     :data:`GUIDE_LENGTH_TOLERANCE` and left to the guide solver's contacts until the length
-    pass moves it. Returns the number of nodes that were inside the collider."""
-    n_strands = x.shape[0]
+    pass moves it. Returns the number of nodes that were inside the collider and whether every
+    coordinate written is finite."""
+    n_strands = offset.shape[0]
     geo = np.empty(9)                    # the collider in the world: centre, then Q
     world_collider(rot, pos, center, axes, geo)
     cw, quad = geo[:3], geo[3:]
     n_blocks = (n_strands + STRAND_BLOCK - 1) // STRAND_BLOCK
     n_chunks = min(n_blocks, CHUNKS)
     contacts = 0
+    bad = 0
     for c in prange(n_chunks):
-        contacts += _blend_blocks(x, offset, roots, rest_length, guide, weight, gcol,
-                                  rot, pos, restore, collide, cw, quad, is_guide, guide_length,
-                                  c * n_blocks // n_chunks, (c + 1) * n_blocks // n_chunks)
-    return contacts
+        inside, not_finite = _blend_blocks(
+            words, stride, out_rot, out_origin, moved, offset, roots, rest_length, guide,
+            weight, gcol, rot, pos, restore, collide, cw, quad, is_guide, guide_length,
+            c * n_blocks // n_chunks, (c + 1) * n_blocks // n_chunks)
+        contacts += inside
+        bad += not_finite
+    return contacts, bad == 0
 
 
 # ----------------------------------------------------------------------------- reference
@@ -422,9 +436,9 @@ class BlendTracker(StatelessTracker):
         self._len32 = np.ascontiguousarray(ghosts.rest_length, dtype=np.float32)
         self._guide_len = np.ascontiguousarray(guides.rest_length, dtype=np.float64)
 
-    def _place(self) -> int:
+    def _place(self, words, stride, rot, origin, moved) -> Tuple[int, bool]:
         """Steps 2-3 of the module docstring."""
         return blend_strands(
-            self._x32, self._offset32, self._roots, self._len32, self._guide_pad,
-            self._weight_pad, self._gcol, self._rot, self._pos, self.restore, self.collide,
-            self._center, self._axes, self.is_guide, self._guide_len)
+            words, stride, rot, origin, moved, self._offset32, self._roots, self._len32,
+            self._guide_pad, self._weight_pad, self._gcol, self._rot, self._pos, self.restore,
+            self.collide, self._center, self._axes, self.is_guide, self._guide_len)

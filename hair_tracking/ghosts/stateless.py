@@ -13,7 +13,7 @@ import numpy as np
 from numba import njit
 
 from hair_tracking.core.model import HeadPose, StrandSet
-from hair_tracking.core.point_records import points_to_records
+from hair_tracking.core.point_records import points_to_records, record_target
 from hair_tracking.guides.collision import outside_distance, world_center
 
 
@@ -146,9 +146,11 @@ class StatelessTracker:
     own (``ghosts.v`` stays zero).
 
     The ghost positions are placed in float32 (:meth:`positions`, world frame): the precision
-    of the point cloud they are published in, and half the bytes a frame writes and the cloud
-    reads.  ``ghosts.x`` (float64) receives them when it is read or assigned; what is assigned
-    there is taken back on the next read.
+    of the point cloud they are published in, and half the bytes of float64.  ``ghosts.x``
+    (float64) receives them when it is read or assigned; what is assigned there is taken back on
+    the next read.  An output that is written before anything reads the positions
+    (:meth:`write_records`: a point cloud) receives the ghosts straight from the kernel, without
+    the float32 copy in between; a later read places them again from the same step.
     """
 
     def __init__(self, ghosts: StrandSet, guides: StrandSet, guide_index, scene, collider=None):
@@ -162,8 +164,9 @@ class StatelessTracker:
         self.seg, self.t = node_map(ghosts.rest.shape[1], guides.rest.shape[1])
         self._gcol = np.empty((guides.count, 3, ghosts.rest.shape[1]))
         self._rot, self._pos = np.empty((3, 3)), np.empty(3)
-        self._pending = False         # a step not yet evaluated (see step and release)
+        self._pending = False         # a step not yet placed into _x32 (see step and release)
         self._x32 = ghosts.x.astype(np.float32)
+        self._x32_words = record_target(self._x32.reshape(-1), 3, self._x32.size // 3)
         self._in_x32 = True           # whether _x32 (else ghosts._x) holds the positions
         ghosts.hold(self)             # so a write to ghosts.x before the first step is seen
         self.collide = bool(scene.tracking.collide and collider is not None)
@@ -178,9 +181,9 @@ class StatelessTracker:
              substeps: int = 1) -> None:
         """Take the guides now (read at the ghosts' node fractions) and the head pose ``head``;
         every ghost is placed from them when its positions are next read (``ghosts.x``,
-        :meth:`positions`, :meth:`write_records`), so a step that no read follows costs this
-        copy only.  Nothing is integrated (``dt``, ``guide_x_old`` and ``substeps`` are accepted
-        for the simulator's interface and not needed)."""
+        :meth:`positions`) or written (:meth:`write_records`), so a step that no read follows
+        costs this copy only.  Nothing is integrated (``dt``, ``guide_x_old`` and
+        ``substeps`` are accepted for the simulator's interface and not needed)."""
         guide_columns(self.guides.x, self.seg, self.t, self._gcol)
         np.copyto(self._rot, head.rotation)
         np.copyto(self._pos, head.position)
@@ -201,13 +204,20 @@ class StatelessTracker:
         if not self._pending:
             return
         self._pending = False
-        self.stats['contacts'] = int(self._place())
-        self.stats['evaluations'] += 1
+        self._placed_into(*self._x32_words)
         self._in_x32 = True
 
-    def _place(self) -> int:
-        """Every ghost into ``_x32`` from ``_gcol``, ``_rot``, ``_pos``; returns the number of
-        head contacts."""
+    def _placed_into(self, words, stride, rot, origin, moved) -> bool:
+        contacts, finite = self._place(words, stride, rot, origin, moved)
+        self.stats['contacts'] = int(contacts)
+        self.stats['evaluations'] += 1
+        return bool(finite)
+
+    def _place(self, words, stride, rot, origin, moved) -> Tuple[int, bool]:
+        """Every ghost from ``_gcol``, ``_rot``, ``_pos`` as float32 x y z into the records of
+        ``words`` (the arguments of
+        :func:`~hair_tracking.core.point_records.record_target`); returns the number of head
+        contacts and whether every coordinate written is finite."""
         raise NotImplementedError
 
     def reset(self, head: HeadPose) -> None:
@@ -226,5 +236,10 @@ class StatelessTracker:
 
     def write_records(self, words, stride, rot=None, origin=None) -> bool:
         """float32 x y z of every ghost node into point records (as
-        :func:`~hair_tracking.core.point_records.points_to_records`)."""
+        :func:`~hair_tracking.core.point_records.points_to_records`).  After a step that nothing
+        has read yet the kernel writes the records itself, and the positions stay to be placed
+        when read."""
+        if self._pending:
+            s, n = self.ghosts.rest.shape[:2]
+            return self._placed_into(*record_target(words, stride, s * n, rot, origin))
         return points_to_records(words, stride, self.positions(), rot, origin)
