@@ -53,6 +53,7 @@ from hair_tracking.core.model import HeadPose, StrandSet
 from hair_tracking.core.point_records import put_point
 from hair_tracking.ghosts.stateless import (StatelessTracker, at_fractions, ellipsoid_form,
                                             node_map, reference_contact, world_collider)
+from hair_tracking.guides.integrate import FASTMATH
 
 #: Guides blended per ghost by default (Unreal's groom interpolation uses up to three).
 DEFAULT_GUIDES_PER_GHOST = 3
@@ -215,7 +216,7 @@ def _deform(blk, lane, offset, rot, guide, weight, gcol, s):
                 w2 * gcol[g2, 2, j]
 
 
-@njit(cache=True, error_model='numpy')
+@njit(cache=True, error_model='numpy', fastmath=FASTMATH)
 def _blend_blocks(words, stride, out_rot, out_origin, moved, offset, roots, rest_length, guide,
                   weight, gcol, rot, pos, restore, collide, cw, quad, is_guide, guide_length,
                   b0, b1):
@@ -320,7 +321,7 @@ def _blend_blocks(words, stride, out_rot, out_origin, moved, offset, roots, rest
     return contacts, bad
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, parallel=True, fastmath=FASTMATH)
 def blend_strands(words, stride, out_rot, out_origin, moved, offset, roots, rest_length, guide,
                   weight, gcol, rot, pos, restore, collide, center, axes, is_guide,
                   guide_length):
