@@ -89,7 +89,7 @@ def _kernel(sim, tr, h, gx, restore=True, collide=True):
     out = np.empty_like(sim.ghosts.rest)        # float64 records of stride 3: x as computed
     axes = tr._axes if collide else np.ones(3)
     contacts, finite = blend.blend_strands(
-        out.reshape(-1), 3, np.eye(3), np.zeros(3), False, tr._offset32, tr._roots, tr._len32,
+        out, np.eye(3), np.zeros(3), False, True, tr._offset32, tr._roots, tr._len32,
         tr._guide_pad, tr._weight_pad, gcol, rot, pos, restore, collide, tr._center, axes,
         tr.is_guide, tr._guide_len)
     assert finite == bool(np.isfinite(out).all())

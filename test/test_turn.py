@@ -68,7 +68,7 @@ def _kernel(tr, h, gx, collide=True):
     turns = np.empty((gx.shape[0], 9, tr.seg.shape[0] - 1))
     out = np.full(tr.ghosts.rest.shape, np.nan)  # float64 records of stride 3: x as computed
     contacts, finite = turn.turn_strands(
-        out.reshape(-1), 3, np.eye(3), np.zeros(3), False, tr._seg, tr._roots, tr._kind,
+        out, np.eye(3), np.zeros(3), False, True, tr._seg, tr._roots, tr._kind,
         tr.block_guide, tr.block_strand, gcol, tr._u0, turns, rot, pos, collide, tr._center,
         tr._axes)
     assert finite == bool(np.isfinite(out).all())

@@ -12,7 +12,7 @@ coordinate written is finite (a cloud's ``is_dense``).
 [node][axis][ghost], see :mod:`hair_tracking.ghosts.kernels`) directly, without a write-back
 into ``(S, N, 3)`` first; :func:`points_to_records` takes ``(S, N, 3)`` arrays (the guides, or
 ghosts placed already).  The stateless trackers' kernels write records themselves, point by
-point with :func:`put_point` (arguments checked by :func:`record_target`).  No ROS here.
+point with :func:`put_record` (arguments checked by :func:`record_target`).  No ROS here.
 """
 import numpy as np
 from numba import njit, prange
@@ -26,8 +26,7 @@ _MAX32 = float(np.finfo(np.float32).max)
 @njit(cache=True, inline='always')
 def put_point(words, w, x0, x1, x2, rot, origin, moved):
     """Write one point (transformed if ``moved``) at word ``w``; 1 if a coordinate is not a
-    finite float32, else 0.  Inlined into the kernels that write records, these and the ghost
-    trackers' (:meth:`hair_tracking.ghosts.stateless.StatelessTracker.write_records`)."""
+    finite float32, else 0."""
     if moved:
         d0, d1, d2 = x0 - origin[0], x1 - origin[1], x2 - origin[2]
         y0 = rot[0, 0] * d0 + rot[0, 1] * d1 + rot[0, 2] * d2
@@ -39,6 +38,13 @@ def put_point(words, w, x0, x1, x2, rot, origin, moved):
     words[w + 1] = y1
     words[w + 2] = y2
     return 0 if (abs(y0) <= _MAX32) & (abs(y1) <= _MAX32) & (abs(y2) <= _MAX32) else 1
+
+
+@njit(cache=True, inline='always')
+def put_record(records, s, j, x0, x1, x2, rot, origin, moved):
+    """:func:`put_point` into the record of point ``j`` of strand ``s`` of ``records`` (S, N,
+    stride) (:func:`record_target`)."""
+    return put_point(records[s, j], 0, x0, x1, x2, rot, origin, moved)
 
 
 @njit(cache=True, nogil=True, parallel=True)
@@ -93,13 +99,15 @@ def _transform(rot, origin):
     return rot, origin, True
 
 
-def record_target(words: np.ndarray, stride: int, points: int, rot=None, origin=None):
-    """The checked arguments of a kernel that writes ``points`` records with
-    :func:`put_point`: ``(words, stride, rot, origin, moved)``, as :func:`points_to_records`
-    takes them."""
-    words = _check_words(words, int(stride), int(points))
+def record_target(words: np.ndarray, stride: int, strands: int, nodes: int, rot=None,
+                  origin=None):
+    """The checked output arguments of a kernel that writes the records of ``strands`` x
+    ``nodes`` points with :func:`put_record`: ``(records (strands, nodes, stride) float32 view
+    of words, rot, origin, moved)``, ``rot`` and ``origin`` as :func:`points_to_records` takes
+    them."""
+    words = _check_words(words, int(stride), int(strands) * int(nodes))
     rot, origin, moved = _transform(rot, origin)
-    return words, np.int64(stride), rot, origin, moved
+    return words.reshape(int(strands), int(nodes), int(stride)), rot, origin, moved
 
 
 def points_to_records(words: np.ndarray, stride: int, x: np.ndarray, rot=None,

@@ -50,7 +50,7 @@ import numpy as np
 from numba import njit, prange
 
 from hair_tracking.core.model import HeadPose, StrandSet
-from hair_tracking.core.point_records import put_point
+from hair_tracking.core.point_records import put_record
 from hair_tracking.ghosts.stateless import (StatelessTracker, at_fractions, ellipsoid_form,
                                             node_map, reference_contact, world_collider)
 from hair_tracking.guides.integrate import FASTMATH
@@ -217,12 +217,12 @@ def _deform(blk, lane, offset, rot, guide, weight, gcol, s):
 
 
 @njit(cache=True, error_model='numpy', fastmath=FASTMATH)
-def _blend_blocks(words, stride, out_rot, out_origin, moved, offset, roots, rest_length, guide,
+def _blend_blocks(out, out_rot, out_origin, moved, check, offset, roots, rest_length, guide,
                   weight, gcol, rot, pos, restore, collide, cw, quad, is_guide, guide_length,
                   b0, b1):
     """Steps 2-3 for the blocks ``b0 .. b1 - 1`` of :data:`STRAND_BLOCK` strands; returns the
     number of nodes that were inside the collider and the number of points written that are
-    not finite."""
+    not finite (counted with ``check`` only)."""
     n_strands, n_nodes = offset.shape[0], offset.shape[2]
     contacts = 0
     bad = 0
@@ -312,23 +312,29 @@ def _blend_blocks(words, stride, out_rot, out_origin, moved, offset, roots, rest
                     blk[j, 2, lane] = nz
         for lane in range(STRAND_BLOCK):
             s = s0 + lane
-            if s < n_strands:
-                w = s * n_nodes * stride
+            if s >= n_strands:
+                continue
+            if check:
                 for j in range(n_nodes):
-                    bad += put_point(words, w, blk[j, 0, lane], blk[j, 1, lane],
-                                     blk[j, 2, lane], out_rot, out_origin, moved)
-                    w += stride
+                    bad += put_record(out, s, j, blk[j, 0, lane], blk[j, 1, lane],
+                                      blk[j, 2, lane], out_rot, out_origin, moved)
+            else:
+                for j in range(n_nodes):
+                    out[s, j, 0] = blk[j, 0, lane]
+                    out[s, j, 1] = blk[j, 1, lane]
+                    out[s, j, 2] = blk[j, 2, lane]
     return contacts, bad
 
 
 @njit(cache=True, parallel=True, fastmath=FASTMATH)
-def blend_strands(words, stride, out_rot, out_origin, moved, offset, roots, rest_length, guide,
+def blend_strands(out, out_rot, out_origin, moved, check, offset, roots, rest_length, guide,
                   weight, gcol, rot, pos, restore, collide, center, axes, is_guide,
                   guide_length):
-    """Kernel, steps 2-3: every strand's nodes written as float32 x y z into the records of
-    ``words`` (``stride`` words each, strand ``s``'s node ``j`` at record ``s * N + j``, world
-    [m], or ``out_rot (x - out_origin)`` when ``moved``; arguments as
-    :func:`~hair_tracking.core.point_records.record_target` makes them); ``offset`` (S, 3, N)
+    """Kernel, steps 2-3: every strand's nodes written as x y z into ``out`` (S, N, >= 3),
+    world [m]; with ``check`` as records (:func:`~hair_tracking.core.point_records.put_record`:
+    ``out_rot (x - out_origin)`` when ``moved``, the points that are not finite counted;
+    arguments as :func:`~hair_tracking.core.point_records.record_target` makes them);
+    ``offset`` (S, 3, N)
     float32 the rest offsets ``o`` (head frame), component-major; ``roots`` (S, 2, 3) the first
     two rest nodes in float64 (pinned exactly); ``rest_length`` (S, N-1) float32; ``guide`` (S,
     K) int32 and ``weight`` (S, K) float32 from :func:`blend_weights`, padded by
@@ -339,7 +345,7 @@ def blend_strands(words, stride, out_rot, out_origin, moved, offset, roots, rest
     guide's ``gcol``, its segments held to ``guide_length`` (G, N-1) float64 within
     :data:`GUIDE_LENGTH_TOLERANCE` and left to the guide solver's contacts until the length
     pass moves it. Returns the number of nodes that were inside the collider and whether every
-    coordinate written is finite."""
+    coordinate written is finite (always true without ``check``)."""
     n_strands = offset.shape[0]
     geo = np.empty(9)                    # the collider in the world: centre, then Q
     world_collider(rot, pos, center, axes, geo)
@@ -350,7 +356,7 @@ def blend_strands(words, stride, out_rot, out_origin, moved, offset, roots, rest
     bad = 0
     for c in prange(n_chunks):
         inside, not_finite = _blend_blocks(
-            words, stride, out_rot, out_origin, moved, offset, roots, rest_length, guide,
+            out, out_rot, out_origin, moved, check, offset, roots, rest_length, guide,
             weight, gcol, rot, pos, restore, collide, cw, quad, is_guide, guide_length,
             c * n_blocks // n_chunks, (c + 1) * n_blocks // n_chunks)
         contacts += inside
@@ -437,9 +443,9 @@ class BlendTracker(StatelessTracker):
         self._len32 = np.ascontiguousarray(ghosts.rest_length, dtype=np.float32)
         self._guide_len = np.ascontiguousarray(guides.rest_length, dtype=np.float64)
 
-    def _place(self, words, stride, rot, origin, moved) -> Tuple[int, bool]:
+    def _place(self, out, rot, origin, moved, check) -> Tuple[int, bool]:
         """Steps 2-3 of the module docstring."""
         return blend_strands(
-            words, stride, rot, origin, moved, self._offset32, self._roots, self._len32,
+            out, rot, origin, moved, check, self._offset32, self._roots, self._len32,
             self._guide_pad, self._weight_pad, self._gcol, self._rot, self._pos, self.restore,
             self.collide, self._center, self._axes, self.is_guide, self._guide_len)

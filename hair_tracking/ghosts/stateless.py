@@ -166,7 +166,7 @@ class StatelessTracker:
         self._rot, self._pos = np.empty((3, 3)), np.empty(3)
         self._pending = False         # a step not yet placed into _x32 (see step and release)
         self._x32 = ghosts.x.astype(np.float32)
-        self._x32_words = record_target(self._x32.reshape(-1), 3, self._x32.size // 3)
+        self._x32_out = (self._x32, np.eye(3), np.zeros(3), False, False)
         self._in_x32 = True           # whether _x32 (else ghosts._x) holds the positions
         ghosts.hold(self)             # so a write to ghosts.x before the first step is seen
         self.collide = bool(scene.tracking.collide and collider is not None)
@@ -204,20 +204,21 @@ class StatelessTracker:
         if not self._pending:
             return
         self._pending = False
-        self._placed_into(*self._x32_words)
+        self._placed_into(*self._x32_out)
         self._in_x32 = True
 
-    def _placed_into(self, words, stride, rot, origin, moved) -> bool:
-        contacts, finite = self._place(words, stride, rot, origin, moved)
+    def _placed_into(self, out, rot, origin, moved, check) -> bool:
+        contacts, finite = self._place(out, rot, origin, moved, check)
         self.stats['contacts'] = int(contacts)
         self.stats['evaluations'] += 1
         return bool(finite)
 
-    def _place(self, words, stride, rot, origin, moved) -> Tuple[int, bool]:
-        """Every ghost from ``_gcol``, ``_rot``, ``_pos`` as float32 x y z into the records of
-        ``words`` (the arguments of
-        :func:`~hair_tracking.core.point_records.record_target`); returns the number of head
-        contacts and whether every coordinate written is finite."""
+    def _place(self, out, rot, origin, moved, check) -> Tuple[int, bool]:
+        """Every ghost from ``_gcol``, ``_rot``, ``_pos`` as float32 x y z into ``out`` (S, N,
+        >= 3): ``_x32`` as it is, or with ``check`` records carried by ``rot``, ``origin`` when
+        ``moved`` (:func:`~hair_tracking.core.point_records.record_target`); returns the number
+        of head contacts and whether every coordinate written is finite (true without
+        ``check``)."""
         raise NotImplementedError
 
     def reset(self, head: HeadPose) -> None:
@@ -241,5 +242,5 @@ class StatelessTracker:
         when read."""
         if self._pending:
             s, n = self.ghosts.rest.shape[:2]
-            return self._placed_into(*record_target(words, stride, s * n, rot, origin))
+            return self._placed_into(*record_target(words, stride, s, n, rot, origin), True)
         return points_to_records(words, stride, self.positions(), rot, origin)

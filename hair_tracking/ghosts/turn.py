@@ -44,7 +44,7 @@ import numpy as np
 from numba import njit, prange
 
 from hair_tracking.core.model import HeadPose, StrandSet
-from hair_tracking.core.point_records import put_point
+from hair_tracking.core.point_records import put_record
 from hair_tracking.ghosts.blend import blend_weights
 from hair_tracking.ghosts.stateless import (StatelessTracker, at_fractions, ellipsoid_form,
                                             node_map, reference_contact, world_collider)
@@ -193,13 +193,13 @@ def _store_turn(out, g, j, rot, t00, t01, t02, t10, t11, t12, t20, t21, t22):
 
 
 @njit(cache=True, fastmath=FASTMATH, error_model='numpy', **NO_REFCOUNT)
-def _turn_blocks(words, stride, out_rot, out_origin, moved, seg, roots, kind, block_guide,
+def _turn_blocks(out, out_rot, out_origin, moved, check, seg, roots, kind, block_guide,
                  block_strand, turns, gcol, rot, pos, collide, flat, geo, b0, b1):
     """Steps 2-3 for the blocks ``b0 .. b1 - 1``, ``flat`` (2 * N * 3 * lanes) the scratch and
     ``geo`` the collider's constants (:func:`_slide_push`; the guide's node is written here);
     returns the number of nodes moved by the collider and the number of points written that
-    are not finite."""
-    n_nodes = gcol.shape[2]
+    are not finite (counted with ``check`` only)."""
+    n_nodes = out.shape[1]
     lanes = block_strand.shape[1]           # not a compile-time constant: LLVM vectorises
     slab = n_nodes * 3 * lanes
     # one scratch array for positions and segments, so the node loop reads and writes one
@@ -244,12 +244,17 @@ def _turn_blocks(words, stride, out_rot, out_origin, moved, seg, roots, kind, bl
                 contacts += _slide_push(w, kind, b, j, geo)
         for lane in range(lanes):
             s = block_strand[b, lane]
-            if s >= 0:
-                at = s * n_nodes * stride
+            if s < 0:
+                continue
+            if check:
                 for j in range(n_nodes):
-                    bad += put_point(words, at, w[0, j, 0, lane], w[0, j, 1, lane],
-                                     w[0, j, 2, lane], out_rot, out_origin, moved)
-                    at += stride
+                    bad += put_record(out, s, j, w[0, j, 0, lane], w[0, j, 1, lane],
+                                      w[0, j, 2, lane], out_rot, out_origin, moved)
+            else:
+                for j in range(n_nodes):
+                    out[s, j, 0] = w[0, j, 0, lane]
+                    out[s, j, 1] = w[0, j, 1, lane]
+                    out[s, j, 2] = w[0, j, 2, lane]
     return contacts, bad
 
 
@@ -302,35 +307,35 @@ def _slide_push(w, kind, b, j, geo):
 
 
 @njit(cache=True, parallel=True, fastmath=FASTMATH)
-def turn_strands(words, stride, out_rot, out_origin, moved, seg, roots, kind, block_guide,
+def turn_strands(out, out_rot, out_origin, moved, check, seg, roots, kind, block_guide,
                  block_strand, gcol, u0, turns, rot, pos, collide, center, axes):
     """Kernel, steps 1-3: every strand of a block (``block_strand``, :func:`group_blocks`)
-    written as float32 x y z into the records of ``words`` (``stride`` words each, strand
-    ``s``'s node ``j`` at record ``s * N + j``, world [m], or ``out_rot (x - out_origin)`` when
-    ``moved``; arguments as :func:`~hair_tracking.core.point_records.record_target` makes them);
-    ``seg`` and ``roots`` the blocks' rest shape
-    (:func:`block_rest`); ``kind`` (B, lanes) int8 what each lane holds (:data:`GUIDE`);
-    ``gcol`` (G, 3, N) the guides at the ghosts' node fractions
+    written as x y z into ``out`` (S, N, >= 3), world [m]; with ``check`` as records
+    (:func:`~hair_tracking.core.point_records.put_record`: ``out_rot (x - out_origin)`` when
+    ``moved``, the points that are not finite counted; arguments as
+    :func:`~hair_tracking.core.point_records.record_target` makes them); ``seg`` and
+    ``roots`` the blocks' rest shape (:func:`block_rest`); ``kind`` (B, lanes) int8 what each
+    lane holds (:data:`GUIDE`); ``gcol`` (G, 3, N) the guides at the ghosts' node fractions
     (:func:`~hair_tracking.ghosts.stateless.guide_columns`), ``u0`` their unit rest directions
     (:func:`rest_directions`) and ``turns`` (G, 9, N - 1) receives their turns (step 1, a
     parallel loop over the guides before the one over the blocks); ``rot``, ``pos`` the head
     pose; ``collide``: keep nodes out of the ellipsoid ``axes`` (radii + margin) around
     ``center`` (head frame).  Returns the number of nodes the collider moved and whether every
-    coordinate written is finite."""
+    coordinate written is finite (always true without ``check``)."""
     for g in prange(gcol.shape[0]):
         guide_turns(gcol, u0, rot, turns, g)
     geo = np.empty(12)       # the collider in the world (centre, Q), then the guide's node
     world_collider(rot, pos, center, axes, geo)
     n_blocks = block_guide.shape[0]
     n_chunks = min(n_blocks, CHUNKS)
-    slab = 2 * gcol.shape[2] * 3 * block_strand.shape[1]
+    slab = 2 * out.shape[1] * 3 * block_strand.shape[1]
     contacts = 0
     bad = 0
     for c in prange(n_chunks):
         flat = np.empty(slab)                 # the work item's scratch and constants
         mine = geo.copy()
         moved_nodes, not_finite = _turn_blocks(
-            words, stride, out_rot, out_origin, moved, seg, roots, kind, block_guide,
+            out, out_rot, out_origin, moved, check, seg, roots, kind, block_guide,
             block_strand, turns, gcol, rot, pos, collide, flat, mine, c * n_blocks // n_chunks,
             (c + 1) * n_blocks // n_chunks)
         contacts += moved_nodes
@@ -392,9 +397,9 @@ class TurnTracker(StatelessTracker):
         self._u0 = rest_directions(at_fractions(guides.rest, self.seg, self.t))
         self._turns = np.empty((guides.count, 9, ghosts.rest.shape[1] - 1))
 
-    def _place(self, words, stride, rot, origin, moved) -> Tuple[int, bool]:
+    def _place(self, out, rot, origin, moved, check) -> Tuple[int, bool]:
         """Steps 1-3 of the module docstring."""
         return turn_strands(
-            words, stride, rot, origin, moved, self._seg, self._roots, self._kind,
+            out, rot, origin, moved, check, self._seg, self._roots, self._kind,
             self.block_guide, self.block_strand, self._gcol, self._u0, self._turns, self._rot,
             self._pos, self.collide, self._center, self._axes)
