@@ -61,16 +61,10 @@ def test_one_guide_per_strand_is_full_simulation(mode):
 
 @pytest.mark.parametrize('mode', sorted(TRACKERS))
 def test_the_simulator_runs_it_once_per_frame_at_rest_lengths_outside_the_head(mode):
-    sim = HairSimulator(scene(mode, groom__guides=8, groom__ghosts_per_guide=8))
+    sim = _moved(mode, poses=30)
     assert isinstance(sim.ghost_tracker, TRACKERS[mode][0])
     assert sim.guides.count == 8 and sim.ghosts.count == 64
     np.testing.assert_array_equal(sim.guides.rest, sim.ghosts.rest[sim.guide_index])
-    t0 = 1_000_000_000
-    for k in range(30):
-        q = quat_from_axis_angle(np.array([0.0, 0.3, 1.0]) / np.hypot(0.3, 1.0),
-                                 0.6 * np.sin(0.4 * k))
-        sim.push_pose(t0 + k * 16_666_667, [0.03 * np.sin(0.3 * k), 0.0, 0.0], q)
-        sim.advance_to(t0 + k * 16_666_667)
     assert sim.ghost_tracker.stats['steps'] == 29        # once per advance_to call
     f = sim.frame()
     assert np.all(np.isfinite(f.ghosts))
@@ -96,12 +90,12 @@ def test_the_first_pose_places_the_ghosts_before_any_step(mode):
     np.testing.assert_allclose(sim.frame(copy=False).strands, want, rtol=0, atol=F32)
 
 
-def _moved(mode, **changes):
-    """A simulator of ``mode`` after a few head poses (guides bent, nodes pressed on the head),
-    its last step not read yet."""
+def _moved(mode, poses=20, **changes):
+    """A simulator of ``mode`` (8 guides x 8 strands) after ``poses`` head poses (guides bent,
+    nodes pressed on the head), its last step not read yet."""
     sim = HairSimulator(scene(mode, groom__guides=8, groom__ghosts_per_guide=8, **changes))
     t0 = 1_000_000_000
-    for k in range(20):
+    for k in range(poses):
         q = quat_from_axis_angle(np.array([0.0, 0.3, 1.0]) / np.hypot(0.3, 1.0),
                                  0.6 * np.sin(0.4 * k))
         sim.push_pose(t0 + k * 16_666_667, [0.03 * np.sin(0.3 * k), 0.0, 0.0], q)
