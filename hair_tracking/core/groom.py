@@ -10,8 +10,8 @@ front_max_polar) * max(0, cos phi)`` with ``phi`` the azimuth from +x (forward, 
 * Ghost roots are uniform random on the cap (seeded), ``guides * ghosts_per_guide`` of them,
   stored in the order of a Morton (Z-order) curve through their positions (:func:`scalp_order`),
   so strands near each other on the scalp are near each other in memory: a ghost tracker that
-  reads each strand's nearby guides then finds them in cache (the blend tracker at 100 k strands
-  runs about 1.35x faster than on the random order, ``scripts/bench_blend.py``).
+  reads each strand's nearby guides then finds them in cache (the blend kernel at 100 k strands
+  runs about 1.3x faster than on the random order).
 * Each strand leaves the scalp along the surface normal (the first segment fixes the root
   direction) and bends toward -z (head frame) by ``droop``; nodes that would fall inside the scalp
   are pushed out radially.  Lengths vary uniformly by ``length_variation``.

@@ -24,7 +24,7 @@ _MAX32 = float(np.finfo(np.float32).max)
 
 
 @njit(cache=True, inline='always')
-def put_point(words, w, x0, x1, x2, rot, origin, moved):
+def _put(words, w, x0, x1, x2, rot, origin, moved):
     """Write one point (transformed if ``moved``) at word ``w``; 1 if a coordinate is not a
     finite float32, else 0."""
     if moved:
@@ -42,9 +42,9 @@ def put_point(words, w, x0, x1, x2, rot, origin, moved):
 
 @njit(cache=True, inline='always')
 def put_record(records, s, j, x0, x1, x2, rot, origin, moved):
-    """:func:`put_point` into the record of point ``j`` of strand ``s`` of ``records`` (S, N,
+    """:func:`_put` into the record of point ``j`` of strand ``s`` of ``records`` (S, N,
     stride) (:func:`record_target`)."""
-    return put_point(records[s, j], 0, x0, x1, x2, rot, origin, moved)
+    return _put(records[s, j], 0, x0, x1, x2, rot, origin, moved)
 
 
 @njit(cache=True, nogil=True, parallel=True)
@@ -58,7 +58,7 @@ def _blocks_to_records(words, stride, xb, order, block_rows, n_nodes, rot, origi
             w = order[k0 + kk] * n_nodes * stride
             i = base + kk
             for _ in range(n_nodes):
-                bad += put_point(words, w, xb[i], xb[i + n], xb[i + 2 * n], rot, origin, moved)
+                bad += _put(words, w, xb[i], xb[i + n], xb[i + 2 * n], rot, origin, moved)
                 w += stride
                 i += 3 * n
     return bad == 0
@@ -71,7 +71,7 @@ def _points_to_records(words, stride, x, n_strands, n_nodes, rot, origin, moved)
         w = s * n_nodes * stride
         i = s * n_nodes * 3
         for _ in range(n_nodes):
-            bad += put_point(words, w, x[i], x[i + 1], x[i + 2], rot, origin, moved)
+            bad += _put(words, w, x[i], x[i + 1], x[i + 2], rot, origin, moved)
             w += stride
             i += 3
     return bad == 0
