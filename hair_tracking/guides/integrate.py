@@ -99,13 +99,12 @@ FASTMATH = {'contract'}
 #: Compile option of the kernels' inner bodies (those called once per block of strands from a
 #: parallel loop, or per substep): no NRT reference counting.  numba counts references of every
 #: array view it creates (``x[j]``, ``a.reshape(...)``, an array bound as an argument of an
-#: inlined function) with an atomic ``lock`` instruction, 20-40 cycles each on this machine, and
-#: its pruning pass cannot remove the pairs inside loops with branches: in the ghost kernel they
-#: were a quarter of the samples under ``perf``, and without them a default-scene ghost step
-#: (512 ghosts in groups of 8, head contact on) took 0.31 instead of 0.47 ms (medians, old and
-#: new kernels alternated in one process).  Safe for functions that
-#: allocate nothing and return no array: the arrays they see are owned by their caller.  Empty
-#: when this numba has no such option (the kernels then run with reference counting).
+#: inlined function) with an atomic ``lock`` instruction, 20-40 cycles each, and its pruning
+#: pass cannot remove the pairs inside loops with branches; in the paper tracker's ghost kernel
+#: they are about a third of the step.  Safe for functions that allocate nothing and return no
+#: array: the arrays they see are owned by their caller.  ``_nrt`` is a target option numba
+#: does not document, so it is used only where this numba has it (checked below); elsewhere the
+#: kernels run, slower, with reference counting and give the same results.
 try:
     from numba.core.cpu import CPUTargetOptions as _CPUOptions
     NO_REFCOUNT = {'_nrt': False} if hasattr(_CPUOptions, '_nrt') else {}
