@@ -6,7 +6,9 @@ the ids given), and, when colours are given, ``rgb`` float32 (offset 16) holding
 ``0x00RRGGBB`` bits as rviz/PCL expect. ``point_step`` 16 or 20, ``row_step = N * point_step``,
 ``is_dense`` true when every coordinate is finite (NaN points are allowed in clouds).
 Built through a numpy structured array (or straight into the CDR bytes) by one compiled pass
-(:mod:`msg_adapters.point_fill`), no per-point Python.
+(:mod:`msg_adapters.point_fill`), no per-point Python.  :class:`CloudBuffer` can also leave the
+``strand`` field out (the row is the strand; ``point_step`` 12, or 16 with ``rgb`` at offset
+12): the bytes every frame copies through the middleware then shrink by a quarter or more.
 """
 import array
 import struct
@@ -26,16 +28,19 @@ _NP_OF_DATATYPE = {PointField.INT8: 'i1', PointField.UINT8: 'u1', PointField.INT
                    PointField.FLOAT32: 'f4', PointField.FLOAT64: 'f8'}
 
 
-def cloud_dtype(with_rgb):
-    """numpy structured dtype of one point (little-endian, packed)."""
-    names = ['x', 'y', 'z', 'strand'] + (['rgb'] if with_rgb else [])
-    formats = ['<f4', '<f4', '<f4', '<u4'] + (['<f4'] if with_rgb else [])
+def cloud_dtype(with_rgb, with_strand=True):
+    """numpy structured dtype of one point (little-endian, packed): x y z, then ``strand``
+    (with ``with_strand``), then ``rgb`` (with ``with_rgb``)."""
+    names = ['x', 'y', 'z'] + (['strand'] if with_strand else []) + \
+        (['rgb'] if with_rgb else [])
+    formats = ['<f4', '<f4', '<f4'] + (['<u4'] if with_strand else []) + \
+        (['<f4'] if with_rgb else [])
     return np.dtype({'names': names, 'formats': formats})
 
 
-def cloud_fields(with_rgb):
+def cloud_fields(with_rgb, with_strand=True):
     """The PointField list matching :func:`cloud_dtype`."""
-    dt = cloud_dtype(with_rgb)
+    dt = cloud_dtype(with_rgb, with_strand)
     types = {'f4': PointField.FLOAT32, 'u4': PointField.UINT32}
     return [PointField(name=name, offset=int(dt.fields[name][1]),
                        datatype=types[dt.fields[name][0].str[1:]], count=1)
@@ -154,17 +159,17 @@ def strands_to_pointcloud2_cdr(strands, *, frame_id, stamp_ns=0, colors=None, st
     return buf.finish()
 
 
-def _cloud_layout(stamp, frame_id, n_strands, n_points, with_rgb):
+def _cloud_layout(stamp, frame_id, n_strands, n_points, with_rgb, with_strand=True):
     """A CdrWriter holding a cloud's message up to its data, and ``(point_step, data size,
     data offset, is_dense offset)`` (body offsets; is_dense written false)."""
-    step = cloud_dtype(with_rgb).itemsize
+    step = cloud_dtype(with_rgb, with_strand).itemsize
     nbytes = step * n_strands * n_points
     w = CdrWriter()
     w.time(*stamp)
     w.string(frame_id)
     w.uint32(n_strands)
     w.uint32(n_points)
-    fields = cloud_fields(with_rgb)
+    fields = cloud_fields(with_rgb, with_strand)
     w.uint32(len(fields))
     for f in fields:
         w.string(f.name)
@@ -197,15 +202,16 @@ class CloudBuffer:
     """
 
     def __init__(self):
-        self._layout = None          # (S, N, frame_id, with rgb) the buffer is laid out for
+        self._layout = None          # (S, N, frame_id, with rgb, with strand) laid out for
         self._msg = None             # the whole message (encapsulation + body), uint8
         self._ids = self._rgb = None     # what the strand / rgb words hold now
 
     def encode(self, n_strands, n_points, write_xyz, *, frame_id, stamp_ns=0, packed_rgb=None,
-               strand_ids=None):
+               strand_ids=None, strand_field=True):
         """The message (a uint8 array, valid until the next call) of a cloud of ``n_strands``
         x ``n_points`` whose coordinates ``write_xyz`` writes; other arguments as
-        :func:`strands_to_pointcloud2_cdr` (``packed_rgb`` the packed colours or None)."""
+        :func:`strands_to_pointcloud2_cdr` (``packed_rgb`` the packed colours or None).
+        ``strand_field=False`` leaves the ``strand`` field out (``strand_ids`` unused)."""
         stamp, frame_id = split_ns(stamp_ns, 'stamp_ns'), check_frame_id(frame_id)
         n_strands, n_points = int(n_strands), int(n_points)
         if n_strands < 0 or n_points < 1:
@@ -213,11 +219,12 @@ class CloudBuffer:
                              f'{n_strands} x {n_points}')
         rgb = None if packed_rgb is None else \
             as_packed_rgb(packed_rgb, n_strands, n_points).view('<u4')
-        ids = as_strand_ids(strand_ids, n_strands)
-        layout = (n_strands, n_points, frame_id, rgb is not None)
+        strand_field = bool(strand_field)
+        ids = as_strand_ids(strand_ids, n_strands) if strand_field else None
+        layout = (n_strands, n_points, frame_id, rgb is not None, strand_field)
         if layout != self._layout:
-            w, step, nbytes, at_data, at_dense = _cloud_layout(stamp, frame_id, n_strands,
-                                                               n_points, rgb is not None)
+            w, step, nbytes, at_data, at_dense = _cloud_layout(
+                stamp, frame_id, n_strands, n_points, rgb is not None, strand_field)
             msg = np.zeros(len(ENCAPSULATION_LE) + w.offset, dtype=np.uint8)
             msg[:len(ENCAPSULATION_LE)] = np.frombuffer(ENCAPSULATION_LE, dtype=np.uint8)
             body = msg[len(ENCAPSULATION_LE):]
@@ -227,11 +234,12 @@ class CloudBuffer:
             self._words = body[at_data:at_data + nbytes].view('<f4')
             self._records = self._words.view('<u4').reshape(n_strands * n_points, self._stride)
             self._layout, self._ids, self._rgb = layout, None, None
-        if self._ids is None or not np.array_equal(ids, self._ids):
+        if ids is not None and (self._ids is None or not np.array_equal(ids, self._ids)):
             self._records[:, 3] = np.repeat(ids, n_points)
             self._ids = ids.copy()
         if rgb is not None and (self._rgb is None or not np.array_equal(rgb, self._rgb)):
-            self._records[:, 4] = np.broadcast_to(rgb, (n_strands, n_points)).reshape(-1)
+            self._records[:, self._stride - 1] = \
+                np.broadcast_to(rgb, (n_strands, n_points)).reshape(-1)
             self._rgb = rgb.copy()
         self._body[:8] = np.frombuffer(struct.pack('<iI', *stamp), dtype=np.uint8)
         self._body[self._at_dense] = bool(write_xyz(self._words, self._stride))

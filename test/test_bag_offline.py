@@ -174,6 +174,7 @@ def test_every_pose_params_file_and_head_frame_output(walk_bag, tmp_path):
     params = tmp_path / 'hair_sim.yaml'
     params.write_text('hair_sim:\n  ros__parameters:\n    publish_rate_hz: 10.0\n'
                       '    marker_style: line_strips\n    output_frame: head\n'
+                      '    cloud_fields: xyz_rgb\n'
                       '    groom:\n      guides: 4\n      ghosts_per_guide: 0\n'
                       '      guide_nodes: 6\n    solver:\n      settle_time: 0.0\n')
     out = tmp_path / 'ten_hz.mcap'
@@ -182,6 +183,8 @@ def test_every_pose_params_file_and_head_frame_output(walk_bag, tmp_path):
     clouds = _decode(out, '/hair/points')
     assert 9 <= len(clouds) <= 11                    # 10 Hz over 1 s
     assert clouds[0][1].header.frame_id == 'head' and clouds[0][1].height == 4
+    assert [f.name for f in clouds[0][1].fields] == ['x', 'y', 'z', 'rgb']
+    assert clouds[0][1].point_step == 16
     mk = _decode(out, '/hair/markers')[-1][1]
     assert [m.type for m in mk.markers] == [4] * 4   # one LINE_STRIP per guide
     assert not _messages(out, '/diagnostics')

@@ -260,6 +260,37 @@ def test_clouds_carry_the_simulated_ghosts_through_rcl_or_rclpy_alike(harness, o
     assert h.node.frames_built == 0              # no markers wanted: no frame was built
 
 
+def test_cloud_fields_change_live_and_the_rows_still_give_the_strands(harness):
+    """cloud_fields leaves strand and rgb out of both clouds from the next frame on; the
+    coordinates are the simulator's either way, and an unknown value is refused."""
+    h = harness(publish_guides=True)
+    h.listen(markers=False)
+    guides = []
+    h.probe.create_subscription(PointCloud2, 'hair/guides/points', guides.append, 10)
+    h.spin_until(lambda: h.node.outputs['guide_points'].wanted(), what='the guide cloud match')
+    pub = h.pose_publisher()
+    refused = h.node.set_parameters([Parameter('cloud_fields', value='xyz_colour')])[0]
+    assert not refused.successful and 'xyz_strand_rgb' in refused.reason
+    expect = {'xyz_strand_rgb': (['x', 'y', 'z', 'strand', 'rgb'], 20),
+              'xyz': (['x', 'y', 'z'], 12), 'xyz_rgb': (['x', 'y', 'z', 'rgb'], 16),
+              'xyz_strand': (['x', 'y', 'z', 'strand'], 16)}
+    for k, (value, t) in enumerate(zip(expect, grid_times(h, len(expect)))):
+        assert h.node.set_parameters([Parameter('cloud_fields', value=value)])[0].successful
+        h.send(pub, pose_stamped_msg(t, [0.02 * k, 0.0, 0.01], yaw_quat(0.3 * k), 'odom'))
+        cloud = h.cloud_at(t)
+        names, step = expect[value]
+        assert [f.name for f in cloud.fields] == names and cloud.point_step == step
+        pts, ids = pointcloud2_to_strands(cloud, dtype=np.float32)
+        frame = h.node.sim.frame()
+        np.testing.assert_array_equal(pts, frame.strands.astype(np.float32))
+        assert ids.tolist() == list(range(12))
+        h.spin_until(lambda: any(time_to_ns(g.header.stamp) == t for g in guides),
+                     what='the guide cloud')
+        g = next(g for g in guides if time_to_ns(g.header.stamp) == t)
+        assert [f.name for f in g.fields] == names
+        np.testing.assert_allclose(pointcloud2_to_strands(g)[0], frame.guides, atol=1e-6)
+
+
 @pytest.mark.parametrize('overrides, shape', [
     ({'groom.ghosts_per_guide': 0}, (4, 6)),                    # the guides are the hair
     ({'output.curve': 'catmull_rom', 'output.points_per_strand': 9}, (12, 9)),   # curves

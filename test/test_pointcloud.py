@@ -336,6 +336,39 @@ def test_cloud_buffer_gives_the_bytes_of_the_cdr_path_frame_after_frame():
     assert len(seen) < len(frames)          # the buffer was reused while the layout held
 
 
+@pytest.mark.parametrize('with_strand, with_rgb, step',
+                         [(False, False, 12), (False, True, 16), (True, False, 16),
+                          (True, True, 20)])
+def test_cloud_buffer_leaves_out_the_fields_not_asked_for(with_strand, with_rgb, step):
+    """Without ``strand`` (and ``rgb``) each point is x y z (and rgb at offset 12); rclpy reads
+    the message, the rows give back the strands, and the layout changes in the same buffer
+    from the full one and back."""
+    rng = np.random.default_rng(5)
+    x = rng.normal(size=(3, 4, 3))
+    cols = rng.random((3, 3))
+    buf = CloudBuffer()
+    full = buf.encode(3, 4, _xyz_writer(x), frame_id='w', packed_rgb=pack_rgb_u32(cols))
+    assert full.tobytes() == strands_to_pointcloud2_cdr(x, frame_id='w', colors=cols)
+    data = buf.encode(3, 4, _xyz_writer(x), frame_id='w', stamp_ns=9,
+                      packed_rgb=pack_rgb_u32(cols) if with_rgb else None,
+                      strand_field=with_strand)
+    msg = deserialize_message(data.tobytes(), PointCloud2)
+    names = ['x', 'y', 'z'] + (['strand'] if with_strand else []) + (['rgb'] if with_rgb else [])
+    assert [(f.name, f.offset, f.datatype, f.count) for f in msg.fields] == [
+        (n, 4 * k, PointField.UINT32 if n == 'strand' else PointField.FLOAT32, 1)
+        for k, n in enumerate(names)]
+    assert (msg.point_step, msg.row_step, msg.height, msg.width) == (step, 4 * step, 3, 4)
+    assert len(msg.data) == 12 * step and msg.is_dense
+    pts, ids = pointcloud2_to_strands(msg)
+    assert np.array_equal(pts, x.astype(np.float32)) and np.array_equal(ids, [0, 1, 2])
+    if with_rgb:
+        rgb = np.frombuffer(bytes(msg.data), '<f4').reshape(3, 4, step // 4)[..., -1]
+        expect = [[reference_rgb(c)] * 4 for c in cols]
+        assert np.array_equal(rgb.view('<u4'), np.array(expect, '<f4').view('<u4'))
+    again = buf.encode(3, 4, _xyz_writer(x), frame_id='w', packed_rgb=pack_rgb_u32(cols))
+    assert again.tobytes() == full.tobytes()
+
+
 def test_cloud_buffer_checks_its_inputs():
     buf = CloudBuffer()
     write = _xyz_writer(np.zeros((2, 3, 3)))

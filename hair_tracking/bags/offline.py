@@ -149,9 +149,11 @@ class FrameEncoder:
         buf = self._clouds.get(ns)
         if buf is None:
             buf = self._clouds[ns] = CloudBuffer()
+        fields = self.settings.cloud_fields
+        rgb = self.colors(ns, n_strands, rgba or self.settings.marker_color) \
+            if 'rgb' in fields else None
         return buf.encode(n_strands, n_points, write_xyz, frame_id=frame_id, stamp_ns=stamp_ns,
-                          packed_rgb=self.colors(ns, n_strands,
-                                                 rgba or self.settings.marker_color))
+                          packed_rgb=rgb, strand_field='strand' in fields)
 
     def markers(self, strands, frame_id, stamp_ns, ns='hair', rgba=None) -> bytes:
         from msg_adapters.marker_cdr import strands_to_marker_array_cdr
