@@ -68,6 +68,7 @@ bench: install
 	$(TEST_ENV) $(PY) scripts/bench_latency.py --json out/bench_latency.json
 	$(TEST_ENV) $(PY) scripts/bench_latency.py --ghosts 10000 --modes on_pose \
 		--set tracking.every_substep=false --json out/bench_latency_10k_once_per_pose.json
+	$(TEST_ENV) $(PY) scripts/bench_transport.py --json out/bench_transport.json
 
 # The full matrix of stiff and extreme cases (a few minutes); writes docs/results/stability.*
 stability: install
