@@ -6,6 +6,8 @@ import os
 import subprocess
 import sys
 
+import pytest
+
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
@@ -23,6 +25,7 @@ def test_latency_benchmark_times_every_stage_of_a_short_stream(tmp_path):
     assert r['probe'] == 'rcl' and r['publish_through_rcl'] is False     # rclpy's publish
     assert r['ghosts'] == 128 and r['latency']['n'] >= 80          # 90 poses counted
     assert r['poses_without_cloud'] <= 5
+    assert r['latency_every_pose']['n'] >= r['latency']['n'] and r['poses_never_shown'] <= 1
     stages = r['stages']
     for name in ('pickup', 'step', 'cloud', 'publish', 'delivery', 'probe_take'):
         s = stages[name]
@@ -31,3 +34,16 @@ def test_latency_benchmark_times_every_stage_of_a_short_stream(tmp_path):
     # the stages lie inside the latency they make up
     assert stages['step']['median_ms'] < r['latency']['median_ms']
     assert 0.0 <= stages['share_arriving_busy'] <= 1.0
+
+
+def test_a_pose_without_a_cloud_of_its_own_counts_until_the_next_cloud_shows_it():
+    sys.path.insert(0, os.path.join(ROOT, 'scripts'))
+    from bench_latency import shown_latency
+    sent = {10: 0.000, 20: 0.010, 30: 0.020, 40: 0.030}
+    received = {10: 0.005, 30: 0.040}          # pose 20 was replaced by 30 in the queue
+    lat, left_out = shown_latency(sent, received, [10, 20, 30, 40])
+    assert lat == pytest.approx([5.0, 30.0, 20.0])
+    assert left_out == 1                          # no cloud came after pose 40
+    # a later-stamped cloud that arrived earlier shows the pose first
+    lat, _ = shown_latency({10: 0.0}, {20: 0.003, 30: 0.002}, [10])
+    assert lat == pytest.approx([2.0])
