@@ -37,7 +37,7 @@ from contextlib import nullcontext
 from dataclasses import dataclass, field
 import math
 import time
-from typing import Callable, Dict, Optional
+from typing import Callable, Dict, Optional, Tuple
 
 import numpy as np
 
@@ -45,7 +45,7 @@ from hair_tracking.core import curves
 from hair_tracking.core.groom import make_groom
 from hair_tracking.core.head_track import HeadTrack, IDENTITY, PoseResult
 from hair_tracking.core.metrics import max_stretch
-from hair_tracking.core.model import HeadPose, StrandSet
+from hair_tracking.core.model import HeadPose, StrandSet, strand_part
 from hair_tracking.core.point_records import points_to_records
 from hair_tracking.core.scene import GUIDES_AMONG_STRANDS, Scene
 from hair_tracking.core.transforms import quat_angle, quat_to_matrix, slerp
@@ -270,10 +270,11 @@ class HairSimulator:
             lambda words, stride: points_to_records(words, stride, x, rot, origin)
 
     def max_stretch(self) -> float:
-        """max |l/l0 - 1| over guide and ghost segments (0 = exact lengths)."""
+        """max |l/l0 - 1| over guide and ghost segments (0 = exact lengths; NaN when a segment
+        has a NaN length)."""
         m = max_stretch(self.guides.x, self.guides.rest_length)
         if self.ghosts is not None:
-            m = max(m, max_stretch(self._ghost_x(), self.ghosts.rest_length))
+            m = _worst(m, max_stretch(self._ghost_x(), self.ghosts.rest_length))
         return m
 
     def penetration(self) -> float:
@@ -284,6 +285,27 @@ class HairSimulator:
         if self.ghosts is not None:
             d = max(d, self.collider.penetration(self._ghost_x(), self.head))
         return d
+
+    def audit(self, part: int = 0, parts: int = 1) -> Tuple[float, float, np.ndarray]:
+        """:meth:`max_stretch` and :meth:`penetration` over the guides and part ``part`` of
+        ``parts`` of the ghost strands (:func:`~hair_tracking.core.model.strand_part`; a
+        stateless tracker places those strands alone from its last step, so checking 1 / parts
+        of the hair costs about 1 / parts of a whole check).  Returns ``(stretch, depth [m],
+        the ghost strands checked)``; ``parts`` = 1 is the whole hair."""
+        stretch = max_stretch(self.guides.x, self.guides.rest_length)
+        depth = 0.0 if self.collider is None else \
+            self.collider.penetration(self.guides.x, self.head)
+        if self.ghosts is None:
+            return stretch, depth, np.zeros(0, dtype=np.int64)
+        if self.ghost_tracker is not None:
+            idx, x = self.ghost_tracker.part_positions(part, parts)
+        else:
+            idx = strand_part(self.ghosts.count, part, parts)
+            x = self.ghosts.x[idx]
+        stretch = _worst(stretch, max_stretch(x, self.ghosts.rest_length[idx]))
+        if self.collider is not None and idx.size:
+            depth = max(depth, self.collider.penetration(x, self.head))
+        return stretch, depth, idx
 
     # ------------------------------------------------------------ internals
     def _ghost_x(self) -> Optional[np.ndarray]:
@@ -419,6 +441,12 @@ class HairSimulator:
                 strands.x[...] = (strands.x - old.position) @ rot.T + new.position
                 strands.v[...] = 0.0
         self._last_speed = 0.0
+
+
+def _worst(a: float, b: float) -> float:
+    """The larger of two checks' values, NaN if either is NaN (``max`` keeps its first
+    argument when the other is NaN, which would hide broken hair)."""
+    return math.nan if math.isnan(a) or math.isnan(b) else max(a, b)
 
 
 def _threshold_for(stages):

@@ -29,6 +29,7 @@ from visualization_msgs.msg import Marker, MarkerArray
 
 from hair_tracking.core.strand_colors import strand_colors
 from hair_tracking.core.transforms import quat_to_matrix
+from hair_tracking.ros import node as node_module
 from hair_tracking.ros.node import HairSimNode
 from hair_tracking.simulator import HairSimulator
 from msg_adapters.pointcloud import pointcloud2_to_strands
@@ -652,6 +653,29 @@ def test_diagnostics_are_published_with_the_step_numbers(harness):
     tracker = h.node.sim.ghost_tracker
     assert values['ghost_kernel'] == ('parallel' if tracker.stats['parallel'] else 'serial')
     assert 'cpu_steal_recent' not in values
+
+
+def test_diagnostics_check_a_large_hair_a_part_per_report_in_turn(harness, monkeypatch):
+    """Each report checks the stretch and head penetration of at most DIAG_AUDIT_STRANDS ghosts,
+    the next part in turn, so reports stay cheap at any hair size and every ghost is checked
+    once per round; the worst value of a round is the whole hair's."""
+    monkeypatch.setattr(node_module, 'DIAG_AUDIT_STRANDS', 5)
+    h = harness(**{'groom.guides': 4, 'groom.ghosts_per_guide': 3})
+    pub = h.pose_publisher()
+    for k, t in enumerate(grid_times(h, 3)):
+        h.send(pub, pose_stamped_msg(t, [0.01 * k, 0.0, 0.0], yaw_quat(0.3 * k), 'world'))
+    sim = h.node.sim
+    ghosts = sim.ghosts.count
+    assert ghosts == 12
+    checked, stretch = [], []
+    for _ in range(4):                      # 12 ghosts in parts of at most 5: 3 parts
+        values = {kv.key: kv.value for kv in h.node.diagnostics().values}
+        first, last = (int(v) for v in values['checked_ghosts'].split('-'))
+        assert last - first + 1 <= 5
+        checked.append((first, last))
+        stretch.append(float(values['max_stretch']))
+    assert checked[:3] == [(0, 3), (4, 7), (8, 11)] and checked[3] == checked[0]
+    assert max(stretch[:3]) == pytest.approx(sim.max_stretch(), abs=2e-6)
 
 
 # ====================================================================== executable

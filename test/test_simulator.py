@@ -266,3 +266,45 @@ def test_track_once_per_call_is_the_once_per_pose_schedule_bit_for_bit():
     drive(b, 40)
     assert np.array_equal(a.frame().ghosts, b.frame().ghosts)
     assert np.array_equal(a.frame().guides, b.frame().guides)
+
+
+@pytest.mark.parametrize('mode', ['blend', 'turn', 'paper'])
+def test_audit_parts_cover_every_ghost_once_and_agree_with_the_whole_hair(mode):
+    sim = HairSimulator(scene(tracking__mode=mode, groom__ghosts_per_guide=7))
+    drive(sim, 12)
+    whole_stretch, whole_depth = sim.max_stretch(), sim.penetration()
+    full = np.array(sim.ghost_tracker.positions(), dtype=np.float64)
+    drive(sim, 1, start=12)                     # a step nothing has read yet
+    parts = 3
+    seen, stretches, depths = [], [], []
+    for part in range(parts):
+        stretch, depth, idx = sim.audit(part, parts)
+        seen.append(idx)
+        stretches.append(stretch)
+        depths.append(depth)
+        # what a part places alone is what the whole evaluation places
+        _, x = sim.ghost_tracker.part_positions(part, parts)
+        after = np.array(sim.ghost_tracker.positions(), dtype=np.float64)
+        np.testing.assert_allclose(np.asarray(x, dtype=np.float64), after[idx], atol=1e-6)
+        assert not np.array_equal(after, full)       # the step moved the hair
+        drive(sim, 1, start=12 + part + 1)
+    everything = np.sort(np.concatenate(seen))
+    assert np.array_equal(everything, np.arange(sim.ghosts.count))
+    assert all(0.0 <= s < 0.5 for s in stretches) and all(d >= 0.0 for d in depths)
+    stretch, depth, idx = sim.audit()            # one part: the whole hair
+    assert idx.size == sim.ghosts.count
+    assert stretch == pytest.approx(sim.max_stretch(), abs=1e-12)
+    assert depth == pytest.approx(sim.penetration(), abs=1e-12)
+    assert whole_stretch >= 0.0 and whole_depth >= 0.0
+    with pytest.raises(ValueError, match='part 3 of 3'):
+        sim.audit(3, 3)
+
+
+def test_a_nan_ghost_is_reported_as_nan_stretch_by_both_checks():
+    sim = HairSimulator(scene(tracking__mode='paper'))
+    drive(sim, 3)
+    x = sim.ghosts.x
+    x[1, 4] = np.nan
+    sim.ghosts.x = x
+    assert np.isnan(sim.max_stretch())
+    assert np.isnan(sim.audit(0, 2)[0])

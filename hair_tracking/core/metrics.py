@@ -15,8 +15,11 @@ def max_stretch(x: np.ndarray, rest_length: np.ndarray) -> float:
     when a measured segment has a NaN length (a check must not hide broken hair).
 
     One compiled pass without temporaries: it runs on every published frame (and for the node's
-    diagnostics), where a numpy expression would make five arrays the size of the hair."""
-    x = np.asarray(x, dtype=np.float64)
+    diagnostics), where a numpy expression would make five arrays the size of the hair.  float32
+    positions (the stateless trackers') are read as they are, not converted."""
+    x = np.asarray(x)
+    if x.dtype != np.float32:
+        x = np.asarray(x, dtype=np.float64)
     rest_length = np.asarray(rest_length, dtype=np.float64)
     if x.ndim != 3 or x.shape[2] != 3 or rest_length.shape != (x.shape[0], x.shape[1] - 1):
         raise ValueError(f'max_stretch: x must be (S, N, 3) and rest_length (S, N-1), got '

@@ -42,6 +42,15 @@ class _HeldArray:
         setattr(obj, self.attr, value)
 
 
+def strand_part(count: int, part: int, parts: int) -> np.ndarray:
+    """Indices of part ``part`` of ``parts`` of ``count`` strands: ``count * part // parts ..
+    count * (part + 1) // parts - 1`` (the parts together are every strand once)."""
+    part, parts = int(part), int(parts)
+    if not 0 <= part < parts:
+        raise ValueError(f'strand part {part} of {parts} does not exist')
+    return np.arange(count * part // parts, count * (part + 1) // parts)
+
+
 class StrandSet:
     """Topology and rest shape of a set of strands, plus their dynamic state.
 

@@ -12,7 +12,7 @@ from typing import Dict, Optional, Tuple
 import numpy as np
 from numba import njit
 
-from hair_tracking.core.model import HeadPose, StrandSet
+from hair_tracking.core.model import HeadPose, StrandSet, strand_part
 from hair_tracking.core.point_records import points_to_records, record_target
 from hair_tracking.guides.collision import outside_distance, world_center
 
@@ -234,6 +234,24 @@ class StatelessTracker:
             np.copyto(self._x32, self.ghosts._x)
             self._in_x32 = True
         return self._x32
+
+    def part_positions(self, part: int, parts: int) -> Tuple[np.ndarray, np.ndarray]:
+        """The strands of part ``part`` of ``parts`` (about ``S / parts`` strands; the parts
+        together are every strand once) and their positions (float32, world frame): placed
+        alone from the last step when nothing has read the hair since (:meth:`_place_part`), so
+        a check of a few strands does not cost a whole evaluation; else read from
+        :meth:`positions`.  Returns ``(strand indices, positions (len, N, 3))``."""
+        idx = strand_part(self.ghosts.count, part, parts)      # checks the part
+        if self._pending:
+            idx = self._place_part(int(part), int(parts))
+            return idx, self._x32[idx]
+        return idx, self.positions()[idx]
+
+    def _place_part(self, part: int, parts: int) -> np.ndarray:
+        """Place the strands of part ``part`` of ``parts`` from the last step into their rows
+        of ``_x32`` (the other rows are left as they are: the step stays pending) and return
+        their indices."""
+        raise NotImplementedError
 
     def write_records(self, words, stride, rot=None, origin=None) -> bool:
         """float32 x y z of every ghost node into point records (as

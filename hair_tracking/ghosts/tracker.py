@@ -31,12 +31,12 @@ group through ``order`` (ghost indices sorted by guide, stable); group ``g`` is
 ``order[group_start[g]:group_start[g + 1]]`` and follows guide ``group_guide[g]``.
 """
 import math
-from typing import Dict
+from typing import Dict, Tuple
 
 import numba
 import numpy as np
 
-from hair_tracking.core.model import HeadPose, StrandSet
+from hair_tracking.core.model import HeadPose, StrandSet, strand_part
 from hair_tracking.core.point_records import blocks_to_records, points_to_records
 from hair_tracking.core.scene import Scene
 from hair_tracking.ghosts.correspondence import assign_guides, node_correspondence
@@ -245,6 +245,12 @@ class GhostTracker:
         view = x.view()
         view.flags.writeable = False
         return view
+
+    def part_positions(self, part: int, parts: int) -> Tuple[np.ndarray, np.ndarray]:
+        """The strands ``S * part // parts .. S * (part + 1) // parts - 1`` and their positions
+        (read from :meth:`positions`): ``(strand indices, positions (len, N, 3))``."""
+        idx = strand_part(self.ghosts.count, part, parts)
+        return idx, self.positions()[idx]
 
     def write_records(self, words: np.ndarray, stride: int, rot=None, origin=None) -> bool:
         """The ghosts' positions as float32 x y z at the start of ``words``' records (S * N

@@ -399,7 +399,19 @@ class TurnTracker(StatelessTracker):
 
     def _place(self, out, rot, origin, moved, check) -> Tuple[int, bool]:
         """Steps 1-3 of the module docstring."""
+        return self._place_blocks(slice(None), out, rot, origin, moved, check)
+
+    def _place_part(self, part: int, parts: int) -> np.ndarray:
+        """The strands of the blocks of the part (blocks hold strands of one guide, so a part
+        is a set of guides' strands)."""
+        n = self.block_guide.shape[0]
+        rows = slice(part * n // parts, (part + 1) * n // parts)
+        self._place_blocks(rows, *self._x32_out)
+        idx = self.block_strand[rows]
+        return np.sort(idx[idx >= 0])
+
+    def _place_blocks(self, rows: slice, out, rot, origin, moved, check) -> Tuple[int, bool]:
         return turn_strands(
-            out, rot, origin, moved, check, self._seg, self._roots, self._kind,
-            self.block_guide, self.block_strand, self._gcol, self._u0, self._turns, self._rot,
-            self._pos, self.collide, self._center, self._axes)
+            out, rot, origin, moved, check, self._seg[rows], self._roots[rows],
+            self._kind[rows], self.block_guide[rows], self.block_strand[rows], self._gcol,
+            self._u0, self._turns, self._rot, self._pos, self.collide, self._center, self._axes)
