@@ -30,26 +30,13 @@ from sensor_msgs.msg import PointCloud2
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
-from bench_latency import stamp_of, stats  # noqa: E402  (scripts/bench_latency.py)
+from bench_latency import copy_ms, stamp_of, stats  # noqa: E402  (scripts/bench_latency.py)
 from hair_tracking import process_tuning  # noqa: E402
 from hair_tracking.core.params import CLOUD_FIELDS  # noqa: E402
 from hair_tracking.ros.node import output_qos  # noqa: E402
 from msg_adapters.pointcloud import CloudBuffer, pack_rgb_u32  # noqa: E402
 from msg_adapters.rcl_serialized import (SerializedPublisher, SerializedTaker,  # noqa: E402
                                          SerializedWaiter, unusable_reason)
-
-
-def copy_ms(nbytes, reps=15):
-    """Median time [ms] of one single-threaded copy of ``nbytes`` between warm buffers."""
-    src = np.ones(nbytes, dtype=np.uint8)
-    dst = np.zeros_like(src)
-    np.copyto(dst, src)
-    times = []
-    for _ in range(reps):
-        t0 = time.perf_counter()
-        np.copyto(dst, src)
-        times.append(time.perf_counter() - t0)
-    return float(np.median(times)) * 1e3
 
 
 def run_case(strands, points, fields, through_rcl, args, domain_id):
