@@ -149,11 +149,10 @@ class FrameEncoder:
         buf = self._clouds.get(ns)
         if buf is None:
             buf = self._clouds[ns] = CloudBuffer()
-        fields = self.settings.cloud_fields
-        rgb = self.colors(ns, n_strands, rgba or self.settings.marker_color) \
-            if 'rgb' in fields else None
+        s = self.settings
+        rgb = self.colors(ns, n_strands, rgba or s.marker_color) if s.cloud_rgb else None
         return buf.encode(n_strands, n_points, write_xyz, frame_id=frame_id, stamp_ns=stamp_ns,
-                          packed_rgb=rgb, strand_field='strand' in fields)
+                          packed_rgb=rgb, strand_field=s.cloud_strand)
 
     def markers(self, strands, frame_id, stamp_ns, ns='hair', rgba=None) -> bytes:
         from msg_adapters.marker_cdr import strands_to_marker_array_cdr
@@ -378,8 +377,9 @@ def run_bag(input_path: str, output_path: str, settings: Settings,
     t_setup = time.perf_counter()
     tiny = warm_up(scene)       # compile or load every kernel here, not inside the timed loop
     if opt.points:              # and the clouds' point writers, on the tiny copy's hair
-        for guides in (False, True):
-            FrameEncoder(settings).cloud(*tiny.record_writer(guides, head_out), 'warmup', 1)
+        warm = FrameEncoder(settings)
+        for guides, ns in ((False, 'hair'), (True, 'guides')):
+            warm.cloud(*tiny.record_writer(guides, head_out), 'warmup', 1, ns)
     sim = HairSimulator(scene)
     enc = FrameEncoder(settings)
     if after_setup is not None:

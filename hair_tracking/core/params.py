@@ -454,6 +454,16 @@ class Settings:
         return 1.0 / self.node['publish_rate_hz']
 
     @property
+    def cloud_rgb(self) -> bool:
+        """Whether the clouds carry the rgb field (``cloud_fields``)."""
+        return 'rgb' in self.node['cloud_fields']
+
+    @property
+    def cloud_strand(self) -> bool:
+        """Whether the clouds carry the strand field (``cloud_fields``)."""
+        return 'strand' in self.node['cloud_fields']
+
+    @property
     def marker_lifetime(self) -> float:
         """Marker lifetime [s]; 0 = forever."""
         return self.node['marker_lifetime_periods'] * self.publish_period

@@ -666,7 +666,6 @@ class HairSimNode(Node):
         frame_id = self.output_frame_id()
         stamp = max(0, (self.sim.time_ns or 0) - self._offset_ns)   # the stream's time base
         lifetime_ns = int(round(s.marker_lifetime * 1e9))
-        fields = s.cloud_fields
         for key, guides, ns, color in (
                 ('points', False, 'hair', s.marker_color),
                 ('markers', False, 'hair', s.marker_color),
@@ -679,8 +678,8 @@ class HairSimNode(Node):
                 n_strands, n_points, write = self.sim.record_writer(guides, head_frame)
                 data = o.cloud.encode(
                     n_strands, n_points, write, frame_id=frame_id, stamp_ns=stamp,
-                    packed_rgb=self._colors(ns, n_strands, color) if 'rgb' in fields else None,
-                    strand_field='strand' in fields)
+                    packed_rgb=self._colors(ns, n_strands, color) if s.cloud_rgb else None,
+                    strand_field=s.cloud_strand)
                 o.cached = data
             else:
                 strands = frame.guides if guides else frame.strands
