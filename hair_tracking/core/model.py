@@ -42,13 +42,20 @@ class _HeldArray:
         setattr(obj, self.attr, value)
 
 
-def strand_part(count: int, part: int, parts: int) -> np.ndarray:
-    """Indices of part ``part`` of ``parts`` of ``count`` strands: ``count * part // parts ..
-    count * (part + 1) // parts - 1`` (the parts together are every strand once)."""
+def part_rows(count: int, part: int, parts: int) -> slice:
+    """Rows ``count * part // parts .. count * (part + 1) // parts - 1`` of ``count``: part
+    ``part`` of ``parts`` (the parts together are every row once)."""
     part, parts = int(part), int(parts)
     if not 0 <= part < parts:
         raise ValueError(f'strand part {part} of {parts} does not exist')
-    return np.arange(count * part // parts, count * (part + 1) // parts)
+    return slice(count * part // parts, count * (part + 1) // parts)
+
+
+def strand_part(count: int, part: int, parts: int) -> np.ndarray:
+    """Indices of the strands of part ``part`` of ``parts`` of ``count`` strands
+    (:func:`part_rows`)."""
+    rows = part_rows(count, part, parts)
+    return np.arange(rows.start, rows.stop)
 
 
 class StrandSet:

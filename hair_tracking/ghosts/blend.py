@@ -49,7 +49,7 @@ from typing import Tuple
 import numpy as np
 from numba import njit, prange
 
-from hair_tracking.core.model import HeadPose, StrandSet, strand_part
+from hair_tracking.core.model import HeadPose, StrandSet, part_rows
 from hair_tracking.core.point_records import put_record
 from hair_tracking.ghosts.stateless import (StatelessTracker, at_fractions, ellipsoid_form,
                                             node_map, reference_contact, world_collider)
@@ -448,18 +448,15 @@ class BlendTracker(StatelessTracker):
         return self._place_strands(slice(None), out, rot, origin, moved, check)
 
     def _place_part(self, part: int, parts: int) -> np.ndarray:
-        """The strands ``a .. b - 1`` of the part: every input sliced to them, so the kernel
-        places them alone."""
-        idx = strand_part(self.ghosts.count, part, parts)
-        self._place_strands(slice(idx[0], idx[-1] + 1) if idx.size else slice(0, 0),
-                            *self._x32_out)
-        return idx
+        """The strands of the part (:func:`~hair_tracking.core.model.part_rows`): every input
+        sliced to them, so the kernel places them alone."""
+        rows = part_rows(self.ghosts.count, part, parts)
+        self._place_strands(rows, *self._x32_out)
+        return np.arange(rows.start, rows.stop)
 
     def _place_strands(self, rows: slice, out, rot, origin, moved, check) -> Tuple[int, bool]:
-        if rows != slice(None):
-            out = out[rows]
         return blend_strands(
-            out, rot, origin, moved, check, self._offset32[rows], self._roots[rows],
+            out[rows], rot, origin, moved, check, self._offset32[rows], self._roots[rows],
             self._len32[rows], self._guide_pad[rows], self._weight_pad[rows], self._gcol,
             self._rot, self._pos, self.restore, self.collide, self._center, self._axes,
             self.is_guide[rows], self._guide_len)

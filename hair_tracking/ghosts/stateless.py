@@ -241,10 +241,10 @@ class StatelessTracker:
         alone from the last step when nothing has read the hair since (:meth:`_place_part`), so
         a check of a few strands does not cost a whole evaluation; else read from
         :meth:`positions`.  Returns ``(strand indices, positions (len, N, 3))``."""
-        idx = strand_part(self.ghosts.count, part, parts)      # checks the part
         if self._pending:
-            idx = self._place_part(int(part), int(parts))
+            idx = self._place_part(part, parts)
             return idx, self._x32[idx]
+        idx = strand_part(self.ghosts.count, part, parts)
         return idx, self.positions()[idx]
 
     def _place_part(self, part: int, parts: int) -> np.ndarray:

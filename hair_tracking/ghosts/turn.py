@@ -43,7 +43,7 @@ from typing import Tuple
 import numpy as np
 from numba import njit, prange
 
-from hair_tracking.core.model import HeadPose, StrandSet
+from hair_tracking.core.model import HeadPose, StrandSet, part_rows
 from hair_tracking.core.point_records import put_record
 from hair_tracking.ghosts.blend import blend_weights
 from hair_tracking.ghosts.stateless import (StatelessTracker, at_fractions, ellipsoid_form,
@@ -403,9 +403,9 @@ class TurnTracker(StatelessTracker):
 
     def _place_part(self, part: int, parts: int) -> np.ndarray:
         """The strands of the blocks of the part (blocks hold strands of one guide, so a part
-        is a set of guides' strands)."""
-        n = self.block_guide.shape[0]
-        rows = slice(part * n // parts, (part + 1) * n // parts)
+        is a set of guides' strands; :func:`~hair_tracking.core.model.part_rows` of the
+        blocks)."""
+        rows = part_rows(self.block_guide.shape[0], part, parts)
         self._place_blocks(rows, *self._x32_out)
         idx = self.block_strand[rows]
         return np.sort(idx[idx >= 0])
