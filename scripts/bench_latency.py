@@ -20,9 +20,9 @@ includes waiting for the next tick, up to one period); ``on_pose`` sets ``publis
 a frame goes out right after its pose was simulated (rate still capped).  Also reported: the
 node's own step time (simulation of one pose) and publish time (encoding + handing the bytes to
 DDS), median and p99, and the cloud's size with the time of one single-threaded copy of its
-bytes measured right after the case (the middleware copies each cloud at least twice between
-the publish call and the probe's take).  Goals: p99 latency of 8 ms at 10 k ghosts and 33 ms at
-100 k.  Numbers depend on the machine; the JSON records its CPU count.
+bytes measured right after the case (the middleware copies each cloud at least three times
+between the publish call and the probe's take, docs/node.md).  Goals: p99 latency of 8 ms at
+10 k ghosts and 33 ms at 100 k.  Numbers depend on the machine; the JSON records its CPU count.
 """
 import argparse
 import json
@@ -223,8 +223,7 @@ def run_case(ghosts, mode, args, domain_id):
     probe = rclpy.create_node('bench_probe', context=ctx)
     sent, received = {}, {}
     lock = threading.Lock()
-
-    cloud_bytes = [0]
+    cloud_bytes = [0]                   # the size of the last cloud taken
 
     def on_cloud(raw):
         now = time.perf_counter()
