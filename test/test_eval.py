@@ -388,3 +388,42 @@ def test_dominance_cli_writes_tables_and_the_plot(tmp_path):
     md = open(tmp_path / 'r' / 'dominance.md').read()
     assert 'hair_sim_eval dominance --ghosts 64' in md and '#### walk, 64 strands' in md
     assert os.path.getsize(tmp_path / 'f' / 'dominance.png') > 5_000
+
+
+def test_dominance_cli_evaluates_recorded_motions_a_bag_and_a_pose_csv(tmp_path):
+    """``--motion FILE`` (repeatable) adds a user's recording, read as hair_sim_bag reads it."""
+    bag = os.path.join(os.path.dirname(ea.__file__), '..', 'data', 'walk_head_pose.mcap')
+    nod = tmp_path / 'nod.csv'
+    with open(nod, 'w', newline='') as f:
+        w = csv.writer(f)
+        w.writerow(['t_s', 'px', 'py', 'pz', 'qx', 'qy', 'qz', 'qw'])
+        for k in range(40):
+            q = quat_from_axis_angle([0.0, 1.0, 0.0], 0.3 * math.sin(0.2 * k))
+            w.writerow([0.01 * k, 0.0, 0.0, 1.6] + [float(c) for c in q])
+    rc = eval_cli.main(['dominance', '--ghosts', '64', '--motions', '--motion', bag,
+                        '--motion', str(nod), '--duration', '0.2', '--repeats', '1',
+                        '--thread-counts', '1', '--out', str(tmp_path / 'r'),
+                        '--figures', str(tmp_path / 'f')])
+    assert rc == 0
+    md = open(tmp_path / 'r' / 'dominance.md').read()
+    assert '#### walk_head_pose, 64 strands' in md and '#### nod, 64 strands' in md
+    assert '#### walk, 64 strands' not in md                   # no built-in motion asked for
+
+
+@pytest.mark.parametrize('cmd', ['accuracy', 'dominance'])
+@pytest.mark.parametrize('content, name, message', [
+    ('not a bag', 'motion.mcap', 'not a bag'),
+    ('t_s px\n1 2\n', 'motion.csv', 'missing column'),
+    (None, 'missing.bvh', 'BVH file not found'),
+])
+def test_a_bad_motion_file_is_refused_before_any_work_with_a_clear_message(
+        tmp_path, capsys, cmd, content, name, message):
+    path = tmp_path / name
+    if content is not None:
+        path.write_text(content)
+    with pytest.raises(SystemExit) as e:
+        eval_cli.main([cmd, '--motion', str(path), '--out', str(tmp_path / 'out')])
+    assert e.value.code == 2
+    err = capsys.readouterr().err
+    assert '--motion: ' in err and message in err and 'Traceback' not in err
+    assert not (tmp_path / 'out').exists()

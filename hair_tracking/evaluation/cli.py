@@ -94,7 +94,7 @@ def cmd_accuracy(args) -> int:
         specs = [s for s in specs if any(o in s.name for o in args.only)]
     reports = []
     t0 = time.perf_counter()
-    for tr in trajectories(args.quick, args.vr) + recorded(args.motion):
+    for tr in trajectories(args.quick, args.vr) + args.recorded:
         if args.motions and tr.name not in args.motions:
             continue
         if args.duration:
@@ -175,7 +175,7 @@ def cmd_dominance(args) -> int:
     from hair_tracking.evaluation.methods import make_workload
     scene = Scene.from_yaml(args.scene) if args.scene else Scene()
     tracks = [t for t in trajectories(False, args.vr) if t.name in args.motions]
-    tracks += recorded(args.motion)
+    tracks += args.recorded
     md = ['# Do the ghosts pay for themselves?', '',
           f'Reproduce: `{command_line(args)}`', '',
           f'Machine: {machine_note(max(args.thread_counts))}.', '',
@@ -267,6 +267,13 @@ def main(argv=None) -> int:
         p.error('--ghosts must be at least 16 (the 1:16 ratio needs one guide)')
     if args.cmd == 'accuracy' and args.ghosts and args.ghosts < 64:
         p.error('--ghosts must be at least 64 (the 1:64 ratio needs one guide)')
+    if args.cmd in ('accuracy', 'dominance'):
+        from hair_tracking.bags.head_motion import HeadMotionError
+        from hair_tracking.bags.io import BagError
+        try:                    # every file read before any work, so a bad one costs nothing
+            args.recorded = recorded(args.motion)
+        except (BagError, HeadMotionError) as e:
+            p.error(f'--motion: {e}')
     if args.cmd == 'dominance':
         _set_threads(max(args.thread_counts))
         return cmd_dominance(args)
