@@ -75,11 +75,11 @@ from msg_adapters.tf import transform_message, transforms as tf_transforms
 from hair_tracking import process_tuning
 from hair_tracking.core import params as P
 from hair_tracking.core.head_track import PoseResult
-from hair_tracking.core.params_check import unknown_parameters
 from hair_tracking.core.scene import Scene, SceneError
 from hair_tracking.core.strand_colors import StrandColorCache
 from hair_tracking.core.tf_tree import compose as tf_compose, TfTree
 from hair_tracking.core.transforms import quat_to_matrix
+from hair_tracking.output.params_check import unknown_parameters
 from hair_tracking.resources import config_path
 from hair_tracking.ros.interrupt import interrupt_between_callbacks
 from hair_tracking.ros.load_shedding import LoadShedder
