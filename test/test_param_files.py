@@ -1,10 +1,11 @@
-"""The files generated from the parameter table (config/hair_sim.yaml, the table in docs/node.md)
-are what the table makes now, and read back as the table says."""
+"""The files generated from the parameter table (config/hair_sim.yaml, config/scene_default.yaml,
+the table in docs/node.md) are what the table makes now, and read back as the table says."""
 import os
 
 import pytest
 import yaml
 
+from hair_tracking.core.scene import Scene
 from hair_tracking.output import param_files
 from hair_tracking.output.settings import by_name, make_settings
 
@@ -44,6 +45,12 @@ def test_params_file_lists_every_parameter_with_typed_defaults():
     assert make_settings(flat) == make_settings({})
 
 
+def test_the_default_scene_file_is_the_default_scene():
+    text = param_files.render_scene_yaml()
+    assert Scene.from_dict(yaml.safe_load(text)) == Scene()
+    assert Scene.from_yaml(os.path.join(ROOT, 'config', 'scene_default.yaml')) == Scene()
+
+
 def test_the_docs_table_is_spliced_between_its_markers():
     doc = f'intro\n{param_files.DOCS_BEGIN}old table\n{param_files.DOCS_END}outro\n'
     new = param_files.with_table(doc)
@@ -65,6 +72,6 @@ def test_the_command_writes_the_files_and_refuses_a_wrong_root(tmp_path, capsys)
             assert (tmp_path / rel).read_text(encoding='utf-8') == text
     assert param_files.render_markdown() in (tmp_path / 'docs' / 'node.md').read_text()
     assert param_files.main(['--root', str(tmp_path)]) == 0
-    assert capsys.readouterr().out.count('up to date') == 2
+    assert capsys.readouterr().out.count('up to date') == 3
     assert param_files.main(['--root', str(tmp_path / 'nowhere')]) == 2
     assert 'repository root' in capsys.readouterr().err
