@@ -12,6 +12,7 @@ are given in the head frame, which follows REP-103: x forward (out of the face),
 origin at the head centre.
 """
 from dataclasses import asdict, dataclass, field, fields, is_dataclass, replace
+import math
 import os
 from typing import Any, Dict, Optional, Tuple
 
@@ -249,7 +250,7 @@ def _coerce(path: str, value: Any, row: Param) -> Any:
         return value
     if kind == 'int':
         if isinstance(value, bool) or not isinstance(value, (int, float)) or \
-                float(value) != int(value):
+                not math.isfinite(value) or float(value) != int(value):
             raise SceneError(path, f'must be an integer, got {value!r}')
         return int(value)
     if kind == 'double':
