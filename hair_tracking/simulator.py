@@ -47,8 +47,7 @@ from hair_tracking.core.head_track import HeadTrack, IDENTITY, PoseResult
 from hair_tracking.core.metrics import max_stretch
 from hair_tracking.core.model import HeadPose, StrandSet, strand_part
 from hair_tracking.core.point_records import points_to_records
-from hair_tracking.core.scene import Scene
-from hair_tracking.core.scene_params import GUIDES_AMONG_STRANDS
+from hair_tracking.core.scene import GUIDES_AMONG_STRANDS, Scene
 from hair_tracking.core.transforms import quat_angle, quat_to_matrix, slerp
 from hair_tracking.ghosts.blend import BlendTracker
 from hair_tracking.ghosts.stateless import choose_guides

@@ -21,6 +21,9 @@ import yaml
 from hair_tracking.core.params import Param
 from hair_tracking.core.scene_params import SCENE_PARAMS, SCENE_ROWS
 
+#: Trackers whose guides are some of the strands, each strand placed once per read (no state).
+GUIDES_AMONG_STRANDS = ('blend', 'turn')
+
 
 class SceneError(ValueError):
     """An invalid scene: ``field`` names the offending entry (dotted path)."""

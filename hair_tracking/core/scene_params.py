@@ -25,8 +25,6 @@ COLLIDERS = ('none', 'sphere', 'ellipsoid')
 ELASTIC_MODES = ('kept', 'changed')
 CURVES = ('none', 'bezier', 'catmull_rom')
 TRACKING_MODES = ('paper', 'blend', 'turn')
-#: Trackers whose guides are some of the strands, each strand placed once per read (no state).
-GUIDES_AMONG_STRANDS = ('blend', 'turn')
 
 
 def _row(name: str, kind: str, default: Any, description: str, **kw: Any) -> Param:
