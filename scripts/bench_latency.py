@@ -46,7 +46,7 @@ from visualization_msgs.msg import MarkerArray
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 from hair_tracking import process_tuning  # noqa: E402
-from hair_tracking.core import params as P  # noqa: E402
+from hair_tracking.output.settings import by_name  # noqa: E402
 from cpu_steal import format_share, StealMeter  # noqa: E402  (scripts/cpu_steal.py)
 from hair_tracking.ros.node import HairSimNode  # noqa: E402
 from msg_adapters.pose import pose_stamped_msg  # noqa: E402
@@ -67,7 +67,7 @@ def _setting(text):
     name, sep, value = text.partition('=')
     if not sep or not name:
         raise argparse.ArgumentTypeError(f'{text!r}: expected NAME=VALUE')
-    if name not in P.by_name():     # rclpy ignores overrides of undeclared names silently
+    if name not in by_name():     # rclpy ignores overrides of undeclared names silently
         raise argparse.ArgumentTypeError(f'{name!r} is not a parameter of the node '
                                          f'(NAME=VALUE, e.g. tracking.every_substep=false)')
     low = value.strip().lower()

@@ -32,7 +32,7 @@ sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 from bench_latency import copy_ms, stamp_of, stats  # noqa: E402  (scripts/bench_latency.py)
 from hair_tracking import process_tuning  # noqa: E402
-from hair_tracking.core.params import CLOUD_FIELDS  # noqa: E402
+from hair_tracking.output.settings import CLOUD_FIELDS  # noqa: E402
 from hair_tracking.ros.node import output_qos  # noqa: E402
 from msg_adapters.pointcloud import CloudBuffer, pack_rgb_u32  # noqa: E402
 from msg_adapters.rcl_serialized import (SerializedPublisher, SerializedTaker,  # noqa: E402

@@ -11,7 +11,7 @@ PACKAGE = os.path.join(ROOT, 'hair_tracking')
 
 #: Layers from the bottom up: a module may import its own layer and the ones below it only.
 #: The top-level helpers (resources, process_tuning) are leaves any layer may use.
-LAYERS = ['core', 'guides', 'ghosts', 'simulator', 'bags', 'evaluation', 'ros']
+LAYERS = ['core', 'guides', 'ghosts', 'simulator', 'output', 'bags', 'evaluation', 'ros']
 LEAVES = {'resources', 'process_tuning'}
 #: Layers that simulate: numpy, numba and yaml only, no ROS messages, no rclpy, no adapters.
 SIMULATION = {'core', 'guides', 'ghosts', 'simulator'}

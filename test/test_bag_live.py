@@ -27,7 +27,7 @@ from hair_tracking.bags import io as bag_io
 from hair_tracking.bags.offline import run_bag, RunOptions
 from hair_tracking.bags.play import BagPlayer
 from hair_tracking.bags.record import BagRecorder
-from hair_tracking.core.params import make_settings
+from hair_tracking.output.settings import make_settings
 from hair_tracking.ros.node import HairSimNode
 
 DOMAIN = 55

@@ -9,7 +9,7 @@ import os
 
 import yaml
 
-from hair_tracking.core import params
+from hair_tracking.output import settings as params
 from hair_tracking.ros.node import HEAD_MARKER_TOPIC
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))

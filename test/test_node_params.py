@@ -14,7 +14,7 @@ from rclpy.parameter import Parameter
 from rclpy.parameter_client import AsyncParameterClient
 import yaml
 
-from hair_tracking.core import params as P
+from hair_tracking.output import settings as P
 from msg_adapters.pointcloud import pointcloud2_to_strands
 from msg_adapters.pose import pose_stamped_msg
 from visualization_msgs.msg import Marker

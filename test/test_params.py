@@ -1,35 +1,79 @@
-"""The declarative parameter table (no ROS): sync with the scene, validation, YAML."""
+"""The declarative parameter table (no ROS): the scene and the settings derived from its rows,
+validation, snapshots."""
 import dataclasses
 import math
-import os
+import typing
 
 import pytest
-import yaml
 
-from hair_tracking.core import params
-from hair_tracking.core.params import apply_changes, make_settings, ParamError
-from hair_tracking.core.scene import RULES, Scene, SceneError
+from hair_tracking.core.params import KINDS, ParamError
+from hair_tracking.core.scene import Scene, scene_fields, scene_params, SceneError
+from hair_tracking.core.scene_params import SCENE_PARAMS
+from hair_tracking.output import settings as params
+from hair_tracking.output.settings import apply_changes, make_settings, NODE_PARAMS, Settings
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+#: The Python type a row's kind reads as.
+TYPES = {'bool': bool, 'int': int, 'double': float, 'string': str, 'double_array': tuple}
 
 
-def test_every_scene_field_has_exactly_one_parameter():
-    fields = params.scene_fields()
-    scene_names = [p.name for p in params.scene_params()]
-    assert sorted(scene_names) == sorted(fields)
-    assert set(params._SCENE_DOCS) == set(fields)
+def _nest(flat):
+    """``{dotted name: value}`` as the nested mapping of a scene file."""
+    out = {}
+    for path, value in flat.items():
+        node = out
+        *sections, name = path.split('.')
+        for part in sections:
+            node = node.setdefault(part, {})
+        node[name] = value
+    return out
+
+
+#: Other fields set while a field's range is checked, so that no cross-field rule interferes.
+CONTEXT = {'groom.scalp.max_polar_deg': {'groom.scalp.front_max_polar_deg': 0.0},
+           'groom.scalp.front_max_polar_deg': {'groom.scalp.max_polar_deg': 180.0}}
+
+
+def test_every_scene_field_has_exactly_one_row_in_field_order():
+    fields = scene_fields()
+    assert [p.name for p in SCENE_PARAMS] == list(fields)
     names = [p.name for p in params.table()]
     assert len(names) == len(set(names)), 'duplicate parameter names'
-    assert not set(p.name for p in params.NODE_PARAMS) & set(fields)
+    assert not set(p.name for p in NODE_PARAMS) & set(fields)
+    assert all(p.scene for p in SCENE_PARAMS) and not any(p.scene for p in NODE_PARAMS)
 
 
-def test_scene_defaults_and_kinds_come_from_the_scene():
-    fields = params.scene_fields(Scene())
-    for p in params.scene_params():
-        assert p.default == fields[p.name]
-        assert p.kind in params.KINDS
-        assert p.scene
+def test_the_scene_dataclasses_take_their_defaults_and_types_from_the_rows():
+    fields = scene_fields(Scene())
+    for p in SCENE_PARAMS:
+        assert fields[p.name] == p.default and type(fields[p.name]) is type(p.default), p.name
+    hints = {}
+
+    def walk(cls, prefix):
+        for f in dataclasses.fields(cls):
+            hint = typing.get_type_hints(cls)[f.name]
+            if dataclasses.is_dataclass(hint):
+                walk(hint, prefix + f.name + '.')
+            else:
+                hints[prefix + f.name] = typing.get_origin(hint) or hint
+    walk(Scene, '')
+    assert hints == {p.name: TYPES[p.kind] for p in SCENE_PARAMS}
+
+
+def test_settings_has_one_typed_attribute_per_node_row():
+    fields = dataclasses.fields(Settings)
+    assert [f.name for f in fields] == ['scene'] + [p.name for p in NODE_PARAMS]
+    hints = typing.get_type_hints(Settings)
+    default = Settings()
+    assert default.scene == Scene()
+    for p in NODE_PARAMS:
+        assert (typing.get_origin(hints[p.name]) or hints[p.name]) is TYPES[p.kind], p.name
+        assert getattr(default, p.name) == p.default, p.name
+    assert make_settings({}) == default
+
+
+def test_rows_are_well_formed():
     for p in params.table():
+        assert p.kind in KINDS
         if p.kind == 'double':
             assert type(p.default) is float, p.name      # 10.0, never 10 (rclpy types by value)
         if p.kind == 'int':
@@ -37,40 +81,50 @@ def test_scene_defaults_and_kinds_come_from_the_scene():
         if p.kind == 'double_array':
             assert p.length == len(p.default)
             assert all(type(v) is float for v in p.default), p.name
+        if p.choices:
+            assert p.kind == 'string' and p.lo is None and p.hi is None, p.name
         p.check(p.default)                               # every default is allowed
 
 
-@pytest.mark.parametrize('path', sorted(RULES))
-def test_ranges_read_from_rules_match_what_the_rules_accept(path):
-    bounds = params.rule_bounds(path)
-    assert bounds, f'rule of {path} could not be read'
-    rule = RULES[path]
-    if 'choices' in bounds:
-        for c in bounds['choices']:
-            rule(path, c)
-        with pytest.raises(SceneError):
-            rule(path, 'no_such_choice')
+@pytest.mark.parametrize('row', [p for p in SCENE_PARAMS if p.lo is not None or p.choices],
+                         ids=lambda p: p.name)
+def test_the_scene_and_the_node_check_the_range_of_the_row(row):
+    """Scene.from_dict (a scene file) and make_settings (the node) accept and refuse the same
+    values: the ends of the row's range and just beyond them."""
+    def accepted(value):
+        element = (lambda v: (v,) * row.length) if row.kind == 'double_array' else (lambda v: v)
+        values = dict(CONTEXT.get(row.name, {}), **{row.name: element(value)})
+        try:
+            Scene.from_dict(_nest(values))
+            scene = True
+        except SceneError as e:
+            assert e.field == row.name
+            scene = False
+        try:
+            make_settings(values)
+            node = True
+        except ParamError as e:
+            assert e.name == row.name
+            node = False
+        return scene, node
+
+    if row.choices:
+        for c in row.choices:
+            assert accepted(c) == (True, True)
+        assert accepted('no_such_choice') == (False, False)
         return
-    if bounds.get('finite'):
-        rule(path, (1.0, -2.0, 3.0))
-        with pytest.raises(SceneError):
-            rule(path, (math.nan, 0.0, 0.0))
+    lo, hi = row.lo, row.hi
+    step = 1 if row.kind == 'int' else max(1e-9, 1e-6 * (hi - lo))
+    assert accepted(hi + step) == (False, False)
+    assert accepted(lo - step) == (False, False)
+    if row.magnitude_only:                    # the scene refuses the bounds themselves
+        assert accepted(hi) == (False, False) and accepted(math.nan) == (False, False)
+        assert accepted(hi / 2) == (True, True)
         return
-    lo, hi = bounds['lo'], bounds['hi']
-    step = max(1e-9, 1e-6 * (hi - lo))
-    rule(path, hi)
-    with pytest.raises(SceneError):
-        rule(path, hi + max(step, 1.0 if isinstance(hi, int) else step))
-    with pytest.raises(SceneError):
-        rule(path, lo - max(step, 1.0 if isinstance(lo, int) else step))
-    if bounds['lo_open']:
-        with pytest.raises(SceneError):
-            rule(path, lo)
-    else:
-        rule(path, lo)
-    # the table carries the same bounds
-    p = params.by_name()[path]
-    assert (p.lo, p.hi, p.lo_open) == (lo, hi, bounds['lo_open'])
+    if row.kind != 'int':
+        assert accepted(math.nan) == (False, False)
+    assert accepted(hi) == (True, True)
+    assert accepted(lo) == ((False, False) if row.lo_open else (True, True))
 
 
 def test_rebuild_policy_is_the_groom_and_read_only_are_start_settings():
@@ -107,8 +161,8 @@ def test_valid_change_gives_a_new_snapshot_and_leaves_the_old_one():
     assert old.scene.solver.type == 'ftl' and old.scene.damping == 1.0
     with pytest.raises((dataclasses.FrozenInstanceError, TypeError, AttributeError)):
         old.scene = new.scene
-    with pytest.raises(TypeError):
-        old.node['publish_rate_hz'] = 1.0
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        old.publish_rate_hz = 1.0
 
 
 def test_shape_changes_ask_for_a_rebuild_only_when_the_value_changes():
@@ -165,48 +219,9 @@ def test_base_scene_supplies_the_scene_defaults():
     base = Scene.from_dict({'groom': {'guides': 7}, 'solver': {'type': 'pbd'}})
     table = params.by_name(base)
     assert table['groom.guides'].default == 7
+    assert {p.name: p.default for p in scene_params(base)} == scene_fields(base)
     s = make_settings({'damping': 3.0}, base)
     assert s.scene.groom.guides == 7 and s.scene.solver.type == 'pbd'
     assert s.scene.damping == 3.0
     s2 = make_settings({'groom.guides': 9}, base)
     assert s2.scene.groom.guides == 9
-
-
-def test_rendered_yaml_lists_every_parameter_with_typed_defaults():
-    text = params.render_yaml()
-    data = yaml.safe_load(text)
-    flat = {}
-
-    def walk(d, prefix):
-        for k, v in d.items():
-            if isinstance(v, dict):
-                walk(v, prefix + k + '.')
-            else:
-                flat[prefix + k] = v
-    walk(data['/**']['ros__parameters'], '')
-    table = params.by_name()
-    assert set(flat) == set(table)
-    for name, value in flat.items():
-        p = table[name]
-        if p.kind == 'double_array':
-            assert tuple(value) == p.default
-            assert all(type(v) is float for v in value), name
-        else:
-            assert value == p.default, name
-            assert type(value) is type(p.default), name
-    assert make_settings({k: v for k, v in flat.items()}).scene == Scene()
-
-
-def test_shipped_config_is_the_rendered_table():
-    with open(os.path.join(ROOT, 'config', 'hair_sim.yaml'), encoding='utf-8') as f:
-        shipped = f.read()
-    assert shipped == params.render_yaml(), \
-        'config/hair_sim.yaml is out of date: python -m hair_tracking.core.params > ' \
-        'config/hair_sim.yaml'
-
-
-def test_docs_carry_the_current_table():
-    with open(os.path.join(ROOT, 'docs', 'node.md'), encoding='utf-8') as f:
-        doc = f.read()
-    assert params.render_markdown() in doc, \
-        'docs/node.md is out of date: paste python -m hair_tracking.core.params --markdown'

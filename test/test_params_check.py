@@ -1,6 +1,6 @@
 """Unknown parameters in params files and -p arguments, matched to the node as rcl does."""
-from hair_tracking.core import params
-from hair_tracking.core.params_check import node_key_matches, param_assignments, params_files, \
+from hair_tracking.output import settings as params
+from hair_tracking.output.params_check import node_key_matches, param_assignments, params_files, \
     unknown_parameters
 
 

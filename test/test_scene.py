@@ -42,6 +42,8 @@ def test_yaml_values_are_used(tmp_path):
     ({'collider': {'shape': 'cube'}}, 'collider.shape', 'none, sphere, ellipsoid'),
     ({'collider': {'radii': [0.1, 0.1]}}, 'collider.radii', 'list of 3 numbers'),
     ({'groom': {'guides': 2.5}}, 'groom.guides', 'integer'),
+    ({'groom': {'guides': float('nan')}}, 'groom.guides', 'integer'),
+    ({'groom': {'seed': float('inf')}}, 'groom.seed', 'integer'),
     ({'groom': {'guidez': 3}}, 'groom.guidez', 'unknown field'),
     ({'tracking': {'elastic_weight': 'yes'}}, 'tracking.elastic_weight', 'true or false'),
     ({'gravity': [0.0, float('nan'), 0.0]}, 'gravity', 'finite'),

@@ -14,7 +14,7 @@ The engine behind ``hair_sim_bag run``.  It drives the same :class:`HairSimulato
 Nothing depends on the wall clock inside the messages (timings go to the summary only), so the
 same bag and settings give byte-identical output messages.  Settings come from a scene (YAML
 or preset name) and/or a ROS 2 params file of the node (``hair_sim: ros__parameters: ...``) and
-``name=value`` overrides, validated by :mod:`hair_tracking.core.params`.
+``name=value`` overrides, validated by :mod:`hair_tracking.output.settings`.
 """
 from dataclasses import dataclass, field
 import functools
@@ -30,9 +30,10 @@ import yaml
 
 from hair_tracking.bags import io as bag_io
 from hair_tracking.bags.io import BagError, EXIT_CONTENT, EXIT_FAILURE, EXIT_USAGE
-from hair_tracking.core.params import make_settings, NODE_NAME, ParamError, Settings
+from hair_tracking.core.params import ParamError
 from hair_tracking.core.scene import Scene, SceneError
 from hair_tracking.core.strand_colors import StrandColorCache
+from hair_tracking.output.settings import make_settings, NODE_NAME, Settings
 
 POINTS_TOPIC = '/hair/points'
 MARKERS_TOPIC = '/hair/markers'

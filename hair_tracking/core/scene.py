@@ -1,8 +1,11 @@
 """The scene: the one description of what is simulated.
 
 A scene is a tree of frozen dataclasses that loads from YAML (or a plain dict) and validates every
-field against its allowed range.  The simulator is assembled from it, so a stage the scene does not
-ask for is never built (see :mod:`hair_tracking.simulator`).
+field against its allowed values.  Each field's type, default, range and description are a row of
+the scene's parameter table (:mod:`hair_tracking.core.scene_params`): the dataclasses below take
+their defaults from the rows, and :meth:`Scene.validate` checks every field with its row.  The
+simulator is assembled from a scene, so a stage the scene does not ask for is never built (see
+:mod:`hair_tracking.simulator`).
 
 Units are SI (metres, seconds, radians unless a name says ``_deg``); the groom and the collider
 are given in the head frame, which follows REP-103: x forward (out of the face), y left, z up,
@@ -11,9 +14,15 @@ origin at the head centre.
 from dataclasses import asdict, dataclass, field, fields, is_dataclass, replace
 import math
 import os
-from typing import Any, Dict, Tuple
+from typing import Any, Dict, Optional, Tuple
 
 import yaml
+
+from hair_tracking.core.params import Param
+from hair_tracking.core.scene_params import SCENE_PARAMS, SCENE_ROWS
+
+#: Trackers whose guides are some of the strands, each strand placed once per read (no state).
+GUIDES_AMONG_STRANDS = ('blend', 'turn')
 
 
 class SceneError(ValueError):
@@ -24,106 +33,116 @@ class SceneError(ValueError):
         self.field = field_name
 
 
-SOLVERS = ('ftl', 'pbd', 'xpbd')
-COLLIDERS = ('none', 'sphere', 'ellipsoid')
-ELASTIC_MODES = ('kept', 'changed')
-CURVES = ('none', 'bezier', 'catmull_rom')
-TRACKING_MODES = ('paper', 'blend', 'turn')
-#: Trackers whose guides are some of the strands, each strand placed once per read (no state).
-GUIDES_AMONG_STRANDS = ('blend', 'turn')
+def _default(path: str) -> Any:
+    """The default of the scene field ``path``: its row's."""
+    return SCENE_ROWS[path].default
 
 
 @dataclass(frozen=True)
 class ScalpSpec:
     """Where roots grow: a cap of an ellipsoid around the head centre (head frame)."""
 
-    center: Tuple[float, float, float] = (0.0, 0.0, 0.0)
-    radii: Tuple[float, float, float] = (0.095, 0.08, 0.105)
-    max_polar_deg: float = 105.0        # roots at polar angle (from +z) up to this ...
-    front_max_polar_deg: float = 45.0   # ... but only up to this on the face side (x > 0)
+    center: Tuple[float, float, float] = _default('groom.scalp.center')
+    radii: Tuple[float, float, float] = _default('groom.scalp.radii')
+    max_polar_deg: float = _default('groom.scalp.max_polar_deg')
+    front_max_polar_deg: float = _default('groom.scalp.front_max_polar_deg')
 
 
 @dataclass(frozen=True)
 class GroomSpec:
-    guides: int = 64                  # number of guide (target) strands
-    ghosts_per_guide: int = 8         # ghost strands created per guide (total = guides * this)
-    guide_nodes: int = 16             # nodes per guide strand (root included)
-    ghost_nodes: int = 16             # nodes per ghost strand (may differ from guide_nodes)
-    length: float = 0.25              # mean strand length [m]
-    length_variation: float = 0.1     # relative spread of lengths: uniform in length*(1 +- this)
-    droop: float = 0.6                # 0: straight along the scalp normal, 1: hangs down
-    seed: int = 1                     # random seed of the groom
+    """The strands: how many, how long, their rest shape and where their roots grow."""
+
+    guides: int = _default('groom.guides')
+    ghosts_per_guide: int = _default('groom.ghosts_per_guide')
+    guide_nodes: int = _default('groom.guide_nodes')
+    ghost_nodes: int = _default('groom.ghost_nodes')
+    length: float = _default('groom.length')
+    length_variation: float = _default('groom.length_variation')
+    droop: float = _default('groom.droop')
+    seed: int = _default('groom.seed')
     scalp: ScalpSpec = field(default_factory=ScalpSpec)
 
 
 @dataclass(frozen=True)
 class ColliderSpec:
-    shape: str = 'ellipsoid'          # none | sphere | ellipsoid
-    center: Tuple[float, float, float] = (0.0, 0.0, 0.0)   # head frame [m]
-    radius: float = 0.1               # sphere radius [m]
-    radii: Tuple[float, float, float] = (0.095, 0.08, 0.105)  # ellipsoid semi-axes [m]
-    margin: float = 0.004             # hair is kept this far outside the surface [m]
-    friction: float = 0.3             # Coulomb-like tangential damping on contact, 0..1
+    """The head collider (head frame)."""
+
+    shape: str = _default('collider.shape')
+    center: Tuple[float, float, float] = _default('collider.center')
+    radius: float = _default('collider.radius')
+    radii: Tuple[float, float, float] = _default('collider.radii')
+    margin: float = _default('collider.margin')
+    friction: float = _default('collider.friction')
 
 
 @dataclass(frozen=True)
 class SolverSpec:
-    type: str = 'ftl'                 # ftl | pbd | xpbd
-    dt: float = 1.0 / 240.0           # fixed substep [s]
-    iterations: int = 4               # constraint iterations per substep (pbd, xpbd)
-    stiffness: float = 1.0            # PBD stretch stiffness 0..1 (iteration dependent)
-    compliance: float = 0.0           # XPBD stretch compliance [m/N]; 0 = rigid
-    bend_stiffness: float = 0.3       # PBD/FTL bending stiffness 0..1
-    bend_compliance: float = 1e-4     # XPBD bending compliance [m/N]
-    ftl_damping: float = 0.9          # FTL velocity correction s_damp, 0..1
-    max_substeps: int = 32            # cap of substeps per advance_to() call
-    shock_propagation: float = 0.0    # 0..1: carry strands rigidly with fast head motion
-    max_displacement: float = 0.05    # per-substep displacement clamp [m]; 0 disables
-    settle_time: float = 0.5          # seconds simulated with a still head after a (re)set
+    """The guide solver and its time step."""
+
+    type: str = _default('solver.type')
+    dt: float = _default('solver.dt')
+    iterations: int = _default('solver.iterations')
+    stiffness: float = _default('solver.stiffness')
+    compliance: float = _default('solver.compliance')
+    bend_stiffness: float = _default('solver.bend_stiffness')
+    bend_compliance: float = _default('solver.bend_compliance')
+    ftl_damping: float = _default('solver.ftl_damping')
+    max_substeps: int = _default('solver.max_substeps')
+    shock_propagation: float = _default('solver.shock_propagation')
+    max_displacement: float = _default('solver.max_displacement')
+    settle_time: float = _default('solver.settle_time')
 
 
 @dataclass(frozen=True)
 class TrackingSpec:
-    mode: str = 'blend'               # blend, turn (guides among the strands) or paper
-    blend_guides: int = 3             # blend: guides per ghost (nearest roots, Shepard weights)
-    candidates: int = 8               # guides with nearest roots examined by equation (1)
-    com_strength: float = 0.5         # centre-of-mass tracking strength per substep, 0..1
-    offset_strength: float = 0.05     # pull of each ghost node to its rest offset, 0..1
-    elastic_weight: bool = True       # W* of equation (4)
-    elastic_mode: str = 'kept'        # kept: W* = 0.5 v.v0 + 0.5 ; changed: 1 - W*
-    tip_weight: float = 0.3           # w_tip at the tip (grows linearly from 0 at the root)
-    com_weight: float = 0.3           # w_com per metre of distance from the group centre / length
-    max_weight: float = 1.5           # clamp of W* + w_tip + w_com (energy safety)
-    length_restore: bool = True       # one Follow-The-Leader pass on ghosts
-    collide: bool = True              # ghosts collide with the head collider (if any)
-    spread: float = 0.0               # HairControl spread control strength 0..1 (0 = off)
-    spread_target: float = 1.0        # target variance as a multiple of the initial variance
-    every_substep: bool = True        # track after every guide substep (false: once per pose)
+    """How the ghosts follow the guides."""
+
+    mode: str = _default('tracking.mode')
+    blend_guides: int = _default('tracking.blend_guides')
+    candidates: int = _default('tracking.candidates')
+    com_strength: float = _default('tracking.com_strength')
+    offset_strength: float = _default('tracking.offset_strength')
+    elastic_weight: bool = _default('tracking.elastic_weight')
+    elastic_mode: str = _default('tracking.elastic_mode')
+    tip_weight: float = _default('tracking.tip_weight')
+    com_weight: float = _default('tracking.com_weight')
+    max_weight: float = _default('tracking.max_weight')
+    length_restore: bool = _default('tracking.length_restore')
+    collide: bool = _default('tracking.collide')
+    spread: float = _default('tracking.spread')
+    spread_target: float = _default('tracking.spread_target')
+    every_substep: bool = _default('tracking.every_substep')
 
 
 @dataclass(frozen=True)
 class HeadTrackSpec:
-    teleport_distance: float = 0.5    # a jump farther than this [m] resets the hair
-    teleport_angle_deg: float = 90.0  # ... or a rotation larger than this between samples
-    max_gap: float = 0.5              # samples farther apart than this [s] count as a jump too
+    """When the head pose stream counts as a jump that resets the hair."""
+
+    teleport_distance: float = _default('head_track.teleport_distance')
+    teleport_angle_deg: float = _default('head_track.teleport_angle_deg')
+    max_gap: float = _default('head_track.max_gap')
 
 
 @dataclass(frozen=True)
 class OutputSpec:
-    curve: str = 'none'               # none | bezier | catmull_rom
-    points_per_strand: int = 16       # output points per strand when curve != none
+    """The published strands."""
+
+    curve: str = _default('output.curve')
+    points_per_strand: int = _default('output.points_per_strand')
 
 
 @dataclass(frozen=True)
 class Scene:
+    """What is simulated: the sections above, gravity (world frame) and damping."""
+
     groom: GroomSpec = field(default_factory=GroomSpec)
     collider: ColliderSpec = field(default_factory=ColliderSpec)
     solver: SolverSpec = field(default_factory=SolverSpec)
     tracking: TrackingSpec = field(default_factory=TrackingSpec)
     head_track: HeadTrackSpec = field(default_factory=HeadTrackSpec)
     output: OutputSpec = field(default_factory=OutputSpec)
-    gravity: Tuple[float, float, float] = (0.0, 0.0, -9.81)   # world frame [m/s^2]
-    damping: float = 1.0              # velocity damping rate [1/s]
+    gravity: Tuple[float, float, float] = _default('gravity')
+    damping: float = _default('damping')
 
     # ----------------------------------------------------------------- building
     @staticmethod
@@ -162,10 +181,12 @@ class Scene:
 
     # --------------------------------------------------------------- validation
     def validate(self) -> None:
-        for path, value in _walk(self):
-            rule = RULES.get(path)
-            if rule is not None:
-                rule(path, value)
+        """SceneError naming the first field its row does not allow, or a broken cross-field
+        rule."""
+        for path, value in scene_fields(self).items():
+            problem = SCENE_ROWS[path].problem(value, scene_words=True)
+            if problem:
+                raise SceneError(path, problem)
         g = self.groom
         if g.guides * g.ghosts_per_guide > 2_000_000:
             raise SceneError('groom.ghosts_per_guide',
@@ -175,11 +196,28 @@ class Scene:
                              'must not exceed groom.scalp.max_polar_deg')
 
 
-def replace_section(scene: Scene, section: str, **changes: Any) -> Scene:
-    """A copy of ``scene`` with fields of one section replaced, validated."""
-    new = replace(scene, **{section: replace(getattr(scene, section), **changes)})
-    new.validate()
-    return new
+def scene_fields(scene: Optional[Scene] = None) -> Dict[str, Any]:
+    """Every leaf field of ``scene`` (default: ``Scene()``) as ``{dotted path: value}``, in the
+    order of the fields."""
+    out: Dict[str, Any] = {}
+
+    def walk(obj, prefix):
+        for f in fields(obj):
+            value = getattr(obj, f.name)
+            if is_dataclass(value):
+                walk(value, prefix + f.name + '.')
+            else:
+                out[prefix + f.name] = value
+    walk(scene if scene is not None else Scene(), '')
+    return out
+
+
+def scene_params(base: Optional[Scene] = None) -> Tuple[Param, ...]:
+    """The scene's rows; with ``base`` (a scene file) its values are the defaults."""
+    if base is None:
+        return SCENE_PARAMS
+    values = scene_fields(base)
+    return tuple(replace(p, default=values[p.name]) for p in SCENE_PARAMS)
 
 
 # ------------------------------------------------------------------ internals
@@ -201,117 +239,34 @@ def _build(cls, data, prefix):
         if is_dataclass(default):
             kwargs[name] = _build(type(default), value, path + '.')
         else:
-            kwargs[name] = _coerce(path, value, default)
+            kwargs[name] = _coerce(path, value, SCENE_ROWS[path])
     return cls(**kwargs)
 
 
-def _coerce(path, value, default):
-    if isinstance(default, bool):
+def _coerce(path: str, value: Any, row: Param) -> Any:
+    """``value`` of a scene file as the Python type of the field ``row`` describes (SceneError
+    if it is not one); a number with an integral value counts as an integer."""
+    kind, length = row.kind, row.length
+    if kind == 'bool':
         if not isinstance(value, bool):
             raise SceneError(path, f'must be true or false, got {value!r}')
         return value
-    if isinstance(default, int):
+    if kind == 'int':
         if isinstance(value, bool) or not isinstance(value, (int, float)) or \
-                float(value) != int(value):
+                not math.isfinite(value) or float(value) != int(value):
             raise SceneError(path, f'must be an integer, got {value!r}')
         return int(value)
-    if isinstance(default, float):
+    if kind == 'double':
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise SceneError(path, f'must be a number, got {value!r}')
         return float(value)
-    if isinstance(default, str):
+    if kind == 'string':
         if not isinstance(value, str):
             raise SceneError(path, f'must be a string, got {value!r}')
         return value
-    if isinstance(default, tuple):
-        if not isinstance(value, (list, tuple)) or len(value) != len(default) or any(
+    if kind == 'double_array':
+        if not isinstance(value, (list, tuple)) or len(value) != length or any(
                 isinstance(v, bool) or not isinstance(v, (int, float)) for v in value):
-            raise SceneError(path, f'must be a list of {len(default)} numbers, got {value!r}')
+            raise SceneError(path, f'must be a list of {length} numbers, got {value!r}')
         return tuple(float(v) for v in value)
     raise SceneError(path, 'unsupported field type')  # pragma: no cover
-
-
-def _walk(obj, prefix=''):
-    for f in fields(obj):
-        value = getattr(obj, f.name)
-        if is_dataclass(value):
-            yield from _walk(value, prefix + f.name + '.')
-        else:
-            yield prefix + f.name, value
-
-
-def _range(lo, hi, lo_open=False):
-    def check(path, value):
-        vals = value if isinstance(value, tuple) else (value,)
-        for v in vals:
-            if not math.isfinite(v) or v < lo or v > hi or (lo_open and v == lo):
-                bracket = '(' if lo_open else '['
-                raise SceneError(path, f'{value!r} is outside the allowed range '
-                                       f'{bracket}{lo}, {hi}]')
-    return check
-
-
-def _choice(options):
-    def check(path, value):
-        if value not in options:
-            raise SceneError(path, f'{value!r} is not one of {", ".join(options)}')
-    return check
-
-
-def _finite(path, value):
-    vals = value if isinstance(value, tuple) else (value,)
-    if not all(math.isfinite(v) and abs(v) < 1e4 for v in vals):
-        raise SceneError(path, f'{value!r} must be finite numbers of magnitude below 1e4')
-
-
-#: Allowed values of every constrained scene field (dotted path -> check).
-RULES = {
-    'groom.guides': _range(1, 100_000),
-    'groom.ghosts_per_guide': _range(0, 10_000),
-    'groom.guide_nodes': _range(3, 256),
-    'groom.ghost_nodes': _range(3, 256),
-    'groom.length': _range(0.001, 5.0),
-    'groom.length_variation': _range(0.0, 0.9),
-    'groom.droop': _range(0.0, 1.0),
-    'groom.seed': _range(0, 2**31 - 1),
-    'groom.scalp.center': _range(-1.0, 1.0),
-    'groom.scalp.radii': _range(0.01, 1.0),
-    'groom.scalp.max_polar_deg': _range(1.0, 180.0),
-    'groom.scalp.front_max_polar_deg': _range(0.0, 180.0),
-    'collider.shape': _choice(COLLIDERS),
-    'collider.center': _range(-1.0, 1.0),
-    'collider.radius': _range(0.01, 1.0),
-    'collider.radii': _range(0.01, 1.0),
-    'collider.margin': _range(0.0, 0.1),
-    'collider.friction': _range(0.0, 1.0),
-    'solver.type': _choice(SOLVERS),
-    'solver.dt': _range(1e-5, 0.1),
-    'solver.iterations': _range(1, 1000),
-    'solver.stiffness': _range(0.0, 1.0, lo_open=True),
-    'solver.compliance': _range(0.0, 1.0),
-    'solver.bend_stiffness': _range(0.0, 1.0),
-    'solver.bend_compliance': _range(0.0, 1e3),
-    'solver.ftl_damping': _range(0.0, 1.0),
-    'solver.max_substeps': _range(1, 10_000),
-    'solver.shock_propagation': _range(0.0, 1.0),
-    'solver.max_displacement': _range(0.0, 10.0),
-    'solver.settle_time': _range(0.0, 60.0),
-    'tracking.mode': _choice(TRACKING_MODES),
-    'tracking.blend_guides': _range(1, 8),
-    'tracking.candidates': _range(1, 1024),
-    'tracking.com_strength': _range(0.0, 1.0),
-    'tracking.offset_strength': _range(0.0, 1.0),
-    'tracking.elastic_mode': _choice(ELASTIC_MODES),
-    'tracking.tip_weight': _range(0.0, 5.0),
-    'tracking.com_weight': _range(0.0, 50.0),
-    'tracking.max_weight': _range(0.0, 10.0),
-    'tracking.spread': _range(0.0, 1.0),
-    'tracking.spread_target': _range(0.01, 100.0),
-    'head_track.teleport_distance': _range(0.0, 1e3, lo_open=True),
-    'head_track.teleport_angle_deg': _range(0.0, 180.0, lo_open=True),
-    'head_track.max_gap': _range(0.0, 3600.0, lo_open=True),
-    'output.curve': _choice(CURVES),
-    'output.points_per_strand': _range(2, 1024),
-    'gravity': _finite,
-    'damping': _range(0.0, 1000.0),
-}

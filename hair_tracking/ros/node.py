@@ -29,11 +29,12 @@ after a simulated pose when a period of stream time has passed, for the lowest l
 
 Service ``~/reset`` (std_srvs/Trigger): hair back to its rest shape at the current head pose.
 
-Parameters: one per entry of the table in :mod:`hair_tracking.core.params` (every scene field plus
-the node's settings), declared with descriptions and ranges; changes are validated in the on-set
-callback (a rejection names the parameter and the allowed values and changes nothing) and
-stored by the post-set callback as a frozen :class:`~hair_tracking.core.params.Settings` snapshot
-that the next step applies (a groom change rebuilds the hair at the current head pose).
+Parameters: one per row of the parameter table (:func:`hair_tracking.output.settings.table`: the
+node's settings plus every scene field), each declared with a descriptor built from its row
+(:func:`descriptor`: description, range, read-only); changes are validated in the on-set callback
+(a rejection names the parameter and the allowed values and changes nothing) and stored by the
+post-set callback as a frozen :class:`~hair_tracking.output.settings.Settings` snapshot that the
+next step applies (a groom change rebuilds the hair at the current head pose).
 
 Everything runs in one thread (a SingleThreadedExecutor), so callbacks never race.
 """
@@ -73,13 +74,15 @@ from msg_adapters.stamps import time_to_ns
 from msg_adapters.tf import transform_message, transforms as tf_transforms
 
 from hair_tracking import process_tuning
-from hair_tracking.core import params as P
 from hair_tracking.core.head_track import PoseResult
-from hair_tracking.core.params_check import unknown_parameters
+from hair_tracking.core.params import Param, ParamError
 from hair_tracking.core.scene import Scene, SceneError
 from hair_tracking.core.strand_colors import StrandColorCache
 from hair_tracking.core.tf_tree import compose as tf_compose, TfTree
 from hair_tracking.core.transforms import quat_to_matrix
+from hair_tracking.output.params_check import unknown_parameters
+from hair_tracking.output.settings import apply_changes, make_settings, MARKER_STYLES, \
+    NODE_NAME, NODE_ROWS, table
 from hair_tracking.resources import config_path
 from hair_tracking.ros.interrupt import interrupt_between_callbacks
 from hair_tracking.ros.load_shedding import LoadShedder
@@ -112,7 +115,7 @@ def output_qos(depth: int) -> QoSProfile:
                       durability=DurabilityPolicy.VOLATILE)
 
 
-def descriptor(p: P.Param) -> ParameterDescriptor:
+def descriptor(p: Param) -> ParameterDescriptor:
     """The ROS ParameterDescriptor of a table entry (description, range, read-only)."""
     d = ParameterDescriptor(name=p.name, type=_PARAM_TYPES[p.kind].value,
                             description=p.full_description(),
@@ -151,7 +154,7 @@ def warm_up(scene: Scene) -> float:
             n_strands, n_points, write = sim.record_writer(guides, head_frame)
             CloudBuffer().encode(n_strands, n_points, write, frame_id='warmup', stamp_ns=1,
                                  packed_rgb=pack_rgb_u32(np.ones((n_strands, 4))))
-            for style in P.MARKER_STYLES:
+            for style in MARKER_STYLES:
                 strands_to_marker_array_cdr(strands, frame_id='warmup', style=style,
                                             delete_all_first=True)
     return time.perf_counter() - start
@@ -184,7 +187,7 @@ class HairSimNode(Node):
     :class:`~hair_tracking.core.params.ParamError` naming the parameter.
     """
 
-    def __init__(self, node_name: str = P.NODE_NAME, *, context=None,
+    def __init__(self, node_name: str = NODE_NAME, *, context=None,
                  parameter_overrides: Optional[List[Parameter]] = None,
                  cli_args: Optional[List[str]] = None, namespace: Optional[str] = None,
                  work_clock: Callable[[], float] = time.perf_counter):
@@ -283,13 +286,13 @@ class HairSimNode(Node):
 
     # ================================================================ parameters
     def _declare_all(self) -> None:
-        sf = P.by_name()['scene_file']
+        sf = NODE_ROWS['scene_file']
         self.declare_parameter(sf.name, sf.default, descriptor(sf))
         scene_file = self.get_parameter('scene_file').value
         self._base = load_base_scene(scene_file)
-        table = P.table(self._base)
+        rows = table(self._base)
         overrides = getattr(self, '_parameter_overrides', None)
-        for p in table:
+        for p in rows:
             if p.name == 'scene_file':
                 continue
             if isinstance(overrides, dict) and p.name in overrides:
@@ -297,10 +300,10 @@ class HairSimNode(Node):
                 if fixed is not None:            # `-p damping:=2` means 2.0
                     overrides[p.name] = fixed
             self.declare_parameter(p.name, p.default, descriptor(p))
-        values = {p.name: _plain(self.get_parameter(p.name).value) for p in table}
-        self._settings = P.make_settings(values, self._base)    # ParamError if invalid
+        values = {p.name: _plain(self.get_parameter(p.name).value) for p in rows}
+        self._settings = make_settings(values, self._base)    # ParamError if invalid
         self._pending = self._settings
-        self._table = {p.name: p for p in table}
+        self._table = {p.name: p for p in rows}
         self.add_pre_set_parameters_callback(self._pre_set)
         self.add_on_set_parameters_callback(self._on_set)
         self.add_post_set_parameters_callback(self._post_set)
@@ -323,8 +326,8 @@ class HairSimNode(Node):
         if not changes:
             return SetParametersResult(successful=True)
         try:
-            P.apply_changes(self._pending, changes, self._base)
-        except P.ParamError as e:
+            apply_changes(self._pending, changes, self._base)
+        except ParamError as e:
             return SetParametersResult(successful=False, reason=str(e))
         return SetParametersResult(successful=True)
 
@@ -334,7 +337,7 @@ class HairSimNode(Node):
         if not changes:
             return
         old = self._pending
-        new = self._pending = P.apply_changes(old, changes, self._base)[0]
+        new = self._pending = apply_changes(old, changes, self._base)[0]
         # timers and threads are not part of a step: they follow at once
         if new.publish_rate_hz != old.publish_rate_hz:
             period_ns = int(round(1e9 / new.publish_rate_hz))
@@ -819,7 +822,7 @@ def _plain(value):
     return value
 
 
-def _coerce_parameter(p: Optional[P.Param], prm: Parameter) -> Optional[Parameter]:
+def _coerce_parameter(p: Optional[Param], prm: Parameter) -> Optional[Parameter]:
     """``prm`` with integers turned into doubles where ``p`` is a double (else None)."""
     if p is None:
         return None
@@ -876,7 +879,7 @@ def main(args=None) -> int:
         rclpy.init(args=argv[:1] + argv[split:],
                    signal_handler_options=SignalHandlerOptions.SIGTERM)
         for line in done:
-            rclpy.logging.get_logger(P.NODE_NAME).info(line)
+            rclpy.logging.get_logger(NODE_NAME).info(line)
         executor = SingleThreadedExecutor()   # before the node: Ctrl-C may come at any time
         node = HairSimNode()
         node.warn_unknown_parameters(argv)
@@ -887,7 +890,7 @@ def main(args=None) -> int:
         executor.spin()
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
-    except (P.ParamError, SceneError, ParameterException) as e:
+    except (ParamError, SceneError, ParameterException) as e:
         print(f'[hair_sim] invalid parameters: {e}', file=sys.stderr)
         code = 2
     finally:

@@ -1,0 +1,159 @@
+"""The scene's rows of the parameter table: every field of the scene, declared once.
+
+Each row (:class:`~hair_tracking.core.params.Param`) gives a scene field's dotted path, type,
+default, description, unit, allowed values and whether a change rebuilds the hair (every groom
+field and the tracker mode: they change strand counts, node counts or the rest shape; every other
+field applies live to the running hair).  The scene dataclasses of :mod:`hair_tracking.core.scene`
+take their field defaults from these rows and validate every field with them; the node declares
+one ROS parameter per row (under the same dotted name), and ``config/hair_sim.yaml``,
+``config/scene_default.yaml`` and the table in ``docs/node.md`` are generated from them
+(:mod:`hair_tracking.output.param_files`).  Rules that join two fields (``groom.guides *
+groom.ghosts_per_guide``, ``groom.scalp.front_max_polar_deg <= groom.scalp.max_polar_deg``) are
+code in :meth:`hair_tracking.core.scene.Scene.validate`.
+
+The rows are in the order of the scene's fields (a section's rows together), the order of the
+generated files.  Units are SI (metres, seconds, radians unless a name says ``_deg``); the groom
+and the collider are given in the head frame (REP-103: x forward, y left, z up, origin at the
+head centre).
+"""
+from typing import Any, Dict, Tuple
+
+from hair_tracking.core.params import Param
+
+SOLVERS = ('ftl', 'pbd', 'xpbd')
+COLLIDERS = ('none', 'sphere', 'ellipsoid')
+ELASTIC_MODES = ('kept', 'changed')
+CURVES = ('none', 'bezier', 'catmull_rom')
+TRACKING_MODES = ('paper', 'blend', 'turn')
+
+
+def _row(name: str, kind: str, default: Any, description: str, **kw: Any) -> Param:
+    return Param(name, kind, default, description, scene=True, **kw)
+
+
+SCENE_PARAMS: Tuple[Param, ...] = (
+    _row('groom.guides', 'int', 64,
+         'number of guide strands simulated with PBD/FTL', lo=1, hi=100_000, rebuild=True),
+    _row('groom.ghosts_per_guide', 'int', 8,
+         'ghost strands created per guide (total = guides * this); 0 shows the guides themselves',
+         lo=0, hi=10_000, rebuild=True),
+    _row('groom.guide_nodes', 'int', 16,
+         'nodes per guide strand, root included', lo=3, hi=256, rebuild=True),
+    _row('groom.ghost_nodes', 'int', 16,
+         'nodes per ghost strand, root included', lo=3, hi=256, rebuild=True),
+    _row('groom.length', 'double', 0.25,
+         'mean strand length', unit='m', lo=0.001, hi=5.0, rebuild=True),
+    _row('groom.length_variation', 'double', 0.1,
+         'relative spread of strand lengths: uniform in length * (1 +- this)',
+         lo=0.0, hi=0.9, rebuild=True),
+    _row('groom.droop', 'double', 0.6,
+         'rest shape: 0 straight along the scalp normal, 1 hanging down',
+         lo=0.0, hi=1.0, rebuild=True),
+    _row('groom.seed', 'int', 1,
+         'random seed of the groom', lo=0, hi=2**31 - 1, rebuild=True),
+    _row('groom.scalp.center', 'double_array', (0.0, 0.0, 0.0),
+         'centre of the scalp ellipsoid, head frame',
+         unit='m', lo=-1.0, hi=1.0, length=3, rebuild=True),
+    _row('groom.scalp.radii', 'double_array', (0.095, 0.08, 0.105),
+         'semi-axes of the scalp ellipsoid, head frame',
+         unit='m', lo=0.01, hi=1.0, length=3, rebuild=True),
+    _row('groom.scalp.max_polar_deg', 'double', 105.0,
+         'roots grow up to this polar angle from +z', unit='deg', lo=1.0, hi=180.0, rebuild=True),
+    _row('groom.scalp.front_max_polar_deg', 'double', 45.0,
+         '... but only up to this on the face side (x > 0); at most groom.scalp.max_polar_deg',
+         unit='deg', lo=0.0, hi=180.0, rebuild=True),
+    _row('collider.shape', 'string', 'ellipsoid',
+         'head collider shape', choices=COLLIDERS),
+    _row('collider.center', 'double_array', (0.0, 0.0, 0.0),
+         'collider centre, head frame', unit='m', lo=-1.0, hi=1.0, length=3),
+    _row('collider.radius', 'double', 0.1,
+         'sphere radius', unit='m', lo=0.01, hi=1.0),
+    _row('collider.radii', 'double_array', (0.095, 0.08, 0.105),
+         'ellipsoid semi-axes, head frame', unit='m', lo=0.01, hi=1.0, length=3),
+    _row('collider.margin', 'double', 0.004,
+         'hair is kept this far outside the collider surface', unit='m', lo=0.0, hi=0.1),
+    _row('collider.friction', 'double', 0.3,
+         'tangential damping on contact, 0 none .. 1 sticks', lo=0.0, hi=1.0),
+    _row('solver.type', 'string', 'ftl',
+         'guide solver: ftl (Follow-The-Leader), pbd, xpbd', choices=SOLVERS),
+    _row('solver.dt', 'double', 1.0 / 240.0,
+         'fixed simulation substep', unit='s', lo=1e-5, hi=0.1),
+    _row('solver.iterations', 'int', 4,
+         'constraint iterations per substep (pbd, xpbd)', lo=1, hi=1000),
+    _row('solver.stiffness', 'double', 1.0,
+         'PBD stretch stiffness (iteration dependent)', lo=0.0, hi=1.0, lo_open=True),
+    _row('solver.compliance', 'double', 0.0,
+         'XPBD stretch compliance; 0 is rigid', unit='m/N', lo=0.0, hi=1.0),
+    _row('solver.bend_stiffness', 'double', 0.3,
+         'PBD/FTL bending stiffness', lo=0.0, hi=1.0),
+    _row('solver.bend_compliance', 'double', 1e-4,
+         'XPBD bending compliance', unit='m/N', lo=0.0, hi=1e3),
+    _row('solver.ftl_damping', 'double', 0.9,
+         'FTL velocity correction s_damp', lo=0.0, hi=1.0),
+    _row('solver.max_substeps', 'int', 32,
+         'cap of substeps per pose; further due substeps are dropped (counted in diagnostics)',
+         lo=1, hi=10_000),
+    _row('solver.shock_propagation', 'double', 0.0,
+         'carry strands rigidly with fast head motion, 0 off .. 1', lo=0.0, hi=1.0),
+    _row('solver.max_displacement', 'double', 0.05,
+         'per-substep displacement clamp; 0 disables', unit='m', lo=0.0, hi=10.0),
+    _row('solver.settle_time', 'double', 0.5,
+         'time simulated with a still head after a (re)build or reset', unit='s', lo=0.0, hi=60.0),
+    _row('tracking.mode', 'string', 'blend',
+         'ghost tracker: paper (Park & Kim: velocity transfer, weights (4)-(5), centre-of-mass '
+         'tracking, every substep) or blend (each ghost the blended points of its '
+         'tracking.blend_guides nearest guides, chosen among the strands, plus its rest offset '
+         'carried by the head, once per frame; see docs/blend.md) or turn (each ghost segment '
+         'turned as the matching segment of the guide with the nearest root, once per frame; '
+         'exact lengths; see docs/turn.md)', choices=TRACKING_MODES, rebuild=True),
+    _row('tracking.blend_guides', 'int', 3,
+         'blend: guides blended per ghost (nearest roots)', lo=1, hi=8),
+    _row('tracking.candidates', 'int', 8,
+         'guides with the nearest roots examined per ghost', lo=1, hi=1024),
+    _row('tracking.com_strength', 'double', 0.5,
+         'centre-of-mass tracking strength per substep', lo=0.0, hi=1.0),
+    _row('tracking.offset_strength', 'double', 0.05,
+         'pull of each ghost node to its rest offset', lo=0.0, hi=1.0),
+    _row('tracking.elastic_weight', 'bool', True,
+         'use the elastic weight W* (equation 4 of Park & Kim)'),
+    _row('tracking.elastic_mode', 'string', 'kept',
+         'elastic weight mode: kept (W* = 0.5 v.v0 + 0.5) or changed (1 - W*)',
+         choices=ELASTIC_MODES),
+    _row('tracking.tip_weight', 'double', 0.3,
+         'tip weight w_tip (grows linearly from 0 at the root)', lo=0.0, hi=5.0),
+    _row('tracking.com_weight', 'double', 0.3,
+         'centre-of-mass weight w_com per metre of distance / length', lo=0.0, hi=50.0),
+    _row('tracking.max_weight', 'double', 1.5,
+         'clamp of W* + w_tip + w_com (energy safety)', lo=0.0, hi=10.0),
+    _row('tracking.length_restore', 'bool', True,
+         'one Follow-The-Leader pass on the ghosts'),
+    _row('tracking.collide', 'bool', True,
+         'ghosts collide with the head collider'),
+    _row('tracking.spread', 'double', 0.0,
+         'HairControl spread control strength, 0 off', lo=0.0, hi=1.0),
+    _row('tracking.spread_target', 'double', 1.0,
+         'target spread as a multiple of the initial variance', lo=0.01, hi=100.0),
+    _row('tracking.every_substep', 'bool', True,
+         'paper: track the ghosts after every guide substep; false tracks them once per head '
+         'pose over all its substeps (2-4x cheaper; passes the stability matrix too)'),
+    _row('head_track.teleport_distance', 'double', 0.5,
+         'a head jump farther than this resets the hair', unit='m', lo=0.0, hi=1e3, lo_open=True),
+    _row('head_track.teleport_angle_deg', 'double', 90.0,
+         '... or a turn larger than this between two poses',
+         unit='deg', lo=0.0, hi=180.0, lo_open=True),
+    _row('head_track.max_gap', 'double', 0.5,
+         'poses farther apart than this count as a jump too',
+         unit='s', lo=0.0, hi=3600.0, lo_open=True),
+    _row('output.curve', 'string', 'none',
+         'smoothing of the output strands', choices=CURVES),
+    _row('output.points_per_strand', 'int', 16,
+         'output points per strand when output.curve is not none', lo=2, hi=1024),
+    _row('gravity', 'double_array', (0.0, 0.0, -9.81),
+         'gravity, in the fixed frame of the head pose (or in gravity_frame)',
+         unit='m/s^2', lo=-1e4, hi=1e4, magnitude_only=True, length=3),
+    _row('damping', 'double', 1.0,
+         'velocity damping rate', unit='1/s', lo=0.0, hi=1000.0),
+)
+
+#: The scene's rows by dotted path.
+SCENE_ROWS: Dict[str, Param] = {p.name: p for p in SCENE_PARAMS}
