@@ -11,7 +11,7 @@ from hair_tracking.bags import io as bag_io
 
 from hair_tracking.bags import head_motion as hm
 from hair_tracking.bags.cli import DEFAULT_START_TIME_S, main
-from hair_tracking.core.transforms import quat_multiply, quat_to_matrix
+from hair_tracking.core.transforms import matrices_to_quats, quat_multiply, quat_to_matrix
 
 DATA = Path(__file__).resolve().parents[1].parent / 'shared' / 'data' / 'head_motion'
 BVH = DATA / 'cmu_131_01_walk.bvh'
@@ -113,8 +113,8 @@ def _tf_bag(path):
     """/tf_static world->camera (rotated, shifted), /tf camera->face_1 and camera->hand."""
     ts = bag_io.typestore()
     rng = np.random.default_rng(3)
-    q_cam = hm.matrices_to_quats(np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0],
-                                           [0.0, -1.0, 0.0]]))
+    q_cam = matrices_to_quats(np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0],
+                                       [0.0, -1.0, 0.0]]))
     p_cam = np.array([1.0, 0.5, 1.2])
     t = 10 ** 9 + np.arange(20) * 10 ** 7
     p_face = rng.normal(size=(20, 3)) * 0.1 + [0, 0, 1.0]

@@ -10,8 +10,7 @@ import numpy as np
 import pytest
 
 from hair_tracking.bags import head_motion as hm
-from hair_tracking.core.transforms import (matrix_to_quat, quat_angle, quat_from_axis_angle,
-                                           quat_to_matrix)
+from hair_tracking.core.transforms import quat_angle, quat_from_axis_angle
 
 DATA = os.environ.get('HEAD_MOTION_DATA', '/work/shared/data/head_motion')
 WALK_BVH = os.path.join(DATA, 'cmu_131_01_walk.bvh')
@@ -300,19 +299,6 @@ def test_pose_csv_round_trip(tmp_path):
 
 
 # ------------------------------------------------------------------ helpers vs references
-def test_matrices_to_quats_agrees_with_reference():
-    rng = np.random.default_rng(7)
-    q = rng.normal(size=(400, 4))
-    q /= np.linalg.norm(q, axis=1, keepdims=True)
-    q[:4] = [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]   # each branch
-    m = quat_to_matrix(q)
-    got = hm.matrices_to_quats(m)
-    for g, mm, qq in zip(got, m, q):
-        ref = matrix_to_quat(mm)
-        assert abs(abs(np.dot(g, ref)) - 1.0) < 1e-12
-        assert abs(abs(np.dot(g, qq)) - 1.0) < 1e-12
-
-
 def test_angular_speed_agrees_with_reference():
     rng = np.random.default_rng(11)
     q = rng.normal(size=(200, 4))

@@ -60,7 +60,7 @@ import re
 import numpy as np
 
 from hair_tracking.core.model import HeadPose
-from hair_tracking.core.transforms import quat_to_matrix
+from hair_tracking.core.transforms import matrices_to_quats, quat_to_matrix
 from hair_tracking.resources import data_path
 
 #: metres per BVH length unit for the CMU conversions (README of the data set: 0.056444).
@@ -196,41 +196,6 @@ def make_sign_continuous(q: np.ndarray) -> np.ndarray:
     flips = np.concatenate([[0], np.cumsum(d < 0)])
     q[flips % 2 == 1] *= -1.0
     return q
-
-
-def matrices_to_quats(m: np.ndarray) -> np.ndarray:
-    """(..., 3, 3) rotation matrices -> (..., 4) unit quaternions (x, y, z, w).
-
-    Shepperd (1978), "Quaternion from rotation matrix", J. Guidance and Control 1(3): the largest
-    of 1 + trace, 1 + 2 m_ii - trace picks the numerically safe formula; vectorised.
-    """
-    m = np.asarray(m, dtype=np.float64)
-    shape = m.shape[:-2]
-    m = m.reshape(-1, 3, 3)
-    tr = m[:, 0, 0] + m[:, 1, 1] + m[:, 2, 2]
-    cand = np.stack([m[:, 0, 0], m[:, 1, 1], m[:, 2, 2], tr], axis=1)
-    pick = np.argmax(cand, axis=1)
-    q = np.empty((len(m), 4))
-    for k in range(4):
-        sel = pick == k
-        if not np.any(sel):
-            continue
-        a = m[sel]
-        if k == 3:
-            s = 2.0 * np.sqrt(1.0 + tr[sel])
-            q[sel] = np.stack([(a[:, 2, 1] - a[:, 1, 2]) / s, (a[:, 0, 2] - a[:, 2, 0]) / s,
-                               (a[:, 1, 0] - a[:, 0, 1]) / s, 0.25 * s], axis=1)
-            continue
-        i, j, h = k, (k + 1) % 3, (k + 2) % 3
-        s = 2.0 * np.sqrt(np.maximum(1.0 + a[:, i, i] - a[:, j, j] - a[:, h, h], 0.0))
-        out = np.empty((len(a), 4))
-        out[:, i] = 0.25 * s
-        out[:, j] = (a[:, j, i] + a[:, i, j]) / s
-        out[:, h] = (a[:, h, i] + a[:, i, h]) / s
-        out[:, 3] = (a[:, h, j] - a[:, j, h]) / s
-        q[sel] = out
-    q /= np.linalg.norm(q, axis=1, keepdims=True)
-    return q.reshape(shape + (4,))
 
 
 def _axis_rotations(axis: int, deg: np.ndarray) -> np.ndarray:

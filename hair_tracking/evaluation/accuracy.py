@@ -53,7 +53,7 @@ from hair_tracking.bags.head_motion import HeadMotion
 from hair_tracking.core.metrics import max_stretch, position_error, tip_error
 from hair_tracking.core.model import HeadPose
 from hair_tracking.core.scene import Scene
-from hair_tracking.core.transforms import quat_to_matrix
+from hair_tracking.core.transforms import quat_to_matrix, slerp
 from hair_tracking.evaluation.methods import (FullSim, GhostTracking, Method, PyPBD, RigidOffset,
                                               Workload,
                                               make_workload, pypbd_available)
@@ -87,17 +87,7 @@ def interpolate_poses(motion: HeadMotion, t_s: np.ndarray):
     i = np.clip(np.searchsorted(ts, t, side='right'), 1, len(ts) - 1)
     u = ((t - ts[i - 1]) / (ts[i] - ts[i - 1]))[:, None]
     p = (1.0 - u) * motion.position[i - 1] + u * motion.position[i]
-    a, b = motion.quaternion[i - 1], motion.quaternion[i]
-    d = np.sum(a * b, axis=1, keepdims=True)
-    b = np.where(d < 0.0, -b, b)
-    d = np.abs(d)
-    theta = np.arccos(np.clip(d, -1.0, 1.0))
-    s = np.sin(theta)
-    small = s < 1e-6
-    wa = np.where(small, 1.0 - u, np.sin((1.0 - u) * theta) / np.where(small, 1.0, s))
-    wb = np.where(small, u, np.sin(u * theta) / np.where(small, 1.0, s))
-    q = wa * a + wb * b
-    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    q = slerp(motion.quaternion[i - 1], motion.quaternion[i], u[:, 0])
     return p, q
 
 

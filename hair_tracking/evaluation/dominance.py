@@ -30,6 +30,7 @@ import numpy as np
 
 from hair_tracking.core.metrics import position_error
 from hair_tracking.core.scene import Scene
+from hair_tracking.core.transforms import quat_angle
 from hair_tracking.evaluation.accuracy import (HeadSchedule, record_reference, run_frames,
                                                Scorer, Trajectory)
 from hair_tracking.evaluation.methods import (BlendTracking, FullSim, GhostTracking,
@@ -107,7 +108,7 @@ def first_moving_frame(schedule: HeadSchedule, tol: float = 1e-3) -> int:
     start = schedule.start()
     for j, poses in enumerate(schedule.poses(1)):
         h = poses[-1]
-        turn = 2.0 * math.acos(min(1.0, abs(float(np.dot(h.quaternion, start.quaternion)))))
+        turn = quat_angle(h.quaternion, start.quaternion)
         if np.linalg.norm(h.position - start.position) > tol or turn > tol:
             return j
     return schedule.frames

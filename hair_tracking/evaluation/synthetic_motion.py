@@ -294,8 +294,7 @@ def resample(motion: HeadMotion, rate_hz: float) -> HeadMotion:
     t0, t1 = motion.t_ns[i - 1], motion.t_ns[i]
     u = np.clip((t - t0) / (t1 - t0), 0.0, 1.0)
     p = (1.0 - u)[:, None] * motion.position[i - 1] + u[:, None] * motion.position[i]
-    q = np.array([slerp(motion.quaternion[a - 1], motion.quaternion[a], w)
-                  for a, w in zip(i, u)])
+    q = slerp(motion.quaternion[i - 1], motion.quaternion[i], u)
     return _motion(t, p, q, f'{motion.source} resampled at {rate_hz:g} Hz')
 
 
