@@ -11,10 +11,11 @@ PACKAGE = os.path.join(ROOT, 'hair_tracking')
 
 #: Layers from the bottom up: a module may import its own layer and the ones below it only.
 #: The top-level helpers (resources, process_tuning) are leaves any layer may use.
-LAYERS = ['core', 'guides', 'ghosts', 'simulator', 'bags', 'evaluation', 'ros']
+LAYERS = ['core', 'motion', 'guides', 'ghosts', 'simulator', 'bags', 'evaluation', 'ros']
 LEAVES = {'resources', 'process_tuning'}
-#: Layers that simulate: numpy, numba and yaml only, no ROS messages, no rclpy, no adapters.
-SIMULATION = {'core', 'guides', 'ghosts', 'simulator'}
+#: Layers that simulate or describe head motion: numpy, numba and yaml only, no ROS messages,
+#: no rclpy, no adapters.
+SIMULATION = {'core', 'motion', 'guides', 'ghosts', 'simulator'}
 ROS_ROOTS = {'rclpy', 'rosidl_runtime_py', 'rosgraph_msgs', 'std_msgs', 'geometry_msgs',
              'sensor_msgs', 'visualization_msgs', 'diagnostic_msgs', 'std_srvs', 'tf2_msgs',
              'rcl_interfaces', 'builtin_interfaces', 'msg_adapters', 'rosbags'}

@@ -9,9 +9,9 @@ import pytest
 
 from hair_tracking.bags import io as bag_io
 
-from hair_tracking.bags import head_motion as hm
 from hair_tracking.bags.cli import DEFAULT_START_TIME_S, main
 from hair_tracking.core.transforms import matrices_to_quats, quat_multiply, quat_to_matrix
+from hair_tracking.motion import bvh as mocap, pose_table as tables
 
 DATA = Path(__file__).resolve().parents[1].parent / 'shared' / 'data' / 'head_motion'
 BVH = DATA / 'cmu_131_01_walk.bvh'
@@ -38,7 +38,7 @@ def test_import_bvh_walk_matches_forward_kinematics(tmp_path, suffix, capsys):
     out = tmp_path / ('walk' + suffix)
     assert main(['import', str(BVH), '-o', str(out)]) == 0
     assert 'cmu' in capsys.readouterr().out          # units recognised from the skeleton
-    ref = hm.load_bvh_head_motion(str(BVH))           # metres, REP-103, Head joint
+    ref = mocap.load_bvh_head_motion(str(BVH))           # metres, REP-103, Head joint
     hp = bag_io.read_head_poses(out)
     assert hp.topic == '/head_pose' and hp.msgtype == 'geometry_msgs/msg/PoseStamped'
     assert hp.frame_id == 'world'
@@ -64,7 +64,7 @@ def test_import_vr360_table_with_named_columns(tmp_path):
     assert code == 0
     assert (out / 'metadata.yaml').is_file()
     assert any(p.suffix == '.db3' for p in out.iterdir())
-    ref = hm.read_vr360(str(VR360), neck_offset=[0, 0, 0.1], pivot=[0, 0, 1.6])
+    ref = tables.read_vr360(str(VR360), neck_offset=[0, 0, 0.1], pivot=[0, 0, 1.6])
     hp = bag_io.read_head_poses(out)
     assert hp.msgtype == 'geometry_msgs/msg/TransformStamped'
     assert hp.child_frame_id == 'head'
@@ -86,7 +86,7 @@ def test_import_slice_tf_and_keep_times(tmp_path):
     assert hp.topic == '/tf' and hp.child_frame_id == 'face_7'
     assert len(hp) == 60                                  # 0.5 s at 120 Hz
     assert hp.t_ns[0] == 50 * 10 ** 9
-    ref = hm.load_bvh_head_motion(str(BVH))
+    ref = mocap.load_bvh_head_motion(str(BVH))
     t = ref.t_ns - ref.t_ns[0]
     keep = (t >= 10 ** 9) & (t < 15 * 10 ** 8)          # Frame Time .0083333: not 1/120 s
     np.testing.assert_allclose(hp.position, ref.position[keep], atol=1e-12)

@@ -93,7 +93,7 @@ def cmd_info(args) -> int:
 # ================================================================ import
 def _bvh_scale(path: str, units: str, joint: str):
     """(metres per unit, words) for --units; 'auto' from the rest-pose height of the skeleton."""
-    from hair_tracking.bags.head_motion import Bvh, read_bvh
+    from hair_tracking.motion.bvh import Bvh, read_bvh
     if units != 'auto':
         return BVH_UNITS[units], units
     bvh = read_bvh(path)
@@ -116,7 +116,7 @@ def _bvh_scale(path: str, units: str, joint: str):
 
 def load_recording(args):
     """HeadMotion of the import's RECORDING, following the options (BagError when bad)."""
-    from hair_tracking.bags import head_motion as hm
+    from hair_tracking.motion import bvh as mocap, head_motion as hm, pose_table as tables
 
     path = args.recording
     fmt = args.format
@@ -131,11 +131,11 @@ def load_recording(args):
                 scale, words = args.scale, f'{args.scale} m/unit'
             else:
                 scale, words = _bvh_scale(path, args.units, args.joint)
-            axes = hm.CMU_HEAD_AXES
+            axes = mocap.CMU_HEAD_AXES
             if args.axes == 'infer':
-                axes = hm.infer_head_axes(hm.read_bvh(path), args.joint, scale=scale)
-            motion = hm.load_bvh_head_motion(path, joint=args.joint, scale=scale,
-                                             head_axes=axes, origin=args.origin)
+                axes = mocap.infer_head_axes(mocap.read_bvh(path), args.joint, scale=scale)
+            motion = mocap.load_bvh_head_motion(path, joint=args.joint, scale=scale,
+                                                head_axes=axes, origin=args.origin)
             note = f'BVH joint {args.joint!r}, units {words}, head axes {args.axes}'
         else:
             time_col, quat_cols, pos_cols = args.time_column, None, None
@@ -145,13 +145,13 @@ def load_recording(args):
             if args.position_columns and args.position_columns.strip().lower() != 'none':
                 pos_cols = _names(args.position_columns, 3, '--position-columns')
             if time_col is None or quat_cols is None or args.position_columns is None:
-                found = hm.recognise_columns(path, args.delimiter)     # by their names
+                found = tables.recognise_columns(path, args.delimiter)     # by their names
                 time_col = time_col or found[0]
                 if quat_cols is None:
                     quat_cols, quat_order = found[1], 'xyzw'
                 if args.position_columns is None:
                     pos_cols = found[2]
-            motion = hm.read_pose_table(
+            motion = tables.read_pose_table(
                 path, time_column=time_col, time_unit=args.time_unit,
                 quat_columns=quat_cols, quat_order=quat_order, position_columns=pos_cols,
                 neck_offset=_floats(args.neck_offset, 3, '--neck-offset'),

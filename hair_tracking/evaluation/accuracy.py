@@ -49,7 +49,6 @@ from typing import Callable, Dict, List, Optional, Sequence
 
 import numpy as np
 
-from hair_tracking.bags.head_motion import HeadMotion
 from hair_tracking.core.metrics import max_stretch, position_error, tip_error
 from hair_tracking.core.model import HeadPose
 from hair_tracking.core.scene import Scene
@@ -58,6 +57,7 @@ from hair_tracking.evaluation.methods import (FullSim, GhostTracking, Method, Py
                                               Workload,
                                               make_workload, pypbd_available)
 from hair_tracking.guides.collision import make_collider
+from hair_tracking.motion.head_motion import HeadMotion
 
 #: Output frame rate [Hz]: errors are measured and time is charged per frame of this rate.
 FRAME_RATE = 60.0
@@ -722,7 +722,7 @@ def plot_error_over_time(path: str, report: MotionReport, names: Sequence[str]) 
                     xycoords=('data', 'axes fraction'), fontsize=7.5, ha='left', va='top',
                     xytext=(3, 0), textcoords='offset points')
     motion = report.trajectory.motion
-    from hair_tracking.bags.head_motion import angular_speed
+    from hair_tracking.motion.head_motion import angular_speed
     w = angular_speed(motion)
     ax2 = ax.twinx()
     ax2.plot(motion.t_s[1:], w, color='0.6', lw=0.6, alpha=0.6)
