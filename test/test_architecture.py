@@ -8,6 +8,7 @@ import pytest
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 PACKAGE = os.path.join(ROOT, 'hair_tracking')
+ADAPTERS = os.path.join(ROOT, 'msg_adapters')
 
 #: Layers from the bottom up: a module may import its own layer and the ones below it only.
 #: The top-level helpers (resources, process_tuning) are leaves any layer may use.
@@ -21,6 +22,8 @@ ROS_ROOTS = {'rclpy', 'rosidl_runtime_py', 'rosgraph_msgs', 'std_msgs', 'geometr
              'rcl_interfaces', 'builtin_interfaces', 'msg_adapters', 'rosbags'}
 #: At most this many modules at the top of hair_tracking/ (besides __init__.py).
 MAX_TOP_MODULES = 4
+#: All that msg_adapters (ROS messages <-> numpy, nothing of hair) may use of hair_tracking.
+ADAPTERS_MAY_USE = ('hair_tracking.core.transforms',)
 #: Optional packages (not installed with the package) and the only modules that import them.
 OPTIONAL = {'viser': {'hair_tracking.ros.view'}}
 
@@ -83,6 +86,19 @@ def test_imports_point_down_the_layers(name, path):
             continue
         assert LAYERS.index(theirs) <= LAYERS.index(own), \
             f'{name} ({own}) imports {target} ({theirs}), a layer above it'
+
+
+def test_msg_adapters_use_nothing_of_hair_but_the_quaternion_maths():
+    found = []
+    for f in sorted(os.listdir(ADAPTERS)):
+        if f.endswith('.py'):
+            name = 'msg_adapters' if f == '__init__.py' else 'msg_adapters.' + f[:-3]
+            found += [(name, t) for t in imports(os.path.join(ADAPTERS, f), name)
+                      if t.split('.')[0] == 'hair_tracking']
+    for name, target in found:
+        assert target.rpartition('.')[0] in ADAPTERS_MAY_USE, \
+            f'{name} imports {target}: msg_adapters know nothing of hair'
+    assert found                        # the check looks at the modules that do use it
 
 
 def test_optional_packages_are_imported_only_where_they_are_used():
