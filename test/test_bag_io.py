@@ -326,10 +326,20 @@ def test_written_bag_read_by_plain_rosbags_reader(tmp_path):
                                    for _, m in got], p)
 
 
-def test_cloud_decoder_agrees_with_msg_adapters():
-    from msg_adapters.pointcloud import strands_to_pointcloud2
+def test_cloud_messages_of_a_bag_in_log_time_order(tmp_path):
+    from msg_adapters.pointcloud import pointcloud2_to_strands, strands_to_pointcloud2_cdr
     rng = np.random.default_rng(11)
-    strands = rng.normal(size=(7, 5, 3))
-    msg = strands_to_pointcloud2(strands, frame_id='w', colors=rng.uniform(size=(7, 3)))
-    got = bag_io.cloud_to_strands(msg)
-    np.testing.assert_array_equal(got, strands.astype(np.float32).astype(np.float64))
+    strands = rng.normal(size=(3, 7, 5, 3))
+    with bag_io.BagWriter(tmp_path / 'c.mcap') as w:
+        w.add_topic('/hair/points', 'sensor_msgs/msg/PointCloud2')
+        w.add_topic('/other', 'sensor_msgs/msg/PointCloud2')
+        for k in range(3):
+            stamp = 10 ** 9 + 5 * k
+            w.write('/hair/points', 100 + k, strands_to_pointcloud2_cdr(
+                strands[k], frame_id='w', stamp_ns=stamp))
+            w.write('/other', 100 + k, strands_to_pointcloud2_cdr(strands[k][:1], frame_id='w'))
+    got = list(bag_io.cloud_messages(tmp_path / 'c.mcap'))
+    assert [t for t, _ in got] == [10 ** 9, 10 ** 9 + 5, 10 ** 9 + 10]
+    for k, (_, msg) in enumerate(got):
+        np.testing.assert_array_equal(pointcloud2_to_strands(msg)[0],
+                                      strands[k].astype(np.float32).astype(np.float64))

@@ -13,6 +13,7 @@ from hair_tracking.bags import io as bag_io
 from hair_tracking.bags.cli import main
 from hair_tracking.bags.offline import load_settings, Progress, run_bag, RunOptions, Schedule
 from hair_tracking.simulator import HairSimulator
+from msg_adapters.pointcloud import pointcloud2_to_strands
 
 ROOT = Path(__file__).resolve().parents[1]
 BVH = ROOT.parent / 'shared' / 'data' / 'head_motion' / 'cmu_131_01_walk.bvh'
@@ -137,7 +138,7 @@ def test_import_run_read_back(walk_bag, tmp_path, name, capsys):
         assert msg.height == 18 and msg.width == 8              # 6 guides x 3 ghosts, 8 nodes
         got = _cloud_strands(msg)
         np.testing.assert_array_equal(got, strands.astype(np.float32).astype(np.float64))
-        np.testing.assert_array_equal(bag_io.cloud_to_strands(msg), got)
+        np.testing.assert_array_equal(pointcloud2_to_strands(msg)[0], got)
         assert log_t in set(hp.log_ns.tolist())                 # logged at the pose's time
     # markers: one LINE_LIST of all segments, float64 exact, DELETEALL first only once
     first = markers[0][1].markers

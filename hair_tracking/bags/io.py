@@ -643,40 +643,17 @@ class BagWriter:
         return False
 
 
-# ================================================================ PointCloud2 decoding
-_PF_DTYPE = {1: 'i1', 2: 'u1', 3: 'i2', 4: 'u2', 5: 'i4', 6: 'u4', 7: 'f4', 8: 'f8'}
+# ================================================================ hair clouds
+def cloud_messages(path, topic: str = '/hair/points'):
+    """``(header stamp [ns], PointCloud2)`` of every message on ``topic`` of a bag, in log-time
+    order (decode them with :func:`msg_adapters.pointcloud.pointcloud2_to_strands`)."""
+    from msg_adapters.stamps import time_to_ns
 
-
-def cloud_to_strands(msg) -> np.ndarray:
-    """Decode a PointCloud2 (rclpy or rosbags object) into float64 ``(height, width, 3)``.
-
-    Reads the x, y, z fields by their declared offsets and datatypes, honouring ``point_step``,
-    ``row_step`` and ``is_bigendian``; an organized cloud (height = strands, width = points per
-    strand) gives the strands directly, an unorganized one ``(1, N, 3)``.  Independent of how
-    the cloud was built (used to check what the bag holds).
-    """
-    fields = {f.name: f for f in msg.fields}
-    missing = [n for n in 'xyz' if n not in fields]
-    if missing:
-        raise BagError(f'PointCloud2 lacks field(s) {missing}', EXIT_CONTENT)
-    h, w = int(msg.height), int(msg.width)
-    step, row = int(msg.point_step), int(msg.row_step)
-    data = np.frombuffer(bytes(msg.data) if not isinstance(msg.data, np.ndarray)
-                         else msg.data.tobytes(), dtype=np.uint8)
-    if h * w == 0:
-        return np.zeros((h, w, 3))
-    if len(data) < (h - 1) * row + w * step:
-        raise BagError(f'PointCloud2 data holds {len(data)} bytes, {h}x{w} points of '
-                       f'{step} bytes need {(h - 1) * row + w * step}', EXIT_CONTENT)
-    out = np.empty((h, w, 3))
-    end = '>' if msg.is_bigendian else '<'
-    for k, name in enumerate('xyz'):
-        f = fields[name]
-        dt = np.dtype(end + _PF_DTYPE[int(f.datatype)])
-        view = np.lib.stride_tricks.as_strided(
-            data[int(f.offset):], shape=(h, w, dt.itemsize), strides=(row, step, 1))
-        out[:, :, k] = np.ascontiguousarray(view).view(dt).reshape(h, w)
-    return out
+    with open_bag(path) as reader:
+        conns = [c for c in reader.connections if c.topic == topic]
+        for conn, _, raw in messages(reader, conns):
+            msg = deserialize(reader, raw, conn.msgtype, conn.topic)
+            yield time_to_ns(msg.header.stamp), msg
 
 
 # ================================================================ head poses -> bag
