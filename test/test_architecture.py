@@ -12,7 +12,8 @@ ADAPTERS = os.path.join(ROOT, 'msg_adapters')
 
 #: Layers from the bottom up: a module may import its own layer and the ones below it only.
 #: The top-level helpers (resources, process_tuning) are leaves any layer may use.
-LAYERS = ['core', 'motion', 'guides', 'ghosts', 'simulator', 'bags', 'evaluation', 'ros']
+LAYERS = ['core', 'motion', 'guides', 'ghosts', 'simulator', 'output', 'bags', 'evaluation',
+          'ros']
 LEAVES = {'resources', 'process_tuning'}
 #: Layers that simulate or describe head motion: numpy, numba and yaml only, no ROS messages,
 #: no rclpy, no adapters.

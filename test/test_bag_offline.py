@@ -297,7 +297,7 @@ def test_console_errors_have_no_traceback(tmp_path):
 
 def test_offline_runs_need_no_rclpy():
     """`hair_sim_bag run` works without a ROS installation: its modules never import rclpy."""
-    code = ('import sys, hair_tracking.bags.offline, hair_tracking.core.strand_colors; '
+    code = ('import sys, hair_tracking.bags.offline, hair_tracking.output.strand_colors; '
             'sys.exit(1 if "rclpy" in sys.modules else 0)')
     assert subprocess.run([sys.executable, '-c', code], timeout=120).returncode == 0
 

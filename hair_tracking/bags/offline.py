@@ -32,7 +32,7 @@ from hair_tracking.bags import io as bag_io
 from hair_tracking.bags.io import BagError, EXIT_CONTENT, EXIT_FAILURE, EXIT_USAGE
 from hair_tracking.core.params import make_settings, NODE_NAME, ParamError, Settings
 from hair_tracking.core.scene import Scene, SceneError
-from hair_tracking.core.strand_colors import StrandColorCache
+from hair_tracking.output.strand_colors import StrandColorCache
 
 POINTS_TOPIC = '/hair/points'
 MARKERS_TOPIC = '/hair/markers'
@@ -121,7 +121,7 @@ def load_settings(scene: Optional[str] = None, params_file: Optional[str] = None
 # ================================================================ encoding
 class FrameEncoder:
     """Serialized output messages of one frame, exactly as the node builds them (CDR bytes):
-    per-strand colours from :func:`hair_tracking.core.strand_colors.strand_colors`, clouds
+    per-strand colours from :func:`hair_tracking.output.strand_colors.strand_colors`, clouds
     rewritten in place in a buffer kept per namespace (the node's
     :class:`msg_adapters.pointcloud.CloudBuffer`, the coordinates written straight from the
     simulator's state), ``line_list``/``line_strips`` markers with a DELETEALL in front of the

@@ -78,8 +78,8 @@ from hair_tracking.core import params as P
 from hair_tracking.core.head_track import PoseResult
 from hair_tracking.core.params_check import unknown_parameters
 from hair_tracking.core.scene import Scene, SceneError
-from hair_tracking.core.strand_colors import StrandColorCache
 from hair_tracking.core.transforms import quat_to_matrix
+from hair_tracking.output.strand_colors import StrandColorCache
 from hair_tracking.resources import config_path
 from hair_tracking.ros.interrupt import interrupt_between_callbacks
 from hair_tracking.ros.load_shedding import LoadShedder

@@ -1,0 +1,1 @@
+"""From simulated hair to published outputs, ROS-free: shared by the node and the bag runs."""
