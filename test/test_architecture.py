@@ -18,6 +18,8 @@ LEAVES = {'resources', 'process_tuning'}
 #: Layers that simulate or describe head motion: numpy, numba and yaml only, no ROS messages,
 #: no rclpy, no adapters.
 SIMULATION = {'core', 'motion', 'guides', 'ghosts', 'simulator'}
+#: Layers that join no ROS graph (no rclpy): they run without a ROS installation's middleware.
+NO_GRAPH = SIMULATION | {'output', 'bags', 'evaluation'}
 ROS_ROOTS = {'rclpy', 'rosidl_runtime_py', 'rosgraph_msgs', 'std_msgs', 'geometry_msgs',
              'sensor_msgs', 'visualization_msgs', 'diagnostic_msgs', 'std_srvs', 'tf2_msgs',
              'rcl_interfaces', 'builtin_interfaces', 'msg_adapters', 'rosbags'}
@@ -80,6 +82,8 @@ def test_imports_point_down_the_layers(name, path):
         root = target.split('.')[0]
         if own in SIMULATION:
             assert root not in ROS_ROOTS, f'{name} imports {target}: no ROS in simulation layers'
+        if own in NO_GRAPH:
+            assert root != 'rclpy', f'{name} imports {target}: only ros/ joins a ROS graph'
         if root != 'hair_tracking' or own is None:
             continue
         theirs = layer(target)
@@ -120,6 +124,7 @@ def test_the_import_check_catches_an_upward_import(tmp_path):
     found = list(imports(str(bad), 'hair_tracking.ghosts.bad'))
     assert 'hair_tracking.ros.node' in found and 'rclpy' in found
     assert LAYERS.index(layer('hair_tracking.ros.node')) > LAYERS.index('ghosts')
+    assert 'bags' in NO_GRAPH and 'ros' not in NO_GRAPH
 
 
 def test_the_numba_cache_key_covers_every_subpackage(tmp_path, monkeypatch):

@@ -27,9 +27,9 @@ from msg_adapters.pointcloud import pointcloud2_to_strands
 
 from hair_tracking.bags import io as bag_io
 from hair_tracking.bags.offline import run_bag, RunOptions
-from hair_tracking.bags.play import BagPlayer
-from hair_tracking.bags.record import BagRecorder
 from hair_tracking.core.params import make_settings
+from hair_tracking.ros.bag_play import BagPlayer
+from hair_tracking.ros.bag_record import BagRecorder
 from hair_tracking.ros.node import HairSimNode
 
 DOMAIN = 55

@@ -288,7 +288,7 @@ def test_console_errors_have_no_traceback(tmp_path):
     for args, code in ((['run', str(tmp_path / 'nope.mcap'), '-o', str(tmp_path / 'o')], 3),
                        (['import', str(tmp_path / 'nope.bvh'), '-o', str(tmp_path / 'o')], 3),
                        (['run', '-o'], 2)):
-        proc = subprocess.run([sys.executable, '-m', 'hair_tracking.bags.cli'] + args,
+        proc = subprocess.run([sys.executable, '-m', 'hair_tracking.ros.bag_cli'] + args,
                               capture_output=True, text=True, timeout=120, env=env, cwd=ROOT)
         assert proc.returncode == code, proc.stderr
         assert 'Traceback' not in proc.stderr and 'error' in proc.stderr
@@ -296,9 +296,10 @@ def test_console_errors_have_no_traceback(tmp_path):
 
 
 def test_offline_runs_need_no_rclpy():
-    """`hair_sim_bag run` works without a ROS installation: its modules never import rclpy."""
-    code = ('import sys, hair_tracking.bags.offline, hair_tracking.output.strand_colors; '
-            'sys.exit(1 if "rclpy" in sys.modules else 0)')
+    """`hair_sim_bag run` works without a ROS installation: its modules, and the executable's
+    module with play and record in its parser, never import rclpy."""
+    code = ('import sys, hair_tracking.bags.offline, hair_tracking.output.strand_colors, '
+            'hair_tracking.ros.bag_cli; sys.exit(1 if "rclpy" in sys.modules else 0)')
     assert subprocess.run([sys.executable, '-c', code], timeout=120).returncode == 0
 
 

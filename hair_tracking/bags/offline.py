@@ -338,6 +338,26 @@ class Progress:
             self.stream.flush()
 
 
+def progress_bar(label: str, quiet: bool = False):
+    """``(progress(done, total), close())`` of a command's progress line: a :class:`Progress`
+    labelled ``label``, made at the first call (so a command that fails before any work draws
+    none), or nothing at all when ``quiet``."""
+    bar = None
+
+    def progress(done: int, total: int) -> None:
+        nonlocal bar
+        if quiet:
+            return
+        if bar is None:
+            bar = Progress(total, label=label)
+        bar.update(done)
+
+    def close() -> None:
+        if bar is not None:
+            bar.close()
+    return progress, close
+
+
 def run_bag(input_path: str, output_path: str, settings: Settings,
             options: Optional[RunOptions] = None,
             progress: Optional[Callable[[int, int], None]] = None,

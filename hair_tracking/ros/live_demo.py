@@ -107,9 +107,9 @@ def run_demo(args) -> int:
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.parameter import Parameter
 
-    from hair_tracking.bags.play import BagPlayer
-    from hair_tracking.bags.record import BagRecorder
     from hair_tracking.bags.render import render
+    from hair_tracking.ros.bag_play import BagPlayer
+    from hair_tracking.ros.bag_record import BagRecorder
 
     os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
     out = Path(args.out)
