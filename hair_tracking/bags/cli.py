@@ -377,9 +377,9 @@ def build_parser(live: Sequence[Callable] = ()) -> argparse.ArgumentParser:
                         'faster for small scenes or on a busy machine)')
     p.add_argument('--every-pose', action='store_true',
                    help='write a hair frame after every pose (default: publish_rate_hz)')
-    p.add_argument('--no-points', action='store_true', help='do not write /hair/points')
-    p.add_argument('--no-markers', action='store_true', help='do not write /hair/markers')
-    p.add_argument('--no-diagnostics', action='store_true', help='do not write /diagnostics')
+    for name, topic in (('points', '/hair/points'), ('markers', '/hair/markers'),
+                        ('diagnostics', '/diagnostics')):
+        p.add_argument(f'--no-{name}', action='store_true', help=f'do not write {topic}')
     p.add_argument('--no-head-pose', action='store_true', help='do not copy /head_pose')
     p.add_argument('--overwrite', action='store_true', help='replace an existing output')
     finish_parser(p, cmd_run, 'no progress bar', omp_wait_policy='active')
