@@ -32,7 +32,7 @@ setup(
     entry_points={
         'console_scripts': [
             'hair_sim_node = hair_tracking.ros.node:main',
-            'hair_sim_bag = hair_tracking.bags.cli:main',
+            'hair_sim_bag = hair_tracking.ros.bag_cli:main',
             'hair_sim_eval = hair_tracking.evaluation.cli:main',
             'hair_sim_demo = hair_tracking.evaluation.demo:main',
             'hair_sim_warmup = hair_tracking.ros.warmup:main',

@@ -3,8 +3,8 @@
 
 Usage: python scripts/make_head_motion_data.py [path/to/cmu_131_01_walk.bvh] [--out CSV]
 
-Reads the BVH with hair_tracking.bags.head_motion.load_bvh_head_motion (Head joint, head-centre
-origin, CMU scale 0.056444 m/unit, REP-103 frames) and writes all 994 frames as
+Reads the BVH with hair_tracking.motion.bvh.load_bvh_head_motion (Head joint, head-centre origin,
+CMU scale 0.056444 m/unit, REP-103 frames) and writes all 994 frames as
 ``t_s,px,py,pz,qx,qy,qz,qw`` (7 significant digits) with an attribution header.  The source is the
 CMU Graphics Lab Motion Capture Database (mocap.cs.cmu.edu), subject 131 trial 01, as converted
 to BVH in the MIT-licensed repository yuki-koyama/bvh11 (resources/131_01.bvh); see
@@ -17,7 +17,7 @@ import sys
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, ROOT)
 
-from hair_tracking.bags import head_motion as hm  # noqa: E402
+from hair_tracking.motion import bvh as mocap, pose_table as tables  # noqa: E402
 
 DEFAULT_BVH = '/work/shared/data/head_motion/cmu_131_01_walk.bvh'
 
@@ -34,11 +34,11 @@ HEADER = (
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument('bvh', nargs='?', default=DEFAULT_BVH)
-    ap.add_argument('--out', default=hm.BUNDLED_WALK_CSV)
+    ap.add_argument('--out', default=tables.BUNDLED_WALK_CSV)
     args = ap.parse_args(argv)
-    motion = hm.load_bvh_head_motion(args.bvh)
+    motion = mocap.load_bvh_head_motion(args.bvh)
     os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
-    hm.write_pose_csv(args.out, motion, comments=HEADER)
+    tables.write_pose_csv(args.out, motion, comments=HEADER)
     print(f'wrote {args.out}: {len(motion)} frames, {motion.duration_s:.3f} s, '
           f'{motion.rate_hz:.2f} Hz')
     return 0

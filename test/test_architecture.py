@@ -8,18 +8,25 @@ import pytest
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 PACKAGE = os.path.join(ROOT, 'hair_tracking')
+ADAPTERS = os.path.join(ROOT, 'msg_adapters')
 
 #: Layers from the bottom up: a module may import its own layer and the ones below it only.
 #: The top-level helpers (resources, process_tuning) are leaves any layer may use.
-LAYERS = ['core', 'guides', 'ghosts', 'simulator', 'output', 'bags', 'evaluation', 'ros']
+LAYERS = ['core', 'motion', 'guides', 'ghosts', 'simulator', 'output', 'bags', 'evaluation',
+          'ros']
 LEAVES = {'resources', 'process_tuning'}
-#: Layers that simulate: numpy, numba and yaml only, no ROS messages, no rclpy, no adapters.
-SIMULATION = {'core', 'guides', 'ghosts', 'simulator'}
+#: Layers that simulate or describe head motion: numpy, numba and yaml only, no ROS messages,
+#: no rclpy, no adapters.
+SIMULATION = {'core', 'motion', 'guides', 'ghosts', 'simulator'}
+#: Layers that join no ROS graph (no rclpy): they run without a ROS installation's middleware.
+NO_GRAPH = SIMULATION | {'output', 'bags', 'evaluation'}
 ROS_ROOTS = {'rclpy', 'rosidl_runtime_py', 'rosgraph_msgs', 'std_msgs', 'geometry_msgs',
              'sensor_msgs', 'visualization_msgs', 'diagnostic_msgs', 'std_srvs', 'tf2_msgs',
              'rcl_interfaces', 'builtin_interfaces', 'msg_adapters', 'rosbags'}
 #: At most this many modules at the top of hair_tracking/ (besides __init__.py).
 MAX_TOP_MODULES = 4
+#: All that msg_adapters (ROS messages <-> numpy, nothing of hair) may use of hair_tracking.
+ADAPTERS_MAY_USE = ('hair_tracking.core.transforms',)
 #: Optional packages (not installed with the package) and the only modules that import them.
 OPTIONAL = {'viser': {'hair_tracking.ros.view'}}
 
@@ -75,6 +82,8 @@ def test_imports_point_down_the_layers(name, path):
         root = target.split('.')[0]
         if own in SIMULATION:
             assert root not in ROS_ROOTS, f'{name} imports {target}: no ROS in simulation layers'
+        if own in NO_GRAPH:
+            assert root != 'rclpy', f'{name} imports {target}: only ros/ joins a ROS graph'
         if root != 'hair_tracking' or own is None:
             continue
         theirs = layer(target)
@@ -82,6 +91,19 @@ def test_imports_point_down_the_layers(name, path):
             continue
         assert LAYERS.index(theirs) <= LAYERS.index(own), \
             f'{name} ({own}) imports {target} ({theirs}), a layer above it'
+
+
+def test_msg_adapters_use_nothing_of_hair_but_the_quaternion_maths():
+    found = []
+    for f in sorted(os.listdir(ADAPTERS)):
+        if f.endswith('.py'):
+            name = 'msg_adapters' if f == '__init__.py' else 'msg_adapters.' + f[:-3]
+            found += [(name, t) for t in imports(os.path.join(ADAPTERS, f), name)
+                      if t.split('.')[0] == 'hair_tracking']
+    for name, target in found:
+        assert target.rpartition('.')[0] in ADAPTERS_MAY_USE, \
+            f'{name} imports {target}: msg_adapters know nothing of hair'
+    assert found                        # the check looks at the modules that do use it
 
 
 def test_optional_packages_are_imported_only_where_they_are_used():
@@ -102,6 +124,7 @@ def test_the_import_check_catches_an_upward_import(tmp_path):
     found = list(imports(str(bad), 'hair_tracking.ghosts.bad'))
     assert 'hair_tracking.ros.node' in found and 'rclpy' in found
     assert LAYERS.index(layer('hair_tracking.ros.node')) > LAYERS.index('ghosts')
+    assert 'bags' in NO_GRAPH and 'ros' not in NO_GRAPH
 
 
 def test_the_numba_cache_key_covers_every_subpackage(tmp_path, monkeypatch):

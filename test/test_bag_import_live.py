@@ -9,7 +9,7 @@ import pytest
 
 from hair_tracking.bags.cli import main as bag_main
 from hair_tracking.bags.io import read_head_poses
-from hair_tracking.bags.play import BagPlayer
+from hair_tracking.ros.bag_play import BagPlayer
 
 from test_node import Harness
 

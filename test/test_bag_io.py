@@ -9,9 +9,9 @@ import pytest
 
 from hair_tracking.bags import io as bag_io
 
-from hair_tracking.bags import head_motion as hm
 from hair_tracking.bags.cli import DEFAULT_START_TIME_S, main
-from hair_tracking.core.transforms import quat_multiply, quat_to_matrix
+from hair_tracking.core.transforms import matrices_to_quats, quat_multiply, quat_to_matrix
+from hair_tracking.motion import bvh as mocap, pose_table as tables
 
 DATA = Path(__file__).resolve().parents[1].parent / 'shared' / 'data' / 'head_motion'
 BVH = DATA / 'cmu_131_01_walk.bvh'
@@ -38,7 +38,7 @@ def test_import_bvh_walk_matches_forward_kinematics(tmp_path, suffix, capsys):
     out = tmp_path / ('walk' + suffix)
     assert main(['import', str(BVH), '-o', str(out)]) == 0
     assert 'cmu' in capsys.readouterr().out          # units recognised from the skeleton
-    ref = hm.load_bvh_head_motion(str(BVH))           # metres, REP-103, Head joint
+    ref = mocap.load_bvh_head_motion(str(BVH))           # metres, REP-103, Head joint
     hp = bag_io.read_head_poses(out)
     assert hp.topic == '/head_pose' and hp.msgtype == 'geometry_msgs/msg/PoseStamped'
     assert hp.frame_id == 'world'
@@ -64,7 +64,7 @@ def test_import_vr360_table_with_named_columns(tmp_path):
     assert code == 0
     assert (out / 'metadata.yaml').is_file()
     assert any(p.suffix == '.db3' for p in out.iterdir())
-    ref = hm.read_vr360(str(VR360), neck_offset=[0, 0, 0.1], pivot=[0, 0, 1.6])
+    ref = tables.read_vr360(str(VR360), neck_offset=[0, 0, 0.1], pivot=[0, 0, 1.6])
     hp = bag_io.read_head_poses(out)
     assert hp.msgtype == 'geometry_msgs/msg/TransformStamped'
     assert hp.child_frame_id == 'head'
@@ -86,7 +86,7 @@ def test_import_slice_tf_and_keep_times(tmp_path):
     assert hp.topic == '/tf' and hp.child_frame_id == 'face_7'
     assert len(hp) == 60                                  # 0.5 s at 120 Hz
     assert hp.t_ns[0] == 50 * 10 ** 9
-    ref = hm.load_bvh_head_motion(str(BVH))
+    ref = mocap.load_bvh_head_motion(str(BVH))
     t = ref.t_ns - ref.t_ns[0]
     keep = (t >= 10 ** 9) & (t < 15 * 10 ** 8)          # Frame Time .0083333: not 1/120 s
     np.testing.assert_allclose(hp.position, ref.position[keep], atol=1e-12)
@@ -113,8 +113,8 @@ def _tf_bag(path):
     """/tf_static world->camera (rotated, shifted), /tf camera->face_1 and camera->hand."""
     ts = bag_io.typestore()
     rng = np.random.default_rng(3)
-    q_cam = hm.matrices_to_quats(np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0],
-                                           [0.0, -1.0, 0.0]]))
+    q_cam = matrices_to_quats(np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0],
+                                       [0.0, -1.0, 0.0]]))
     p_cam = np.array([1.0, 0.5, 1.2])
     t = 10 ** 9 + np.arange(20) * 10 ** 7
     p_face = rng.normal(size=(20, 3)) * 0.1 + [0, 0, 1.0]
@@ -326,10 +326,20 @@ def test_written_bag_read_by_plain_rosbags_reader(tmp_path):
                                    for _, m in got], p)
 
 
-def test_cloud_decoder_agrees_with_msg_adapters():
-    from msg_adapters.pointcloud import strands_to_pointcloud2
+def test_cloud_messages_of_a_bag_in_log_time_order(tmp_path):
+    from msg_adapters.pointcloud import pointcloud2_to_strands, strands_to_pointcloud2_cdr
     rng = np.random.default_rng(11)
-    strands = rng.normal(size=(7, 5, 3))
-    msg = strands_to_pointcloud2(strands, frame_id='w', colors=rng.uniform(size=(7, 3)))
-    got = bag_io.cloud_to_strands(msg)
-    np.testing.assert_array_equal(got, strands.astype(np.float32).astype(np.float64))
+    strands = rng.normal(size=(3, 7, 5, 3))
+    with bag_io.BagWriter(tmp_path / 'c.mcap') as w:
+        w.add_topic('/hair/points', 'sensor_msgs/msg/PointCloud2')
+        w.add_topic('/other', 'sensor_msgs/msg/PointCloud2')
+        for k in range(3):
+            stamp = 10 ** 9 + 5 * k
+            w.write('/hair/points', 100 + k, strands_to_pointcloud2_cdr(
+                strands[k], frame_id='w', stamp_ns=stamp))
+            w.write('/other', 100 + k, strands_to_pointcloud2_cdr(strands[k][:1], frame_id='w'))
+    got = list(bag_io.cloud_messages(tmp_path / 'c.mcap'))
+    assert [t for t, _ in got] == [10 ** 9, 10 ** 9 + 5, 10 ** 9 + 10]
+    for k, (_, msg) in enumerate(got):
+        np.testing.assert_array_equal(pointcloud2_to_strands(msg)[0],
+                                      strands[k].astype(np.float32).astype(np.float64))

@@ -23,11 +23,13 @@ from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
 
+from msg_adapters.pointcloud import pointcloud2_to_strands
+
 from hair_tracking.bags import io as bag_io
 from hair_tracking.bags.offline import run_bag, RunOptions
-from hair_tracking.bags.play import BagPlayer
-from hair_tracking.bags.record import BagRecorder
 from hair_tracking.output.settings import make_settings
+from hair_tracking.ros.bag_play import BagPlayer
+from hair_tracking.ros.bag_record import BagRecorder
 from hair_tracking.ros.node import HairSimNode
 
 DOMAIN = 55
@@ -58,15 +60,11 @@ def _stamp(cdr: bytes) -> int:
 
 def _clouds(path):
     """{stamp: strands} of /hair/points (first message of each stamp) and the message count."""
-    ts = bag_io.typestore()
     out, n = {}, 0
-    with bag_io.open_bag(path) as r:
-        conns = [c for c in r.connections if c.topic == '/hair/points']
-        for _, _, raw in bag_io.messages(r, conns):
-            n += 1
-            msg = ts.deserialize_cdr(raw, 'sensor_msgs/msg/PointCloud2')
-            stamp = msg.header.stamp.sec * 10 ** 9 + msg.header.stamp.nanosec
-            out.setdefault(stamp, bag_io.cloud_to_strands(msg))
+    for stamp, msg in bag_io.cloud_messages(path):
+        n += 1
+        if stamp not in out:
+            out[stamp] = pointcloud2_to_strands(msg)[0]
     return out, n
 
 

@@ -13,6 +13,7 @@ from hair_tracking.bags import io as bag_io
 from hair_tracking.bags.cli import main
 from hair_tracking.bags.offline import load_settings, Progress, run_bag, RunOptions, Schedule
 from hair_tracking.simulator import HairSimulator
+from msg_adapters.pointcloud import pointcloud2_to_strands
 
 ROOT = Path(__file__).resolve().parents[1]
 BVH = ROOT.parent / 'shared' / 'data' / 'head_motion' / 'cmu_131_01_walk.bvh'
@@ -137,7 +138,7 @@ def test_import_run_read_back(walk_bag, tmp_path, name, capsys):
         assert msg.height == 18 and msg.width == 8              # 6 guides x 3 ghosts, 8 nodes
         got = _cloud_strands(msg)
         np.testing.assert_array_equal(got, strands.astype(np.float32).astype(np.float64))
-        np.testing.assert_array_equal(bag_io.cloud_to_strands(msg), got)
+        np.testing.assert_array_equal(pointcloud2_to_strands(msg)[0], got)
         assert log_t in set(hp.log_ns.tolist())                 # logged at the pose's time
     # markers: one LINE_LIST of all segments, float64 exact, DELETEALL first only once
     first = markers[0][1].markers
@@ -287,7 +288,7 @@ def test_console_errors_have_no_traceback(tmp_path):
     for args, code in ((['run', str(tmp_path / 'nope.mcap'), '-o', str(tmp_path / 'o')], 3),
                        (['import', str(tmp_path / 'nope.bvh'), '-o', str(tmp_path / 'o')], 3),
                        (['run', '-o'], 2)):
-        proc = subprocess.run([sys.executable, '-m', 'hair_tracking.bags.cli'] + args,
+        proc = subprocess.run([sys.executable, '-m', 'hair_tracking.ros.bag_cli'] + args,
                               capture_output=True, text=True, timeout=120, env=env, cwd=ROOT)
         assert proc.returncode == code, proc.stderr
         assert 'Traceback' not in proc.stderr and 'error' in proc.stderr
@@ -295,9 +296,10 @@ def test_console_errors_have_no_traceback(tmp_path):
 
 
 def test_offline_runs_need_no_rclpy():
-    """`hair_sim_bag run` works without a ROS installation: its modules never import rclpy."""
-    code = ('import sys, hair_tracking.bags.offline, hair_tracking.core.strand_colors; '
-            'sys.exit(1 if "rclpy" in sys.modules else 0)')
+    """`hair_sim_bag run` works without a ROS installation: its modules, and the executable's
+    module with play and record in its parser, never import rclpy."""
+    code = ('import sys, hair_tracking.bags.offline, hair_tracking.output.strand_colors, '
+            'hair_tracking.ros.bag_cli; sys.exit(1 if "rclpy" in sys.modules else 0)')
     assert subprocess.run([sys.executable, '-c', code], timeout=120).returncode == 0
 
 

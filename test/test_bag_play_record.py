@@ -13,9 +13,9 @@ from rclpy.parameter import Parameter
 from rclpy.qos import qos_profile_sensor_data
 
 from hair_tracking.bags import io as bag_io
-from hair_tracking.bags.cli import main
-from hair_tracking.bags.play import BagPlayer
-from hair_tracking.bags.record import BagRecorder
+from hair_tracking.ros.bag_cli import main
+from hair_tracking.ros.bag_play import BagPlayer
+from hair_tracking.ros.bag_record import BagRecorder
 
 DOMAIN_ROUNDTRIP = 51
 DOMAIN_LOOP = 53
@@ -205,7 +205,7 @@ def test_ctrl_c_stops_a_playing_bag_cleanly():
     root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
     env = dict(os.environ, ROS_DOMAIN_ID='54', PYTHONUNBUFFERED='1',
                PYTHONPATH=os.pathsep.join(filter(None, [root, os.environ.get('PYTHONPATH')])))
-    cmd = [sys.executable, '-m', 'hair_tracking.bags.cli', 'play', '--quiet', '--loop',
+    cmd = [sys.executable, '-m', 'hair_tracking.ros.bag_cli', 'play', '--quiet', '--loop',
            '--rate', '4']
     proc = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             text=True)

@@ -6,8 +6,6 @@ import os
 import numpy as np
 import pytest
 
-from hair_tracking.bags.head_motion import (HeadMotion, angular_speed, linear_speed,
-                                            load_bundled_walk)
 from hair_tracking.core.head_track import IDENTITY
 from hair_tracking.core.metrics import max_stretch, position_error
 from hair_tracking.core.model import HeadPose
@@ -18,6 +16,8 @@ from hair_tracking.evaluation import cli as eval_cli
 from hair_tracking.evaluation import synthetic_motion as sm
 from hair_tracking.evaluation.methods import (FullSim, GhostTracking, PyPBD, RigidOffset,
                                               make_workload, pypbd_available)
+from hair_tracking.motion.head_motion import angular_speed, HeadMotion, linear_speed
+from hair_tracking.motion.pose_table import load_bundled_walk
 
 VR = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), '..', 'shared',
                   'data', 'head_motion', 'vr360_user1_quaternion.txt')

@@ -9,9 +9,8 @@ import os
 import numpy as np
 import pytest
 
-from hair_tracking.bags import head_motion as hm
-from hair_tracking.core.transforms import (matrix_to_quat, quat_angle, quat_from_axis_angle,
-                                           quat_to_matrix)
+from hair_tracking.core.transforms import quat_angle, quat_from_axis_angle
+from hair_tracking.motion import bvh as mocap, head_motion as hm, pose_table as tables
 
 DATA = os.environ.get('HEAD_MOTION_DATA', '/work/shared/data/head_motion')
 WALK_BVH = os.path.join(DATA, 'cmu_131_01_walk.bvh')
@@ -37,17 +36,17 @@ def _assert_stats(motion, ref, rel=0.03):
 
 @pytest.fixture(scope='module')
 def walk_bvh():
-    return hm.read_bvh(WALK_BVH)
+    return mocap.read_bvh(WALK_BVH)
 
 
 @pytest.fixture(scope='module')
 def walk():
-    return hm.load_bvh_head_motion(WALK_BVH)
+    return mocap.load_bvh_head_motion(WALK_BVH)
 
 
 @pytest.fixture(scope='module')
 def vr():
-    return hm.read_vr360(VR_TXT)
+    return tables.read_vr360(VR_TXT)
 
 
 # ------------------------------------------------------------------ BVH: the CMU walk
@@ -76,7 +75,7 @@ def test_walk_quaternions_unit_and_continuous(walk):
 
 @need_walk
 def test_walk_head_height_plausible(walk_bvh, walk):
-    allp = walk_bvh.all_positions() @ hm.BVH_TO_WORLD.T * hm.CMU_SCALE_M
+    allp = walk_bvh.all_positions() @ mocap.BVH_TO_WORLD.T * mocap.CMU_SCALE_M
     floor = allp[..., 2].min()                       # lowest point of the body (toes)
     standing = walk.t_s < 1.0                        # the clip starts standing still
     centre = np.median(walk.position[standing, 2]) - floor
@@ -84,11 +83,11 @@ def test_walk_head_height_plausible(walk_bvh, walk):
     assert 1.4 <= centre <= 1.9, f'standing head-centre height {centre:.3f} m'
     assert 1.4 <= top <= 1.9, f'head-top height {top:.3f} m'
     # the head centre lies above the Head joint along head z, by half the head bone
-    joint = hm.load_bvh_head_motion(WALK_BVH, origin='joint')
+    joint = mocap.load_bvh_head_motion(WALK_BVH, origin='joint')
     up = walk.rotation()[:, :, 2]
     d = walk.position - joint.position
     assert np.allclose(d, up * np.linalg.norm(d, axis=1, keepdims=True), atol=1e-3)
-    assert np.allclose(np.linalg.norm(d, axis=1), 0.5 * 1.63304 * hm.CMU_SCALE_M, atol=1e-3)
+    assert np.allclose(np.linalg.norm(d, axis=1), 0.5 * 1.63304 * mocap.CMU_SCALE_M, atol=1e-3)
 
 
 @need_walk
@@ -116,10 +115,10 @@ def test_walk_head_axes_follow_walking_and_up(walk):
 
 @need_walk
 def test_head_axes_inferred_from_data_match_constant(walk_bvh):
-    axes = hm.infer_head_axes(walk_bvh)
-    assert np.array_equal(axes, hm.CMU_HEAD_AXES)
+    axes = mocap.infer_head_axes(walk_bvh)
+    assert np.array_equal(axes, mocap.CMU_HEAD_AXES)
     # a wrong mapping makes the walking check fail (the check can fail)
-    wrong = hm.load_bvh_head_motion(WALK_BVH, head_axes=np.eye(3))
+    wrong = mocap.load_bvh_head_motion(WALK_BVH, head_axes=np.eye(3))
     direction, walking = hm.walking_direction(wrong.position, wrong.t_ns)
     x = wrong.rotation()[walking, :2, 0]
     x /= np.linalg.norm(x, axis=1, keepdims=True)
@@ -182,7 +181,7 @@ def test_fk_matches_reference_for_all_joints(walk_bvh):
 
 # ------------------------------------------------------------------ bundled data
 def test_bundled_walk_loads_without_raw_data():
-    m = hm.load_bundled_walk()
+    m = tables.load_bundled_walk()
     assert len(m) == 994 and abs(m.rate_hz - 120.0) < 0.01
     assert np.all(np.sum(m.quaternion[1:] * m.quaternion[:-1], axis=1) >= 0.0)
     assert 'CMU' in m.source
@@ -190,13 +189,13 @@ def test_bundled_walk_loads_without_raw_data():
     assert np.allclose(pose.to_world(np.array([[0.1, 0.0, 0.0]]))[0],
                        m.position[500] + 0.1 * m.rotation()[500][:, 0])
     _assert_stats(m, WALK_STATS)
-    assert os.path.isfile(os.path.join(hm.DATA_DIR, 'ATTRIBUTION.md'))
-    assert os.path.isfile(os.path.join(hm.DATA_DIR, 'LICENSE_cmu_bvh11_repo_MIT.txt'))
+    assert os.path.isfile(os.path.join(tables.DATA_DIR, 'ATTRIBUTION.md'))
+    assert os.path.isfile(os.path.join(tables.DATA_DIR, 'LICENSE_cmu_bvh11_repo_MIT.txt'))
 
 
 @need_walk
 def test_bundled_csv_equals_bvh_import(walk):
-    b = hm.load_bundled_walk()
+    b = tables.load_bundled_walk()
     assert np.max(np.abs(b.t_ns - walk.t_ns)) <= 500            # written to 1 us
     assert np.allclose(b.position, walk.position, rtol=0, atol=5e-6)
     assert np.allclose(b.quaternion, walk.quaternion, rtol=0, atol=1e-6)
@@ -226,7 +225,7 @@ def test_vr_sign_flips_removed(vr):
 @need_vr
 def test_vr_neck_offset(vr):
     off = np.array([0.02, 0.0, 0.1])
-    m = hm.read_vr360(VR_TXT, neck_offset=off, pivot=[0.0, 0.0, 1.5])
+    m = tables.read_vr360(VR_TXT, neck_offset=off, pivot=[0.0, 0.0, 1.5])
     expect = np.array([0.0, 0.0, 1.5]) + vr.rotation() @ off
     assert np.allclose(m.position, expect, atol=1e-12)
     assert np.allclose(np.linalg.norm(m.position - [0, 0, 1.5], axis=1), np.linalg.norm(off))
@@ -252,10 +251,10 @@ def test_pose_table_drops_bad_rows_and_fixes_signs(tmp_path):
             '35,1,2,3,1,0,0,0',                                 # time going back
             'nan,1,2,3,1,0,0,0',                                # no time
             '50.5,4,5,6,1,0,0,0']
-    m = hm.read_pose_table(_write(tmp_path / 'poses.csv', '\n'.join(rows) + '\n'),
-                           time_column='time_ms', time_unit='ms',
-                           quat_columns=('QW', 'QX', 'QY', 'QZ'), quat_order='wxyz',
-                           position_columns=('X', 'Y', 'Z'))
+    m = tables.read_pose_table(_write(tmp_path / 'poses.csv', '\n'.join(rows) + '\n'),
+                               time_column='time_ms', time_unit='ms',
+                               quat_columns=('QW', 'QX', 'QY', 'QZ'), quat_order='wxyz',
+                               position_columns=('X', 'Y', 'Z'))
     assert list(m.t_ns) == [0, 40_000_000, 50_500_000]
     assert m.dropped == {'bad_quaternion': 2, 'bad_position': 1, 'bad_time': 3}
     assert np.allclose(m.position, [[1, 2, 3], [1, 2, 3], [4, 5, 6]])
@@ -269,15 +268,15 @@ def test_pose_table_whitespace_xyzw_and_exact_times(tmp_path):
     text = ('stamp qx qy qz qw\n'
             '1700000000123456789 0 0 0 1\n'
             '1700000000123456790 0 0 0.0 -1\n')
-    m = hm.read_pose_table(_write(tmp_path / 'p.txt', text), time_column='stamp',
-                           time_unit='ns', position_columns=None)
+    m = tables.read_pose_table(_write(tmp_path / 'p.txt', text), time_column='stamp',
+                               time_unit='ns', position_columns=None)
     assert m.t_ns.tolist() == [1700000000123456789, 1700000000123456790]
     assert np.all(m.quaternion[:, 3] > 0)                      # -1 flipped to +1
-    s = hm.read_pose_table(_write(tmp_path / 's.txt', 't qx qy qz qw\n1700000000.000000001 '
-                                  '0 0 0 1\n'), time_column='t', position_columns=None)
+    s = tables.read_pose_table(_write(tmp_path / 's.txt', 't qx qy qz qw\n1700000000.000000001 '
+                                      '0 0 0 1\n'), time_column='t', position_columns=None)
     assert s.t_ns[0] == 1700000000000000001
-    u = hm.read_pose_table(_write(tmp_path / 'u.txt', 't qx qy qz qw\n2.5 0 0 0 1\n'),
-                           time_column='t', time_unit='us', position_columns=None)
+    u = tables.read_pose_table(_write(tmp_path / 'u.txt', 't qx qy qz qw\n2.5 0 0 0 1\n'),
+                               time_column='t', time_unit='us', position_columns=None)
     assert u.t_ns[0] == 2500
 
 
@@ -290,29 +289,16 @@ def test_pose_csv_round_trip(tmp_path):
     t = (t // 1000) * 1000                                     # the format keeps 1 us
     m = hm.HeadMotion(t, rng.normal(size=(50, 3)), q, source='random')
     path = str(tmp_path / 'rt.csv')
-    hm.write_pose_csv(path, m, comments=['made by a test', 'second line'])
+    tables.write_pose_csv(path, m, comments=['made by a test', 'second line'])
     with open(path) as fh:
         assert fh.readline() == '# made by a test\n'
-    r = hm.read_pose_csv(path)
+    r = tables.read_pose_csv(path)
     assert np.array_equal(r.t_ns, m.t_ns)
     assert np.allclose(r.position, m.position, rtol=1e-6, atol=1e-7)
     assert np.allclose(r.quaternion, m.quaternion, atol=1e-6)
 
 
 # ------------------------------------------------------------------ helpers vs references
-def test_matrices_to_quats_agrees_with_reference():
-    rng = np.random.default_rng(7)
-    q = rng.normal(size=(400, 4))
-    q /= np.linalg.norm(q, axis=1, keepdims=True)
-    q[:4] = [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]   # each branch
-    m = quat_to_matrix(q)
-    got = hm.matrices_to_quats(m)
-    for g, mm, qq in zip(got, m, q):
-        ref = matrix_to_quat(mm)
-        assert abs(abs(np.dot(g, ref)) - 1.0) < 1e-12
-        assert abs(abs(np.dot(g, qq)) - 1.0) < 1e-12
-
-
 def test_angular_speed_agrees_with_reference():
     rng = np.random.default_rng(11)
     q = rng.normal(size=(200, 4))
@@ -334,17 +320,17 @@ def test_truncated_bvh_raises_with_line(tmp_path):
     lines = open(WALK_BVH).read().splitlines()
     cut_motion = _write(tmp_path / 'cut.bvh', '\n'.join(lines[:500]) + '\n')
     with pytest.raises(hm.HeadMotionError, match=r'cut\.bvh:\d+: .*Frames: 994.*truncated'):
-        hm.read_bvh(cut_motion)
+        mocap.read_bvh(cut_motion)
     cut_line = _write(tmp_path / 'half.bvh', '\n'.join(lines[:300]) + '\n'
                       + lines[300][:len(lines[300]) // 2] + '\n')
     with pytest.raises(hm.HeadMotionError, match=r'half\.bvh:301: .*values'):
-        hm.read_bvh(cut_line)
+        mocap.read_bvh(cut_line)
     cut_hier = _write(tmp_path / 'hier.bvh', '\n'.join(lines[:90]) + '\n')
     with pytest.raises(hm.HeadMotionError, match='no MOTION'):
-        hm.read_bvh(cut_hier)
+        mocap.read_bvh(cut_hier)
     no_close = _write(tmp_path / 'brace.bvh', '\n'.join(lines[:92] + lines[184:]) + '\n')
     with pytest.raises(hm.HeadMotionError, match='unbalanced'):
-        hm.read_bvh(no_close)
+        mocap.read_bvh(no_close)
 
 
 @need_walk
@@ -352,55 +338,55 @@ def test_bad_bvh_header_and_channels(tmp_path):
     lines = open(WALK_BVH).read().splitlines()
     bad = _write(tmp_path / 'b.bvh', '\n'.join(['HIERARCY'] + lines[1:]))
     with pytest.raises(hm.HeadMotionError, match=r'b\.bvh:1: .*HIERARCHY'):
-        hm.read_bvh(bad)
+        mocap.read_bvh(bad)
     chan = list(lines)
     chan[8] = '\t\tCHANNELS 3 Zrotation Yrotation Wrotation'
     with pytest.raises(hm.HeadMotionError, match=r'c\.bvh:9: .*Wrotation'):
-        hm.read_bvh(_write(tmp_path / 'c.bvh', '\n'.join(chan)))
+        mocap.read_bvh(_write(tmp_path / 'c.bvh', '\n'.join(chan)))
     ft = list(lines)
     ft[186] = 'Frame Time: fast'
     with pytest.raises(hm.HeadMotionError, match=r'f\.bvh:187: .*frame time'):
-        hm.read_bvh(_write(tmp_path / 'f.bvh', '\n'.join(ft)))
+        mocap.read_bvh(_write(tmp_path / 'f.bvh', '\n'.join(ft)))
     num = list(lines)
     num[200] = num[200].replace('0.0000', 'abc', 1)
     with pytest.raises(hm.HeadMotionError, match=r'n\.bvh:201: .*not a number'):
-        hm.read_bvh(_write(tmp_path / 'n.bvh', '\n'.join(num)))
+        mocap.read_bvh(_write(tmp_path / 'n.bvh', '\n'.join(num)))
 
 
 @need_walk
 def test_unknown_joint_lists_available(walk_bvh):
     with pytest.raises(hm.HeadMotionError, match=r"no joint named 'Skull'.*Head.*LeftWrist"):
-        hm.load_bvh_head_motion(WALK_BVH, joint='Skull')
+        mocap.load_bvh_head_motion(WALK_BVH, joint='Skull')
     with pytest.raises(hm.HeadMotionError, match='Neck2'):
         walk_bvh.forward_kinematics('Neck2')
 
 
 def test_missing_files_raise(tmp_path):
     with pytest.raises(hm.HeadMotionError, match='not found'):
-        hm.read_bvh(str(tmp_path / 'none.bvh'))
+        mocap.read_bvh(str(tmp_path / 'none.bvh'))
     with pytest.raises(hm.HeadMotionError, match='not found'):
-        hm.read_pose_csv(str(tmp_path / 'none.csv'))
+        tables.read_pose_csv(str(tmp_path / 'none.csv'))
 
 
 def test_pose_table_errors(tmp_path):
     ok = 't_s,px,py,pz,qx,qy,qz,qw\n0,0,0,0,0,0,0,1\n'
     with pytest.raises(hm.HeadMotionError, match=r"m\.csv:1: missing column\(s\) \['qw'\]"):
-        hm.read_pose_csv(_write(tmp_path / 'm.csv', ok.replace(',qw', ',w')))
+        tables.read_pose_csv(_write(tmp_path / 'm.csv', ok.replace(',qw', ',w')))
     with pytest.raises(hm.HeadMotionError, match=r'h\.csv:1: bad header'):
-        hm.read_pose_csv(_write(tmp_path / 'h.csv', '0,0,0,0,0,0,0,1\n1,0,0,0,0,0,0,1\n'))
+        tables.read_pose_csv(_write(tmp_path / 'h.csv', '0,0,0,0,0,0,0,1\n1,0,0,0,0,0,0,1\n'))
     with pytest.raises(hm.HeadMotionError, match=r'r\.csv:3: 7 fields'):
-        hm.read_pose_csv(_write(tmp_path / 'r.csv', ok + '1,0,0,0,0,0,1\n'))
+        tables.read_pose_csv(_write(tmp_path / 'r.csv', ok + '1,0,0,0,0,0,1\n'))
     with pytest.raises(hm.HeadMotionError, match=r"v\.csv:2: column 'py' value 'x'"):
-        hm.read_pose_csv(_write(tmp_path / 'v.csv', ok.replace('0,0,0,0,0,0,0,1',
-                                                               '0,0,x,0,0,0,0,1')))
+        tables.read_pose_csv(_write(tmp_path / 'v.csv', ok.replace('0,0,0,0,0,0,0,1',
+                                                                   '0,0,x,0,0,0,0,1')))
     with pytest.raises(hm.HeadMotionError, match=r"t\.csv:2: time 'soon'"):
-        hm.read_pose_csv(_write(tmp_path / 't.csv', ok.replace('\n0,', '\nsoon,')))
+        tables.read_pose_csv(_write(tmp_path / 't.csv', ok.replace('\n0,', '\nsoon,')))
     with pytest.raises(hm.HeadMotionError, match='no usable rows'):
-        hm.read_pose_csv(_write(tmp_path / 'z.csv', ok.replace(',0,0,0,1', ',0,0,0,0')))
+        tables.read_pose_csv(_write(tmp_path / 'z.csv', ok.replace(',0,0,0,1', ',0,0,0,0')))
     with pytest.raises(hm.HeadMotionError, match='time_unit'):
-        hm.read_pose_table(_write(tmp_path / 'o.csv', ok), time_unit='min')
+        tables.read_pose_table(_write(tmp_path / 'o.csv', ok), time_unit='min')
     with pytest.raises(hm.HeadMotionError, match='empty'):
-        hm.read_pose_csv(_write(tmp_path / 'e.csv', '# only a comment\n'))
+        tables.read_pose_csv(_write(tmp_path / 'e.csv', '# only a comment\n'))
 
 
 def test_head_motion_validates():
@@ -421,13 +407,13 @@ def test_pose_table_columns_are_recognised_by_their_names(tmp_path):
     text = ('timestamp,x,y,z,quat_w,quat_x,quat_y,quat_z\n'
             '10.0,0.1,0.2,1.6,1,0,0,0\n10.5,0.1,0.2,1.7,1,0,0,0\n')
     path = _write(tmp_path / 'tracker.csv', text)
-    assert hm.recognise_columns(str(path)) == (
+    assert tables.recognise_columns(str(path)) == (
         'timestamp', ('quat_x', 'quat_y', 'quat_z', 'quat_w'), ('x', 'y', 'z'))
     hmd = _write(tmp_path / 'hmd.txt', 'time w x y z\n0 1 0 0 0\n')
-    assert hm.recognise_columns(str(hmd)) == ('time', ('x', 'y', 'z', 'w'), None)
+    assert tables.recognise_columns(str(hmd)) == ('time', ('x', 'y', 'z', 'w'), None)
     with pytest.raises(hm.HeadMotionError, match=r"no time and no quaternion columns recognised "
                                                  r"among \['a', 'b'\]"):
-        hm.recognise_columns(str(_write(tmp_path / 'bad.csv', 'a,b\n1,2\n')))
+        tables.recognise_columns(str(_write(tmp_path / 'bad.csv', 'a,b\n1,2\n')))
 
 
 def test_headset_ticks_since_year_one_import_with_a_time_scale(tmp_path):
@@ -437,19 +423,19 @@ def test_headset_ticks_since_year_one_import_with_a_time_scale(tmp_path):
     t0 = 638_680_000_000_000_000
     rows = [f'{t0 + k * 111_111},0,0,1.6,0,0,0,1' for k in range(10)]   # 90 Hz
     path = _write(tmp_path / 'ticks.csv', 't,px,py,pz,qx,qy,qz,qw\n' + '\n'.join(rows) + '\n')
-    m = hm.read_pose_table(str(path), time_column='t', time_scale='1e-7')
+    m = tables.read_pose_table(str(path), time_column='t', time_scale='1e-7')
     assert m.t_ns[0] == 0 and m.t_ns[1] == 11_111_100 and m.t_ns[-1] == 9 * 11_111_100
     assert 'relative to the first row' in m.source
     # the same ticks read as microseconds still fit relative to the first row, and absurd
     # spans are refused with a message instead of an overflow
-    us = hm.read_pose_table(str(path), time_column='t', time_unit='us')
+    us = tables.read_pose_table(str(path), time_column='t', time_unit='us')
     assert us.t_ns[1] - us.t_ns[0] == 111_111_000
     far = _write(tmp_path / 'far.csv', 't,px,py,pz,qx,qy,qz,qw\n0,0,0,1,0,0,0,1\n'
                  '1e30,0,0,1,0,0,0,1\n')
     with pytest.raises(hm.HeadMotionError, match='more than a ROS time can hold'):
-        hm.read_pose_table(str(far), time_column='t')
+        tables.read_pose_table(str(far), time_column='t')
     with pytest.raises(hm.HeadMotionError, match='time_scale must be a positive number'):
-        hm.read_pose_table(str(path), time_column='t', time_scale='-1')
+        tables.read_pose_table(str(path), time_column='t', time_scale='-1')
 
 
 def test_import_takes_a_table_named_its_own_way(tmp_path, capsys):

@@ -27,8 +27,8 @@ from sensor_msgs.msg import PointCloud2
 from std_srvs.srv import Trigger
 from visualization_msgs.msg import Marker, MarkerArray
 
-from hair_tracking.core.strand_colors import strand_colors
 from hair_tracking.core.transforms import quat_to_matrix
+from hair_tracking.output.strand_colors import strand_colors
 from hair_tracking.ros import node as node_module
 from hair_tracking.ros.node import HairSimNode
 from hair_tracking.simulator import HairSimulator

@@ -102,6 +102,20 @@ def test_reader_handles_foreign_layouts():
     np.testing.assert_array_equal(pointcloud2_to_strands(msg)[1], [0, 1])
 
 
+def test_reader_takes_rosbags_clouds_as_rclpy_ones():
+    """A cloud deserialized by rosbags (a bag's) decodes to what the rclpy message gives."""
+    rng = np.random.default_rng(12)
+    strands = rng.normal(size=(4, 6, 3))
+    cdr = strands_to_pointcloud2_cdr(strands, frame_id='w', colors=rng.uniform(size=(4, 3)),
+                                     strand_ids=np.array([5, 1, 9, 2]))
+    from_rclpy = pointcloud2_to_strands(deserialize_message(bytes(cdr), PointCloud2))
+    from_bag = pointcloud2_to_strands(TYPESTORE.deserialize_cdr(bytes(cdr), CLOUD))
+    for a, b in zip(from_bag, from_rclpy):
+        np.testing.assert_array_equal(a, b)
+    np.testing.assert_array_equal(from_bag[0], strands.astype(np.float32))
+    np.testing.assert_array_equal(from_bag[1], [5, 1, 9, 2])
+
+
 def test_reader_errors():
     msg = strands_to_pointcloud2(np.zeros((2, 3, 3)), frame_id='w')
     bad = PointCloud2(height=msg.height, width=msg.width, point_step=msg.point_step,

@@ -147,7 +147,7 @@ def test_process_options_parse_and_apply():
 def test_offline_run_waits_active_and_the_live_executables_passive():
     """``hair_sim_bag run`` has no executor or DDS threads to leave the cores to, so its OpenMP
     workers spin between parallel regions by default; play and record (which run DDS) sleep."""
-    from hair_tracking.bags.cli import build_parser
+    from hair_tracking.ros.bag_cli import build_parser
     parser = build_parser()
     assert parser.parse_args(['run', '-o', 'x.mcap']).omp_wait_policy == 'active'
     assert parser.parse_args(['run', '-o', 'x.mcap', '--omp-wait-policy', 'passive']) \

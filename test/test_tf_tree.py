@@ -3,8 +3,8 @@ use of it over DDS is in test_node_ros.py)."""
 import numpy as np
 import pytest
 
-from hair_tracking.core.tf_tree import TfTree
 from hair_tracking.core.transforms import quat_from_axis_angle, quat_to_matrix
+from msg_adapters.tf_tree import TfTree
 
 
 def _apply(t, q, p):
@@ -47,3 +47,19 @@ def test_bad_stale_and_looping_transforms():
     tree.set('c', 'a', [0, 0, 0], [0, 0, 0, 1])
     with pytest.raises(ValueError, match='TF loop'):
         tree.to_root('c')
+
+
+def test_add_message_takes_rclpy_and_rosbags_tf_messages():
+    """The node's TFMessages (rclpy) and a bag's (rosbags) fill the tree the same way."""
+    from hair_tracking.bags.io import head_pose_message
+    from msg_adapters.tf import transform_message
+    q = quat_from_axis_angle([0, 0, 1], 0.3)
+    trees = [TfTree(), TfTree()]
+    trees[0].add_message(transform_message(7, 'world', 'cam', [1.0, 0, 0], q), static=True)
+    trees[1].add_message(head_pose_message('tf', 7, [1.0, 0, 0], q, '/world', 'cam')[1],
+                         static=True)
+    for tree in trees:
+        assert tree.frames() == ['cam'] and tree.parent('cam') == 'world'
+        root, t, r = tree.to_root('cam')
+        assert root == 'world' and np.array_equal(t, [1.0, 0, 0])
+        np.testing.assert_allclose(r, q, atol=1e-15)

@@ -11,7 +11,10 @@ Sub-commands (``hair_sim_bag <command> --help`` for every option; guide: docs/ba
 
 ``BAG`` defaults to the bundled sample (CMU 131_01 walk head poses).  Bags are rosbag2
 directories or single ``.mcap``/``.db3`` files (ROS 1 ``.bag`` too, for reading); no ROS
-installation is needed for info/import/run/render.
+installation is needed for info/import/run/render.  This module holds those four and the
+parser; ``play`` and ``record`` join a ROS graph and live in :mod:`hair_tracking.ros.bag_play`
+and :mod:`hair_tracking.ros.bag_record`, which the executable (:mod:`hair_tracking.ros.bag_cli`)
+adds.
 
 Exit codes: 0 success, 1 the run failed, 2 bad command line, 3 input missing/not a bag/corrupt,
 4 the bag lacks what was asked for (no head-pose topic, unknown frame), 5 output exists or cannot
@@ -21,7 +24,7 @@ import argparse
 import math
 import os
 import sys
-from typing import List, Optional
+from typing import Callable, List, Optional, Sequence
 
 import numpy as np
 
@@ -93,7 +96,7 @@ def cmd_info(args) -> int:
 # ================================================================ import
 def _bvh_scale(path: str, units: str, joint: str):
     """(metres per unit, words) for --units; 'auto' from the rest-pose height of the skeleton."""
-    from hair_tracking.bags.head_motion import Bvh, read_bvh
+    from hair_tracking.motion.bvh import Bvh, read_bvh
     if units != 'auto':
         return BVH_UNITS[units], units
     bvh = read_bvh(path)
@@ -116,7 +119,7 @@ def _bvh_scale(path: str, units: str, joint: str):
 
 def load_recording(args):
     """HeadMotion of the import's RECORDING, following the options (BagError when bad)."""
-    from hair_tracking.bags import head_motion as hm
+    from hair_tracking.motion import bvh as mocap, head_motion as hm, pose_table as tables
 
     path = args.recording
     fmt = args.format
@@ -131,11 +134,11 @@ def load_recording(args):
                 scale, words = args.scale, f'{args.scale} m/unit'
             else:
                 scale, words = _bvh_scale(path, args.units, args.joint)
-            axes = hm.CMU_HEAD_AXES
+            axes = mocap.CMU_HEAD_AXES
             if args.axes == 'infer':
-                axes = hm.infer_head_axes(hm.read_bvh(path), args.joint, scale=scale)
-            motion = hm.load_bvh_head_motion(path, joint=args.joint, scale=scale,
-                                             head_axes=axes, origin=args.origin)
+                axes = mocap.infer_head_axes(mocap.read_bvh(path), args.joint, scale=scale)
+            motion = mocap.load_bvh_head_motion(path, joint=args.joint, scale=scale,
+                                                head_axes=axes, origin=args.origin)
             note = f'BVH joint {args.joint!r}, units {words}, head axes {args.axes}'
         else:
             time_col, quat_cols, pos_cols = args.time_column, None, None
@@ -145,13 +148,13 @@ def load_recording(args):
             if args.position_columns and args.position_columns.strip().lower() != 'none':
                 pos_cols = _names(args.position_columns, 3, '--position-columns')
             if time_col is None or quat_cols is None or args.position_columns is None:
-                found = hm.recognise_columns(path, args.delimiter)     # by their names
+                found = tables.recognise_columns(path, args.delimiter)     # by their names
                 time_col = time_col or found[0]
                 if quat_cols is None:
                     quat_cols, quat_order = found[1], 'xyzw'
                 if args.position_columns is None:
                     pos_cols = found[2]
-            motion = hm.read_pose_table(
+            motion = tables.read_pose_table(
                 path, time_column=time_col, time_unit=args.time_unit,
                 quat_columns=quat_cols, quat_order=quat_order, position_columns=pos_cols,
                 neck_offset=_floats(args.neck_offset, 3, '--neck-offset'),
@@ -218,8 +221,8 @@ def cmd_import(args) -> int:
 # ================================================================ run
 def cmd_run(args) -> int:
     from hair_tracking.bags import io as bag_io
-    from hair_tracking.bags.offline import (load_settings, parse_overrides, Progress, run_bag,
-                                            RunOptions)
+    from hair_tracking.bags.offline import (load_settings, parse_overrides, progress_bar,
+                                            run_bag, RunOptions)
 
     _check_seconds(args.start_offset, '--start-offset')
     _check_seconds(args.duration, '--duration', positive=True)
@@ -240,44 +243,35 @@ def cmd_run(args) -> int:
                       points=not args.no_points, markers=not args.no_markers,
                       diagnostics=not args.no_diagnostics, head_pose=not args.no_head_pose,
                       every_pose=args.every_pose)
-    bar = None
-
-    def progress(done, total):
-        nonlocal bar
-        if args.quiet:
-            return
-        if bar is None:
-            bar = Progress(total, label='run')
-        bar.update(done)
-
+    progress, close = progress_bar('run', args.quiet)
     try:
         summary = run_bag(src, args.output, settings, opts, progress,
                           after_setup=process_tuning.freeze_heap if args.gc_freeze else None)
     finally:
-        if bar is not None:
-            bar.close()
+        close()
     print(summary.text())
     return EXIT_OK if summary.finite else EXIT_FAILURE
 
 
-# ================================================================ play / record / render
-def cmd_play(args) -> int:
-    from hair_tracking.bags.play import main_play
-    return main_play(args)
-
-
-def cmd_record(args) -> int:
-    from hair_tracking.bags.record import main_record
-    return main_record(args)
-
-
+# ================================================================ render
 def cmd_render(args) -> int:
     from hair_tracking.bags.render import main_render
     return main_render(args)
 
 
 # ================================================================ parser
-def build_parser() -> argparse.ArgumentParser:
+def finish_parser(p, func: Callable[[argparse.Namespace], int], quiet_help: str,
+                  omp_wait_policy: str = 'passive') -> None:
+    """The end of a sub-command that runs a while: ``-q`` (``quiet_help``), the process-wide
+    settings (:func:`hair_tracking.process_tuning.add_arguments`) and ``func`` to run it."""
+    p.add_argument('-q', '--quiet', action='store_true', help=quiet_help)
+    process_tuning.add_arguments(p, omp_wait_policy=omp_wait_policy)
+    p.set_defaults(func=func)
+
+
+def build_parser(live: Sequence[Callable] = ()) -> argparse.ArgumentParser:
+    """The ``hair_sim_bag`` parser; each of ``live`` adds a sub-command to the sub-parsers it is
+    given (``play``, ``record``: :mod:`hair_tracking.ros.bag_cli`)."""
     ap = _Parser(prog='hair_sim_bag', description=__doc__.split('\n')[0],
                  epilog='Exit codes: 0 ok, 1 run failed, 2 usage, 3 bad input bag/file, '
                         '4 missing topic/frame, 5 output exists/unwritable, 130 interrupted. '
@@ -383,55 +377,16 @@ def build_parser() -> argparse.ArgumentParser:
                         'faster for small scenes or on a busy machine)')
     p.add_argument('--every-pose', action='store_true',
                    help='write a hair frame after every pose (default: publish_rate_hz)')
-    p.add_argument('--no-points', action='store_true', help='do not write /hair/points')
-    p.add_argument('--no-markers', action='store_true', help='do not write /hair/markers')
-    p.add_argument('--no-diagnostics', action='store_true', help='do not write /diagnostics')
+    for name, topic in (('points', '/hair/points'), ('markers', '/hair/markers'),
+                        ('diagnostics', '/diagnostics')):
+        p.add_argument(f'--no-{name}', action='store_true', help=f'do not write {topic}')
     p.add_argument('--no-head-pose', action='store_true', help='do not copy /head_pose')
     p.add_argument('--overwrite', action='store_true', help='replace an existing output')
-    p.add_argument('-q', '--quiet', action='store_true', help='no progress bar')
-    process_tuning.add_arguments(p, omp_wait_policy='active')
-    p.set_defaults(func=cmd_run)
+    finish_parser(p, cmd_run, 'no progress bar', omp_wait_policy='active')
 
-    # ---- play
-    p = sub.add_parser('play', help='publish a bag live with /clock (ros2 bag play --clock)')
-    p.add_argument('bag', nargs='?', help='bag (default: the bundled walk sample)')
-    p.add_argument('-r', '--rate', type=float, default=1.0, help='playback speed factor')
-    p.add_argument('-l', '--loop', action='store_true', help='play again and again (Ctrl-C)')
-    p.add_argument('--start-offset', type=float, default=0.0,
-                   help='start this many seconds into the bag')
-    p.add_argument('--duration', type=float, help='play this many seconds of the bag')
-    p.add_argument('--topics', nargs='+', metavar='TOPIC', help='play only these topics')
-    p.add_argument('--remap', nargs='+', default=[], metavar='FROM:=TO',
-                   help='rename topics, e.g. --remap /head_pose:=/face/pose')
-    p.add_argument('--no-clock', action='store_true', help='do not publish /clock')
-    p.add_argument('--wait-for-subscribers', type=float, default=2.0, metavar='SECONDS',
-                   help='wait up to this long for every topic to have a subscriber (default 2)')
-    p.add_argument('--delay', type=float, default=0.0, help='sleep this long before playing')
-    p.add_argument('--domain-id', type=int, help='ROS_DOMAIN_ID to use')
-    p.add_argument('-q', '--quiet', action='store_true', help='no progress line')
-    process_tuning.add_arguments(p)
-    p.set_defaults(func=cmd_play)
-
-    # ---- record
-    p = sub.add_parser('record', help='subscribe to topics (raw) and write a bag')
-    p.add_argument('topics', nargs='*', metavar='TOPIC', help='topics to record')
-    p.add_argument('-a', '--all', action='store_true', help='record every topic that appears')
-    p.add_argument('-o', '--output', required=True,
-                   help='bag to create: NAME.mcap / NAME.db3 or a folder name')
-    p.add_argument('--storage', choices=STORAGES, help='mcap (default) or sqlite3')
-    p.add_argument('--compress', action='store_true', help='zstd-compress (MCAP chunks)')
-    p.add_argument('--duration', type=float, help='stop after this many seconds')
-    p.add_argument('--max-messages', type=int, help='stop after this many messages')
-    p.add_argument('--idle-timeout', type=float,
-                   help='stop when nothing arrived for this many seconds (after the first '
-                        'message)')
-    p.add_argument('--use-sim-time', action='store_true',
-                   help='log messages at /clock time instead of the wall clock')
-    p.add_argument('--domain-id', type=int, help='ROS_DOMAIN_ID to use')
-    p.add_argument('--overwrite', action='store_true', help='replace an existing output')
-    p.add_argument('-q', '--quiet', action='store_true', help='no progress line')
-    process_tuning.add_arguments(p)
-    p.set_defaults(func=cmd_record)
+    # ---- play, record: they join a ROS graph (hair_tracking.ros.bag_cli puts them in)
+    for add in live:
+        add(sub)
 
     # ---- render
     p = sub.add_parser('render', help='pictures of an output bag: GIF/PNG + diagnostics plot')
@@ -452,9 +407,10 @@ def build_parser() -> argparse.ArgumentParser:
     return ap
 
 
-def main(argv: Optional[List[str]] = None) -> int:
-    """Console entry point ``hair_sim_bag``; returns the exit code (see module doc)."""
-    parser = build_parser()
+def main(argv: Optional[List[str]] = None, live: Sequence[Callable] = ()) -> int:
+    """``hair_sim_bag`` with the sub-commands ``live`` adds (see :func:`build_parser`); returns
+    the exit code (see module doc).  The executable is :mod:`hair_tracking.ros.bag_cli`."""
+    parser = build_parser(live)
     args = parser.parse_args(argv)
     try:
         if hasattr(args, 'malloc_retain_mb'):       # run, play, record: process-wide settings
@@ -483,7 +439,3 @@ def main(argv: Optional[List[str]] = None) -> int:
         print(f'hair_sim_bag {args.command}: error: {type(exc).__name__}: {exc} '
               f'(set HAIR_SIM_BAG_DEBUG=1 for the traceback)', file=sys.stderr)
         return EXIT_FAILURE
-
-
-if __name__ == '__main__':
-    sys.exit(main())

@@ -36,7 +36,6 @@ from typing import Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
-from hair_tracking.core.transforms import quat_multiply, quat_to_matrix
 from hair_tracking.resources import data_path
 
 # ---------------------------------------------------------------- exit codes
@@ -372,27 +371,6 @@ def select_head_source(reader, topic: Optional[str] = None,
                    EXIT_CONTENT)
 
 
-def _static_chain(statics: Dict[str, Tuple[str, np.ndarray, np.ndarray]], fixed: str,
-                  frame: str):
-    """Compose static transforms from ``fixed`` down to ``frame``: (p, q) or None."""
-    chain = []
-    f = frame
-    seen = set()
-    while f != fixed:
-        if f in seen or f not in statics:
-            return None
-        seen.add(f)
-        parent, p, q = statics[f]
-        chain.append((p, q))
-        f = parent
-    pos = np.zeros(3)
-    quat = np.array([0.0, 0.0, 0.0, 1.0])
-    for p, q in reversed(chain):          # fixed -> ... -> frame
-        pos = pos + quat_to_matrix(quat) @ p
-        quat = quat_multiply(quat, q)
-    return pos, quat
-
-
 def read_head_poses(path, topic: Optional[str] = None, head_frame: Optional[str] = None,
                     fixed_frame: Optional[str] = None, start_offset_s: float = 0.0,
                     duration_s: Optional[float] = None) -> HeadPoses:
@@ -406,6 +384,7 @@ def read_head_poses(path, topic: Optional[str] = None, head_frame: Optional[str]
     path to ``fixed_frame``, or no usable pose in the range.
     """
     from msg_adapters.pose import pose_from_msg, PoseError
+    from msg_adapters.tf_tree import compose, frame_name, TfTree
 
     with open_bag(path) as reader:
         src_topic, msgtype, frame = select_head_source(reader, topic, head_frame)
@@ -417,16 +396,13 @@ def read_head_poses(path, topic: Optional[str] = None, head_frame: Optional[str]
         if duration_s is not None:
             stop = (start or t0) + int(round(duration_s * 1e9))
 
-        statics: Dict[str, Tuple[str, np.ndarray, np.ndarray]] = {}
+        statics = TfTree()
         if is_tf:
             static_conns = [c for c in reader.connections
                             if _is_tf(c.msgtype) and c.topic.endswith('tf_static')]
             for conn, _, raw in messages(reader, static_conns):
-                msg = deserialize(reader, raw, conn.msgtype, conn.topic)
-                for tr in msg.transforms:
-                    s = pose_from_msg(tr)
-                    statics[s.child_frame_id] = (s.frame_id, np.array(s.position),
-                                                 np.array(s.quaternion))
+                statics.add_message(deserialize(reader, raw, conn.msgtype, conn.topic),
+                                    static=True)
             if frame is None:
                 raise BagError(f'{path}: {src_topic} is TF; choose the head frame with '
                                f'--head-frame', EXIT_CONTENT)
@@ -456,19 +432,20 @@ def read_head_poses(path, topic: Optional[str] = None, head_frame: Optional[str]
                     continue
                 p, q = np.array(s.position), np.array(s.quaternion)
                 parent = s.frame_id
-                if fixed_frame is not None and parent != fixed_frame:
+                if fixed_frame is not None and frame_name(parent) != frame_name(fixed_frame):
                     if parent not in chain_cache:
-                        chain_cache[parent] = _static_chain(statics, fixed_frame, parent)
+                        try:
+                            chain_cache[parent] = statics.lookup(fixed_frame, parent)
+                        except ValueError as exc:        # a loop in /tf_static
+                            raise BagError(f'{path}: {exc}', EXIT_CONTENT) from None
                     ch = chain_cache[parent]
                     if ch is None:
                         raise BagError(
                             f'{path}: frame {parent!r} (parent of {child or "the head"!r}) has '
                             f'no static transform path to the fixed frame {fixed_frame!r}; '
-                            f'static frames: {", ".join(sorted(statics)) or "(none)"}',
+                            f'static frames: {", ".join(statics.frames()) or "(none)"}',
                             EXIT_CONTENT)
-                    cp, cq = ch
-                    p = cp + quat_to_matrix(cq) @ p
-                    q = quat_multiply(cq, q / np.linalg.norm(q))
+                    p, q = compose(ch, (p, q))
                     parent = fixed_frame
                 if frame_id is None:
                     frame_id, child_id = parent, child
@@ -666,40 +643,17 @@ class BagWriter:
         return False
 
 
-# ================================================================ PointCloud2 decoding
-_PF_DTYPE = {1: 'i1', 2: 'u1', 3: 'i2', 4: 'u2', 5: 'i4', 6: 'u4', 7: 'f4', 8: 'f8'}
+# ================================================================ hair clouds
+def cloud_messages(path, topic: str = '/hair/points'):
+    """``(header stamp [ns], PointCloud2)`` of every message on ``topic`` of a bag, in log-time
+    order (decode them with :func:`msg_adapters.pointcloud.pointcloud2_to_strands`)."""
+    from msg_adapters.stamps import time_to_ns
 
-
-def cloud_to_strands(msg) -> np.ndarray:
-    """Decode a PointCloud2 (rclpy or rosbags object) into float64 ``(height, width, 3)``.
-
-    Reads the x, y, z fields by their declared offsets and datatypes, honouring ``point_step``,
-    ``row_step`` and ``is_bigendian``; an organized cloud (height = strands, width = points per
-    strand) gives the strands directly, an unorganized one ``(1, N, 3)``.  Independent of how
-    the cloud was built (used to check what the bag holds).
-    """
-    fields = {f.name: f for f in msg.fields}
-    missing = [n for n in 'xyz' if n not in fields]
-    if missing:
-        raise BagError(f'PointCloud2 lacks field(s) {missing}', EXIT_CONTENT)
-    h, w = int(msg.height), int(msg.width)
-    step, row = int(msg.point_step), int(msg.row_step)
-    data = np.frombuffer(bytes(msg.data) if not isinstance(msg.data, np.ndarray)
-                         else msg.data.tobytes(), dtype=np.uint8)
-    if h * w == 0:
-        return np.zeros((h, w, 3))
-    if len(data) < (h - 1) * row + w * step:
-        raise BagError(f'PointCloud2 data holds {len(data)} bytes, {h}x{w} points of '
-                       f'{step} bytes need {(h - 1) * row + w * step}', EXIT_CONTENT)
-    out = np.empty((h, w, 3))
-    end = '>' if msg.is_bigendian else '<'
-    for k, name in enumerate('xyz'):
-        f = fields[name]
-        dt = np.dtype(end + _PF_DTYPE[int(f.datatype)])
-        view = np.lib.stride_tricks.as_strided(
-            data[int(f.offset):], shape=(h, w, dt.itemsize), strides=(row, step, 1))
-        out[:, :, k] = np.ascontiguousarray(view).view(dt).reshape(h, w)
-    return out
+    with open_bag(path) as reader:
+        conns = [c for c in reader.connections if c.topic == topic]
+        for conn, _, raw in messages(reader, conns):
+            msg = deserialize(reader, raw, conn.msgtype, conn.topic)
+            yield time_to_ns(msg.header.stamp), msg
 
 
 # ================================================================ head poses -> bag

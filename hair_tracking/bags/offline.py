@@ -32,8 +32,8 @@ from hair_tracking.bags import io as bag_io
 from hair_tracking.bags.io import BagError, EXIT_CONTENT, EXIT_FAILURE, EXIT_USAGE
 from hair_tracking.core.params import ParamError
 from hair_tracking.core.scene import Scene, SceneError
-from hair_tracking.core.strand_colors import StrandColorCache
 from hair_tracking.output.settings import make_settings, NODE_NAME, Settings
+from hair_tracking.output.strand_colors import StrandColorCache
 
 POINTS_TOPIC = '/hair/points'
 MARKERS_TOPIC = '/hair/markers'
@@ -122,7 +122,7 @@ def load_settings(scene: Optional[str] = None, params_file: Optional[str] = None
 # ================================================================ encoding
 class FrameEncoder:
     """Serialized output messages of one frame, exactly as the node builds them (CDR bytes):
-    per-strand colours from :func:`hair_tracking.core.strand_colors.strand_colors`, clouds
+    per-strand colours from :func:`hair_tracking.output.strand_colors.strand_colors`, clouds
     rewritten in place in a buffer kept per namespace (the node's
     :class:`msg_adapters.pointcloud.CloudBuffer`, the coordinates written straight from the
     simulator's state), ``line_list``/``line_strips`` markers with a DELETEALL in front of the
@@ -337,6 +337,26 @@ class Progress:
             self.update(self.total, force=True)
             self.stream.write('\n')
             self.stream.flush()
+
+
+def progress_bar(label: str, quiet: bool = False):
+    """``(progress(done, total), close())`` of a command's progress line: a :class:`Progress`
+    labelled ``label``, made at the first call (so a command that fails before any work draws
+    none), or nothing at all when ``quiet``."""
+    bar = None
+
+    def progress(done: int, total: int) -> None:
+        nonlocal bar
+        if quiet:
+            return
+        if bar is None:
+            bar = Progress(total, label=label)
+        bar.update(done)
+
+    def close() -> None:
+        if bar is not None:
+            bar.close()
+    return progress, close
 
 
 def run_bag(input_path: str, output_path: str, settings: Settings,

@@ -72,6 +72,8 @@ def load_hair(path, topic: Optional[str] = None, max_frames: Optional[int] = Non
     ``strands`` is the (S, N, 3) array for a cloud, None for markers.  Frames are thinned to
     at most ``fps`` per second of recording and at most ``max_frames`` (evenly spread).
     """
+    from msg_adapters.pointcloud import pointcloud2_to_strands
+
     with bag_io.open_bag(path) as reader:
         infos = bag_io.topics(reader)
         if topic:
@@ -105,7 +107,10 @@ def load_hair(path, topic: Optional[str] = None, max_frames: Optional[int] = Non
                 continue
             msg = bag_io.deserialize(reader, raw, conn.msgtype, conn.topic)
             if conn.msgtype.endswith('PointCloud2'):
-                strands = bag_io.cloud_to_strands(msg)
+                try:
+                    strands = pointcloud2_to_strands(msg)[0]
+                except ValueError as exc:
+                    raise BagError(f'{path}: {info.topic}: {exc}', EXIT_CONTENT) from None
                 if strands.shape[1] < 2:
                     raise BagError(f'{path}: {info.topic} is not a cloud of strands (width '
                                    f'{strands.shape[1]})', EXIT_CONTENT)

@@ -58,24 +58,45 @@ def matrix_of_quat(x, y, z, w):
                      [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
 
 
-def matrix_to_quat(m):
-    """Unit quaternion (x, y, z, w) with w >= 0 of a rotation matrix (Shepperd's method)."""
+def matrices_to_quats(m):
+    """(..., 3, 3) rotation matrices -> (..., 4) unit quaternions (x, y, z, w).
+
+    Shepperd (1978), "Quaternion from rotation matrix", J. Guidance and Control 1(3): the largest
+    of 1 + trace, 1 + 2 m_ii - trace picks the numerically safe formula; vectorised.
+    """
     m = np.asarray(m, dtype=np.float64)
-    tr = m[0, 0] + m[1, 1] + m[2, 2]
-    if tr > 0:
-        s = 2.0 * np.sqrt(tr + 1.0)
-        q = [(m[2, 1] - m[1, 2]) / s, (m[0, 2] - m[2, 0]) / s, (m[1, 0] - m[0, 1]) / s, 0.25 * s]
-    elif m[0, 0] > m[1, 1] and m[0, 0] > m[2, 2]:
-        s = 2.0 * np.sqrt(1.0 + m[0, 0] - m[1, 1] - m[2, 2])
-        q = [0.25 * s, (m[0, 1] + m[1, 0]) / s, (m[0, 2] + m[2, 0]) / s, (m[2, 1] - m[1, 2]) / s]
-    elif m[1, 1] > m[2, 2]:
-        s = 2.0 * np.sqrt(1.0 + m[1, 1] - m[0, 0] - m[2, 2])
-        q = [(m[0, 1] + m[1, 0]) / s, 0.25 * s, (m[1, 2] + m[2, 1]) / s, (m[0, 2] - m[2, 0]) / s]
-    else:
-        s = 2.0 * np.sqrt(1.0 + m[2, 2] - m[0, 0] - m[1, 1])
-        q = [(m[0, 2] + m[2, 0]) / s, (m[1, 2] + m[2, 1]) / s, 0.25 * s, (m[1, 0] - m[0, 1]) / s]
-    q = np.array(q)
-    q /= np.linalg.norm(q)
+    shape = m.shape[:-2]
+    m = m.reshape(-1, 3, 3)
+    tr = m[:, 0, 0] + m[:, 1, 1] + m[:, 2, 2]
+    cand = np.stack([m[:, 0, 0], m[:, 1, 1], m[:, 2, 2], tr], axis=1)
+    pick = np.argmax(cand, axis=1)
+    q = np.empty((len(m), 4))
+    for k in range(4):
+        sel = pick == k
+        if not np.any(sel):
+            continue
+        a = m[sel]
+        if k == 3:
+            s = 2.0 * np.sqrt(1.0 + tr[sel])
+            q[sel] = np.stack([(a[:, 2, 1] - a[:, 1, 2]) / s, (a[:, 0, 2] - a[:, 2, 0]) / s,
+                               (a[:, 1, 0] - a[:, 0, 1]) / s, 0.25 * s], axis=1)
+            continue
+        i, j, h = k, (k + 1) % 3, (k + 2) % 3
+        s = 2.0 * np.sqrt(np.maximum(1.0 + a[:, i, i] - a[:, j, j] - a[:, h, h], 0.0))
+        out = np.empty((len(a), 4))
+        out[:, i] = 0.25 * s
+        out[:, j] = (a[:, j, i] + a[:, i, j]) / s
+        out[:, h] = (a[:, h, i] + a[:, i, h]) / s
+        out[:, 3] = (a[:, h, j] - a[:, j, h]) / s
+        q[sel] = out
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    return q.reshape(shape + (4,))
+
+
+def matrix_to_quat(m):
+    """Unit quaternion (x, y, z, w) with w >= 0 of one rotation matrix (see
+    :func:`matrices_to_quats`)."""
+    q = matrices_to_quats(m)
     return q if q[3] >= 0 else -q
 
 
@@ -91,19 +112,30 @@ def quat_angle(a, b):
     return 2.0 * np.arccos(min(1.0, d))
 
 
+#: Above this cosine of the half angle between two quaternions :func:`slerp` interpolates
+#: linearly and normalises (the arc is flat there, and sin(theta) too small to divide by).
+NLERP_ABOVE = 0.9995
+
+
 def slerp(a, b, u):
-    """Spherical linear interpolation between unit quaternions, shortest arc, u in [0, 1]."""
+    """Spherical linear interpolation (Shoemake 1985, "Animating rotation with quaternion
+    curves", SIGGRAPH) from unit quaternions ``a`` to ``b``, shortest arc, at ``u`` in [0, 1].
+
+    ``a``, ``b`` (..., 4) and ``u`` a number or (...,): one quaternion or a stack of them; the
+    normalised linear interpolation where the two are closer than :data:`NLERP_ABOVE`.
+    """
     a = np.asarray(a, dtype=np.float64)
     b = np.asarray(b, dtype=np.float64)
-    d = float(np.dot(a, b))
-    if d < 0.0:
-        b, d = -b, -d
-    if d > 0.9995:
-        q = a + u * (b - a)
-        return q / np.linalg.norm(q)
-    theta = np.arccos(d)
-    s = np.sin(theta)
-    return (np.sin((1 - u) * theta) * a + np.sin(u * theta) * b) / s
+    u = np.asarray(u, dtype=np.float64)[..., None]
+    d = np.sum(a * b, axis=-1, keepdims=True)
+    b = np.where(d < 0.0, -b, b)
+    d = np.abs(d)
+    near = d > NLERP_ABOVE
+    lerp = a + u * (b - a)
+    lerp = lerp / np.linalg.norm(lerp, axis=-1, keepdims=True)
+    theta = np.arccos(np.minimum(d, 1.0))
+    s = np.where(near, 1.0, np.sin(theta))
+    return np.where(near, lerp, (np.sin((1 - u) * theta) * a + np.sin(u * theta) * b) / s)
 
 
 def quat_dot(a, b) -> float:
@@ -113,11 +145,12 @@ def quat_dot(a, b) -> float:
 
 def slerp_floats(a, b, u):
     """:func:`slerp` of two unit quaternions given as sequences of four floats, on Python floats
-    (a tuple; the head track samples one pose a substep); shortest arc."""
+    (a tuple; the head track samples one pose a substep, where numpy's per-call cost would
+    dominate); shortest arc."""
     d = quat_dot(a, b)
     if d < 0.0:
         b, d = tuple(-c for c in b), -d
-    if d > 0.9995:
+    if d > NLERP_ABOVE:
         q = tuple(a[k] + u * (b[k] - a[k]) for k in range(4))
         n = math.hypot(*q)
         return tuple(c / n for c in q)

@@ -49,15 +49,15 @@ from typing import Callable, Dict, List, Optional, Sequence
 
 import numpy as np
 
-from hair_tracking.bags.head_motion import HeadMotion
 from hair_tracking.core.metrics import max_stretch, position_error, tip_error
 from hair_tracking.core.model import HeadPose
 from hair_tracking.core.scene import Scene
-from hair_tracking.core.transforms import quat_to_matrix
+from hair_tracking.core.transforms import quat_to_matrix, slerp
 from hair_tracking.evaluation.methods import (FullSim, GhostTracking, Method, PyPBD, RigidOffset,
                                               Workload,
                                               make_workload, pypbd_available)
 from hair_tracking.guides.collision import make_collider
+from hair_tracking.motion.head_motion import HeadMotion
 
 #: Output frame rate [Hz]: errors are measured and time is charged per frame of this rate.
 FRAME_RATE = 60.0
@@ -87,17 +87,7 @@ def interpolate_poses(motion: HeadMotion, t_s: np.ndarray):
     i = np.clip(np.searchsorted(ts, t, side='right'), 1, len(ts) - 1)
     u = ((t - ts[i - 1]) / (ts[i] - ts[i - 1]))[:, None]
     p = (1.0 - u) * motion.position[i - 1] + u * motion.position[i]
-    a, b = motion.quaternion[i - 1], motion.quaternion[i]
-    d = np.sum(a * b, axis=1, keepdims=True)
-    b = np.where(d < 0.0, -b, b)
-    d = np.abs(d)
-    theta = np.arccos(np.clip(d, -1.0, 1.0))
-    s = np.sin(theta)
-    small = s < 1e-6
-    wa = np.where(small, 1.0 - u, np.sin((1.0 - u) * theta) / np.where(small, 1.0, s))
-    wb = np.where(small, u, np.sin(u * theta) / np.where(small, 1.0, s))
-    q = wa * a + wb * b
-    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    q = slerp(motion.quaternion[i - 1], motion.quaternion[i], u[:, 0])
     return p, q
 
 
@@ -732,7 +722,7 @@ def plot_error_over_time(path: str, report: MotionReport, names: Sequence[str]) 
                     xycoords=('data', 'axes fraction'), fontsize=7.5, ha='left', va='top',
                     xytext=(3, 0), textcoords='offset points')
     motion = report.trajectory.motion
-    from hair_tracking.bags.head_motion import angular_speed
+    from hair_tracking.motion.head_motion import angular_speed
     w = angular_speed(motion)
     ax2 = ax.twinx()
     ax2.plot(motion.t_s[1:], w, color='0.6', lw=0.6, alpha=0.6)

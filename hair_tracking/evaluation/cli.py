@@ -58,7 +58,7 @@ def machine_note(threads: int) -> str:
 
 
 def trajectories(quick: bool, vr_path: str, log=print):
-    from hair_tracking.bags.head_motion import load_bundled_walk, read_vr360
+    from hair_tracking.motion.pose_table import load_bundled_walk, read_vr360
     from hair_tracking.evaluation import synthetic_motion as sm
     from hair_tracking.evaluation.accuracy import Trajectory
     walk = load_bundled_walk()
@@ -268,7 +268,7 @@ def main(argv=None) -> int:
     if args.cmd == 'accuracy' and args.ghosts and args.ghosts < 64:
         p.error('--ghosts must be at least 64 (the 1:64 ratio needs one guide)')
     if args.cmd in ('accuracy', 'dominance'):
-        from hair_tracking.bags.head_motion import HeadMotionError
+        from hair_tracking.motion.head_motion import HeadMotionError
         from hair_tracking.bags.io import BagError
         try:                    # every file read before any work, so a bad one costs nothing
             args.recorded = recorded(args.motion)

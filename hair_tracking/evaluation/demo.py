@@ -13,8 +13,8 @@ import time
 
 import numpy as np
 
-from hair_tracking.bags.head_motion import load_bundled_walk
 from hair_tracking.core.scene import Scene, SceneError
+from hair_tracking.motion.pose_table import load_bundled_walk
 from hair_tracking.resources import config_path
 from hair_tracking.simulator import HairSimulator, warm_up as warm_up_simulator
 

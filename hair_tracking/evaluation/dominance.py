@@ -30,6 +30,7 @@ import numpy as np
 
 from hair_tracking.core.metrics import position_error
 from hair_tracking.core.scene import Scene
+from hair_tracking.core.transforms import quat_angle
 from hair_tracking.evaluation.accuracy import (HeadSchedule, record_reference, run_frames,
                                                Scorer, Trajectory)
 from hair_tracking.evaluation.methods import (BlendTracking, FullSim, GhostTracking,
@@ -107,7 +108,7 @@ def first_moving_frame(schedule: HeadSchedule, tol: float = 1e-3) -> int:
     start = schedule.start()
     for j, poses in enumerate(schedule.poses(1)):
         h = poses[-1]
-        turn = 2.0 * math.acos(min(1.0, abs(float(np.dot(h.quaternion, start.quaternion)))))
+        turn = quat_angle(h.quaternion, start.quaternion)
         if np.linalg.norm(h.position - start.position) > tol or turn > tol:
             return j
     return schedule.frames
@@ -243,13 +244,13 @@ def load_motion(path: str):
     """A head motion from a file, read as ``hair_sim_bag import`` and ``run`` read them: a
     rosbag2 head-pose bag (MCAP, sqlite3; PoseStamped, TransformStamped or TF), a BVH capture
     (CMU conventions) or a pose CSV (``t_s px py pz qx qy qz qw``)."""
-    from hair_tracking.bags import head_motion as hm
+    from hair_tracking.motion import bvh as mocap, head_motion as hm, pose_table as tables
     from hair_tracking.bags import io as bag_io
     lower = path.lower()
     if lower.endswith('.bvh'):
-        return hm.load_bvh_head_motion(path)
+        return mocap.load_bvh_head_motion(path)
     if lower.endswith(('.csv', '.txt')):
-        return hm.read_pose_csv(path)
+        return tables.read_pose_csv(path)
     poses = bag_io.read_head_poses(path)
     return hm.HeadMotion(t_ns=poses.t_ns - poses.t_ns[0], position=poses.position,
                          quaternion=poses.quaternion, source=f'{path} ({poses.topic})')

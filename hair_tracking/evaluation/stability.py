@@ -46,11 +46,11 @@ from typing import Callable, Dict, List, Optional, Sequence
 
 import numpy as np
 
-from hair_tracking.bags.head_motion import (HeadMotion, angular_speed, linear_speed,
-                                            load_bundled_walk)
 from hair_tracking.core.metrics import max_stretch
 from hair_tracking.core.scene import Scene
 from hair_tracking.evaluation import synthetic_motion as sm
+from hair_tracking.motion.head_motion import angular_speed, HeadMotion, linear_speed
+from hair_tracking.motion.pose_table import load_bundled_walk
 from hair_tracking.simulator import HairSimulator
 
 #: Bound on the guides' max stretch ``max |l/l0 - 1|`` per solver (see docs/stability.md).

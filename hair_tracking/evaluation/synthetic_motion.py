@@ -1,8 +1,9 @@
 """Synthetic head motions: extremes for the evaluation and the stability matrix.
 
-Every generator returns a :class:`~hair_tracking.bags.head_motion.HeadMotion` (integer nanosecond
-times, head-centre positions [m] and unit quaternions (x, y, z, w) in the world frame, REP-103:
-z up, head x forward), so synthetic and recorded motions go through the same code.  The head
+Every generator returns a :class:`~hair_tracking.motion.head_motion.HeadMotion` (integer
+nanosecond times, head-centre positions [m] and unit quaternions (x, y, z, w) in the world
+frame, REP-103: z up, head x forward), so synthetic and recorded motions go through the same
+code.  The head
 starts upright at :data:`HEAD_HEIGHT` above the origin.  Motions are defined analytically and
 sampled at ``rate_hz``; rotations are built from rotation vectors (axis * angle) so a given peak
 angular speed is exact up to sampling.
@@ -34,8 +35,8 @@ from typing import Callable, Dict, Sequence
 
 import numpy as np
 
-from hair_tracking.bags.head_motion import HeadMotion, make_sign_continuous
 from hair_tracking.core.transforms import quat_multiply, quat_to_matrix, slerp
+from hair_tracking.motion.head_motion import HeadMotion, make_sign_continuous
 
 #: Height [m] of the head centre above the world origin at the start of every synthetic motion.
 HEAD_HEIGHT = 1.6
@@ -294,8 +295,7 @@ def resample(motion: HeadMotion, rate_hz: float) -> HeadMotion:
     t0, t1 = motion.t_ns[i - 1], motion.t_ns[i]
     u = np.clip((t - t0) / (t1 - t0), 0.0, 1.0)
     p = (1.0 - u)[:, None] * motion.position[i - 1] + u[:, None] * motion.position[i]
-    q = np.array([slerp(motion.quaternion[a - 1], motion.quaternion[a], w)
-                  for a, w in zip(i, u)])
+    q = slerp(motion.quaternion[i - 1], motion.quaternion[i], u)
     return _motion(t, p, q, f'{motion.source} resampled at {rate_hz:g} Hz')
 
 
@@ -313,7 +313,7 @@ def window(motion: HeadMotion, start_s: float, duration_s: float) -> HeadMotion:
 def busiest_window(motion: HeadMotion, duration_s: float) -> float:
     """Start time [s] of the ``duration_s`` window with the largest total head rotation
     (deterministic: the earliest such window on a 0.5 s grid)."""
-    from hair_tracking.bags.head_motion import angular_speed
+    from hair_tracking.motion.head_motion import angular_speed
     ts = motion.t_s
     if ts[-1] <= duration_s:
         return 0.0

@@ -1,1 +1,2 @@
-"""What the hair is published as and with which settings: shared by bags and ros, no ROS."""
+"""From simulated hair to what is published, and with which settings: ROS-free, shared by the
+node and the bag runs."""

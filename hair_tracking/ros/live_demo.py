@@ -29,6 +29,8 @@ from typing import Dict, List, Optional
 
 import numpy as np
 
+from msg_adapters.pointcloud import pointcloud2_to_strands
+
 from hair_tracking import process_tuning
 from hair_tracking.bags import io as bag_io
 from hair_tracking.bags.io import BagError
@@ -89,19 +91,14 @@ def _last_diagnostics(path) -> Dict[str, str]:
 
 def _frames(path):
     """(distinct stamps [ns], messages, all finite) of /hair/points in a recording."""
-    ts = bag_io.typestore()
     stamps, n, finite, shape = [], 0, True, None
-    with bag_io.open_bag(path) as r:
-        conns = [c for c in r.connections if c.topic == '/hair/points']
-        for _, _, raw in bag_io.messages(r, conns):
-            n += 1
-            msg = ts.deserialize_cdr(raw, 'sensor_msgs/msg/PointCloud2')
-            t = msg.header.stamp.sec * 10 ** 9 + msg.header.stamp.nanosec
-            if not stamps or stamps[-1] != t:
-                stamps.append(t)
-                pts = bag_io.cloud_to_strands(msg)
-                finite = finite and bool(np.all(np.isfinite(pts)))
-                shape = pts.shape
+    for t, msg in bag_io.cloud_messages(path):
+        n += 1
+        if not stamps or stamps[-1] != t:
+            stamps.append(t)
+            pts = pointcloud2_to_strands(msg)[0]
+            finite = finite and bool(np.all(np.isfinite(pts)))
+            shape = pts.shape
     return stamps, n, finite, shape
 
 
@@ -110,9 +107,9 @@ def run_demo(args) -> int:
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.parameter import Parameter
 
-    from hair_tracking.bags.play import BagPlayer
-    from hair_tracking.bags.record import BagRecorder
     from hair_tracking.bags.render import render
+    from hair_tracking.ros.bag_play import BagPlayer
+    from hair_tracking.ros.bag_record import BagRecorder
 
     os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
     out = Path(args.out)

@@ -71,18 +71,18 @@ from msg_adapters.pointcloud import CloudBuffer, pack_rgb_u32
 from msg_adapters.pose import pose_from_msg, PoseError
 from msg_adapters.rcl_serialized import SerializedPublisher
 from msg_adapters.stamps import time_to_ns
-from msg_adapters.tf import transform_message, transforms as tf_transforms
+from msg_adapters.tf import transform_message
+from msg_adapters.tf_tree import compose as tf_compose, TfTree
 
 from hair_tracking import process_tuning
 from hair_tracking.core.head_track import PoseResult
 from hair_tracking.core.params import Param, ParamError
 from hair_tracking.core.scene import Scene, SceneError
-from hair_tracking.core.strand_colors import StrandColorCache
-from hair_tracking.core.tf_tree import compose as tf_compose, TfTree
 from hair_tracking.core.transforms import quat_to_matrix
 from hair_tracking.output.params_check import unknown_parameters
 from hair_tracking.output.settings import apply_changes, make_settings, MARKER_STYLES, \
     NODE_NAME, NODE_ROWS, table
+from hair_tracking.output.strand_colors import StrandColorCache
 from hair_tracking.resources import config_path
 from hair_tracking.ros.interrupt import interrupt_between_callbacks
 from hair_tracking.ros.load_shedding import LoadShedder
@@ -436,8 +436,7 @@ class HairSimNode(Node):
         self._store_tf(msg, static=False)
 
     def _store_tf(self, msg, static: bool) -> None:
-        for parent, child, t, q, stamp in tf_transforms(msg):
-            self._tf.set(parent, child, t, q, stamp, static=static)
+        self._tf.add_message(msg, static=static)
         if self._settings.gravity_frame and self._has_pose:
             self._update_gravity()
 

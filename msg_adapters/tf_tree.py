@@ -7,15 +7,18 @@ the root of its tree (:meth:`TfTree.to_root`) and the transform between two fram
 (:meth:`TfTree.lookup`).  Latest values only, no interpolation in time (tf2's
 ``lookup_transform`` at time 0); enough for static mounts (a camera on a stand, a camera's
 optical frame) and the head chain of one tracker.  Frame names are compared without a leading
-``/``.  Pure numpy: no ROS import.
+``/``.  The node keeps one of ``/tf_static`` and ``/tf``; a bag reader composes the head's
+parent with ``/tf_static`` through one (:meth:`TfTree.add_message` takes TFMessages from rclpy
+or rosbags alike).  The quaternion maths are :mod:`hair_tracking.core.transforms`.
 """
 from dataclasses import dataclass
-from typing import Dict, Optional, Tuple
+from typing import Dict, List, Optional, Tuple
 
 import numpy as np
 
 from hair_tracking.core.transforms import (quat_conjugate, quat_multiply, quat_normalize,
                                            quat_to_matrix)
+from msg_adapters.tf import transforms
 
 MAX_DEPTH = 64
 
@@ -74,6 +77,15 @@ class TfTree:
             return False
         self._edges[child] = Edge(parent, t.copy(), q / n, int(stamp_ns), bool(static))
         return True
+
+    def add_message(self, msg, static: bool = False) -> None:
+        """:meth:`set` every transform of a TFMessage (``static`` for ``/tf_static``)."""
+        for parent, child, t, q, stamp in transforms(msg):
+            self.set(parent, child, t, q, stamp, static=static)
+
+    def frames(self) -> List[str]:
+        """The child frames held, sorted."""
+        return sorted(self._edges)
 
     def parent(self, child: str) -> Optional[str]:
         e = self._edges.get(frame_name(child))
