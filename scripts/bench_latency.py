@@ -22,7 +22,8 @@ node's own step time (simulation of one pose) and publish time (encoding + handi
 DDS), median and p99, and the cloud's size with the time of one single-threaded copy of its
 bytes measured right after the case (the middleware copies each cloud at least three times
 between the publish call and the probe's take, docs/node.md).  Goals: p99 latency of 8 ms at
-10 k ghosts and 33 ms at 100 k.  Numbers depend on the machine; the JSON records its CPU count.
+10 k ghosts and 33 ms at 100 k.  Numbers depend on the machine; the JSON starts with its
+provenance (machine, date, command: hair_tracking/evaluation/provenance.py).
 """
 import argparse
 import json

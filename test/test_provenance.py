@@ -57,3 +57,16 @@ def test_every_committed_report_has_its_provenance():
                     'machine': {'cpu': machine, 'logical_cpus': 1}}, name)
         else:                           # a table (CSV) whose report says how it was made
             assert os.path.isfile(os.path.join(RESULTS, stem + '.md')), name
+
+
+def test_the_documents_link_reports_that_exist():
+    """README.md and docs/*.md quote a report's headline with a link to it."""
+    docs = [os.path.join(ROOT, 'README.md')] + glob.glob(os.path.join(ROOT, 'docs', '*.md'))
+    linked = set()
+    for path in docs:
+        with open(path, encoding='utf-8') as f:
+            for target in re.findall(r'\]\(((?:docs/)?results/[^)#]+)', f.read()):
+                full = os.path.normpath(os.path.join(os.path.dirname(path), target))
+                assert os.path.isfile(full), f'{os.path.basename(path)} links {target}'
+                linked.add(os.path.basename(full))
+    assert {'dominance.md', 'stability.md', 'bench_blend.json', 'bench_latency.json'} <= linked
