@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Core speed benchmark (issue 2): guides against pypbd, ghost throughput, numba compile time.
+"""Core speed benchmark: guides against pypbd, ghost throughput, numba compile time.
 
     python scripts/bench.py [--json out/bench.json] [--quick]
 
@@ -34,7 +34,6 @@ import sys
 _THREADS = sys.argv[sys.argv.index('--threads') + 1] if '--threads' in sys.argv else '1'
 os.environ['NUMBA_NUM_THREADS'] = str(max(int(_THREADS), os.cpu_count() or 1))
 os.environ['OMP_NUM_THREADS'] = _THREADS
-import platform  # noqa: E402
 import subprocess  # noqa: E402
 import tempfile  # noqa: E402
 import time  # noqa: E402
@@ -49,6 +48,7 @@ from hair_tracking.core.groom import make_groom  # noqa: E402
 from hair_tracking.core.head_track import IDENTITY  # noqa: E402
 from hair_tracking.core.model import StrandSet  # noqa: E402
 from hair_tracking.core.scene import Scene  # noqa: E402
+from hair_tracking.evaluation.provenance import command_line, provenance  # noqa: E402
 from cpu_steal import format_share, StealMeter  # noqa: E402  (scripts/cpu_steal.py)
 from hair_tracking.ghosts.tracker import GhostTracker  # noqa: E402
 from hair_tracking.guides.solver import GuideSolver  # noqa: E402
@@ -202,7 +202,8 @@ def bench_compile():
     return out
 
 
-def main():
+def main(argv=None):
+    argv = sys.argv[1:] if argv is None else argv
     ap = argparse.ArgumentParser(description='hair_tracking core benchmark')
     ap.add_argument('--json', help='write the figures to this JSON file')
     ap.add_argument('--quick', action='store_true', help='fewer repeats and sizes')
@@ -211,7 +212,7 @@ def main():
                     'before import')
     ap.add_argument('--ghost-threads', type=int, default=0,
                     help='numba threads of the ghost figures (0: every core)')
-    args = ap.parse_args()
+    args = ap.parse_args(argv)
     guide_threads = int(_THREADS)
     ghost_threads = args.ghost_threads or numba.config.NUMBA_NUM_THREADS
     reps = 5 if args.quick else 20
@@ -222,8 +223,8 @@ def main():
         have_pypbd = False
         print('pypbd not installed: `pip install pypbd` (make bench does) for the peer column')
 
-    result = {'machine': {'cpus': os.cpu_count(), 'python': platform.python_version(),
-                          'threads': guide_threads, 'ghost_threads': ghost_threads,
+    result = {'provenance': provenance(command_line('python scripts/bench.py', argv)),
+              'machine': {'threads': guide_threads, 'ghost_threads': ghost_threads,
                           'load_average': os.getloadavg()},
               'guides': [], 'ghosts': [], 'compile': {}}
     result['machine']['reference_start'] = ref = machine_reference()

@@ -26,6 +26,7 @@ import numba  # noqa: E402
 import numpy as np  # noqa: E402
 
 from hair_tracking.core.scene import Scene  # noqa: E402
+from hair_tracking.evaluation.provenance import command_line, provenance  # noqa: E402
 from hair_tracking.simulator import HairSimulator  # noqa: E402
 
 BYTES_PER_NODE = {'blend': 16 + 12, 'turn': 12 + 3 + 12}
@@ -51,6 +52,7 @@ def moved(sim, k):
 
 
 def main(argv=None):
+    argv = sys.argv[1:] if argv is None else argv
     ap = argparse.ArgumentParser(description=__doc__.split('\n')[0])
     ap.add_argument('--ghosts', type=int, nargs='+', default=[10000, 100000])
     ap.add_argument('--threads', type=int, default=numba.config.NUMBA_NUM_THREADS)
@@ -96,8 +98,9 @@ def main(argv=None):
               f"nodes/s, {100 * t['bandwidth_share']:.0f} %); paper tracker step "
               f"{p['median_ms']:.2f} ms ({p['Mnodes_per_s']:.0f} M nodes/s)", flush=True)
     if args.json:
+        record = provenance(command_line('python scripts/bench_blend.py', argv), args.threads)
         with open(args.json, 'w', encoding='utf-8') as f:
-            json.dump({'results': results}, f, indent=2)
+            json.dump({'provenance': record, 'results': results}, f, indent=2)
     return 0
 
 

@@ -28,6 +28,7 @@ import numpy as np  # noqa: E402
 
 from hair_tracking.bags import io as bag_io  # noqa: E402
 from hair_tracking.core.scene import Scene  # noqa: E402
+from hair_tracking.evaluation.provenance import command_line, provenance  # noqa: E402
 from hair_tracking.simulator import HairSimulator, warm_up  # noqa: E402
 from msg_adapters.pointcloud import CloudBuffer, pack_rgb_u32  # noqa: E402
 
@@ -35,6 +36,7 @@ WARM_FRAMES = 30
 
 
 def main(argv=None):
+    argv = sys.argv[1:] if argv is None else argv
     ap = argparse.ArgumentParser(description=__doc__.split('\n')[0])
     ap.add_argument('--ghosts', type=int, default=100000)
     ap.add_argument('--threads', type=int, default=numba.config.NUMBA_NUM_THREADS)
@@ -82,8 +84,9 @@ def main(argv=None):
           f"{row['guides_median_ms']:.2f}, ghosts + cloud bytes "
           f"{row['ghosts_cloud_median_ms']:.2f})")
     if args.json:
+        record = provenance(command_line('python scripts/bench_frame.py', argv), args.threads)
         with open(args.json, 'w', encoding='utf-8') as fh:
-            json.dump(row, fh, indent=2)
+            json.dump({'provenance': record, **row}, fh, indent=2)
     return 0
 
 

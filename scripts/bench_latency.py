@@ -22,7 +22,8 @@ node's own step time (simulation of one pose) and publish time (encoding + handi
 DDS), median and p99, and the cloud's size with the time of one single-threaded copy of its
 bytes measured right after the case (the middleware copies each cloud at least three times
 between the publish call and the probe's take, docs/node.md).  Goals: p99 latency of 8 ms at
-10 k ghosts and 33 ms at 100 k.  Numbers depend on the machine; the JSON records its CPU count.
+10 k ghosts and 33 ms at 100 k.  Numbers depend on the machine; the JSON starts with its
+provenance (machine, date, command: hair_tracking/evaluation/provenance.py).
 """
 import argparse
 import json
@@ -47,6 +48,7 @@ sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 from hair_tracking import process_tuning  # noqa: E402
 from hair_tracking.output.settings import by_name  # noqa: E402
+from hair_tracking.evaluation.provenance import command_line, provenance  # noqa: E402
 from cpu_steal import format_share, StealMeter  # noqa: E402  (scripts/cpu_steal.py)
 from hair_tracking.ros.node import HairSimNode  # noqa: E402
 from msg_adapters.pose import pose_stamped_msg  # noqa: E402
@@ -360,6 +362,7 @@ def fmt(s):
 
 
 def main(argv=None):
+    argv = sys.argv[1:] if argv is None else argv
     ap = argparse.ArgumentParser(description=__doc__.split('\n')[0])
     ap.add_argument('--ghosts', type=int, nargs='+', default=[1000, 10000])
     ap.add_argument('--modes', nargs='+', default=['timer', 'on_pose'],
@@ -437,8 +440,9 @@ def main(argv=None):
     if args.json:
         os.makedirs(os.path.dirname(os.path.abspath(args.json)), exist_ok=True)
         with open(args.json, 'w', encoding='utf-8') as f:
-            json.dump({'machine': {'cpus': os.cpu_count(), 'loadavg_end': os.getloadavg(),
-                                   'python': platform.python_version(),
+            json.dump({'provenance': provenance(command_line('python scripts/bench_latency.py',
+                                                             argv)),
+                       'machine': {'loadavg_end': os.getloadavg(),
                                    'platform': platform.platform()},
                        'frame_ms': FRAME_MS, 'results': results}, f, indent=2)
         print(f'wrote {args.json}')

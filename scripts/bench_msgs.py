@@ -24,6 +24,7 @@ from visualization_msgs.msg import MarkerArray  # noqa: E402
 from msg_adapters.marker_cdr import strands_to_marker_array_cdr  # noqa: E402
 from msg_adapters.markers import strands_to_marker_array  # noqa: E402
 from hair_tracking.core.point_records import points_to_records  # noqa: E402
+from hair_tracking.evaluation.provenance import command_line, provenance  # noqa: E402
 from msg_adapters.pointcloud import (CloudBuffer, pack_rgb_u32,  # noqa: E402
                                      strands_to_pointcloud2, strands_to_pointcloud2_cdr)
 
@@ -103,6 +104,7 @@ def bench_cloud(n_strands, n_points, reps):
 
 
 def main(argv=None):
+    argv = sys.argv[1:] if argv is None else argv
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument('--points', type=int, default=16, help='points per strand')
     ap.add_argument('--colors', choices=['none', 'strand', 'point'], default='strand')
@@ -122,8 +124,7 @@ def main(argv=None):
         results.append(bench_cloud(n_strands, args.points,
                                    args.reps if n_strands <= 10_000 else max(3, args.reps // 4)))
 
-    env = dict(python=platform.python_version(), numpy=np.__version__,
-               machine=platform.machine(), cpus=os.cpu_count(),
+    env = dict(machine=platform.machine(),
                ROS_PYTHON_CHECK_FIELDS=os.environ.get('ROS_PYTHON_CHECK_FIELDS', ''),
                loadavg_1min=round(os.getloadavg()[0], 2))
     print(f'# {env}')
@@ -138,8 +139,9 @@ def main(argv=None):
               + (f'   packed colours {r["fast_packed_ms"]:.3f}, kept buffer '
                  f'{r["kept_buffer_ms"]:.3f}' if 'fast_packed_ms' in r else ''))
     if args.json:
+        record = provenance(command_line('python scripts/bench_msgs.py', argv))
         with open(args.json, 'w') as f:
-            json.dump(dict(env=env, results=results), f, indent=2)
+            json.dump(dict(provenance=record, env=env, results=results), f, indent=2)
     return 0
 
 

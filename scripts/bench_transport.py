@@ -33,6 +33,7 @@ sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 from bench_latency import copy_ms, stamp_of, stats  # noqa: E402  (scripts/bench_latency.py)
 from hair_tracking import process_tuning  # noqa: E402
 from hair_tracking.output.settings import CLOUD_FIELDS  # noqa: E402
+from hair_tracking.evaluation.provenance import command_line, provenance  # noqa: E402
 from hair_tracking.ros.node import output_qos  # noqa: E402
 from msg_adapters.pointcloud import CloudBuffer, pack_rgb_u32  # noqa: E402
 from msg_adapters.rcl_serialized import (SerializedPublisher, SerializedTaker,  # noqa: E402
@@ -107,6 +108,7 @@ def run_case(strands, points, fields, through_rcl, args, domain_id):
 
 
 def main(argv=None):
+    argv = sys.argv[1:] if argv is None else argv
     ap = argparse.ArgumentParser(description=__doc__.split('\n')[0])
     ap.add_argument('--ghosts', type=int, nargs='+', default=[10000, 100000])
     ap.add_argument('--points', type=int, default=16, help='points per strand')
@@ -148,8 +150,9 @@ def main(argv=None):
     if args.json:
         os.makedirs(os.path.dirname(os.path.abspath(args.json)), exist_ok=True)
         with open(args.json, 'w', encoding='utf-8') as f:
-            json.dump({'machine': {'cpus': os.cpu_count(), 'python': platform.python_version(),
-                                   'platform': platform.platform()},
+            json.dump({'provenance': provenance(command_line('python scripts/bench_transport.py',
+                                                             argv)),
+                       'machine': {'platform': platform.platform()},
                        'rate_hz': args.rate, 'seconds': args.seconds, 'results': results},
                       f, indent=1)
     return 0

@@ -16,7 +16,6 @@ from hair_tracking.simulator import HairSimulator
 from msg_adapters.pointcloud import pointcloud2_to_strands
 
 ROOT = Path(__file__).resolve().parents[1]
-BVH = ROOT.parent / 'shared' / 'data' / 'head_motion' / 'cmu_131_01_walk.bvh'
 SMALL = ['groom.guides=6', 'groom.ghosts_per_guide=3', 'groom.guide_nodes=8',
          'groom.ghost_nodes=8', 'solver.settle_time=0.1']
 
@@ -82,15 +81,10 @@ def one_numba_thread():
 
 @pytest.fixture(scope='module')
 def walk_bag(tmp_path_factory):
-    """The first 1.5 s of the CMU walk, imported from the BVH (or the bundled sample)."""
-    d = tmp_path_factory.mktemp('walk')
-    out = d / 'walk.mcap'
-    src = str(BVH) if BVH.is_file() else bag_io.bundled_bag()
-    if BVH.is_file():
-        assert main(['import', src, '-o', str(out), '--duration', '1.5']) == 0
-    else:
-        hp = bag_io.read_head_poses(src, duration_s=1.5)
-        bag_io.write_head_pose_bag(out, hp.t_ns, hp.position, hp.quaternion)
+    """The first 1.5 s of the bundled CMU walk bag."""
+    out = tmp_path_factory.mktemp('walk') / 'walk.mcap'
+    hp = bag_io.read_head_poses(bag_io.bundled_bag(), duration_s=1.5)
+    bag_io.write_head_pose_bag(out, hp.t_ns, hp.position, hp.quaternion)
     return out
 
 

@@ -1,6 +1,7 @@
-"""scripts/bench_latency.py end to end on a small groom: it runs, every pose gets its cloud,
-and with --stages every stage of the chain is timed (a smoke test of the benchmark itself; the
-numbers it prints are not checked here: speed is measured by running it, not in tests)."""
+"""scripts/bench_latency.py end to end on a small groom: it runs, counts every pose it sent,
+and with --stages reports every stage of the chain (a smoke test of the benchmark itself: the
+structure of its report is checked, never what the numbers say about speed, which depends on
+the machine; speed is measured by running it, not in tests)."""
 import json
 import os
 import subprocess
@@ -23,17 +24,23 @@ def test_latency_benchmark_times_every_stage_of_a_short_stream(tmp_path):
     assert 'stages, median / p99 ms: pickup' in proc.stdout
     (r,) = json.loads(out.read_text())['results']
     assert r['probe'] == 'rcl' and r['publish_through_rcl'] is False     # rclpy's publish
-    assert r['ghosts'] == 128 and r['latency']['n'] >= 80          # 90 poses counted
-    assert r['poses_without_cloud'] <= 5
-    assert r['latency_every_pose']['n'] >= r['latency']['n'] and r['poses_never_shown'] <= 1
+    assert r['ghosts'] == 128 and r['mode'] == 'on_pose'
+    # every counted pose (2 s at 60 Hz, less 0.5 s of warm-up) is accounted for either way
+    assert r['latency']['n'] + r['poses_without_cloud'] == 90
+    assert r['latency_every_pose']['n'] + r['poses_never_shown'] == 90
     stages = r['stages']
+    for name in ('latency', 'latency_every_pose', 'step', 'publish'):
+        _assert_stats(r[name], name)
     for name in ('pickup', 'step', 'cloud', 'publish', 'delivery', 'probe_take'):
-        s = stages[name]
-        assert s['n'] >= 0.8 * r['latency']['n'], name
-        assert 0.0 <= s['median_ms'] <= s['p99_ms'], name
-    # the stages lie inside the latency they make up
-    assert stages['step']['median_ms'] < r['latency']['median_ms']
+        _assert_stats(stages[name], name)
     assert 0.0 <= stages['share_arriving_busy'] <= 1.0
+
+
+def _assert_stats(s, name):
+    """A block of timings: a count, and order statistics in order when there is any."""
+    assert set(s) >= {'n', 'median_ms', 'p90_ms', 'p99_ms', 'max_ms'}, name
+    assert isinstance(s['n'], int) and s['n'] >= 1, name
+    assert 0.0 <= s['median_ms'] <= s['p90_ms'] <= s['p99_ms'] <= s['max_ms'], name
 
 
 def test_a_pose_without_a_cloud_of_its_own_counts_until_the_next_cloud_shows_it():

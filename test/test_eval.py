@@ -1,5 +1,6 @@
 """Evaluation: synthetic head motions, the compared methods, the error/time harness and the CLI."""
 import csv
+import json
 import math
 import os
 
@@ -14,13 +15,13 @@ from hair_tracking.core.transforms import quat_from_axis_angle, quat_to_matrix, 
 from hair_tracking.evaluation import accuracy as ea
 from hair_tracking.evaluation import cli as eval_cli
 from hair_tracking.evaluation import synthetic_motion as sm
+from hair_tracking.evaluation.provenance import provenance
 from hair_tracking.evaluation.methods import (FullSim, GhostTracking, PyPBD, RigidOffset,
                                               make_workload, pypbd_available)
 from hair_tracking.motion.head_motion import angular_speed, HeadMotion, linear_speed
-from hair_tracking.motion.pose_table import load_bundled_walk
+from hair_tracking.motion.pose_table import load_bundled_walk, read_vr360
 
-VR = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), '..', 'shared',
-                  'data', 'head_motion', 'vr360_user1_quaternion.txt')
+from recordings import VR_TRACE as VR
 
 
 # behaviour, not speed: these modules run numba on one thread (conftest.py)
@@ -277,13 +278,14 @@ def test_evaluate_writes_tables_and_plots(tmp_path, workload):
     assert rows['ghost 1:16 plain copy']['max_stretch'] > 1e-3
     assert any(r['pareto'] for r in rows.values())
     paths = ea.write_outputs([rep], str(tmp_path / 'res'), str(tmp_path / 'fig'),
-                             'hair_sim_eval accuracy --test', ['a note'],
+                             provenance('hair_sim_eval accuracy --test', 1), ['a note'],
                              time_series=('ghost 1:16 all on',))
     with open(paths['csv']) as f:
         table = list(csv.DictReader(f))
     assert len(table) == 4 and table[0]['motion'] == 'walk'
     md = open(paths['md']).read()
-    assert 'hair_sim_eval accuracy --test' in md and '| ghost 1:16 all on |' in md
+    assert '- Command: `hair_sim_eval accuracy --test`' in md and '| ghost 1:16 all on |' in md
+    assert '- Date: ' in md and '1 thread(s) used' in md and '- a note' in md
     for key in ('pareto_walk', 'time_walk'):
         assert os.path.getsize(paths[key]) > 10_000
         assert open(paths[key], 'rb').read(8) == b'\x89PNG\r\n\x1a\n'
@@ -302,7 +304,6 @@ def test_cli_quick_subset(tmp_path, capsys):
         eval_cli.main(['accuracy', '--ghosts', '10'])
 
 
-@pytest.mark.skipif(not os.path.isfile(VR), reason='shared VR360 trace not available')
 def test_vr_trajectory_is_the_busiest_window():
     trs = eval_cli.trajectories(False, VR, log=lambda s: None)
     names = [t.name for t in trs]
@@ -311,7 +312,9 @@ def test_vr_trajectory_is_the_busiest_window():
     assert 9.5 < vr.duration_s <= 10.0
     # the head centre moves (neck pivot), and the window is busier than the trace on average
     assert linear_speed(vr).max() > 0.05
-    assert angular_speed(vr).mean() > 0.3
+    whole = read_vr360(VR)
+    assert whole.duration_s > 11.0
+    assert angular_speed(vr).mean() > angular_speed(whole).mean() > 0.3
 
 
 def test_busiest_window_and_window():
@@ -380,6 +383,34 @@ def test_dominance_scores_once_and_times_per_thread_count(tmp_path):
     assert open(png, 'rb').read(8) == b'\x89PNG\r\n\x1a\n'
 
 
+def test_dominance_summary_counts_the_cases_each_tracker_wins():
+    from hair_tracking.evaluation import dominance as dm
+
+    def case(motion, *rows):
+        return {'motion': motion, 'strands': 64, 'threads': 1,
+                'rows': [dm.Row(dm.BASELINE, False, [3.0], 10.0)] + [
+                    dm.Row(name, True, [ms], err, dominates=wins) for name, ms, err, wins in rows]}
+    reports = [case('walk', ('turn 1:16, guides dt 1/60', 0.9, 9.0, True),
+                    ('blend 1:16, guides dt 1/60', 0.6, 9.5, True),
+                    ('paper 1:16', 2.0, 8.0, False)),
+               case('shake', ('turn 1:16, guides dt 1/60', 1.2, 11.0, False),
+                    ('blend 1:16, guides dt 1/60', 0.8, 9.0, True),
+                    ('paper 1:16', 2.0, 8.0, False)),
+               case('vr', ('turn 1:16, guides dt 1/60', 1.2, 11.0, False),
+                    ('blend 1:16, guides dt 1/60', 1.5, 9.0, False),
+                    ('paper 1:16', 2.0, 8.0, False))]
+    text = dm.summary(reports)
+    assert text.startswith('**A ghost setting dominates the baseline in 2/3 cases**; cases won '
+                           'by each tracker: turn 1/3, blend 2/3, paper 0/3.')
+    lines = text.splitlines()
+    assert lines[4] == ('| walk | 64 | 1 | 3.00, 10.00 | blend 1:16, guides dt 1/60 | 0.60 | '
+                        '0.20 | 9.50 |')                 # the cheaper of the two that win
+    assert lines[6].startswith('| vr | 64 | 1 | 3.00, 10.00 | - |')
+    # the JSON form of a report reads back into the same summary
+    dumped = [{**r, 'rows': [dict(x.__dict__, ms=x.ms) for x in r['rows']]} for r in reports]
+    assert dm.summary([dm.rows_from_json(json.loads(json.dumps(r))) for r in dumped]) == text
+
+
 def test_dominance_cli_writes_tables_and_the_plot(tmp_path):
     rc = eval_cli.main(['dominance', '--ghosts', '64', '--motions', 'walk', '--duration', '0.2',
                         '--repeats', '1', '--thread-counts', '1', '--out', str(tmp_path / 'r'),
@@ -387,6 +418,11 @@ def test_dominance_cli_writes_tables_and_the_plot(tmp_path):
     assert rc == 0
     md = open(tmp_path / 'r' / 'dominance.md').read()
     assert 'hair_sim_eval dominance --ghosts 64' in md and '#### walk, 64 strands' in md
+    assert '**A ghost setting dominates the baseline in ' in md.split('#### walk')[0]
+    with open(tmp_path / 'r' / 'dominance.json') as f:
+        report = json.load(f)
+    assert report['provenance']['command'].startswith('hair_sim_eval dominance --ghosts 64')
+    assert report['studies'][0]['motion'] == 'walk' and report['studies'][0]['strands'] == 64
     assert os.path.getsize(tmp_path / 'f' / 'dominance.png') > 5_000
 
 

@@ -14,6 +14,7 @@ from hair_tracking.core.model import StrandSet
 from hair_tracking.core.scene import Scene
 from hair_tracking.core.transforms import quat_from_axis_angle, quat_to_matrix
 from hair_tracking.evaluation import stability
+from hair_tracking.evaluation.provenance import provenance
 from hair_tracking.evaluation import synthetic_motion as sm
 from hair_tracking.guides.collision import Collider, outside_distance, surface_point
 from hair_tracking.guides.solver import BEND_REFERENCE_DT, GuideSolver, ftl_bend_stiffness
@@ -145,9 +146,10 @@ def test_energy_bound_grows_with_the_motion():
 
 def test_outputs_written(tmp_path):
     results = stability.run_matrix([c for c in QUICK if c.group == 'teleport'], log=lambda s: 0)
-    paths = stability.write_outputs(results, str(tmp_path), 'hair_sim_eval stability --quick')
+    paths = stability.write_outputs(results, str(tmp_path),
+                                    provenance('hair_sim_eval stability --quick', 1))
     text = open(paths['md']).read()
-    assert '1/1 cases passed' in text and 'hair_sim_eval stability --quick' in text
+    assert '1/1 cases passed' in text and '- Command: `hair_sim_eval stability --quick`' in text
     rows = open(paths['csv']).read().splitlines()
     assert rows[0].startswith('case,group,solver,passed') and len(rows) == 2
 

@@ -741,16 +741,18 @@ def plot_error_over_time(path: str, report: MotionReport, names: Sequence[str]) 
     plt.close(fig)
 
 
-def write_outputs(reports: List[MotionReport], out_dir: str, fig_dir: str, command: str,
+def write_outputs(reports: List[MotionReport], out_dir: str, fig_dir: str, record: dict,
                   notes: Sequence[str] = (), time_series: Sequence[str] = ()) -> Dict[str, str]:
-    """CSV, Markdown and PNG plots of the reports; returns {kind: path}."""
+    """CSV, Markdown and PNG plots of the reports, the Markdown headed by ``record``
+    (:func:`hair_tracking.evaluation.provenance.provenance`); returns {kind: path}."""
+    from hair_tracking.evaluation.provenance import markdown_lines
     os.makedirs(out_dir, exist_ok=True)
     os.makedirs(fig_dir, exist_ok=True)
     all_rows = [r for rep in reports for r in rows(rep)]
     paths = {'csv': os.path.join(out_dir, 'accuracy.csv'),
              'md': os.path.join(out_dir, 'accuracy.md')}
     write_csv(paths['csv'], all_rows)
-    md = ['# Error against run time', '', f'Reproduce: `{command}`', '']
+    md = ['# Error against run time', ''] + markdown_lines(record)
     md += [f'- {n}' for n in notes]
     md.append('')
     for rep in reports:

@@ -20,10 +20,11 @@ slowed down by an order of magnitude by other load, and one thread treats every 
 """
 import argparse
 import os
-import platform
-import shlex
 import sys
 import time
+
+from hair_tracking.evaluation.provenance import (command_line as provenance_command_line,
+                                                 markdown_lines, provenance)
 
 #: The VR360 headset trace is not bundled (its licence asks for attribution we keep with the
 #: data): pass ``--vr PATH`` to include it.
@@ -39,22 +40,6 @@ def _set_threads(n: int) -> None:
     os.environ['OMP_NUM_THREADS'] = str(n)
     import numba
     numba.set_num_threads(min(n, numba.config.NUMBA_NUM_THREADS))
-
-
-def machine_note(threads: int) -> str:
-    import numba
-    import numpy
-    cpu = platform.processor() or platform.machine()
-    try:
-        with open('/proc/cpuinfo', encoding='utf-8') as f:
-            for line in f:
-                if line.startswith('model name'):
-                    cpu = line.split(':', 1)[1].strip()
-                    break
-    except OSError:
-        pass
-    return (f'{cpu}, {os.cpu_count()} logical CPUs, {threads} thread(s) used; Python '
-            f'{platform.python_version()}, numpy {numpy.__version__}, numba {numba.__version__}')
 
 
 def trajectories(quick: bool, vr_path: str, log=print):
@@ -103,8 +88,7 @@ def cmd_accuracy(args) -> int:
                                    timing_frames=60 if args.quick else 120,
                                    convergence_frames=30 if args.quick else 60))
     wall = time.perf_counter() - t0
-    notes = [f'Machine: {machine_note(args.threads)}; wall time of the evaluation '
-             f'{wall / 60:.1f} min.',
+    notes = [f'Wall time of the evaluation {wall / 60:.1f} min.',
              f'Workload: {workload.count} ghost strands x {workload.ghost_rest.shape[1]} nodes, '
              f'mean length {workload.strand_length.mean():.3f} m; base scene: solver '
              f'{scene.solver.type} dt 1/{1 / scene.solver.dt:.0f} s, collider '
@@ -124,7 +108,8 @@ def cmd_accuracy(args) -> int:
              'the method; both are reported.']
     if missing:
         notes.append(f'pypbd skipped: {missing}.')
-    paths = ea.write_outputs(reports, args.out, args.figures, command_line(args), notes,
+    paths = ea.write_outputs(reports, args.out, args.figures,
+                             provenance(command_line(args), args.threads), notes,
                              time_series=TIME_SERIES)
     for k, p in paths.items():
         print(f'wrote {k}: {p}')
@@ -145,9 +130,9 @@ def cmd_stability(args) -> int:
     results = stability.run_matrix(cases, log=print)
     wall = time.perf_counter() - t0
     os.makedirs(args.out, exist_ok=True)
-    paths = stability.write_outputs(results, args.out, command_line(args),
-                                    [f'Machine: {machine_note(args.threads)}; wall time '
-                                     f'{wall / 60:.1f} min.'])
+    paths = stability.write_outputs(results, args.out,
+                                    provenance(command_line(args), args.threads),
+                                    [f'Wall time {wall / 60:.1f} min.'])
     for k, p in paths.items():
         print(f'wrote {k}: {p}')
     failed = [r for r in results if not r.passed]
@@ -176,14 +161,14 @@ def cmd_dominance(args) -> int:
     scene = Scene.from_yaml(args.scene) if args.scene else Scene()
     tracks = [t for t in trajectories(False, args.vr) if t.name in args.motions]
     tracks += args.recorded
-    md = ['# Do the ghosts pay for themselves?', '',
-          f'Reproduce: `{command_line(args)}`', '',
-          f'Machine: {machine_note(max(args.thread_counts))}.', '',
+    record = provenance(command_line(args), max(args.thread_counts))
+    md = ['# Do the ghosts pay for themselves?', ''] + markdown_lines(record) + [
           'Every method simulates the same strands; errors against every strand simulated by '
           'FTL at dt 1/960 s; a ghost setting dominates the baseline (every strand, FTL dt '
           '1/60 s) when it takes at most 1/3 of its time a frame with no more motion error, '
           'stretch <= 1 % and no penetration beyond the collider margin '
           '(`hair_tracking/evaluation/dominance.py`).', '']
+    intro = len(md)
     dump, reports = [], []
     for ghosts in args.ghosts:
         workload = make_workload(scene, ghosts)
@@ -196,11 +181,12 @@ def cmd_dominance(args) -> int:
                 dump.append({**{k: v for k, v in rep.items() if k != 'rows'},
                              'rows': [dict(r.__dict__, ms=r.ms) for r in rep['rows']]})
                 print(md[-1], flush=True)
+    md[intro:intro] = [dm.summary(reports)]
     os.makedirs(args.out, exist_ok=True)
     with open(os.path.join(args.out, 'dominance.md'), 'w', encoding='utf-8') as f:
         f.write('\n'.join(md))
     with open(os.path.join(args.out, 'dominance.json'), 'w', encoding='utf-8') as f:
-        json.dump(dump, f, indent=1)
+        json.dump({'provenance': record, 'studies': dump}, f, indent=1)
     os.makedirs(args.figures, exist_ok=True)
     print(f"wrote {os.path.join(args.out, 'dominance.md')}, "
           f"{dm.plot(reports, os.path.join(args.figures, 'dominance.png'))}")
@@ -208,7 +194,7 @@ def cmd_dominance(args) -> int:
 
 
 def command_line(args) -> str:
-    return 'hair_sim_eval ' + ' '.join(shlex.quote(a) for a in args.argv)
+    return provenance_command_line('hair_sim_eval', args.argv)
 
 
 def main(argv=None) -> int:

@@ -20,7 +20,7 @@ is admitted, takes at most 1/3 of the baseline's ms per frame and has no more mo
 
     hair_sim_eval dominance --ghosts 4096 16384 [--motion FILE] [--threads 1 2]
 """
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field, fields, replace
 import math
 import time
 from typing import Callable, Dict, List
@@ -195,6 +195,48 @@ def markdown(report: Dict, threads: int) -> str:
                      f'{r.motion_err:.2f} | {r.settled_err:.2f} | {100 * r.stretch:.3f} | '
                      f'{r.penetration_mm:.2f} | {mark} |')
     return '\n'.join(lines) + '\n'
+
+
+def family(name: str) -> str:
+    """The kind of a method from its name: ``full``, ``blend``, ``turn`` or ``paper``."""
+    return name.split()[0]
+
+
+def summary(reports: List[Dict]) -> str:
+    """The headline of a study -- in how many cases (a motion, a size, a thread count) some
+    ghost setting dominates the baseline, and how many of them each kind of tracker wins --
+    and a table of each case's cheapest dominating setting."""
+    kinds = list(dict.fromkeys(family(r.name) for rep in reports for r in rep['rows']
+                               if r.ghost))
+    wins = dict.fromkeys(kinds, 0)
+    lines = ['| motion | strands | threads | baseline ms, motion error [% L] | cheapest '
+             'dominating setting | ms | share of baseline | motion error [% L] |',
+             '|---|---:|---:|---|---|---:|---:|---:|']
+    dominated = 0
+    for rep in reports:
+        base = next(r for r in rep['rows'] if r.name == BASELINE)
+        winners = [r for r in rep['rows'] if r.dominates]
+        for kind in {family(r.name) for r in winners}:
+            wins[kind] += 1
+        cells = '| - | | | |'
+        if winners:
+            dominated += 1
+            best = min(winners, key=lambda r: r.ms)
+            cells = (f'| {best.name} | {best.ms:.2f} | {best.ms / base.ms:.2f} | '
+                     f'{best.motion_err:.2f} |')
+        lines.append(f"| {rep['motion']} | {rep['strands']} | {rep['threads']} | "
+                     f'{base.ms:.2f}, {base.motion_err:.2f} ' + cells)
+    head = (f'**A ghost setting dominates the baseline in {dominated}/{len(reports)} cases**; '
+            'cases won by each tracker: '
+            + ', '.join(f'{kind} {n}/{len(reports)}' for kind, n in wins.items()) + '.')
+    return '\n'.join([head, ''] + lines) + '\n'
+
+
+def rows_from_json(report: Dict) -> Dict:
+    """A report as :func:`study` returns it, from its ``dominance.json`` form."""
+    names = {f.name for f in fields(Row)}
+    return {**report, 'rows': [Row(**{k: v for k, v in r.items() if k in names})
+                               for r in report['rows']]}
 
 
 def plot(reports: List[Dict], path: str) -> str:

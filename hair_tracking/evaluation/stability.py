@@ -442,8 +442,11 @@ def result_row(r: CaseResult) -> Dict:
     return row
 
 
-def write_outputs(results: Sequence[CaseResult], out_dir: str, command: str,
+def write_outputs(results: Sequence[CaseResult], out_dir: str, record: dict,
                   notes: Sequence[str] = ()) -> Dict[str, str]:
+    """CSV and Markdown of the results, the Markdown headed by ``record``
+    (:func:`hair_tracking.evaluation.provenance.provenance`); returns {kind: path}."""
+    from hair_tracking.evaluation.provenance import markdown_lines
     os.makedirs(out_dir, exist_ok=True)
     paths = {'csv': os.path.join(out_dir, 'stability.csv'),
              'md': os.path.join(out_dir, 'stability.md')}
@@ -454,7 +457,7 @@ def write_outputs(results: Sequence[CaseResult], out_dir: str, command: str,
             wr.writerow({k: (f'{v:.6g}' if isinstance(v, float) else v)
                          for k, v in result_row(r).items()})
     passed = sum(r.passed for r in results)
-    lines = ['# Stability matrix', '', f'Reproduce: `{command}`', '',
+    lines = ['# Stability matrix', ''] + markdown_lines(record) + [
              f'**{passed}/{len(results)} cases passed.** Bounds: guide stretch '
              + ', '.join(f'{k.upper()} {v:g}' for k, v in STRETCH_BOUND.items())
              + f'; ghost stretch {GHOST_STRETCH_BOUND:g}; roots within {ROOT_TOLERANCE:g} m; '
