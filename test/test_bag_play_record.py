@@ -1,10 +1,8 @@
 """play and record over real DDS, in-process: raw bytes in = raw bytes out, /clock before each
 message (a use_sim_time subscriber sees the bag's times), remapping, looping, start offset."""
 import os
-import sys
 import threading
 import time
-import types
 
 import numpy as np
 import pytest
@@ -131,8 +129,8 @@ def test_play_waits_for_each_message_by_its_log_time_over_the_rate(
     src = tmp_path / 'in.mcap'
     stamps = _bag(src, n=6, rate_hz=100.0)
     node = rclpy.create_node('paced', context=ros_context(DOMAIN_PACING))
-    player = BagPlayer(node, src, rate=2.0)
     now = [100.0]
+    player = BagPlayer(node, src, rate=2.0, now=lambda: now[0])
     waits = []
 
     def sleep(seconds):
@@ -140,8 +138,6 @@ def test_play_waits_for_each_message_by_its_log_time_over_the_rate(
         now[0] += max(0.0, seconds)
         return False
 
-    monkeypatch.setattr(sys.modules[BagPlayer.__module__], 'time',
-                        types.SimpleNamespace(monotonic=lambda: now[0]))
     monkeypatch.setattr(player, 'sleep', sleep)
     try:
         st = player.play()

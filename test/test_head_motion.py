@@ -11,8 +11,8 @@ import os
 import numpy as np
 import pytest
 
-from hair_tracking.core.transforms import (matrix_to_quat, quat_angle, quat_from_axis_angle,
-                                           quat_to_matrix)
+from hair_tracking.core.transforms import (matrices_to_quats, matrix_to_quat, quat_angle,
+                                           quat_from_axis_angle, quat_to_matrix)
 from hair_tracking.motion import bvh as mocap, head_motion as hm, pose_table as tables
 
 from recordings import VR_START_S, VR_TRACE as VR_TXT, WALK_BVH, WALK_FIRST_FRAME
@@ -340,7 +340,7 @@ def test_matrices_to_quats_agrees_with_reference():
     q /= np.linalg.norm(q, axis=1, keepdims=True)
     q[:4] = [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]   # each branch
     m = quat_to_matrix(q)
-    got = hm.matrices_to_quats(m)
+    got = matrices_to_quats(m)
     for g, mm, qq in zip(got, m, q):
         ref = matrix_to_quat(mm)
         assert abs(abs(np.dot(g, ref)) - 1.0) < 1e-12

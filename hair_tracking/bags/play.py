@@ -49,13 +49,16 @@ class Playback:
     ``duration_s`` [s] select a slice from the bag start; ``topics`` a subset (names as in the
     bag); ``remap`` {bag topic: published topic} (counted under the published name).  Opening
     checks the bag and these (BagError).  ``infos`` are the topics chosen, ``qos_of`` {topic:
-    the rosbags QoS profiles the bag recorded}.
+    the rosbags QoS profiles the bag recorded}.  ``now()`` [s] is the monotonic clock the
+    schedule runs on (a test injects one).
     """
 
     def __init__(self, bag, *, rate: float = 1.0, loop: bool = False,
                  start_offset_s: float = 0.0, duration_s: Optional[float] = None,
                  topics: Optional[Sequence[str]] = None, remap: Optional[Dict[str, str]] = None,
-                 log: Optional[Callable[[str], None]] = None):
+                 log: Optional[Callable[[str], None]] = None,
+                 now: Callable[[], float] = time.monotonic):
+        self.now = now
         if not (rate > 0 and rate < float('inf')):
             raise BagError(f'--rate must be > 0, got {rate}', EXIT_USAGE)
         if start_offset_s < 0 or (duration_s is not None and not duration_s > 0):
@@ -107,9 +110,9 @@ class Playback:
 
     def sleep(self, seconds: float) -> bool:
         """Wait ``seconds`` unless asked to stop first; returns whether asked."""
-        deadline = time.monotonic() + seconds
+        deadline = self.now() + seconds
         while not self.stopping():
-            left = deadline - time.monotonic()
+            left = deadline - self.now()
             if left <= 0:
                 return False
             self._stop.wait(min(left, 0.1))
@@ -121,13 +124,13 @@ class Playback:
         """``send(topic, t_ns, data)`` every message of ``topics`` when its time comes (once,
         or until :meth:`stop` with ``loop``); returns the stats."""
         st = self.stats
-        wall0 = time.monotonic()
+        wall0 = self.now()
         while not self.stopping():
             st.loops += 1
             self._replay_once(send, set(topics), progress)
             if not self.loop:
                 break
-        st.wall_s = time.monotonic() - wall0
+        st.wall_s = self.now() - wall0
         st.interrupted = self.stopping()
         return st
 
@@ -137,7 +140,7 @@ class Playback:
             conns = [c for c in reader.connections if c.topic in topics]
             total = sum(int(c.msgcount or 0) for c in conns)
             first = None
-            wall0 = time.monotonic()
+            wall0 = self.now()
             done = 0
             for conn, t_ns, raw in bag_io.messages(reader, conns, self.start_ns, self.stop_ns):
                 if self.stopping():
@@ -145,9 +148,9 @@ class Playback:
                 if first is None:
                     first = t_ns
                 due = wall0 + (t_ns - first) * 1e-9 / self.rate
-                if self.sleep(due - time.monotonic()):
+                if self.sleep(due - self.now()):
                     return
-                st.max_lag_ms = max(st.max_lag_ms, (time.monotonic() - due) * 1e3)
+                st.max_lag_ms = max(st.max_lag_ms, (self.now() - due) * 1e3)
                 data = raw
                 if self.is_ros1:
                     data = reader.typestore.ros1_to_cdr(raw, conn.msgtype)

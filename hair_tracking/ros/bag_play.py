@@ -97,12 +97,13 @@ class BagPlayer(Playback):
     def __init__(self, node, bag, *, rate: float = 1.0, loop: bool = False,
                  start_offset_s: float = 0.0, duration_s: Optional[float] = None,
                  topics: Optional[Sequence[str]] = None, remap: Optional[Dict[str, str]] = None,
-                 clock: bool = True, log: Optional[Callable[[str], None]] = None):
+                 clock: bool = True, log: Optional[Callable[[str], None]] = None,
+                 now: Callable[[], float] = time.monotonic):
         from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
         from rosgraph_msgs.msg import Clock
 
         super().__init__(bag, rate=rate, loop=loop, start_offset_s=start_offset_s,
-                         duration_s=duration_s, topics=topics, remap=remap, log=log)
+                         duration_s=duration_s, topics=topics, remap=remap, log=log, now=now)
         self.node = node
         self.clock = clock
         self.publishers = {}
