@@ -100,6 +100,18 @@ def _sniff(path: Path) -> Optional[str]:
     return None
 
 
+def looks_like_bag(path) -> bool:
+    """Whether ``path`` is meant as a bag: a folder, a storage file's name (``.mcap``, ``.db3``,
+    ``.bag``) or a bag's first bytes (it need not be a readable one)."""
+    p = Path(path)
+    if p.is_dir() or p.suffix.lower() in _SUFFIX_STORAGE or p.suffix.lower() == '.bag':
+        return True
+    try:
+        return p.is_file() and _sniff(p) is not None
+    except BagError:
+        return False
+
+
 #: messages scanned to list the frames of a TF topic when choosing the head frame
 _SCAN_LIMIT = 5000
 
