@@ -5,14 +5,15 @@ Sub-commands (``hair_sim_bag <command> --help`` for every option; guide: docs/ba
     info    [BAG]                 topics, types, counts and duration of a bag
     import  RECORDING -o BAG      BVH motion capture, a pose table or a bag -> head-pose bag
     run     [BAG] -o OUT          offline: head poses -> hair -> markers, cloud, diagnostics
+    recover BAG OUT               a clean copy (an MCAP cut short: to its last whole message)
     play    [BAG]                 publish a bag live with /clock (like ros2 bag play --clock)
     record  TOPIC... -o OUT       subscribe (raw) and write a bag (like ros2 bag record)
     render  BAG -o DIR            PNG frames / animated GIF of the hair + a diagnostics plot
 
 ``BAG`` defaults to the bundled sample (CMU 131_01 walk head poses).  Bags are rosbag2
 directories or single ``.mcap``/``.db3`` files (ROS 1 ``.bag`` too, for reading); no ROS
-installation is needed for info/import/run/render.  This module holds those four and the
-parser; ``play`` and ``record`` join a ROS graph and live in :mod:`hair_tracking.ros.bag_play`
+installation is needed for info/import/run/recover/render.  This module holds those five and
+the parser; ``play`` and ``record`` join a ROS graph and live in :mod:`hair_tracking.ros.bag_play`
 and :mod:`hair_tracking.ros.bag_record`, which the executable (:mod:`hair_tracking.ros.bag_cli`)
 adds.
 
@@ -155,6 +156,23 @@ def cmd_run(args) -> int:
     return EXIT_OK if summary.finite else EXIT_FAILURE
 
 
+# ================================================================ recover
+def cmd_recover(args) -> int:
+    from hair_tracking.bags import io as bag_io
+    if (args.output is None) == (args.output_option is None):
+        raise BagError('give the output bag once: hair_sim_bag recover IN OUT (or -o OUT)',
+                       EXIT_USAGE)
+    output = args.output or args.output_option
+    bag_io.check_output_path(output, args.overwrite)
+    bag_io.output_storage(output, args.storage)
+    counts = bag_io.copy_bag(args.bag, output, storage=args.storage, compress=args.compress,
+                             overwrite=args.overwrite)
+    print(f'wrote {output}: {sum(counts.values())} messages')
+    for topic, n in sorted(counts.items()):
+        print(f'  {topic}: {n}')
+    return EXIT_OK
+
+
 # ================================================================ render
 def cmd_render(args) -> int:
     from hair_tracking.bags.render import main_render
@@ -254,6 +272,22 @@ def build_parser(live: Sequence[Callable] = ()) -> argparse.ArgumentParser:
     p.add_argument('--no-head-pose', action='store_true', help='do not copy /head_pose')
     p.add_argument('--overwrite', action='store_true', help='replace an existing output')
     finish_parser(p, cmd_run, 'no progress bar', omp_wait_policy='active')
+
+    # ---- recover
+    p = sub.add_parser('recover', help='a clean copy of a bag, an MCAP cut short read to its '
+                                       'last whole message',
+                       description='Write every message of a bag into a new one. An MCAP file '
+                       'a recorder left cut short (no summary, no end magic) is read to its '
+                       'last whole message; the copy is a whole, indexed bag.')
+    p.add_argument('bag', help='the bag to copy')
+    p.add_argument('output', nargs='?',
+                   help='bag to create: NAME.mcap / NAME.db3 (one file) or a folder name')
+    p.add_argument('-o', dest='output_option', metavar='OUTPUT', help='the same as OUTPUT')
+    p.add_argument('--storage', choices=STORAGES,
+                   help='mcap (default) or sqlite3 (a .mcap/.db3 name decides by itself)')
+    p.add_argument('--compress', action='store_true', help='zstd-compress (MCAP chunks)')
+    p.add_argument('--overwrite', action='store_true', help='replace an existing output')
+    p.set_defaults(func=cmd_recover)
 
     # ---- play, record: they join a ROS graph (hair_tracking.ros.bag_cli puts them in)
     for add in live:
