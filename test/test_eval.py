@@ -459,9 +459,8 @@ def test_motion_files_evaluate_as_they_import(tmp_path, capsys):
         assert bag_main(['import', str(f), '-o', str(bags[-1])]) == 0
     rc = eval_cli.main(['dominance', '--ghosts', '64', '--motions', '--duration', '0.3',
                         '--repeats', '1', '--thread-counts', '1', '--out', str(tmp_path / 'r'),
-                        '--figures', str(tmp_path / 'f'), '--motion', str(bvh),
-                        '--motion', str(table), '--motion', str(bags[0]),
-                        '--motion', str(bags[1])])
+                        '--motion', str(bvh), '--motion', str(table),
+                        '--motion', str(bags[0]), '--motion', str(bags[1])])
     assert rc == 0
     files, imported = _dominance_rows(tmp_path / 'r' / 'dominance.json')[:2], \
         _dominance_rows(tmp_path / 'r' / 'dominance.json')[2:]
@@ -491,16 +490,29 @@ def test_built_in_motions_and_files_are_kept_alike(tmp_path):
     bag = os.path.join(os.path.dirname(ea.__file__), '..', 'data', 'walk_head_pose.mcap')
     rc = eval_cli.main(['accuracy', '--quick', '--ghosts', '64', '--repeats', '0',
                         '--only', 'rigid offset 1:16', '--duration', '0.2', '--motions', 'walk',
-                        '--motion', bag, '--out', str(tmp_path / 'a'),
-                        '--figures', str(tmp_path / 'a' / 'figures')])
+                        '--motion', bag, '--out', str(tmp_path / 'a')])
     assert rc == 0
     rows = list(csv.DictReader(open(tmp_path / 'a' / 'accuracy.csv')))
     assert [r['motion'] for r in rows] == ['walk', 'walk_head_pose']
     assert os.path.isfile(tmp_path / 'a' / 'figures' / 'pareto_walk_head_pose.png')
     rc = eval_cli.main(['dominance', '--ghosts', '64', '--motions', 'walk', '--motion', bag,
-                        '--duration', '0.2', '--repeats', '1', '--out', str(tmp_path / 'd'),
-                        '--figures', str(tmp_path / 'd' / 'figures')])
+                        '--duration', '0.2', '--repeats', '1', '--out', str(tmp_path / 'd')])
     assert rc == 0
     md = open(tmp_path / 'd' / 'dominance.md').read()
     assert '#### walk, 64 strands' in md and '#### walk_head_pose, 64 strands' in md
     assert os.path.isfile(tmp_path / 'd' / 'figures' / 'dominance.png')
+
+
+@pytest.mark.parametrize('argv', [
+    ['stability', '--quick', '--only', 'ftl teleport 1 m'],
+    ['accuracy', '--quick', '--ghosts', '64', '--repeats', '0', '--only', 'rigid offset 1:16',
+     '--duration', '0.2'],
+    ['dominance', '--ghosts', '64', '--motions', 'walk', '--duration', '0.2', '--repeats', '1'],
+])
+def test_commands_write_under_out_of_the_current_folder(tmp_path, monkeypatch, argv):
+    """Without --out nothing is written outside out/eval/<command>/ (the committed reports
+    under docs/ are left alone)."""
+    monkeypatch.chdir(tmp_path)
+    assert eval_cli.main(argv) == 0
+    written = sorted(str(p.relative_to(tmp_path)) for p in tmp_path.rglob('*') if p.is_file())
+    assert written and all(w.startswith(os.path.join('out', 'eval', argv[0], '')) for w in written)

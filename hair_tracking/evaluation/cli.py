@@ -1,9 +1,8 @@
 """``hair_sim_eval``: the evaluation of the package, from the command line.
 
-    hair_sim_eval accuracy [--quick] [--motions NAME ...] [--motion FILE ...]
-                           [--out docs/results] [--figures docs/figures]
-    hair_sim_eval dominance [--ghosts 4096 16384] [--motion FILE ...]
-    hair_sim_eval stability [--quick] [--out docs/results] [--only NAME ...]
+    hair_sim_eval accuracy [--quick] [--motions NAME ...] [--motion FILE ...] [--out DIR]
+    hair_sim_eval dominance [--ghosts 4096 16384] [--motion FILE ...] [--out DIR]
+    hair_sim_eval stability [--quick] [--only NAME ...] [--out DIR]
 
 ``accuracy`` measures error against run time of every method
 (:mod:`hair_tracking.evaluation.accuracy`) on the bundled walk recording, a VR head-mounted-display
@@ -14,6 +13,9 @@ settings against simulating every strand (:mod:`hair_tracking.evaluation.dominan
 (:mod:`hair_tracking.evaluation.stability`) and writes ``stability.csv`` and ``stability.md``; it
 exits with status 1 if a case fails.
 
+Every command writes under ``out/eval/<command>/`` of the current folder (figures in its
+``figures/``) unless ``--out`` (and ``--figures``) name other folders; the committed reports
+under ``docs/`` are refreshed by ``make eval`` and ``make stability``, which name them.
 ``--motions`` picks built-in motions by name (:data:`MOTIONS`; an unknown name is a usage
 error), and ``--motion FILE`` adds a recording read exactly as ``hair_sim_bag import`` reads
 it, with its options (:mod:`hair_tracking.bags.recording`); the files come on top of the
@@ -41,6 +43,10 @@ VR_NECK_OFFSET = (0.0, 0.0, 0.1)
 
 #: The built-in motions ``--motions`` names; ``--quick`` runs the walk unless it names others.
 MOTIONS = ('walk', 'vr', 'shake')
+
+#: Where a command writes unless ``--out`` says otherwise: ``out/eval/<command>`` of the
+#: current folder (``out/`` is ignored by git).
+OUT_DIR = os.path.join('out', 'eval')
 
 
 def _set_threads(n: int) -> None:
@@ -224,6 +230,15 @@ def command_line(args) -> str:
     return 'hair_sim_eval ' + ' '.join(shlex.quote(a) for a in args.argv)
 
 
+def _outputs(p, command: str, what: str, figures: bool) -> None:
+    """``--out`` (and ``--figures``) of ``command``: under :data:`OUT_DIR` by default."""
+    out = os.path.join(OUT_DIR, command)
+    p.add_argument('--out', default=out, help=f'folder of {what} (default {out}/)')
+    if figures:
+        p.add_argument('--figures', default=None,
+                       help='folder of the PNG plots (default: figures/ in --out)')
+
+
 def _motions(p, default: str) -> None:
     """``--motions`` (built-in, by name), ``--motion FILE`` and the options of
     ``hair_sim_bag import`` that say how the files are read."""
@@ -244,8 +259,7 @@ def main(argv=None) -> int:
     sub = p.add_subparsers(dest='cmd', required=True)
     a = sub.add_parser('accuracy', help='error against run time of every method')
     a.add_argument('--quick', action='store_true', help='CI-sized run (a few minutes)')
-    a.add_argument('--out', default='docs/results', help='folder of the CSV/Markdown tables')
-    a.add_argument('--figures', default='docs/figures', help='folder of the PNG plots')
+    _outputs(a, 'accuracy', 'the CSV/Markdown tables', figures=True)
     a.add_argument('--ghosts', type=int, default=0, help='ghost strands (default 512, quick 128)')
     a.add_argument('--repeats', type=int, default=2, help='timing runs per method')
     a.add_argument('--scene', default='', help='scene YAML (default: the default scene)')
@@ -266,11 +280,10 @@ def main(argv=None) -> int:
     d.add_argument('--thread-counts', type=int, nargs='+', default=[1],
                    help='numba thread counts to time (default 1)')
     d.add_argument('--scene', default='', help='scene YAML (default: the default scene)')
-    d.add_argument('--out', default='docs/results', help='folder of dominance.md / .json')
-    d.add_argument('--figures', default='docs/figures', help='folder of dominance.png')
+    _outputs(d, 'dominance', 'dominance.md / .json', figures=True)
     s = sub.add_parser('stability', help='the matrix of stiff and extreme cases')
     s.add_argument('--quick', action='store_true', help='the reduced matrix (CI)')
-    s.add_argument('--out', default='docs/results', help='folder of the tables')
+    _outputs(s, 'stability', 'the tables', figures=False)
     s.add_argument('--only', nargs='*', default=None, help='only cases whose name contains')
     s.add_argument('--threads', type=int, default=1, help='numba threads (default 1)')
     s.add_argument('--tracking-mode', choices=['paper', 'blend', 'turn'], default=None,
@@ -289,6 +302,8 @@ def main(argv=None) -> int:
         p.error('--ghosts must be at least 16 (the 1:16 ratio needs one guide)')
     if args.cmd == 'accuracy' and args.ghosts and args.ghosts < 64:
         p.error('--ghosts must be at least 64 (the 1:64 ratio needs one guide)')
+    if getattr(args, 'figures', '') is None:
+        args.figures = os.path.join(args.out, 'figures')
     if args.cmd in ('accuracy', 'dominance'):
         from hair_tracking.bags.io import BagError
         if args.motions is None:
