@@ -216,6 +216,14 @@ def test_damaged_files_get_one_line_naming_the_file_the_byte_and_what_was_expect
     garbled.write_bytes(bytes(bad))
     _one_line_error(capsys, 3, ['import', str(garbled), '-o', str(tmp_path / 'x.mcap')],
                     str(garbled), f'at byte {first + 9 + 28 + 8 + 8}', 'expected zstd data')
+    # a whole file whose Footer puts the summary beyond itself
+    beyond = bytearray(data)
+    footer = len(data) - 37
+    struct.pack_into('<Q', beyond, footer + 9, 2 * len(data))
+    far = tmp_path / 'far.mcap'
+    far.write_bytes(bytes(beyond))
+    _one_line_error(capsys, 3, ['info', str(far)], str(far), f'at byte {footer + 9}',
+                    f'summary at byte {2 * len(data)}, expected one between')
     # zeros where the next record should start end the data like a cut
     zeros = tmp_path / 'zeros.mcap'
     zeros.write_bytes(data[:_records(data)[2][0]] + bytes(4096))

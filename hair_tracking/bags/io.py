@@ -189,9 +189,14 @@ def _wrap_reader_error(path, exc) -> BagError:
         kind, p = bag_kind(path)
     except BagError:
         kind = None
-    cut = _sqlite_cut(p) if kind == 'sqlite3' else ''
-    return BagError(f'{path}: corrupt or unreadable bag: {cut + "; sqlite3 says: " if cut else ""}'
-                    f'{text}', EXIT_INPUT)
+    cut = ''
+    if kind == 'sqlite3':
+        cut = _sqlite_cut(p)
+    elif kind == 'mcap':
+        from hair_tracking.bags.mcap_salvage import footer_problem
+        cut = footer_problem(p)
+    said = f'{cut}; the reader says: {text}' if cut else text
+    return BagError(f'{path}: corrupt or unreadable bag: {said}', EXIT_INPUT)
 
 
 #: closed copies of cut MCAP files: (real path, size, mtime) -> copy (see :func:`_salvaged`)

@@ -71,6 +71,28 @@ def is_cut(path) -> bool:
     return not (tail.endswith(MAGIC) and tail[0] == FOOTER)
 
 
+def footer_problem(path) -> str:
+    """What is wrong with the Footer record of an MCAP file that has one ('' when nothing is):
+    its summary start (uint64 at 9 bytes into the record) must lie between the Header and
+    the Footer."""
+    size = os.path.getsize(path)
+    if is_cut(path):
+        return ''
+    footer = size - _FOOTER_SIZE
+    with open(path, 'rb') as fh:
+        fh.seek(footer)
+        tail = fh.read(_FOOTER_SIZE)
+    op, length = _RECORD.unpack_from(tail)
+    if length != 20:
+        return (f'at byte {footer}: expected a Footer record of 20 bytes, its length says '
+                f'{length}')
+    (summary,) = struct.unpack_from('<Q', tail, 9)
+    if summary and not len(MAGIC) < summary <= footer:
+        return (f'at byte {footer + 9}: the Footer puts the summary at byte {summary}, expected '
+                f'one between the Header and the Footer (byte {footer})')
+    return ''
+
+
 def _name(op: int) -> str:
     return f"{RECORDS.get(op, 'unknown')} record (opcode 0x{op:02x})"
 
