@@ -70,15 +70,18 @@ bench: install
 		--set tracking.every_substep=false --json out/bench_latency_10k_once_per_pose.json
 	$(TEST_ENV) $(PY) scripts/bench_transport.py --json out/bench_transport.json
 
-# The full matrix of stiff and extreme cases (a few minutes); writes docs/results/stability.*
+# The full matrix of stiff and extreme cases (a few minutes); refreshes the committed
+# docs/results/stability.* (hair_sim_eval itself writes under out/eval/ unless told).
 stability: install
-	$(PY) -m hair_tracking.evaluation.cli stability
+	$(PY) -m hair_tracking.evaluation.cli stability --out docs/results
 
-# Error against run time of every method (installs the peer pypbd); writes docs/results and
-# docs/figures.  VR_TRACE=path/to/vr360_user1_quaternion.txt adds the headset trace.
+# Error against run time of every method (installs the peer pypbd); refreshes the committed
+# docs/results/accuracy.* and docs/figures.  VR_TRACE=path/to/vr360_user1_quaternion.txt adds
+# the headset trace.
 eval: install
 	$(PY) -m pip install -q pypbd
-	$(PY) -m hair_tracking.evaluation.cli accuracy $(if $(VR_TRACE),--vr $(VR_TRACE))
+	$(PY) -m hair_tracking.evaluation.cli accuracy $(if $(VR_TRACE),--vr $(VR_TRACE)) \
+	    --out docs/results --figures docs/figures
 
 clean:
 	rm -rf $(VENV) out build *.egg-info hair_tracking/__pycache__/numba-*

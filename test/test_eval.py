@@ -305,7 +305,7 @@ def test_cli_quick_subset(tmp_path, capsys):
 
 
 def test_vr_trajectory_is_the_busiest_window():
-    trs = eval_cli.trajectories(False, VR, log=lambda s: None)
+    trs = eval_cli.trajectories(eval_cli.MOTIONS, False, VR, log=lambda s: None)
     names = [t.name for t in trs]
     assert names == ['walk', 'vr', 'shake']
     vr = trs[1].motion
@@ -449,7 +449,7 @@ def test_dominance_cli_evaluates_recorded_motions_a_bag_and_a_pose_csv(tmp_path)
 @pytest.mark.parametrize('cmd', ['accuracy', 'dominance'])
 @pytest.mark.parametrize('content, name, message', [
     ('not a bag', 'motion.mcap', 'not a bag'),
-    ('t_s px\n1 2\n', 'motion.csv', 'missing column'),
+    ('t_s px\n1 2\n', 'motion.csv', 'no quaternion columns recognised'),
     (None, 'missing.bvh', 'BVH file not found'),
 ])
 def test_a_bad_motion_file_is_refused_before_any_work_with_a_clear_message(
@@ -463,3 +463,92 @@ def test_a_bad_motion_file_is_refused_before_any_work_with_a_clear_message(
     err = capsys.readouterr().err
     assert '--motion: ' in err and message in err and 'Traceback' not in err
     assert not (tmp_path / 'out').exists()
+
+
+def _dominance_rows(path):
+    """The figures of every row of dominance.json that do not depend on timing."""
+    import json
+    keys = ('name', 'ghost', 'motion_err', 'settled_err', 'stretch', 'penetration_mm',
+            'admitted')
+    return [[{k: r[k] for k in keys} for r in rep['rows']] for rep in json.load(open(path))]
+
+
+def test_motion_files_evaluate_as_they_import(tmp_path, capsys):
+    """``--motion F`` reads F as ``hair_sim_bag import F`` does (units, columns, ticks): a BVH
+    in centimetres and a ``timestamp,x,y,z,qx,qy,qz,qw`` table in 100 ns ticks give the
+    figures their imported bags give."""
+    import argparse
+    from hair_tracking.bags import recording
+    from hair_tracking.bags.cli import main as bag_main
+    from test_import_units import write_bvh
+    bvh = write_bvh(tmp_path / 'walk_cm.bvh', 0.01, frames=48)
+    table = tmp_path / 'tracker.csv'
+    t0 = 638_680_000_000_000_000
+    rows = ['timestamp,x,y,z,qx,qy,qz,qw']
+    for k in range(40):
+        q = quat_from_axis_angle([0.0, 1.0, 0.0], 0.3 * math.sin(0.2 * k))
+        rows.append(f'{t0 + k * 100_000},{0.002 * k},0,1.6,' + ','.join(f'{c:.9f}' for c in q))
+    table.write_text('\n'.join(rows) + '\n')
+    bags = []
+    for f in (bvh, table):
+        bags.append(tmp_path / (f.stem + '_bag.mcap'))
+        assert bag_main(['import', str(f), '-o', str(bags[-1])]) == 0
+    rc = eval_cli.main(['dominance', '--ghosts', '64', '--motions', '--duration', '0.3',
+                        '--repeats', '1', '--thread-counts', '1', '--out', str(tmp_path / 'r'),
+                        '--motion', str(bvh), '--motion', str(table),
+                        '--motion', str(bags[0]), '--motion', str(bags[1])])
+    assert rc == 0
+    files, imported = _dominance_rows(tmp_path / 'r' / 'dominance.json')[:2], \
+        _dominance_rows(tmp_path / 'r' / 'dominance.json')[2:]
+    assert files == imported
+    md = open(tmp_path / 'r' / 'dominance.md').read()
+    assert '#### walk_cm, 64 strands' in md and '#### tracker_bag, 64 strands' in md
+    # the head of the BVH moves at a walker's speed (CMU units would make it 5.6 times faster)
+    p = argparse.ArgumentParser()
+    recording.add_arguments(p)
+    walk = eval_cli.recorded(argparse.Namespace(motion=[str(bvh)], **vars(p.parse_args([]))))
+    assert linear_speed(walk[0].motion).mean() == pytest.approx(1.2, rel=0.1)
+
+
+@pytest.mark.parametrize('cmd', ['accuracy', 'dominance'])
+def test_unknown_motion_names_are_a_usage_error(tmp_path, capsys, cmd):
+    with pytest.raises(SystemExit) as e:
+        eval_cli.main([cmd, '--quick' if cmd == 'accuracy' else '--duration=0.2',
+                       '--motions', 'wlak', '--out', str(tmp_path / 'out')])
+    assert e.value.code == 2
+    err = capsys.readouterr().err
+    assert "invalid choice: 'wlak'" in err and "'walk', 'vr', 'shake'" in err
+    assert not (tmp_path / 'out').exists()
+
+
+def test_built_in_motions_and_files_are_kept_alike(tmp_path):
+    """``--motions walk --motion F``: the walk and the file, in accuracy as in dominance."""
+    bag = os.path.join(os.path.dirname(ea.__file__), '..', 'data', 'walk_head_pose.mcap')
+    rc = eval_cli.main(['accuracy', '--quick', '--ghosts', '64', '--repeats', '0',
+                        '--only', 'rigid offset 1:16', '--duration', '0.2', '--motions', 'walk',
+                        '--motion', bag, '--out', str(tmp_path / 'a')])
+    assert rc == 0
+    rows = list(csv.DictReader(open(tmp_path / 'a' / 'accuracy.csv')))
+    assert [r['motion'] for r in rows] == ['walk', 'walk_head_pose']
+    assert os.path.isfile(tmp_path / 'a' / 'figures' / 'pareto_walk_head_pose.png')
+    rc = eval_cli.main(['dominance', '--ghosts', '64', '--motions', 'walk', '--motion', bag,
+                        '--duration', '0.2', '--repeats', '1', '--out', str(tmp_path / 'd')])
+    assert rc == 0
+    md = open(tmp_path / 'd' / 'dominance.md').read()
+    assert '#### walk, 64 strands' in md and '#### walk_head_pose, 64 strands' in md
+    assert os.path.isfile(tmp_path / 'd' / 'figures' / 'dominance.png')
+
+
+@pytest.mark.parametrize('argv', [
+    ['stability', '--quick', '--only', 'ftl teleport 1 m'],
+    ['accuracy', '--quick', '--ghosts', '64', '--repeats', '0', '--only', 'rigid offset 1:16',
+     '--duration', '0.2'],
+    ['dominance', '--ghosts', '64', '--motions', 'walk', '--duration', '0.2', '--repeats', '1'],
+])
+def test_commands_write_under_out_of_the_current_folder(tmp_path, monkeypatch, argv):
+    """Without --out nothing is written outside out/eval/<command>/ (the committed reports
+    under docs/ are left alone)."""
+    monkeypatch.chdir(tmp_path)
+    assert eval_cli.main(argv) == 0
+    written = sorted(str(p.relative_to(tmp_path)) for p in tmp_path.rglob('*') if p.is_file())
+    assert written and all(w.startswith(os.path.join('out', 'eval', argv[0], '')) for w in written)

@@ -3,16 +3,17 @@
 Sub-commands (``hair_sim_bag <command> --help`` for every option; guide: docs/bags.md)::
 
     info    [BAG]                 topics, types, counts and duration of a bag
-    import  RECORDING -o BAG      BVH motion capture or a pose table -> head-pose bag
+    import  RECORDING -o BAG      BVH motion capture, a pose table or a bag -> head-pose bag
     run     [BAG] -o OUT          offline: head poses -> hair -> markers, cloud, diagnostics
+    recover BAG OUT               a clean copy (an MCAP cut short: to its last whole message)
     play    [BAG]                 publish a bag live with /clock (like ros2 bag play --clock)
     record  TOPIC... -o OUT       subscribe (raw) and write a bag (like ros2 bag record)
     render  BAG -o DIR            PNG frames / animated GIF of the hair + a diagnostics plot
 
 ``BAG`` defaults to the bundled sample (CMU 131_01 walk head poses).  Bags are rosbag2
 directories or single ``.mcap``/``.db3`` files (ROS 1 ``.bag`` too, for reading); no ROS
-installation is needed for info/import/run/render.  This module holds those four and the
-parser; ``play`` and ``record`` join a ROS graph and live in :mod:`hair_tracking.ros.bag_play`
+installation is needed for info/import/run/recover/render.  This module holds those five and
+the parser; ``play`` and ``record`` join a ROS graph and live in :mod:`hair_tracking.ros.bag_play`
 and :mod:`hair_tracking.ros.bag_record`, which the executable (:mod:`hair_tracking.ros.bag_cli`)
 adds.
 
@@ -29,16 +30,14 @@ from typing import Callable, List, Optional, Sequence
 import numpy as np
 
 from hair_tracking import process_tuning
-from hair_tracking.bags.io import (BagError, EXIT_CONTENT, EXIT_FAILURE, EXIT_INPUT,
-                                   EXIT_INTERRUPTED, EXIT_OK, EXIT_OUTPUT, EXIT_USAGE,
-                                   POSE_KIND_TOPICS, POSE_KINDS, STORAGES)
+from hair_tracking.bags import recording
+from hair_tracking.bags.io import (BagError, EXIT_CONTENT, EXIT_FAILURE, EXIT_INTERRUPTED,
+                                   EXIT_OK, EXIT_OUTPUT, EXIT_USAGE, POSE_KIND_TOPICS,
+                                   POSE_KINDS, STORAGES)
 
 #: seconds since the epoch given to the first sample of an import (reproducible, non-zero:
 #: a stamp of 0 means "now" to the node); 1e9 s is 2001-09-09T01:46:40Z.
 DEFAULT_START_TIME_S = 1_000_000_000.0
-
-#: metres per BVH length unit for --units
-BVH_UNITS = {'cmu': 0.056444, 'm': 1.0, 'cm': 0.01, 'mm': 0.001, 'in': 0.0254}
 
 
 class _Parser(argparse.ArgumentParser):
@@ -47,24 +46,6 @@ class _Parser(argparse.ArgumentParser):
     def error(self, message):
         self.print_usage(sys.stderr)
         self.exit(EXIT_USAGE, f'{self.prog}: error: {message}\n')
-
-
-def _floats(text: str, n: int, what: str):
-    try:
-        vals = [float(v) for v in text.replace(',', ' ').split()]
-    except ValueError:
-        raise BagError(f'{what}: expected {n} numbers, got {text!r}', EXIT_USAGE) from None
-    if len(vals) != n or not all(math.isfinite(v) for v in vals):
-        raise BagError(f'{what}: expected {n} finite numbers, got {text!r}', EXIT_USAGE)
-    return vals
-
-
-def _names(text: str, n: int, what: str):
-    names = [v.strip() for v in text.split(',') if v.strip()]
-    if len(names) != n:
-        raise BagError(f'{what}: expected {n} comma-separated column names, got {text!r}',
-                       EXIT_USAGE)
-    return names
 
 
 def _check_seconds(value, what, allow_none=True, positive=False):
@@ -94,91 +75,13 @@ def cmd_info(args) -> int:
 
 
 # ================================================================ import
-def _bvh_scale(path: str, units: str, joint: str):
-    """(metres per unit, words) for --units; 'auto' from the rest-pose height of the skeleton."""
-    from hair_tracking.motion.bvh import Bvh, read_bvh
-    if units != 'auto':
-        return BVH_UNITS[units], units
-    bvh = read_bvh(path)
-    rest = Bvh(joints=bvh.joints, motion=np.zeros((1, bvh.motion.shape[1])),
-               frame_time=bvh.frame_time, path=path)
-    pts = rest.all_positions()[0]
-    height = float(np.ptp(pts[:, 1]))          # BVH is y up
-    if not height > 0:
-        raise BagError(f'{path}: cannot infer the units (the rest pose has no height); give '
-                       f'--units or --scale', EXIT_USAGE)
-    implied = 1.7 / height                     # an adult standing 1.7 m tall
-    name = min(BVH_UNITS, key=lambda k: abs(math.log(BVH_UNITS[k] / implied)))
-    if abs(math.log(BVH_UNITS[name] / implied)) > math.log(1.35):
-        raise BagError(f'{path}: cannot infer the units: the rest pose is {height:.4g} units '
-                       f'tall, which matches none of {", ".join(BVH_UNITS)}; give --units or '
-                       f'--scale', EXIT_USAGE)
-    return BVH_UNITS[name], (f'{name} (auto: rest pose {height:.4g} units tall = '
-                             f'{height * BVH_UNITS[name]:.2f} m)')
-
-
-def load_recording(args):
-    """HeadMotion of the import's RECORDING, following the options (BagError when bad)."""
-    from hair_tracking.motion import bvh as mocap, head_motion as hm, pose_table as tables
-
-    path = args.recording
-    fmt = args.format
-    if fmt == 'auto':
-        fmt = 'bvh' if path.lower().endswith('.bvh') else 'table'
-    try:
-        if fmt == 'bvh':
-            if args.scale is not None:
-                if not (math.isfinite(args.scale) and args.scale > 0):
-                    raise BagError(f'--scale must be > 0 metres per unit, got {args.scale}',
-                                   EXIT_USAGE)
-                scale, words = args.scale, f'{args.scale} m/unit'
-            else:
-                scale, words = _bvh_scale(path, args.units, args.joint)
-            axes = mocap.CMU_HEAD_AXES
-            if args.axes == 'infer':
-                axes = mocap.infer_head_axes(mocap.read_bvh(path), args.joint, scale=scale)
-            motion = mocap.load_bvh_head_motion(path, joint=args.joint, scale=scale,
-                                                head_axes=axes, origin=args.origin)
-            note = f'BVH joint {args.joint!r}, units {words}, head axes {args.axes}'
-        else:
-            time_col, quat_cols, pos_cols = args.time_column, None, None
-            quat_order = args.quat_order
-            if args.quat_columns:
-                quat_cols = _names(args.quat_columns, 4, '--quat-columns')
-            if args.position_columns and args.position_columns.strip().lower() != 'none':
-                pos_cols = _names(args.position_columns, 3, '--position-columns')
-            if time_col is None or quat_cols is None or args.position_columns is None:
-                found = tables.recognise_columns(path, args.delimiter)     # by their names
-                time_col = time_col or found[0]
-                if quat_cols is None:
-                    quat_cols, quat_order = found[1], 'xyzw'
-                if args.position_columns is None:
-                    pos_cols = found[2]
-            motion = tables.read_pose_table(
-                path, time_column=time_col, time_unit=args.time_unit,
-                quat_columns=quat_cols, quat_order=quat_order, position_columns=pos_cols,
-                neck_offset=_floats(args.neck_offset, 3, '--neck-offset'),
-                pivot=_floats(args.pivot, 3, '--pivot'), delimiter=args.delimiter,
-                time_scale=args.time_scale)
-            unit = f'{args.time_scale} s ticks' if args.time_scale else args.time_unit
-            note = (f'pose table, time {time_col!r} [{unit}], quaternion '
-                    f'{",".join(quat_cols)} ({quat_order})'
-                    + (', orientation only' if pos_cols is None else
-                       f', position {",".join(pos_cols)}'))
-    except hm.HeadMotionError as exc:
-        raise BagError(str(exc), EXIT_INPUT) from None
-    except OSError as exc:
-        raise BagError(f'{path}: cannot read: {exc.strerror or exc}', EXIT_INPUT) from None
-    return motion, note
-
-
 def cmd_import(args) -> int:
     from hair_tracking.bags import io as bag_io
     _check_seconds(args.start, '--start')
     _check_seconds(args.duration, '--duration', positive=True)
     bag_io.check_output_path(args.output, args.overwrite)
     bag_io.output_storage(args.output, args.storage)
-    motion, note = load_recording(args)
+    motion, note = recording.load_recording(args.recording, args)
     t = motion.t_ns - motion.t_ns[0]
     keep = t >= int(round(args.start * 1e9))
     if args.duration is not None:
@@ -253,6 +156,23 @@ def cmd_run(args) -> int:
     return EXIT_OK if summary.finite else EXIT_FAILURE
 
 
+# ================================================================ recover
+def cmd_recover(args) -> int:
+    from hair_tracking.bags import io as bag_io
+    if (args.output is None) == (args.output_option is None):
+        raise BagError('give the output bag once: hair_sim_bag recover IN OUT (or -o OUT)',
+                       EXIT_USAGE)
+    output = args.output or args.output_option
+    bag_io.check_output_path(output, args.overwrite)
+    bag_io.output_storage(output, args.storage)
+    counts = bag_io.copy_bag(args.bag, output, storage=args.storage, compress=args.compress,
+                             overwrite=args.overwrite)
+    print(f'wrote {output}: {sum(counts.values())} messages')
+    for topic, n in sorted(counts.items()):
+        print(f'  {topic}: {n}')
+    return EXIT_OK
+
+
 # ================================================================ render
 def cmd_render(args) -> int:
     from hair_tracking.bags.render import main_render
@@ -285,47 +205,16 @@ def build_parser(live: Sequence[Callable] = ()) -> argparse.ArgumentParser:
     p.set_defaults(func=cmd_info)
 
     # ---- import
-    p = sub.add_parser('import', help='BVH / pose table -> head-pose bag',
+    p = sub.add_parser('import', help='BVH / pose table / bag -> head-pose bag',
                        description='Turn a head-motion recording into a head-pose bag. BVH: '
                        'the chosen joint by forward kinematics, units to metres, BVH y-up to '
                        'REP-103 z-up, head axes x forward / y left / z up. Tables: CSV or '
-                       'whitespace text with a header line naming the columns.')
-    p.add_argument('recording', help='a .bvh file or a pose table (.csv/.txt)')
+                       'whitespace text with a header line naming the columns. Bags: the '
+                       'head-pose stream run would read.')
+    p.add_argument('recording', help='a .bvh file, a pose table (.csv/.txt) or a bag')
     p.add_argument('-o', '--output', required=True,
                    help='bag to create: NAME.mcap / NAME.db3 (one file) or a folder name')
-    p.add_argument('--format', choices=('auto', 'bvh', 'table'), default='auto',
-                   help='input format (auto: .bvh is BVH, anything else a table)')
-    g = p.add_argument_group('BVH')
-    g.add_argument('--joint', default='Head', help='joint that is the head (default Head)')
-    g.add_argument('--units', choices=('auto',) + tuple(BVH_UNITS), default='auto',
-                   help='BVH length unit: cmu (0.056444 m), m, cm, mm, in, or auto (from the '
-                        'rest-pose height of the skeleton; default)')
-    g.add_argument('--scale', type=float, help='metres per BVH unit (overrides --units)')
-    g.add_argument('--origin', choices=('center', 'joint'), default='center',
-                   help='head-frame origin: the middle of the head bone (default) or the joint')
-    g.add_argument('--axes', choices=('cmu', 'infer'), default='cmu',
-                   help='head axes in the joint frame: the CMU skeleton convention (default) or '
-                        'inferred from the walking direction')
-    g = p.add_argument_group('pose table')
-    g.add_argument('--time-column', default=None,
-                   help='time column (default: recognised by name: t_s, t, time, timestamp, '
-                        'stamp, ...)')
-    g.add_argument('--time-unit', choices=('s', 'ms', 'us', 'ns'), default='s')
-    g.add_argument('--time-scale', default=None, metavar='SECONDS',
-                   help='seconds per tick of the time column instead of --time-unit, e.g. 1e-7 '
-                        'for 100 ns ticks; any epoch (the first stamp is subtracted exactly)')
-    g.add_argument('--quat-columns', default=None,
-                   help='the four quaternion columns, in --quat-order (default: recognised by '
-                        'name: qx qy qz qw, quat_x ..., rot_x ..., orientation_x ..., or w x y z)')
-    g.add_argument('--quat-order', choices=('xyzw', 'wxyz'), default='xyzw')
-    g.add_argument('--position-columns', default=None,
-                   help="three position columns [m], or 'none' for orientation only (default: "
-                        'recognised by name: px py pz, x y z, pos_x ..., or none found)')
-    g.add_argument('--neck-offset', default='0,0,0',
-                   help='orientation only: head origin from the neck pivot, head frame [m]')
-    g.add_argument('--pivot', default='0,0,0', help='orientation only: neck pivot, world [m]')
-    g.add_argument('--delimiter', default=None,
-                   help="column separator (default: ',' if the header has one, else spaces)")
+    recording.add_arguments(p)
     g = p.add_argument_group('time')
     g.add_argument('--start', type=float, default=0.0,
                    help='skip this many seconds of the recording')
@@ -383,6 +272,22 @@ def build_parser(live: Sequence[Callable] = ()) -> argparse.ArgumentParser:
     p.add_argument('--no-head-pose', action='store_true', help='do not copy /head_pose')
     p.add_argument('--overwrite', action='store_true', help='replace an existing output')
     finish_parser(p, cmd_run, 'no progress bar', omp_wait_policy='active')
+
+    # ---- recover
+    p = sub.add_parser('recover', help='a clean copy of a bag, an MCAP cut short read to its '
+                                       'last whole message',
+                       description='Write every message of a bag into a new one. An MCAP file '
+                       'a recorder left cut short (no summary, no end magic) is read to its '
+                       'last whole message; the copy is a whole, indexed bag.')
+    p.add_argument('bag', help='the bag to copy')
+    p.add_argument('output', nargs='?',
+                   help='bag to create: NAME.mcap / NAME.db3 (one file) or a folder name')
+    p.add_argument('-o', dest='output_option', metavar='OUTPUT', help='the same as OUTPUT')
+    p.add_argument('--storage', choices=STORAGES,
+                   help='mcap (default) or sqlite3 (a .mcap/.db3 name decides by itself)')
+    p.add_argument('--compress', action='store_true', help='zstd-compress (MCAP chunks)')
+    p.add_argument('--overwrite', action='store_true', help='replace an existing output')
+    p.set_defaults(func=cmd_recover)
 
     # ---- play, record: they join a ROS graph (hair_tracking.ros.bag_cli puts them in)
     for add in live:

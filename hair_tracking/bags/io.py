@@ -23,16 +23,25 @@ static transforms up to a chosen fixed frame), read by the same :mod:`msg_adapte
 uses.  Units SI; a pose maps head-frame points into its parent frame,
 ``p_parent = position + R(q) @ p_head``.
 
+MCAP files a recorder left cut short (no summary, no closing magic) are read to their last
+whole message: :func:`open_bag` reads a closed copy of their whole records
+(:mod:`hair_tracking.bags.mcap_salvage`, made once per file and process, in a temporary folder
+removed at exit) and says on stderr how much it recovered; :func:`copy_bag` writes such a bag
+(or any other) as a clean one (``hair_sim_bag recover``).
+
 Every failure a user can cause raises :class:`BagError` with a message that names the path and
 the reason, and an exit code (``EXIT_*``) for the command line.
 """
+import atexit
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 import os
 from pathlib import Path
 import shutil
+import struct
+import sys
 import tempfile
-from typing import Dict, List, Optional, Sequence, Tuple
+from typing import Callable, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -56,6 +65,7 @@ _SUFFIX_STORAGE = {'.mcap': 'mcap', '.db3': 'sqlite3'}
 
 _MAGIC = {b'\x89MCAP0\r\n': 'mcap', b'SQLite format 3\x00': 'sqlite3', b'#ROSBAG V2.0\n': 'ros1'}
 _KIND_SUFFIX = {'mcap': '.mcap', 'sqlite3': '.db3', 'ros1': '.bag'}
+_KIND_NAME = {'mcap': 'MCAP', 'sqlite3': 'sqlite3', 'ros1': 'ROS 1'}
 
 BUNDLED_BAG = data_path('walk_head_pose.mcap')
 
@@ -100,6 +110,18 @@ def _sniff(path: Path) -> Optional[str]:
     return None
 
 
+def looks_like_bag(path) -> bool:
+    """Whether ``path`` is meant as a bag: a folder, a storage file's name (``.mcap``, ``.db3``,
+    ``.bag``) or a bag's first bytes (it need not be a readable one)."""
+    p = Path(path)
+    if p.is_dir() or p.suffix.lower() in _SUFFIX_STORAGE or p.suffix.lower() == '.bag':
+        return True
+    try:
+        return p.is_file() and _sniff(p) is not None
+    except BagError:
+        return False
+
+
 #: messages scanned to list the frames of a TF topic when choosing the head frame
 _SCAN_LIMIT = 5000
 
@@ -131,34 +153,130 @@ def bag_kind(path) -> Tuple[str, Path]:
     if kind is None:
         if p.stat().st_size == 0:
             raise BagError(f'{path}: empty file, not a bag; {_NOT_A_BAG}', EXIT_INPUT)
-        raise BagError(f'{path}: not a bag (unknown file format); {_NOT_A_BAG}', EXIT_INPUT)
+        with open(p, 'rb') as fh:
+            head = fh.read(8)
+        magics = ', '.join(f'{m!r} ({_KIND_NAME[k]})' for m, k in _MAGIC.items())
+        raise BagError(f'{path}: not a bag (unknown file format): at byte 0 it holds {head!r} '
+                       f'where a bag starts with one of {magics}; {_NOT_A_BAG}', EXIT_INPUT)
     return kind, p
+
+
+def _sqlite_cut(p: Path) -> str:
+    """Why a sqlite3 file is shorter than its header says ('' when it is not): the page size
+    (bytes 16-17) times the page count (bytes 28-31, valid while bytes 92-95 equal the change
+    counter at bytes 24-27; https://www.sqlite.org/fileformat.html)."""
+    try:
+        with open(p, 'rb') as fh:
+            head = fh.read(100)
+        size = p.stat().st_size
+    except OSError:
+        return ''
+    if len(head) < 100:
+        return f'the file ends at byte {len(head)} inside the 100-byte sqlite3 header'
+    page = struct.unpack_from('>H', head, 16)[0]
+    page = 65536 if page == 1 else page
+    count, = struct.unpack_from('>I', head, 28)
+    if head[24:28] != head[92:96] or not count or page * count <= size:
+        return ''
+    return (f'the header counts {count} pages of {page} bytes (byte 28) = {page * count} '
+            f'bytes, the file ends at byte {size}: cut short (a sqlite3 file cannot be read '
+            f"in part; sqlite3's .recover may save some of it)")
 
 
 def _wrap_reader_error(path, exc) -> BagError:
     text = str(exc).strip() or type(exc).__name__
-    return BagError(f'{path}: corrupt or unreadable bag: {text}', EXIT_INPUT)
+    try:
+        kind, p = bag_kind(path)
+    except BagError:
+        kind = None
+    cut = ''
+    if kind == 'sqlite3':
+        cut = _sqlite_cut(p)
+    elif kind == 'mcap':
+        from hair_tracking.bags.mcap_salvage import footer_problem
+        cut = footer_problem(p)
+    said = f'{cut}; the reader says: {text}' if cut else text
+    return BagError(f'{path}: corrupt or unreadable bag: {said}', EXIT_INPUT)
+
+
+#: closed copies of cut MCAP files: (real path, size, mtime) -> copy (see :func:`_salvaged`)
+_SALVAGED: Dict[tuple, Path] = {}
+
+
+def _warn(text: str) -> None:
+    print(text, file=sys.stderr)
+
+
+def _salvaged(path, p: Path, warn: Callable[[str], None]) -> Path:
+    """The closed copy of the whole records of the cut MCAP file ``p`` (made at the first call
+    for this file's size and time; ``warn`` then gets one line saying what was recovered)."""
+    from rosbags.highlevel import AnyReader
+    from hair_tracking.bags import mcap_salvage
+
+    st = p.stat()
+    key = (os.path.realpath(p), st.st_size, st.st_mtime_ns)
+    if key in _SALVAGED:
+        return _SALVAGED[key]
+    tmp = tempfile.mkdtemp(prefix='hair_bag_salvage-')
+    atexit.register(shutil.rmtree, tmp, True)
+    copy = Path(tmp) / (p.stem + '.mcap')
+    try:
+        cut = mcap_salvage.salvage(p, copy)
+    except mcap_salvage.McapError as exc:
+        raise BagError(f'{path}: corrupt or unreadable bag: {exc}', EXIT_INPUT) from None
+    except OSError as exc:
+        raise BagError(f'{path}: cannot read: {exc.strerror or exc}', EXIT_INPUT) from None
+    try:
+        with AnyReader([copy], default_typestore=typestore()) as reader:
+            n, t0, t1 = reader.message_count, reader.start_time, reader.end_time
+    except Exception as exc:       # noqa: B902 - a damaged whole record
+        raise _wrap_reader_error(path, exc) from None
+    where = f'cut short at byte {cut.size} (no summary, no end magic)'
+    if n == 0:
+        raise BagError(f'{path}: corrupt or unreadable bag: {where}, before any whole message; '
+                       f'it ends inside {cut.stop}', EXIT_INPUT)
+    warn(f'warning: {path}: {where}: read to its last whole message: {n} messages, '
+         f'{(t1 - t0) * 1e-9:.3f} s, {cut.kept} bytes of whole records; it ends inside '
+         f'{cut.stop} (hair_sim_bag recover writes a clean copy)')
+    _SALVAGED[key] = copy
+    return copy
+
+
+def _storage_files(kind: str, p: Path, path, warn) -> List[Path]:
+    """What AnyReader opens: the bag, or, where MCAP files of it are cut short, every storage
+    file of it with closed copies in their place."""
+    from hair_tracking.bags.mcap_salvage import is_cut
+    if kind == 'mcap':
+        return [_salvaged(path, p, warn)] if is_cut(p) else [p]
+    if kind == 'dir':
+        files = sorted(x for x in p.iterdir() if x.suffix == '.mcap' and x.is_file())
+        if any(is_cut(x) for x in files):
+            return [_salvaged(x, x, warn) if is_cut(x) else x for x in files]
+    return [p]
 
 
 @contextmanager
-def open_bag(path):
+def open_bag(path, warn: Optional[Callable[[str], None]] = None):
     """An opened ``rosbags.highlevel.AnyReader`` for ``path`` (see module doc for the kinds).
 
     A storage file whose name does not match its content (an MCAP file named ``x.dat``) is read
-    through a temporary symbolic link with the right suffix.  Errors while opening become
-    BagError; use :func:`messages` to read so that errors while reading do too.
+    through a temporary symbolic link with the right suffix.  An MCAP file cut short is read to
+    its last whole message (see module doc); ``warn`` (default: a line on stderr) hears what
+    was recovered, once per file.  Errors while opening become BagError; use
+    :func:`messages` to read so that errors while reading do too.
     """
     from rosbags.highlevel import AnyReader
 
     kind, p = bag_kind(path)
     tmp = None
     try:
-        if kind != 'dir' and p.suffix != _KIND_SUFFIX[kind]:
+        files = _storage_files(kind, p, path, warn or _warn)
+        if files == [p] and kind != 'dir' and p.suffix != _KIND_SUFFIX[kind]:
             tmp = tempfile.mkdtemp(prefix='hair_bag_link-')
             link = Path(tmp) / ('bag' + _KIND_SUFFIX[kind])
             os.symlink(os.path.abspath(p), link)
-            p = link
-        reader = AnyReader([p], default_typestore=typestore())
+            files = [link]
+        reader = AnyReader(files, default_typestore=typestore())
         try:
             reader.open()
         except Exception as exc:   # noqa: B902 - any failure of a third-party parser
@@ -575,14 +693,15 @@ class BagWriter:
         self.closed = False
 
     def add_topic(self, topic: str, msgtype: str, qos=None):
-        """Register ``topic`` of ``msgtype`` (e.g. 'sensor_msgs/msg/PointCloud2')."""
+        """Register ``topic`` of ``msgtype`` (e.g. 'sensor_msgs/msg/PointCloud2'); ``qos`` a
+        rosbags ``Qos`` or a list of them (the offered QoS profiles)."""
         if topic in self._conns:
             return self._conns[topic]
         kwargs = {'typestore': typestore()}
         if msgtype not in typestore().types:
             raise BagError(f'unknown message type {msgtype} for {topic}', EXIT_CONTENT)
         if qos is not None:
-            kwargs['offered_qos_profiles'] = [qos]
+            kwargs['offered_qos_profiles'] = qos if isinstance(qos, list) else [qos]
         conn = self._writer.add_connection(topic, msgtype, **kwargs)
         self._conns[topic] = conn
         self.counts[topic] = 0
@@ -641,6 +760,33 @@ class BagWriter:
         else:
             self.abort()
         return False
+
+
+def copy_bag(src, output, *, storage: Optional[str] = None, compress: bool = False,
+             overwrite: bool = False, warn: Optional[Callable[[str], None]] = None) -> dict:
+    """Write every message of the bag ``src`` (read by :func:`open_bag`: a cut MCAP file to its
+    last whole message) into a new bag ``output`` (:class:`BagWriter`, with the topics' QoS
+    profiles; ROS 1 messages converted to CDR).  Topics of a type the Jazzy typestore does not
+    know are left out, each with a line to ``warn``.  Returns ``{topic: messages}``."""
+    warn = warn or _warn
+    with open_bag(src, warn=warn) as reader, \
+            BagWriter(output, storage=storage, overwrite=overwrite, compress=compress) as w:
+        kept, types = [], {}
+        for c in reader.connections:
+            if c.msgtype not in typestore().types:
+                warn(f'warning: {src}: {c.topic} left out: {c.msgtype} is unknown to the '
+                     'rosbags Jazzy typestore')
+            elif types.setdefault(c.topic, c.msgtype) != c.msgtype:
+                warn(f'warning: {src}: {c.topic} left out in {c.msgtype}: the topic is '
+                     f'written in {types[c.topic]}')
+            else:
+                w.add_topic(c.topic, c.msgtype, list(getattr(
+                    getattr(c, 'ext', None), 'offered_qos_profiles', None) or []) or None)
+                kept.append(c)
+        for conn, t_ns, raw in messages(reader, kept):
+            data = raw if reader.is2 else reader.typestore.ros1_to_cdr(raw, conn.msgtype)
+            w.write(conn.topic, t_ns, data)
+        return dict(w.counts)
 
 
 # ================================================================ hair clouds

@@ -1,8 +1,8 @@
 """``hair_sim_eval``: the evaluation of the package, from the command line.
 
-    hair_sim_eval accuracy [--quick] [--out docs/results] [--figures docs/figures]
-    hair_sim_eval dominance [--ghosts 4096 16384] [--motion FILE ...]
-    hair_sim_eval stability [--quick] [--out docs/results] [--only NAME ...]
+    hair_sim_eval accuracy [--quick] [--motions NAME ...] [--motion FILE ...] [--out DIR]
+    hair_sim_eval dominance [--ghosts 4096 16384] [--motion FILE ...] [--out DIR]
+    hair_sim_eval stability [--quick] [--only NAME ...] [--out DIR]
 
 ``accuracy`` measures error against run time of every method
 (:mod:`hair_tracking.evaluation.accuracy`) on the bundled walk recording, a VR head-mounted-display
@@ -12,6 +12,14 @@ settings against simulating every strand (:mod:`hair_tracking.evaluation.dominan
 ``stability`` runs the matrix of stiff and extreme cases
 (:mod:`hair_tracking.evaluation.stability`) and writes ``stability.csv`` and ``stability.md``; it
 exits with status 1 if a case fails.
+
+Every command writes under ``out/eval/<command>/`` of the current folder (figures in its
+``figures/``) unless ``--out`` (and ``--figures``) name other folders; the committed reports
+under ``docs/`` are refreshed by ``make eval`` and ``make stability``, which name them.
+``--motions`` picks built-in motions by name (:data:`MOTIONS`; an unknown name is a usage
+error), and ``--motion FILE`` adds a recording read exactly as ``hair_sim_bag import`` reads
+it, with its options (:mod:`hair_tracking.bags.recording`); the files come on top of the
+built-in motions, in every command alike.
 
 ``--quick`` is the CI-sized variant (a few minutes on two cores); the default is the full
 evaluation whose outputs are committed under ``docs/``.  Timings are taken single-threaded by
@@ -34,6 +42,13 @@ DEFAULT_VR = ''
 #: records orientation only (a head turns about the neck, so its centre moves).
 VR_NECK_OFFSET = (0.0, 0.0, 0.1)
 
+#: The built-in motions ``--motions`` names; ``--quick`` runs the walk unless it names others.
+MOTIONS = ('walk', 'vr', 'shake')
+
+#: Where a command writes unless ``--out`` says otherwise: ``out/eval/<command>`` of the
+#: current folder (``out/`` is ignored by git).
+OUT_DIR = os.path.join('out', 'eval')
+
 
 def _set_threads(n: int) -> None:
     # must happen before numba kernels run / pypbd is imported (OpenMP reads it at start)
@@ -42,25 +57,31 @@ def _set_threads(n: int) -> None:
     numba.set_num_threads(min(n, numba.config.NUMBA_NUM_THREADS))
 
 
-def trajectories(quick: bool, vr_path: str, log=print):
+def trajectories(names, quick: bool, vr_path: str, log=print):
+    """The built-in motions ``names`` (of :data:`MOTIONS`), in that order; the walk lasts 3 s
+    with ``quick``; the VR trace is skipped (with a note) without ``vr_path``."""
     from hair_tracking.motion.pose_table import load_bundled_walk, read_vr360
     from hair_tracking.evaluation import synthetic_motion as sm
     from hair_tracking.evaluation.accuracy import Trajectory
-    walk = load_bundled_walk()
-    out = [Trajectory('walk', walk, 'CMU 131_01 start-walk-stop, 120 Hz mocap head',
-                      3.0 if quick else None)]
-    if quick:
-        return out
-    if vr_path and os.path.isfile(vr_path):
-        vr = read_vr360(vr_path, neck_offset=VR_NECK_OFFSET)
-        start = sm.busiest_window(vr, 10.0)
-        vr = sm.window(vr, start, 10.0)
-        out.append(Trajectory('vr', vr, f'VR360 user 1 HMD trace, busiest 10 s (from '
-                                        f'{start:g} s), 59 Hz, head 10 cm above the neck pivot'))
-    else:
-        log(f'VR trace not given or not found ({vr_path or "no --vr"}): skipped')
-    out.append(Trajectory('shake', sm.named('shake10', 3.0),
-                          'synthetic head shake, 10 rad/s peak at 2 Hz, then 0.5 s still'))
+    out = []
+    for name in names:
+        if name == 'walk':
+            out.append(Trajectory('walk', load_bundled_walk(),
+                                  'CMU 131_01 start-walk-stop, 120 Hz mocap head',
+                                  3.0 if quick else None))
+        elif name == 'vr' and vr_path and os.path.isfile(vr_path):
+            vr = read_vr360(vr_path, neck_offset=VR_NECK_OFFSET)
+            start = sm.busiest_window(vr, 10.0)
+            vr = sm.window(vr, start, 10.0)
+            out.append(Trajectory('vr', vr, f'VR360 user 1 HMD trace, busiest 10 s (from '
+                                            f'{start:g} s), 59 Hz, head 10 cm above the neck '
+                                            'pivot'))
+        elif name == 'vr':
+            log(f'VR trace not given or not found ({vr_path or "no --vr"}): skipped')
+        elif name == 'shake':
+            out.append(Trajectory('shake', sm.named('shake10', 3.0),
+                                  'synthetic head shake, 10 rad/s peak at 2 Hz, then 0.5 s '
+                                  'still'))
     return out
 
 
@@ -79,9 +100,7 @@ def cmd_accuracy(args) -> int:
         specs = [s for s in specs if any(o in s.name for o in args.only)]
     reports = []
     t0 = time.perf_counter()
-    for tr in trajectories(args.quick, args.vr) + args.recorded:
-        if args.motions and tr.name not in args.motions:
-            continue
+    for tr in trajectories(args.motions, args.quick, args.vr) + args.recorded:
         if args.duration:
             tr.duration_s = args.duration
         reports.append(ea.evaluate(workload, tr, specs, repeats=args.repeats,
@@ -140,15 +159,16 @@ def cmd_stability(args) -> int:
     return 1 if failed else 0
 
 
-def recorded(paths, duration=None):
-    """Trajectories of the motion files named by ``--motion``."""
+def recorded(args, duration=None):
+    """Trajectories of the files named by ``--motion``, read as ``hair_sim_bag import`` reads
+    them (:func:`hair_tracking.bags.recording.load_recording`, with the options in ``args``)."""
+    from hair_tracking.bags.recording import load_recording
     from hair_tracking.evaluation.accuracy import Trajectory
-    from hair_tracking.evaluation.dominance import load_motion
     out = []
-    for path in paths:
-        motion = load_motion(path)
-        out.append(Trajectory(os.path.splitext(os.path.basename(path))[0], motion,
-                              f'recorded: {motion.source}', duration))
+    for path in args.motion:
+        motion, note = load_recording(path, args)
+        out.append(Trajectory(os.path.splitext(os.path.basename(path.rstrip('/')))[0], motion,
+                              f'recorded: {path} ({note})', duration))
     return out
 
 
@@ -159,8 +179,7 @@ def cmd_dominance(args) -> int:
     from hair_tracking.evaluation import dominance as dm
     from hair_tracking.evaluation.methods import make_workload
     scene = Scene.from_yaml(args.scene) if args.scene else Scene()
-    tracks = [t for t in trajectories(False, args.vr) if t.name in args.motions]
-    tracks += args.recorded
+    tracks = trajectories(args.motions, False, args.vr) + args.recorded
     record = provenance(command_line(args), max(args.thread_counts))
     md = ['# Do the ghosts pay for themselves?', ''] + markdown_lines(record) + [
           'Every method simulates the same strands; errors against every strand simulated by '
@@ -197,46 +216,60 @@ def command_line(args) -> str:
     return provenance_command_line('hair_sim_eval', args.argv)
 
 
+def _outputs(p, command: str, what: str, figures: bool) -> None:
+    """``--out`` (and ``--figures``) of ``command``: under :data:`OUT_DIR` by default."""
+    out = os.path.join(OUT_DIR, command)
+    p.add_argument('--out', default=out, help=f'folder of {what} (default {out}/)')
+    if figures:
+        p.add_argument('--figures', default=None,
+                       help='folder of the PNG plots (default: figures/ in --out)')
+
+
+def _motions(p, default: str) -> None:
+    """``--motions`` (built-in, by name), ``--motion FILE`` and the options of
+    ``hair_sim_bag import`` that say how the files are read."""
+    from hair_tracking.bags import recording
+    p.add_argument('--motions', nargs='*', default=None, metavar='NAME', choices=MOTIONS,
+                   help=f'built-in motions among {", ".join(MOTIONS)} (default: {default}; '
+                        'none: only the --motion files)')
+    p.add_argument('--motion', action='append', default=[], metavar='FILE',
+                   help='also a recording of your own, read as hair_sim_bag import reads it: a '
+                        'head-pose bag, a BVH capture or a pose table (repeatable); the options '
+                        'below are those of hair_sim_bag import')
+    recording.add_arguments(p)
+
+
 def main(argv=None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     p = argparse.ArgumentParser(prog='hair_sim_eval', description=__doc__.split('\n')[0])
     sub = p.add_subparsers(dest='cmd', required=True)
     a = sub.add_parser('accuracy', help='error against run time of every method')
     a.add_argument('--quick', action='store_true', help='CI-sized run (a few minutes)')
-    a.add_argument('--out', default='docs/results', help='folder of the CSV/Markdown tables')
-    a.add_argument('--figures', default='docs/figures', help='folder of the PNG plots')
+    _outputs(a, 'accuracy', 'the CSV/Markdown tables', figures=True)
     a.add_argument('--ghosts', type=int, default=0, help='ghost strands (default 512, quick 128)')
     a.add_argument('--repeats', type=int, default=2, help='timing runs per method')
     a.add_argument('--scene', default='', help='scene YAML (default: the default scene)')
     a.add_argument('--vr', default=DEFAULT_VR, help='VR360 trace (timestamp viewpoint w x y z)')
-    a.add_argument('--motions', nargs='*', default=None, help='only these trajectories')
+    _motions(a, 'all of them; --quick: walk')
     a.add_argument('--duration', type=float, default=0.0,
                    help='simulate only the first S seconds of each trajectory')
     a.add_argument('--only', nargs='*', default=None, help='only methods whose name contains')
     a.add_argument('--threads', type=int, default=1, help='numba/OpenMP threads (default 1)')
-    a.add_argument('--motion', action='append', default=[], metavar='FILE',
-                   help='also a recorded motion: a head-pose bag, a BVH capture or a pose CSV '
-                        '(repeatable)')
     d = sub.add_parser('dominance', help='ghost settings against simulating every strand with '
                                          'FTL at dt 1/60 s (same-solver reference)')
     d.add_argument('--ghosts', type=int, nargs='+', default=[4096, 16384],
                    help='strand counts (default 4096 16384)')
-    d.add_argument('--motions', nargs='*', default=['walk', 'vr', 'shake'],
-                   help='built-in motions (walk, vr, shake)')
-    d.add_argument('--motion', action='append', default=[], metavar='FILE',
-                   help='also a recorded motion: a head-pose bag, a BVH capture or a pose CSV '
-                        '(repeatable)')
+    _motions(d, 'all of them')
     d.add_argument('--vr', default=DEFAULT_VR, help='VR360 trace (timestamp viewpoint w x y z)')
     d.add_argument('--duration', type=float, default=3.0, help='seconds of each motion')
     d.add_argument('--repeats', type=int, default=2, help='timing runs per method')
     d.add_argument('--thread-counts', type=int, nargs='+', default=[1],
                    help='numba thread counts to time (default 1)')
     d.add_argument('--scene', default='', help='scene YAML (default: the default scene)')
-    d.add_argument('--out', default='docs/results', help='folder of dominance.md / .json')
-    d.add_argument('--figures', default='docs/figures', help='folder of dominance.png')
+    _outputs(d, 'dominance', 'dominance.md / .json', figures=True)
     s = sub.add_parser('stability', help='the matrix of stiff and extreme cases')
     s.add_argument('--quick', action='store_true', help='the reduced matrix (CI)')
-    s.add_argument('--out', default='docs/results', help='folder of the tables')
+    _outputs(s, 'stability', 'the tables', figures=False)
     s.add_argument('--only', nargs='*', default=None, help='only cases whose name contains')
     s.add_argument('--threads', type=int, default=1, help='numba threads (default 1)')
     s.add_argument('--tracking-mode', choices=['paper', 'blend', 'turn'], default=None,
@@ -249,17 +282,25 @@ def main(argv=None) -> int:
         p.error('--threads must be >= 1')
     if getattr(args, 'repeats', 1) < 0:
         p.error('--repeats must be >= 0')
+    if args.cmd == 'dominance' and args.repeats < 1:
+        p.error('--repeats must be >= 1 (a setting dominates by its time)')
     if args.cmd == 'dominance' and min(args.ghosts) < 16:
         p.error('--ghosts must be at least 16 (the 1:16 ratio needs one guide)')
     if args.cmd == 'accuracy' and args.ghosts and args.ghosts < 64:
         p.error('--ghosts must be at least 64 (the 1:64 ratio needs one guide)')
+    if getattr(args, 'figures', '') is None:
+        args.figures = os.path.join(args.out, 'figures')
     if args.cmd in ('accuracy', 'dominance'):
-        from hair_tracking.motion.head_motion import HeadMotionError
         from hair_tracking.bags.io import BagError
+        if args.motions is None:
+            args.motions = ['walk'] if getattr(args, 'quick', False) else list(MOTIONS)
         try:                    # every file read before any work, so a bad one costs nothing
-            args.recorded = recorded(args.motion)
-        except (BagError, HeadMotionError) as e:
+            args.recorded = recorded(args)
+        except BagError as e:
             p.error(f'--motion: {e}')
+        if not args.motions and not args.recorded:
+            p.error('nothing to evaluate: --motions names no built-in motion and no --motion '
+                    'file is given')
     if args.cmd == 'dominance':
         _set_threads(max(args.thread_counts))
         return cmd_dominance(args)

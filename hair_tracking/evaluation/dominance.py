@@ -280,19 +280,3 @@ def plot(reports: List[Dict], path: str) -> str:
     fig.savefig(path)
     plt.close(fig)
     return path
-
-
-def load_motion(path: str):
-    """A head motion from a file, read as ``hair_sim_bag import`` and ``run`` read them: a
-    rosbag2 head-pose bag (MCAP, sqlite3; PoseStamped, TransformStamped or TF), a BVH capture
-    (CMU conventions) or a pose CSV (``t_s px py pz qx qy qz qw``)."""
-    from hair_tracking.motion import bvh as mocap, head_motion as hm, pose_table as tables
-    from hair_tracking.bags import io as bag_io
-    lower = path.lower()
-    if lower.endswith('.bvh'):
-        return mocap.load_bvh_head_motion(path)
-    if lower.endswith(('.csv', '.txt')):
-        return tables.read_pose_csv(path)
-    poses = bag_io.read_head_poses(path)
-    return hm.HeadMotion(t_ns=poses.t_ns - poses.t_ns[0], position=poses.position,
-                         quaternion=poses.quaternion, source=f'{path} ({poses.topic})')

@@ -38,10 +38,16 @@ import numpy as np
 
 from hair_tracking.core.transforms import matrices_to_quats
 from hair_tracking.motion.head_motion import (HeadMotion, HeadMotionError, make_sign_continuous,
-                                              walking_direction)
+                                              UnitsError, walking_direction)
 
 #: metres per BVH length unit for the CMU conversions (README of the data set: 0.056444).
 CMU_SCALE_M = 0.056444
+
+#: metres per BVH length unit, by name ('cmu': the CMU conversions).
+BVH_UNITS = {'cmu': CMU_SCALE_M, 'm': 1.0, 'cm': 0.01, 'mm': 0.001, 'in': 0.0254}
+
+#: How tall a skeleton's rest pose is taken to be when its unit is recognised [m] (an adult).
+REST_HEIGHT_M = 1.7
 
 #: BVH (y up) world coordinates -> project world coordinates (z up, REP-103): ``p = M @ p_bvh``.
 #: BVH +z -> world +x, BVH +x -> world +y, BVH +y -> world +z (a proper rotation, det = +1).
@@ -328,6 +334,29 @@ def read_bvh(path: str) -> Bvh:
         bad = int(np.nonzero(~np.all(np.isfinite(motion), axis=1))[0][0])
         fail(row_lines[bad], 'frame line holds NaN or Inf')
     return Bvh(joints=joints, motion=motion, frame_time=frame_time, path=path)
+
+
+def recognise_units(bvh: Bvh):
+    """The length unit of a BVH file from its skeleton: ``(metres per unit, words)``.
+
+    The rest pose (every channel 0) is taken to stand :data:`REST_HEIGHT_M` tall, BVH being y
+    up; the unit of :data:`BVH_UNITS` nearest to the height that implies (by ratio) is chosen
+    when it is within a factor 1.35, otherwise UnitsError asks for ``--units`` or ``--scale``.
+    """
+    rest = Bvh(joints=bvh.joints, motion=np.zeros((1, bvh.motion.shape[1])),
+               frame_time=bvh.frame_time, path=bvh.path)
+    height = float(np.ptp(rest.all_positions()[0][:, 1]))
+    if not height > 0:
+        raise UnitsError(f'{bvh.path}: cannot recognise the units (the rest pose has no '
+                         f'height); give --units or --scale')
+    implied = REST_HEIGHT_M / height
+    name = min(BVH_UNITS, key=lambda k: abs(math.log(BVH_UNITS[k] / implied)))
+    if abs(math.log(BVH_UNITS[name] / implied)) > math.log(1.35):
+        raise UnitsError(f'{bvh.path}: cannot recognise the units: the rest pose is '
+                         f'{height:.4g} units tall, which matches none of '
+                         f'{", ".join(BVH_UNITS)}; give --units or --scale')
+    return BVH_UNITS[name], (f'{name} (auto: rest pose {height:.4g} units tall = '
+                             f'{height * BVH_UNITS[name]:.2f} m)')
 
 
 def infer_head_axes(bvh: Bvh, joint: str = 'Head', bvh_to_world=BVH_TO_WORLD,

@@ -21,6 +21,31 @@ class HeadMotionError(ValueError):
     """A motion file is missing, malformed, or asked for something it does not contain."""
 
 
+class UnitsError(HeadMotionError):
+    """The units of a recording cannot be told from the file: an option has to name them."""
+
+
+#: The median rate [Hz] a head-pose stream has (a tracker, a headset, motion capture), and the
+#: longest it lasts [s]: a reader that chooses a file's units checks its choice against them,
+#: and a stream outside them is reported (see :func:`timing_problem`).
+PLAUSIBLE_RATE_HZ = (1.0, 10_000.0)
+PLAUSIBLE_DURATION_S = 86_400.0
+
+
+def timing_problem(rate_hz: float, duration_s: float) -> str:
+    """Why a head-pose stream of this median rate [Hz] and duration [s] cannot be right (times
+    read in the wrong unit, most likely), or '' when it can.  A rate of 0 (one sample) is not
+    checked."""
+    lo, hi = PLAUSIBLE_RATE_HZ
+    if rate_hz > 0 and not lo <= rate_hz <= hi:
+        return (f'a median rate of {rate_hz:.3g} Hz over {duration_s:.4g} s (a head-pose '
+                f'stream has {lo:g} Hz to {hi:g} Hz)')
+    if duration_s > PLAUSIBLE_DURATION_S:
+        return (f'a duration of {duration_s:.4g} s (more than a day) at a median rate of '
+                f'{rate_hz:.3g} Hz')
+    return ''
+
+
 @dataclass
 class HeadMotion:
     """A recorded head-pose stream, cleaned.
@@ -29,7 +54,9 @@ class HeadMotion:
     the world [m]; ``quaternion`` (F, 4) float64 unit (x, y, z, w), sign-continuous, rotating
     head-frame vectors into the world.  ``source`` names where it came from (a path and what was
     read), ``dropped`` counts input rows kept out by reason (``'bad_quaternion'`` NaN/Inf/zero
-    norm, ``'bad_position'`` NaN/Inf, ``'bad_time'`` NaN or not after the previous kept row).
+    norm, ``'bad_position'`` NaN/Inf, ``'bad_time'`` NaN or not after the previous kept row);
+    ``units`` says how a reader took the file's units when it recognised them itself ('' when
+    they were given).
     Construction checks shapes, finiteness, increasing times and unit quaternions (to 1e-6),
     and makes the quaternion stream sign-continuous.
     """
@@ -39,6 +66,7 @@ class HeadMotion:
     quaternion: np.ndarray
     source: str = ''
     dropped: dict = field(default_factory=dict)
+    units: str = ''
 
     def __post_init__(self):
         t = np.asarray(self.t_ns)

@@ -14,13 +14,15 @@ world z, i.e. yaw).  x is taken as the viewing direction, as we read Corbillon e
 the stored rotation turns the reference direction (1, 0, 0) into the viewing direction (not
 checked against the videos).
 """
+import datetime
 import decimal
 import os
 
 import numpy as np
 
 from hair_tracking.core.transforms import quat_to_matrix
-from hair_tracking.motion.head_motion import HeadMotion, HeadMotionError, make_sign_continuous
+from hair_tracking.motion.head_motion import (HeadMotion, HeadMotionError, make_sign_continuous,
+                                              PLAUSIBLE_RATE_HZ, timing_problem, UnitsError)
 from hair_tracking.resources import data_path
 
 DATA_DIR = data_path('')
@@ -28,7 +30,32 @@ BUNDLED_WALK_CSV = os.path.join(DATA_DIR, 'cmu_131_01_walk_head.csv')
 
 POSE_CSV_COLUMNS = ('t_s', 'px', 'py', 'pz', 'qx', 'qy', 'qz', 'qw')
 
-_TIME_FACTOR_NS = {'s': 10 ** 9, 'ms': 10 ** 6, 'us': 10 ** 3, 'ns': 1}
+#: Nanoseconds per tick of each time unit a pose table may use ('100ns': the 100 ns ticks of
+#: .NET, Unity and Windows, e.g. HoloLens).
+TIME_FACTOR_NS = {'s': 10 ** 9, 'ms': 10 ** 6, 'us': 10 ** 3, '100ns': 100, 'ns': 1}
+TIME_UNITS = tuple(TIME_FACTOR_NS)
+TIME_UNIT_WORDS = {'s': 's', 'ms': 'ms', 'us': 'us', '100ns': '100 ns ticks', 'ns': 'ns'}
+
+#: Last words of a time column's name that say its unit (``t_s``, ``time_ms``, ``stamp_us``,
+#: ``timestamp_ns``, ``ticks``).
+_NAME_UNITS = {**dict.fromkeys(('s', 'sec', 'secs', 'second', 'seconds'), 's'),
+               **dict.fromkeys(('ms', 'msec', 'millis', 'milliseconds'), 'ms'),
+               **dict.fromkeys(('us', 'usec', 'micros', 'microseconds'), 'us'),
+               **dict.fromkeys(('ticks', '100ns'), '100ns'),
+               **dict.fromkeys(('ns', 'nsec', 'nanos', 'nanoseconds'), 'ns')}
+
+#: Epochs of absolute stamps: (name, the units counted from it, seconds from it to 1970-01-01).
+TIME_EPOCHS = (('1970-01-01', TIME_UNITS, 0),
+               ('0001-01-01 (.NET / Unity DateTime ticks)', ('100ns',), 62_135_596_800),
+               ('1601-01-01 (Windows FILETIME)', ('100ns',), 11_644_473_600))
+#: An absolute stamp is recognised as a date in 2000 .. 2099 (Unix seconds); in these years the
+#: unit / epoch pairs of :data:`TIME_EPOCHS` give disjoint ranges of numbers.
+DATE_RANGE_S = (946_684_800, 4_102_444_800)
+#: The rates of head trackers and headsets [Hz], preferred when the median step of a table's
+#: times fits several units.
+TRACKER_RATE_HZ = (20.0, 2_000.0)
+
+_TIME_FLAGS = 'give --time-unit (s, ms, us, 100ns, ns) or --time-scale SECONDS_PER_TICK'
 
 #: Column names pose tables of trackers and headsets use (lower case), tried in this order when
 #: a table does not name its columns as asked: time, position (x y z), quaternion (x y z w).
@@ -74,6 +101,81 @@ def recognise_columns(path: str, delimiter=None):
     return time, quat, pos
 
 
+def _median_step(stamps) -> decimal.Decimal:
+    """Median of the positive steps between consecutive stamps (0 when there is none)."""
+    steps = sorted(b - a for a, b in zip(stamps, stamps[1:]) if b > a)
+    return steps[len(steps) // 2] if steps else decimal.Decimal(0)
+
+
+def _date_epoch(first: decimal.Decimal, unit: str):
+    """(epoch name, seconds from it to 1970) of the epoch that makes ``first`` in ``unit`` a date
+    in :data:`DATE_RANGE_S`, or None."""
+    seconds = first * TIME_FACTOR_NS[unit] / 10 ** 9
+    for name, units, offset in TIME_EPOCHS:
+        if unit in units and DATE_RANGE_S[0] <= seconds - offset < DATE_RANGE_S[1]:
+            return name, offset
+    return None
+
+
+def recognise_time_unit(column: str, stamps, where: str = ''):
+    """The unit of a time column when no option names it: ``(unit, seconds from its epoch to
+    1970-01-01, words)``; ``stamps`` are the column's finite values (``decimal.Decimal``) in
+    file order.
+
+    In this order: the last word of the column's name (``t_s``, ``time_ms``, ``stamp_us``,
+    ``timestamp_ns``, ``ticks`` for 100 ns); else the first stamp read as a date of 2000-2099
+    (:data:`DATE_RANGE_S`): seconds, ms, us, 100 ns or ns since 1970-01-01, or 100 ns ticks
+    since 0001-01-01 (.NET / Unity ``DateTime.Ticks``) or since 1601-01-01 (Windows FILETIME),
+    which in those years are disjoint ranges of numbers; else the median step: seconds if that
+    gives a rate of 1 Hz to 10 kHz, else the first of ms, us, 100 ns, ns that gives a
+    tracker's rate (:data:`TRACKER_RATE_HZ`), else the first that gives 1 Hz to 10 kHz.
+    The choice must give a plausible stream
+    (:func:`~hair_tracking.motion.head_motion.timing_problem`); otherwise UnitsError says
+    which options name the unit.  An epoch other than 1970 makes the times absolute (Unix)
+    times; the durations never depend on it.
+    """
+    step = _median_step(stamps)
+    first = stamps[0] if stamps else decimal.Decimal(0)
+    unit = _NAME_UNITS.get(column.lower().replace('.', '_').replace(' ', '_').split('_')[-1])
+    how = f'from the name {column!r}' if unit else ''
+    if unit is None:
+        unit = next((u for u in TIME_UNITS if _date_epoch(first, u)), None)
+        how = 'the first stamp is a date' if unit else ''
+
+    def rate(u):
+        return 1e9 / float(step * TIME_FACTOR_NS[u]) if step > 0 else 0.0
+
+    if unit is None and step > 0:
+        lo, hi = PLAUSIBLE_RATE_HZ
+        rest = [u for u in TIME_UNITS if u != 's']
+        unit = ('s' if lo <= rate('s') <= hi else
+                next((u for u in rest if TRACKER_RATE_HZ[0] <= rate(u) <= TRACKER_RATE_HZ[1]),
+                     None) or next((u for u in rest if lo <= rate(u) <= hi), None))
+        how = f'from the median step {float(step):.6g}'
+        if unit is None:
+            raise UnitsError(f'{where}time column {column!r}: a median step of {float(step):.6g} '
+                             'is no head-pose rate in any unit ('
+                             + ', '.join(f'{TIME_UNIT_WORDS[u]}: {rate(u):.3g} Hz'
+                                         for u in TIME_UNITS) + f'); {_TIME_FLAGS}')
+    if unit is None:
+        unit, how = 's', 'one sample'
+    span = float((stamps[-1] - stamps[0]) * TIME_FACTOR_NS[unit]) * 1e-9 if stamps else 0.0
+    problem = timing_problem(rate(unit), span)
+    if problem:
+        raise UnitsError(f'{where}time column {column!r} read in {TIME_UNIT_WORDS[unit]} ({how}) '
+                         f'gives {problem}; {_TIME_FLAGS}')
+    words = TIME_UNIT_WORDS[unit]
+    epoch = _date_epoch(first, unit)
+    offset = epoch[1] if epoch else 0
+    if epoch:
+        date = datetime.datetime.fromtimestamp(
+            float(first * TIME_FACTOR_NS[unit] / 10 ** 9 - offset), datetime.timezone.utc)
+        words += f' since {epoch[0]}'
+        how += f', {date:%Y-%m-%d %H:%M:%S} UTC' if how.startswith('the first') else ''
+    return unit, offset, (f'{words} (auto: {how}' + (f'; median rate {rate(unit):.4g} Hz)'
+                                                     if step > 0 else ')'))
+
+
 def read_pose_table(path: str, time_column: str = 't_s', time_unit: str = 's',
                     quat_columns=('qx', 'qy', 'qz', 'qw'), quat_order: str = 'xyzw',
                     position_columns=('px', 'py', 'pz'), neck_offset=None, pivot=None,
@@ -81,10 +183,11 @@ def read_pose_table(path: str, time_column: str = 't_s', time_unit: str = 's',
     """Read a pose table: CSV or whitespace-separated text whose first non-comment line names
     the columns.  Blank lines and lines starting with ``#`` are skipped.
 
-    ``time_column`` in ``time_unit`` ('s', 'ms', 'us', 'ns'), or in ticks of ``time_scale``
-    seconds (e.g. ``'1e-7'`` for 100 ns ticks; a string is taken exactly), any epoch: times are
-    parsed exactly (no float rounding) and the first row's stamp is subtracted before scaling;
-    the times are absolute when the first stamp fits a ROS time (int64 ns), else relative to it;
+    ``time_column`` in ``time_unit`` ('s', 'ms', 'us', '100ns', 'ns', or 'auto': recognised by
+    :func:`recognise_time_unit`), or in ticks of ``time_scale`` seconds (e.g. ``'1e-7'`` for
+    100 ns ticks; a string is taken exactly), any epoch: times are parsed exactly (no float
+    rounding) and the first row's stamp is subtracted before scaling; the times are absolute
+    when the first stamp fits a ROS time (int64 ns), else relative to it;
     ``quat_columns`` four column names holding the quaternion components in ``quat_order``
     ('xyzw' or 'wxyz'); ``position_columns`` three column names [m], or None for an
     orientation-only table: then the head origin is ``pivot + R @ neck_offset`` (a head turning
@@ -97,8 +200,8 @@ def read_pose_table(path: str, time_column: str = 't_s', time_unit: str = 's',
     normalised and made sign-continuous.  Missing file/column, a bad header, a row with the
     wrong number of fields or a non-numeric field raise HeadMotionError naming the line.
     """
-    if time_unit not in _TIME_FACTOR_NS:
-        raise HeadMotionError(f'time_unit must be one of {sorted(_TIME_FACTOR_NS)}, '
+    if time_unit not in TIME_FACTOR_NS and time_unit != 'auto':
+        raise HeadMotionError(f"time_unit must be one of {list(TIME_UNITS)} or 'auto', "
                               f'got {time_unit!r}')
     if time_scale is not None:
         try:
@@ -109,8 +212,8 @@ def read_pose_table(path: str, time_column: str = 't_s', time_unit: str = 's',
             raise HeadMotionError(f'time_scale must be a positive number of seconds per tick, '
                                   f'got {time_scale!r}')
         ns_per_tick = scale * 10 ** 9
-    else:
-        ns_per_tick = decimal.Decimal(_TIME_FACTOR_NS[time_unit])
+    elif time_unit != 'auto':
+        ns_per_tick = decimal.Decimal(TIME_FACTOR_NS[time_unit])
     if quat_order not in ('xyzw', 'wxyz'):
         raise HeadMotionError(f"quat_order must be 'xyzw' or 'wxyz', got {quat_order!r}")
     if len(quat_columns) != 4:
@@ -184,7 +287,14 @@ def read_pose_table(path: str, time_column: str = 't_s', time_unit: str = 's',
         stamps.append(d if d.is_finite() else None)
         t_ok[i] = d.is_finite()
     first = next((d for d in stamps if d is not None), decimal.Decimal(0))
+    epoch_ns, units = 0, ''
+    if time_scale is None and time_unit == 'auto':
+        time_unit, epoch_s, units = recognise_time_unit(
+            time_column, [d for d in stamps if d is not None], f'{path}: ')
+        ns_per_tick = decimal.Decimal(TIME_FACTOR_NS[time_unit])
+        epoch_ns = epoch_s * 10 ** 9
     origin = int((first * ns_per_tick).to_integral_value(rounding=decimal.ROUND_HALF_EVEN))
+    origin -= epoch_ns
     absolute = 0 <= origin <= MAX_STAMP_NS // 2
     for i, d in enumerate(stamps):
         if d is None:
@@ -225,10 +335,10 @@ def read_pose_table(path: str, time_column: str = 't_s', time_unit: str = 's',
         off = np.zeros(3) if neck_offset is None else np.asarray(neck_offset, float).reshape(3)
         piv = np.zeros(3) if pivot is None else np.asarray(pivot, float).reshape(3)
         pos = piv + quat_to_matrix(qk) @ off
-    unit = f'{time_scale} s ticks' if time_scale is not None else time_unit
+    unit = f'{time_scale} s ticks' if time_scale is not None else units or time_unit
     desc = source or (f'{path} (pose table, time {time_column!r} [{unit}]'
                       + ('' if absolute else ', relative to the first row') + ')')
-    return HeadMotion(t_ns[keep], pos, qk, source=desc, dropped=dropped)
+    return HeadMotion(t_ns[keep], pos, qk, source=desc, dropped=dropped, units=units)
 
 
 def read_vr360(path: str, neck_offset=None, pivot=None) -> HeadMotion:
