@@ -470,7 +470,9 @@ def _dominance_rows(path):
     import json
     keys = ('name', 'ghost', 'motion_err', 'settled_err', 'stretch', 'penetration_mm',
             'admitted')
-    return [[{k: r[k] for k in keys} for r in rep['rows']] for rep in json.load(open(path))]
+    with open(path) as f:
+        studies = json.load(f)['studies']
+    return [[{k: r[k] for k in keys} for r in rep['rows']] for rep in studies]
 
 
 def test_motion_files_evaluate_as_they_import(tmp_path, capsys):
