@@ -51,8 +51,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PoseStamped, TransformStamped
 import numba
 import numpy as np
-from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, \
-    SetParametersResult
+from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 import rclpy
 from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
@@ -79,7 +78,8 @@ from hair_tracking.core.head_track import PoseResult
 from hair_tracking.core.params import Param, ParamError
 from hair_tracking.core.scene import Scene, SceneError
 from hair_tracking.core.transforms import quat_to_matrix
-from hair_tracking.output.params_check import unknown_parameters
+from hair_tracking.output.params_check import params_files_problem, rcl_arguments_problem, \
+    unknown_parameters
 from hair_tracking.output.settings import apply_changes, make_settings, MARKER_STYLES, \
     NODE_NAME, NODE_ROWS, table
 from hair_tracking.output.strand_colors import StrandColorCache
@@ -116,16 +116,17 @@ def output_qos(depth: int) -> QoSProfile:
 
 
 def descriptor(p: Param) -> ParameterDescriptor:
-    """The ROS ParameterDescriptor of a table entry (description, range, read-only)."""
-    d = ParameterDescriptor(name=p.name, type=_PARAM_TYPES[p.kind].value,
-                            description=p.full_description(),
-                            additional_constraints=p.range_text(), read_only=p.read_only)
-    if p.kind == 'int' and p.lo is not None and p.hi is not None:
-        d.integer_range = [IntegerRange(from_value=int(p.lo), to_value=int(p.hi), step=1)]
-    elif p.kind == 'double' and p.lo is not None and p.hi is not None:
-        d.floating_point_range = [FloatingPointRange(from_value=float(p.lo),
-                                                     to_value=float(p.hi), step=0.0)]
-    return d
+    """The ROS ParameterDescriptor of a table entry: description, the allowed values as text
+    (``additional_constraints``, e.g. ``[1, 100000]``), read-only.
+
+    No ``integer_range`` / ``floating_point_range``: rclpy checks those before the node's own
+    validation and answers in its own words ("Parameter groom.guides out of range. Min: 1,
+    ..."); without them every refusal, at start and live, is the node's (:func:`make_settings`,
+    :meth:`HairSimNode._on_set`): ``groom.guides: 0 is outside the allowed range [1, 100000]``.
+    """
+    return ParameterDescriptor(name=p.name, type=_PARAM_TYPES[p.kind].value,
+                               description=p.full_description(),
+                               additional_constraints=p.range_text(), read_only=p.read_only)
 
 
 def load_base_scene(scene_file: str) -> Scene:
@@ -860,6 +861,10 @@ def main(args=None) -> int:
     argv = list(sys.argv if args is None else args)
     split = argv.index('--ros-args') if '--ros-args' in argv else len(argv)
     options = make_parser().parse_args(argv[1:split])
+    problem = params_files_problem(argv)      # before rcl, whose parse error is a traceback
+    if problem:
+        print(f'[hair_sim] {problem}', file=sys.stderr)
+        return 2
     try:
         done = process_tuning.apply(options)
     except ValueError as e:
@@ -891,6 +896,11 @@ def main(args=None) -> int:
         pass
     except (ParamError, SceneError, ParameterException) as e:
         print(f'[hair_sim] invalid parameters: {e}', file=sys.stderr)
+        code = 2
+    except RuntimeError as e:       # rcl refused the ROS arguments params_files_problem passed
+        if rcl_arguments_problem(e) is None:
+            raise
+        print(f'[hair_sim] {rcl_arguments_problem(e)}', file=sys.stderr)
         code = 2
     finally:
         if executor is not None:
