@@ -22,7 +22,8 @@ Outputs, built only when somebody subscribes: ``hair/points`` (organized PointCl
 strand, x y z float32, ``strand`` index, packed ``rgb``), ``hair/markers`` (MarkerArray,
 ``line_list`` or ``line_strips``, a DELETEALL first whenever the strand count or style changes,
 lifetime of a few publishing periods), optionally ``hair/guides/points`` and
-``hair/guides/markers``, and ``/diagnostics``.  Both hair outputs are serialized straight to CDR
+``hair/guides/markers``, the head collider on ``hair/head`` (Marker, ``head_marker``), each
+head pose on ``/tf`` (``publish_tf``), and ``/diagnostics``.  Both hair outputs are serialized straight to CDR
 bytes with numpy (:mod:`msg_adapters.pointcloud`, :mod:`msg_adapters.marker_cdr`).  Publishing
 runs on its own timer (``publish_rate_hz``); ``publish_on_pose`` additionally publishes right
 after a simulated pose when a period of stream time has passed, for the lowest latency.
@@ -838,10 +839,12 @@ def make_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog='hair_sim_node',
         description='ROS 2 node that makes hair follow a head-pose stream: subscribes '
-                    'head_pose (PoseStamped) and head_transform (TransformStamped), publishes '
-                    'hair/points (PointCloud2), hair/markers (MarkerArray) and /diagnostics, '
-                    'offers ~/reset. Every setting is a ROS parameter (see config/hair_sim.yaml '
-                    'and docs/node.md).',
+                    'head_pose (PoseStamped) and head_transform (TransformStamped), with use_tf '
+                    '/tf and /tf_static (TFMessage); publishes hair/points (PointCloud2), '
+                    'hair/markers (MarkerArray), hair/head (Marker, the head collider), /tf (the '
+                    'head pose, publish_tf), /diagnostics, and with publish_guides '
+                    'hair/guides/points and hair/guides/markers; offers ~/reset. Every setting '
+                    'is a ROS parameter (see config/hair_sim.yaml and docs/node.md).',
         epilog='ROS arguments follow --ros-args, e.g. hair_sim_node --ros-args '
                '--params-file config/hair_sim.yaml -p scene_file:=long_hair '
                '-r head_pose:=/face/pose')
