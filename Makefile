@@ -70,7 +70,7 @@ bench: install
 		--set tracking.every_substep=false --json out/bench_latency_10k_once_per_pose.json
 	$(TEST_ENV) $(PY) scripts/bench_transport.py --json out/bench_transport.json
 
-# The full matrix of stiff and extreme cases (a few minutes); writes docs/results/stability.*
+# The full matrix of stiff and extreme cases; writes docs/results/stability.*
 stability: install
 	$(PY) -m hair_tracking.evaluation.cli stability
 

@@ -13,7 +13,7 @@ settings against simulating every strand (:mod:`hair_tracking.evaluation.dominan
 (:mod:`hair_tracking.evaluation.stability`) and writes ``stability.csv`` and ``stability.md``; it
 exits with status 1 if a case fails.
 
-``--quick`` is the CI-sized variant (a few minutes on two cores); the default is the full
+``--quick`` is the CI-sized variant (fewer strands, motions and methods); the default is the full
 evaluation whose outputs are committed under ``docs/``.  Timings are taken single-threaded by
 default (``--threads``): on a shared two-core machine numba's and OpenMP's thread pools are
 slowed down by an order of magnitude by other load, and one thread treats every method alike.
@@ -202,7 +202,8 @@ def main(argv=None) -> int:
     p = argparse.ArgumentParser(prog='hair_sim_eval', description=__doc__.split('\n')[0])
     sub = p.add_subparsers(dest='cmd', required=True)
     a = sub.add_parser('accuracy', help='error against run time of every method')
-    a.add_argument('--quick', action='store_true', help='CI-sized run (a few minutes)')
+    a.add_argument('--quick', action='store_true',
+                   help='CI-sized run: 128 ghosts, 3 s of the walk, fewer methods')
     a.add_argument('--out', default='docs/results', help='folder of the CSV/Markdown tables')
     a.add_argument('--figures', default='docs/figures', help='folder of the PNG plots')
     a.add_argument('--ghosts', type=int, default=0, help='ghost strands (default 512, quick 128)')
