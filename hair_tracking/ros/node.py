@@ -23,10 +23,11 @@ strand, x y z float32, ``strand`` index, packed ``rgb``), ``hair/markers`` (Mark
 ``line_list`` or ``line_strips``, a DELETEALL first whenever the strand count or style changes,
 lifetime of a few publishing periods), optionally ``hair/guides/points`` and
 ``hair/guides/markers``, the head collider on ``hair/head`` (Marker, ``head_marker``), each
-head pose on ``/tf`` (``publish_tf``), and ``/diagnostics``.  Both hair outputs are serialized straight to CDR
-bytes with numpy (:mod:`msg_adapters.pointcloud`, :mod:`msg_adapters.marker_cdr`).  Publishing
-runs on its own timer (``publish_rate_hz``); ``publish_on_pose`` additionally publishes right
-after a simulated pose when a period of stream time has passed, for the lowest latency.
+head pose on ``/tf`` (``publish_tf``), and ``/diagnostics``.  Both hair outputs are serialized
+straight to CDR bytes with numpy (:mod:`msg_adapters.pointcloud`,
+:mod:`msg_adapters.marker_cdr`).  Publishing runs on its own timer (``publish_rate_hz``);
+``publish_on_pose`` additionally publishes right after a simulated pose when a period of stream
+time has passed, for the lowest latency.
 
 Service ``~/reset`` (std_srvs/Trigger): hair back to its rest shape at the current head pose.
 
