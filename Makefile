@@ -70,8 +70,8 @@ bench: install
 		--set tracking.every_substep=false --json out/bench_latency_10k_once_per_pose.json
 	$(TEST_ENV) $(PY) scripts/bench_transport.py --json out/bench_transport.json
 
-# The full matrix of stiff and extreme cases (a few minutes); refreshes the committed
-# docs/results/stability.* (hair_sim_eval itself writes under out/eval/ unless told).
+# The full matrix of stiff and extreme cases; refreshes the committed docs/results/stability.*
+# (hair_sim_eval itself writes under out/eval/ unless told).
 stability: install
 	$(PY) -m hair_tracking.evaluation.cli stability --out docs/results
 

@@ -58,9 +58,20 @@ def test_list_get_set_and_refusals(node):
     rc, out, err = ctl('param', 'set', '/hair_sim', 'solver.type', 'rk4')
     assert rc == 1 and 'setting solver.type failed' in err and 'ftl' in err
     rc, out, err = ctl('param', 'set', '/hair_sim', 'groom.guides', '0')  # out of range
-    assert rc == 1 and 'groom.guides' in err
-    rc, out, err = ctl('param', 'get', '/hair_sim', 'no.such')
-    assert rc == 1 and 'not set' in err
+    assert rc == 1 and err == ('hair_sim_ctl: setting groom.guides failed: groom.guides: 0 is '
+                               'outside the allowed range [1, 100000]\n')
+
+
+def test_unknown_names_are_one_line_with_the_closest_ones(node):
+    rc, out, err = ctl('param', 'set', '/hair_sim', 'groom.gost_nodes', '4')
+    assert (rc, out) == (2, '')
+    assert err == ("hair_sim_ctl: unknown parameter 'groom.gost_nodes' of /hair_sim; did you "
+                   "mean 'groom.ghost_nodes'?\n")
+    rc, out, err = ctl('param', 'get', '/hair_sim', 'no.such.thing')
+    assert rc == 2
+    assert err == ("hair_sim_ctl: unknown parameter 'no.such.thing' of /hair_sim "
+                   "(hair_sim_ctl param list /hair_sim lists them)\n")
+    assert ctl('param', 'get', '/hair_sim', 'groom.ghost_nodes')[1].strip() == '16'
 
 
 def test_dump_is_a_params_file_and_reset_answers(node):

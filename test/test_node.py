@@ -756,3 +756,49 @@ def test_executable_rejects_a_bad_parameter_with_its_name():
     assert proc.returncode == 2, out
     assert 'solver.type' in out and 'ftl' in out
     assert 'Traceback' not in out
+
+
+def _exit_of(args, domain_id):
+    proc = _run_node(args, domain_id)
+    try:
+        out, _ = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
+    return proc.returncode, out
+
+
+def test_executable_refuses_an_out_of_range_parameter_in_the_readme_form():
+    code, out = _exit_of(['-p', 'groom.guides:=0', '-p', 'warmup:=false'], 58)
+    assert code == 2, out
+    assert out.splitlines()[-1] == ('[hair_sim] invalid parameters: groom.guides: 0 is outside '
+                                    'the allowed range [1, 100000]'), out
+    assert 'Traceback' not in out and 'ready:' not in out
+
+
+@pytest.mark.parametrize('text, reason', [
+    (None, 'params file not found'),
+    ('hair_sim:\n  ros__parameters: {groom: [\n', 'not valid YAML: line 3, column 1: '),
+    ('hair_sim:\n  groom:\n    guides: 4\n',
+     'hair_sim.groom.guides: a value where "ros__parameters:" should be'),
+    ('hair_sim:\n  ros__parameters:\n    gravity: [0, 0, -9.81]\n',
+     'hair_sim.ros__parameters.gravity: the list mixes double and integer values'),
+])
+def test_executable_refuses_an_unusable_params_file_in_one_line(tmp_path, text, reason):
+    path = tmp_path / 'p.yaml'
+    if text is not None:
+        path.write_text(text)
+    code, out = _exit_of(['--params-file', str(path)], 59)
+    assert code == 2, out
+    assert len(out.splitlines()) == 1 and out.startswith(f'[hair_sim] {path}: {reason}'), out
+
+
+def test_a_params_file_only_rcl_refuses_is_still_a_short_message(tmp_path):
+    path = tmp_path / 'p.yaml'
+    path.write_text('3d:\n  ros__parameters: {a: 1}\n')      # rcl: no node name starts with 3
+    code, out = _exit_of(['--params-file', str(path)], 59)
+    assert code == 2, out
+    assert out.splitlines()[-1] == (f'[hair_sim] {path}: not a valid params file: node name '
+                                    'must not start with a number'), out
+    assert 'Traceback' not in out

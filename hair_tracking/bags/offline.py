@@ -32,6 +32,7 @@ from hair_tracking.bags import io as bag_io
 from hair_tracking.bags.io import BagError, EXIT_CONTENT, EXIT_FAILURE, EXIT_USAGE
 from hair_tracking.core.params import ParamError
 from hair_tracking.core.scene import Scene, SceneError
+from hair_tracking.output.params_check import load_params_file, node_parameters, ParamsFileError
 from hair_tracking.output.settings import make_settings, NODE_NAME, Settings
 from hair_tracking.output.strand_colors import StrandColorCache
 
@@ -45,39 +46,19 @@ DIAGNOSTIC_NAME = 'hair_sim: hair simulation'
 
 
 # ================================================================ settings
-def _flatten(d, prefix=''):
-    out = {}
-    for k, v in d.items():
-        key = f'{prefix}{k}'
-        if isinstance(v, dict):
-            out.update(_flatten(v, key + '.'))
-        else:
-            out[key] = v
-    return out
-
-
 def read_params_file(path: str, node_name: str = NODE_NAME) -> Dict[str, object]:
-    """Flat ``{name: value}`` of a ROS 2 params file for ``node_name`` (also ``/**`` and
-    ``/node_name`` sections; nested keys become dotted names)."""
-    if not os.path.isfile(path):
-        raise BagError(f'{path}: params file not found', EXIT_USAGE)
+    """Flat ``{name: value}`` of a ROS 2 params file for ``node_name``: the sections that apply
+    to ``/node_name`` as rcl matches them (``/**``, ``node_name``, ``/node_name`` ...; nested
+    keys become dotted names), read by the node's own reader
+    (:func:`hair_tracking.output.params_check.load_params_file`)."""
     try:
-        with open(path, encoding='utf-8') as fh:
-            data = yaml.safe_load(fh)
-    except (OSError, yaml.YAMLError) as exc:
-        raise BagError(f'{path}: not a valid params file: {exc}', EXIT_USAGE) from None
-    if not isinstance(data, dict):
-        raise BagError(f'{path}: a params file holds a mapping of node names', EXIT_USAGE)
-    values: Dict[str, object] = {}
-    found = False
-    for key in ('/**', node_name, '/' + node_name):
-        section = data.get(key)
-        if isinstance(section, dict) and isinstance(section.get('ros__parameters'), dict):
-            values.update(_flatten(section['ros__parameters']))
-            found = True
-    if not found:
+        data = load_params_file(path)
+    except ParamsFileError as exc:
+        raise BagError(str(exc), EXIT_USAGE) from None
+    values = node_parameters(data, '/' + node_name)
+    if values is None:
         raise BagError(f'{path}: no "{node_name}: ros__parameters:" (or "/**") section; '
-                       f'sections: {", ".join(map(str, data))}', EXIT_USAGE)
+                       f'sections: {", ".join(map(str, data)) or "none"}', EXIT_USAGE)
     return values
 
 

@@ -21,10 +21,11 @@ error), and ``--motion FILE`` adds a recording read exactly as ``hair_sim_bag im
 it, with its options (:mod:`hair_tracking.bags.recording`); the files come on top of the
 built-in motions, in every command alike.
 
-``--quick`` is the CI-sized variant (a few minutes on two cores); the default is the full
-evaluation whose outputs are committed under ``docs/``.  Timings are taken single-threaded by
-default (``--threads``): on a shared two-core machine numba's and OpenMP's thread pools are
-slowed down by an order of magnitude by other load, and one thread treats every method alike.
+``--quick`` is the CI-sized variant (fewer strands, motions and methods); the default is the
+full evaluation, the one ``make eval`` commits under ``docs/``.  Timings are taken
+single-threaded by default (``--threads``): on a shared two-core machine numba's and OpenMP's
+thread pools are slowed down by an order of magnitude by other load, and one thread treats
+every method alike.
 """
 import argparse
 import os
@@ -244,7 +245,8 @@ def main(argv=None) -> int:
     p = argparse.ArgumentParser(prog='hair_sim_eval', description=__doc__.split('\n')[0])
     sub = p.add_subparsers(dest='cmd', required=True)
     a = sub.add_parser('accuracy', help='error against run time of every method')
-    a.add_argument('--quick', action='store_true', help='CI-sized run (a few minutes)')
+    a.add_argument('--quick', action='store_true',
+                   help='CI-sized run: 128 ghosts, 3 s of the walk, fewer methods')
     _outputs(a, 'accuracy', 'the CSV/Markdown tables', figures=True)
     a.add_argument('--ghosts', type=int, default=0, help='ghost strands (default 512, quick 128)')
     a.add_argument('--repeats', type=int, default=2, help='timing runs per method')

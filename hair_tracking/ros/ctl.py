@@ -11,9 +11,11 @@ It talks to a running node through rclpy's own parameter client
 ``~/reset`` service.  Values are parsed as YAML, as ``ros2 param set`` does: ``-3`` is an
 integer, ``-3.0`` a double (hair_sim takes an integer for a double parameter; other nodes may
 refuse it, so write the decimal point).
-Exit codes: 0 done, 1 the node refused or did not answer, 2 bad command line.
+Exit codes: 0 done, 1 the node refused or did not answer, 2 bad command line (a parameter
+the node does not have is named with the closest one it has).
 """
 import argparse
+import difflib
 import sys
 from typing import List, Optional
 
@@ -34,6 +36,18 @@ def _value(p):
     """The Python value of an rcl_interfaces ParameterValue."""
     from rclpy.parameter import parameter_value_to_python
     return parameter_value_to_python(p)
+
+
+def _unknown_name(name: str, target: str, names) -> Optional[str]:
+    """``None`` when ``target`` has a parameter ``name``, else one line saying so, with the
+    closest name it has if one is close (:func:`difflib.get_close_matches`)."""
+    names = list(names)
+    if name in names:
+        return None
+    close = difflib.get_close_matches(name, names, n=1)
+    hint = f"; did you mean '{close[0]}'?" if close else \
+        f' (hair_sim_ctl param list {target} lists them)'
+    return f"unknown parameter '{name}' of {target}{hint}"
 
 
 def run(args, node) -> int:
@@ -60,6 +74,12 @@ def run(args, node) -> int:
         for name in sorted(res.result.names):
             print(name)
         return 0
+    if args.action in ('get', 'set'):
+        unknown = _unknown_name(args.name, target, _spin_until(
+            node, client.list_parameters(), args.timeout).result.names)
+        if unknown:
+            print(f'hair_sim_ctl: {unknown}', file=sys.stderr)
+            return 2
     if args.action in ('get', 'dump'):
         if args.action == 'get':
             names = [args.name]

@@ -9,8 +9,9 @@
    ``OUT/hair_output.mcap``, logging at ``/clock`` time;
 3. plays the bundled head-pose bag (CMU 131_01 walk, 8.3 s) into it with ``/clock`` before
    each message, paced by the wall clock;
-4. stops the node, renders ``OUT/pictures/`` (``hair.gif``, ``hair.png``, ``diagnostics.png``)
-   from the recording, and prints a summary: frames, rate, the node's step times, stretch,
+4. stops the node (SIGINT, then SIGTERM, SIGKILL only as a last resort, each said), renders
+   ``OUT/pictures/`` (``hair.gif``, ``hair.png``, ``diagnostics.png``) from the recording, and
+   prints a summary: frames, rate, the node's step times, stretch,
    penetration, rejected poses.
 
 Everything stays on this machine (``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``) on its own
@@ -38,6 +39,7 @@ from hair_tracking.bags.io import BagError
 DEFAULT_DOMAIN = 88
 NODE_READY_TIMEOUT_S = 120.0      # first start may compile every numba kernel
 DRAIN_S = 1.5                     # keep recording this long after the last message played
+STOP_WAIT_S = 10.0                # how long the node may take to exit after each signal
 
 
 def _log(text: str) -> None:
@@ -62,15 +64,25 @@ def start_node(domain: int, log_path: Path, params: List[str], threads: Optional
     return proc, log
 
 
-def stop_node(proc, timeout: float = 10.0) -> int:
-    """SIGINT (the node shuts down cleanly), then SIGKILL if it does not."""
-    if proc.poll() is None:
-        proc.send_signal(signal.SIGINT)
+def stop_node(proc, timeout: float = STOP_WAIT_S, log=_log) -> int:
+    """Stop the node as a user would: SIGINT (Ctrl-C), then, if it is still running after
+    ``timeout`` seconds, SIGTERM (an external shutdown, which rclpy's own handler turns into one
+    however the node waits), and only as the last resort SIGKILL; each escalation is logged.
+    Returns the node's exit code."""
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        if proc.poll() is not None:
+            break
+        if sig != signal.SIGINT:
+            log(f'the node did not stop within {timeout:g} s of SIGINT: sending SIGTERM')
+        proc.send_signal(sig)
         try:
             proc.wait(timeout)
         except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait(5)
+            pass
+    if proc.poll() is None:
+        log(f'the node did not stop within {timeout:g} s of SIGTERM either: killing it (SIGKILL)')
+        proc.kill()
+        proc.wait(timeout)
     return proc.returncode
 
 

@@ -22,10 +22,12 @@ Outputs, built only when somebody subscribes: ``hair/points`` (organized PointCl
 strand, x y z float32, ``strand`` index, packed ``rgb``), ``hair/markers`` (MarkerArray,
 ``line_list`` or ``line_strips``, a DELETEALL first whenever the strand count or style changes,
 lifetime of a few publishing periods), optionally ``hair/guides/points`` and
-``hair/guides/markers``, and ``/diagnostics``.  Both hair outputs are serialized straight to CDR
-bytes with numpy (:mod:`msg_adapters.pointcloud`, :mod:`msg_adapters.marker_cdr`).  Publishing
-runs on its own timer (``publish_rate_hz``); ``publish_on_pose`` additionally publishes right
-after a simulated pose when a period of stream time has passed, for the lowest latency.
+``hair/guides/markers``, the head collider on ``hair/head`` (Marker, ``head_marker``), each
+head pose on ``/tf`` (``publish_tf``), and ``/diagnostics``.  Both hair outputs are serialized
+straight to CDR bytes with numpy (:mod:`msg_adapters.pointcloud`,
+:mod:`msg_adapters.marker_cdr`).  Publishing runs on its own timer (``publish_rate_hz``);
+``publish_on_pose`` additionally publishes right after a simulated pose when a period of stream
+time has passed, for the lowest latency.
 
 Service ``~/reset`` (std_srvs/Trigger): hair back to its rest shape at the current head pose.
 
@@ -51,8 +53,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PoseStamped, TransformStamped
 import numba
 import numpy as np
-from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, \
-    SetParametersResult
+from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 import rclpy
 from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
@@ -79,7 +80,8 @@ from hair_tracking.core.head_track import PoseResult
 from hair_tracking.core.params import Param, ParamError
 from hair_tracking.core.scene import Scene, SceneError
 from hair_tracking.core.transforms import quat_to_matrix
-from hair_tracking.output.params_check import unknown_parameters
+from hair_tracking.output.params_check import params_files_problem, rcl_arguments_problem, \
+    unknown_parameters
 from hair_tracking.output.settings import apply_changes, make_settings, MARKER_STYLES, \
     NODE_NAME, NODE_ROWS, table
 from hair_tracking.output.strand_colors import StrandColorCache
@@ -116,16 +118,17 @@ def output_qos(depth: int) -> QoSProfile:
 
 
 def descriptor(p: Param) -> ParameterDescriptor:
-    """The ROS ParameterDescriptor of a table entry (description, range, read-only)."""
-    d = ParameterDescriptor(name=p.name, type=_PARAM_TYPES[p.kind].value,
-                            description=p.full_description(),
-                            additional_constraints=p.range_text(), read_only=p.read_only)
-    if p.kind == 'int' and p.lo is not None and p.hi is not None:
-        d.integer_range = [IntegerRange(from_value=int(p.lo), to_value=int(p.hi), step=1)]
-    elif p.kind == 'double' and p.lo is not None and p.hi is not None:
-        d.floating_point_range = [FloatingPointRange(from_value=float(p.lo),
-                                                     to_value=float(p.hi), step=0.0)]
-    return d
+    """The ROS ParameterDescriptor of a table entry: description, the allowed values as text
+    (``additional_constraints``, e.g. ``[1, 100000]``), read-only.
+
+    No ``integer_range`` / ``floating_point_range``: rclpy checks those before the node's own
+    validation and answers in its own words ("Parameter groom.guides out of range. Min: 1,
+    ..."); without them every refusal, at start and live, is the node's (:func:`make_settings`,
+    :meth:`HairSimNode._on_set`): ``groom.guides: 0 is outside the allowed range [1, 100000]``.
+    """
+    return ParameterDescriptor(name=p.name, type=_PARAM_TYPES[p.kind].value,
+                               description=p.full_description(),
+                               additional_constraints=p.range_text(), read_only=p.read_only)
 
 
 def load_base_scene(scene_file: str) -> Scene:
@@ -837,10 +840,12 @@ def make_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog='hair_sim_node',
         description='ROS 2 node that makes hair follow a head-pose stream: subscribes '
-                    'head_pose (PoseStamped) and head_transform (TransformStamped), publishes '
-                    'hair/points (PointCloud2), hair/markers (MarkerArray) and /diagnostics, '
-                    'offers ~/reset. Every setting is a ROS parameter (see config/hair_sim.yaml '
-                    'and docs/node.md).',
+                    'head_pose (PoseStamped) and head_transform (TransformStamped), with use_tf '
+                    '/tf and /tf_static (TFMessage); publishes hair/points (PointCloud2), '
+                    'hair/markers (MarkerArray), hair/head (Marker, the head collider), /tf (the '
+                    'head pose, publish_tf), /diagnostics, and with publish_guides '
+                    'hair/guides/points and hair/guides/markers; offers ~/reset. Every setting '
+                    'is a ROS parameter (see config/hair_sim.yaml and docs/node.md).',
         epilog='ROS arguments follow --ros-args, e.g. hair_sim_node --ros-args '
                '--params-file config/hair_sim.yaml -p scene_file:=long_hair '
                '-r head_pose:=/face/pose')
@@ -860,6 +865,10 @@ def main(args=None) -> int:
     argv = list(sys.argv if args is None else args)
     split = argv.index('--ros-args') if '--ros-args' in argv else len(argv)
     options = make_parser().parse_args(argv[1:split])
+    problem = params_files_problem(argv)      # before rcl, whose parse error is a traceback
+    if problem:
+        print(f'[hair_sim] {problem}', file=sys.stderr)
+        return 2
     try:
         done = process_tuning.apply(options)
     except ValueError as e:
@@ -891,6 +900,11 @@ def main(args=None) -> int:
         pass
     except (ParamError, SceneError, ParameterException) as e:
         print(f'[hair_sim] invalid parameters: {e}', file=sys.stderr)
+        code = 2
+    except RuntimeError as e:       # rcl refused the ROS arguments params_files_problem passed
+        if rcl_arguments_problem(e) is None:
+            raise
+        print(f'[hair_sim] {rcl_arguments_problem(e)}', file=sys.stderr)
         code = 2
     finally:
         if executor is not None:
