@@ -11,17 +11,17 @@ PACKAGE = os.path.join(ROOT, 'hair_tracking')
 
 #: Layers from the bottom up: a module may import its own layer and the ones below it only.
 #: The top-level helpers (resources, process_tuning) are leaves any layer may use.
-LAYERS = ['core', 'guides', 'ghosts', 'simulator', 'output', 'bags', 'evaluation', 'ros']
+LAYERS = ['core', 'grooms', 'guides', 'ghosts', 'simulator', 'output', 'bags', 'evaluation', 'ros']
 LEAVES = {'resources', 'process_tuning'}
 #: Layers that simulate: numpy, numba and yaml only, no ROS messages, no rclpy, no adapters.
-SIMULATION = {'core', 'guides', 'ghosts', 'simulator'}
+SIMULATION = {'core', 'grooms', 'guides', 'ghosts', 'simulator'}
 ROS_ROOTS = {'rclpy', 'rosidl_runtime_py', 'rosgraph_msgs', 'std_msgs', 'geometry_msgs',
              'sensor_msgs', 'visualization_msgs', 'diagnostic_msgs', 'std_srvs', 'tf2_msgs',
              'rcl_interfaces', 'builtin_interfaces', 'msg_adapters', 'rosbags'}
 #: At most this many modules at the top of hair_tracking/ (besides __init__.py).
 MAX_TOP_MODULES = 4
 #: Optional packages (not installed with the package) and the only modules that import them.
-OPTIONAL = {'viser': {'hair_tracking.ros.view'}}
+OPTIONAL = {'viser': {'hair_tracking.ros.view'}, 'pxr': {'hair_tracking.grooms.usd'}}
 
 
 def modules():
@@ -85,7 +85,8 @@ def test_imports_point_down_the_layers(name, path):
 
 
 def test_optional_packages_are_imported_only_where_they_are_used():
-    """viser (the browser viewer's library) stays out of the node and the simulation."""
+    """viser (the browser viewer's library) stays out of the node and the simulation, usd-core
+    (pxr) in the USD reader."""
     users = {root: set() for root in OPTIONAL}
     for name, path in modules():
         for target in imports(path, name):
@@ -114,7 +115,7 @@ def test_the_numba_cache_key_covers_every_subpackage(tmp_path, monkeypatch):
     shutil.copytree(PACKAGE, copy, ignore=shutil.ignore_patterns('__pycache__', 'data'))
     monkeypatch.setattr(hair_tracking, '_HERE', str(copy))
     before = hair_tracking.source_hash()
-    for sub in ('ghosts', 'guides', 'core'):
+    for sub in ('ghosts', 'guides', 'grooms', 'core'):
         kernel = next(p for p in sorted((copy / sub).iterdir()) if p.name != '__init__.py')
         kernel.write_text(kernel.read_text() + '\n# edited\n')
         after = hair_tracking.source_hash()
