@@ -66,6 +66,10 @@ MIN_SPLIT_DT = 1.0 / 960.0
 SPLIT_FRACTION = 0.5
 #: ... or this distance [m] when the clamp is off (``solver.max_displacement = 0``).
 SPLIT_DISTANCE = 0.025
+#: A settle until still (``solver.settle_speed``) goes on this long [s] at a time ...
+SETTLE_CHUNK_S = 0.1
+#: ... and, with ``solver.settle_time``, at most this long [s] in all.
+MAX_SETTLE_S = 30.0
 
 
 @dataclass
@@ -429,21 +433,52 @@ class HairSimulator:
         self.counters.last_track_ms += (self.clock() - start) * 1e3
 
     def _rest_at(self, head: HeadPose) -> None:
+        """The rest shape at ``head``, settled: ``solver.settle_time`` with the head still,
+        then, with ``solver.settle_speed``, :data:`SETTLE_CHUNK_S` at a time until no node
+        moved faster than that over the last one (at most :data:`MAX_SETTLE_S` in all).
+        ``settled_s`` is the time simulated.  The velocities are then zero (FTL's stored
+        velocities do not vanish at rest, :mod:`hair_tracking.guides.ftl`: zeroing them sets
+        still FTL hair moving by a few millimetres, which settles again)."""
         self.guide_solver.reset(head)
         if self.ghost_tracker is not None:
             self.ghost_tracker.reset(head)
         once, self.track_once_per_call = self.track_once_per_call, False   # the scene's rest
+        sv = self.scene.solver
         try:
-            self._begin_ghosts()
-            settle = int(round(self.scene.solver.settle_time / self.scene.solver.dt))
-            self._run(self.scene.solver.dt, head, [head] * settle)
-            self._track_ghosts(self.scene.solver.dt * settle, settle)
+            steps = int(round(sv.settle_time / sv.dt))
+            self._settle(head, steps)
+            self.settled_s = steps * sv.dt
+            if sv.settle_speed > 0.0:
+                chunk = max(1, int(round(SETTLE_CHUNK_S / sv.dt)))
+                while self.settled_s + chunk * sv.dt <= MAX_SETTLE_S + 1e-9:
+                    before = self._settling_nodes()
+                    self._settle(head, chunk)
+                    self.settled_s += chunk * sv.dt
+                    moved = max(float(np.max(np.abs(a - b))) if a.size else 0.0
+                                for a, b in zip(self._settling_nodes(), before))
+                    if moved <= sv.settle_speed * chunk * sv.dt:
+                        break
         finally:
             self.track_once_per_call = once
         for strands in (self.guides, self.ghosts):
             if strands is not None:
                 strands.v[...] = 0.0
         self._last_speed = 0.0
+
+    def _settle(self, head: HeadPose, steps: int) -> None:
+        """``steps`` substeps with the head still at ``head``, the ghosts tracked as the scene
+        says."""
+        self._begin_ghosts()
+        self._run(self.scene.solver.dt, head, [head] * steps)
+        self._track_ghosts(self.scene.solver.dt * steps, steps)
+
+    def _settling_nodes(self):
+        """Copies of the positions that settle: the guides, and the paper tracker's ghosts
+        (the blend and turn trackers place theirs from the guides)."""
+        out = [self.guides.x.copy()]
+        if self.ghosts is not None and not self._stateless(self.scene):
+            out.append(self.ghosts.x.copy())
+        return out
 
     def _carry_rigidly(self, old: HeadPose, new: HeadPose) -> None:
         """Move all hair with the head from ``old`` to ``new``, at rest (no whip)."""

@@ -99,6 +99,7 @@ class SolverSpec:
     shock_propagation: float = _default('solver.shock_propagation')
     max_displacement: float = _default('solver.max_displacement')
     settle_time: float = _default('solver.settle_time')
+    settle_speed: float = _default('solver.settle_speed')
 
 
 @dataclass(frozen=True)

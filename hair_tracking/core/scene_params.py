@@ -138,6 +138,10 @@ SCENE_PARAMS: Tuple[Param, ...] = (
          'per-substep displacement clamp; 0 disables', unit='m', lo=0.0, hi=10.0),
     _row('solver.settle_time', 'double', 0.5,
          'time simulated with a still head after a (re)build or reset', unit='s', lo=0.0, hi=60.0),
+    _row('solver.settle_speed', 'double', 0.0,
+         'after solver.settle_time, keep settling (0.1 s at a time, at most 30 s in all) until '
+         'no hair node moved faster than this over the last 0.1 s, so the hair starts near its '
+         'settled shape; 0 settles exactly solver.settle_time', unit='m/s', lo=0.0, hi=10.0),
     _row('tracking.mode', 'string', 'blend',
          'ghost tracker: paper (Park & Kim: velocity transfer, weights (4)-(5), centre-of-mass '
          'tracking, every substep) or blend (each ghost the blended points of its '
