@@ -32,8 +32,8 @@ def shake(sim, poses=40, t0=10**9, amplitude=0.6):
     for k in range(poses):
         a = amplitude * np.sin(k * 0.35)
         t = t0 + k * 16_666_667
-        sim.push_pose(t, [0.03 * np.sin(k * 0.2), 0.0, 0.0], [0.0, 0.0, np.sin(a / 2),
-                                                                  np.cos(a / 2)])
+        q = [0.0, 0.0, np.sin(a / 2), np.cos(a / 2)]
+        sim.push_pose(t, [0.03 * np.sin(k * 0.2), 0.0, 0.0], q)
         sim.advance_to(t)
     return t
 

@@ -51,11 +51,13 @@ class Survey:
 @dataclass
 class Imported:
     """An imported groom: ``strands`` (S, N, 3) resampled, in the head frame [m], along the
-    scalp; ``placed`` the same strands at the file's resolution; ``survey`` the file; ``note``
-    one line saying what was done."""
+    scalp; ``placed`` the same strands at the file's resolution, in the file's order
+    (``strands[i]`` is ``placed``'s strand ``order[i]``); ``survey`` the file; ``note`` one
+    line saying what was done."""
 
     strands: np.ndarray
     placed: Polylines
+    order: np.ndarray
     survey: Survey
     note: str
 
@@ -69,8 +71,9 @@ def survey(path: str, units: str = 'auto', up_axis: str = 'auto') -> Tuple[Surve
         raise GroomFileError(path, '', 'a strand of two or more distinct vertices',
                              f'{empty} empty and {degenerate} degenerate strands')
     raw_count, raw_vertices = poly.count, int(poly.counts.sum())
-    poly = poly.select(keep)
-    lengths = lengths[keep]
+    if keep.size < poly.count:
+        poly = poly.select(keep)
+        lengths = lengths[keep]
     starts = poly.starts
     roots = poly.points[starts]
     tips = poly.points[starts + poly.counts - 1]
@@ -125,7 +128,7 @@ def import_groom(spec: GroomSpec) -> Imported:
             + (f' ({info.empty} empty, {info.degenerate} degenerate skipped)'
                if info.empty or info.degenerate else '')
             + f'; units {info.units_words}; up {info.up_words}; {fit_words}')
-    return Imported(strands=np.ascontiguousarray(strands[order]), placed=placed.select(order),
+    return Imported(strands=np.ascontiguousarray(strands[order]), placed=placed, order=order,
                     survey=info, note=note)
 
 
@@ -153,7 +156,8 @@ def build_groom(spec: GroomSpec) -> Groom:
     strands = imported.strands
     count = min(spec.guides, strands.shape[0])
     index = choose_guides_by_shape(strands, count)
-    guide_rest = resample.resample(imported.placed.select(index), spec.guide_nodes)
+    guide_rest = resample.resample(imported.placed.select(imported.order[index]),
+                                   spec.guide_nodes)
     fit.push_out(guide_rest[:, 1:], spec.scalp.center, spec.scalp.radii)
     note = imported.note + f'; {count} guides'
     if count < spec.guides:

@@ -42,6 +42,8 @@ AXES = {'y': np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]),
 #: The up axis is guessed only when the roots lie at least this far (strand lengths, on
 #: average) above the tips.
 MIN_DROP = 0.05
+#: The fit onto the scalp uses at most this many roots (evenly picked in the file's order).
+FIT_ROOTS = 2000
 
 
 def guess_units(roots: np.ndarray, points: np.ndarray) -> Tuple[str, str]:
@@ -86,11 +88,14 @@ def rotation(degrees) -> np.ndarray:
 def fit_to_scalp(roots: np.ndarray, center, radii, scale: bool,
                  iterations: int = 60) -> Tuple[float, np.ndarray, float]:
     """``(s, t, rms)``: the uniform scale (1 unless ``scale``) and translation putting ``roots``
-    (S, 3) on the ellipsoid ``center``, ``radii`` in the least-squares sense of
-    ``|(s p + t - c) / a| - 1`` (Levenberg-Marquardt), and that RMS at the fit."""
+    (S, 3; at most :data:`FIT_ROOTS` of them, evenly picked) on the ellipsoid ``center``,
+    ``radii`` in the least-squares sense of ``|(s p + t - c) / a| - 1`` (Levenberg-Marquardt,
+    until a step moves less than 1e-10 of the radii), and that RMS at the fit."""
     c = np.asarray(center, dtype=np.float64)
     a = np.asarray(radii, dtype=np.float64)
     p = np.asarray(roots, dtype=np.float64)
+    if p.shape[0] > FIT_ROOTS:
+        p = p[np.linspace(0, p.shape[0] - 1, FIT_ROOTS).round().astype(np.int64)]
     lo, hi = p.min(axis=0), p.max(axis=0)
     t = np.array([c[0] - 0.5 * (lo[0] + hi[0]), c[1] - 0.5 * (lo[1] + hi[1]),
                   c[2] + a[2] - hi[2]])
@@ -120,7 +125,8 @@ def fit_to_scalp(roots: np.ndarray, center, radii, scale: bool,
         if new_cost < cost:
             t, log_s, q, r, f, cost = t_new, s_new, q_new, r_new, f_new, new_cost
             lam = max(lam * 0.3, 1e-9)
-            if np.abs(step).max() < 1e-12:
+            if np.abs(step[:3]).max() < 1e-10 * a.min() and \
+                    (not scale or abs(step[3]) < 1e-10):
                 break
         else:
             lam *= 10.0
