@@ -43,8 +43,8 @@ def synthetic_groom(strands=200, vertices=20, seed=0, ragged=True):
         curl = rng.random() < 1 / 3
         s = np.linspace(0.0, 1.0, n)[:, None]
         down = np.array([0.0, 0.0, -1.0]) if not front else \
-            np.array([0.6, 0.0, -0.8])
-        w = np.clip(s * 3.0, 0.0, 1.0)
+            np.array([0.35, 0.0, -0.94])
+        w = np.clip(s * 8.0, 0.0, 1.0)
         d = (1.0 - w) * normal + w * down
         d /= np.linalg.norm(d, axis=1, keepdims=True)
         p = root + np.cumsum(d * length / (n - 1), axis=0) - d[0] * length / (n - 1)
