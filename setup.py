@@ -22,7 +22,8 @@ setup(
     ],
     package_data={package_name: ['data/*']},
     install_requires=['setuptools', 'numpy', 'numba', 'pyyaml', 'rosbags'],
-    extras_require={'view': ['viser']},        # hair_sim_view's web page
+    extras_require={'view': ['viser'],         # hair_sim_view's web page
+                    'usd': ['usd-core']},      # groom.file: USD BasisCurves
     zip_safe=True,
     maintainer='hair_tracking developers',
     maintainer_email='hair-tracking@example.invalid',
@@ -33,6 +34,7 @@ setup(
         'console_scripts': [
             'hair_sim_node = hair_tracking.ros.node:main',
             'hair_sim_bag = hair_tracking.ros.bag_cli:main',
+            'hair_sim_groom = hair_tracking.bags.groom_cli:main',
             'hair_sim_eval = hair_tracking.evaluation.cli:main',
             'hair_sim_demo = hair_tracking.evaluation.demo:main',
             'hair_sim_warmup = hair_tracking.ros.warmup:main',

@@ -42,7 +42,6 @@ from typing import Callable, Dict, Optional, Tuple
 import numpy as np
 
 from hair_tracking.core import curves
-from hair_tracking.core.groom import make_groom
 from hair_tracking.core.head_track import HeadTrack, IDENTITY, PoseResult
 from hair_tracking.core.metrics import max_stretch
 from hair_tracking.core.model import HeadPose, StrandSet, strand_part
@@ -53,6 +52,7 @@ from hair_tracking.ghosts.blend import BlendTracker
 from hair_tracking.ghosts.stateless import choose_guides
 from hair_tracking.ghosts.turn import TurnTracker
 from hair_tracking.ghosts.tracker import GhostTracker
+from hair_tracking.grooms.build import build_groom
 from hair_tracking.guides.collision import make_collider
 from hair_tracking.guides.integrate import parallel_from, runs_parallel
 from hair_tracking.guides.solver import GuideSolver
@@ -66,6 +66,10 @@ MIN_SPLIT_DT = 1.0 / 960.0
 SPLIT_FRACTION = 0.5
 #: ... or this distance [m] when the clamp is off (``solver.max_displacement = 0``).
 SPLIT_DISTANCE = 0.025
+#: A settle until still (``solver.settle_speed``) goes on this long [s] at a time ...
+SETTLE_CHUNK_S = 0.1
+#: ... and, with ``solver.settle_time``, at most this long [s] in all.
+MAX_SETTLE_S = 30.0
 
 
 @dataclass
@@ -114,13 +118,20 @@ class HairSimulator:
         self._build()
 
     # ------------------------------------------------------------- assembly
-    def _build(self, head: HeadPose = IDENTITY) -> None:
+    def _build(self, head: HeadPose = IDENTITY, groom=None) -> None:
+        """Assemble every stage from the scene (``groom``: the scene's groom, if already
+        built), the hair at rest at ``head``."""
         scene = self.scene
-        groom = make_groom(scene.groom)
+        if groom is None:
+            groom = build_groom(scene.groom)
+        #: Where the strands came from (an imported groom's report; '' for the procedural one).
+        self.groom_note = groom.note
         self.guide_index = None
         if self._stateless(scene) and groom.ghost_rest.shape[0] > 0:
-            # the guides are some of the strands themselves (1:1 is full simulation)
-            self.guide_index = choose_guides(groom.ghost_rest[:, 0], scene.groom.guides)
+            # the guides are some of the strands themselves (1:1 is full simulation); an
+            # imported groom has chosen them by root and shape
+            self.guide_index = groom.guide_index if groom.guide_index is not None else \
+                choose_guides(groom.ghost_rest[:, 0], scene.groom.guides)
             self.guides = StrandSet.from_rest(groom.ghost_rest[self.guide_index])
         else:
             self.guides = StrandSet.from_rest(groom.guide_rest)
@@ -148,14 +159,19 @@ class HairSimulator:
     def update_scene(self, scene: Scene) -> bool:
         """Adopt a changed scene; returns True when the hair had to be rebuilt.
 
-        A changed groom (strand counts, nodes, lengths, seed ...) rebuilds the hair in its rest
-        shape at the current head pose; anything else keeps the hair where it is.
+        A changed groom (strand counts, nodes, lengths, seed, file ...) rebuilds the hair in its
+        rest shape at the current head pose; anything else keeps the hair where it is.  A groom
+        file that cannot be read raises
+        :class:`~hair_tracking.grooms.polylines.GroomFileError` and changes nothing.
         """
         scene.validate()
+        rebuild = scene.groom != self.scene.groom or \
+            scene.tracking.mode != self.scene.tracking.mode
+        groom = build_groom(scene.groom) if rebuild else None
         old, self.scene = self.scene, scene
         self.track.spec = scene.head_track
-        if scene.groom != old.groom or scene.tracking.mode != old.tracking.mode:
-            self._build(self.head)
+        if rebuild:
+            self._build(self.head, groom)
             return True
         self.collider = make_collider(scene.collider)
         self.guide_solver = GuideSolver(self.guides, scene)
@@ -417,21 +433,52 @@ class HairSimulator:
         self.counters.last_track_ms += (self.clock() - start) * 1e3
 
     def _rest_at(self, head: HeadPose) -> None:
+        """The rest shape at ``head``, settled: ``solver.settle_time`` with the head still,
+        then, with ``solver.settle_speed``, :data:`SETTLE_CHUNK_S` at a time until no node
+        moved faster than that over the last one (at most :data:`MAX_SETTLE_S` in all).
+        ``settled_s`` is the time simulated.  The velocities are then zero (FTL's stored
+        velocities do not vanish at rest, :mod:`hair_tracking.guides.ftl`: zeroing them sets
+        still FTL hair moving by a few millimetres, which settles again)."""
         self.guide_solver.reset(head)
         if self.ghost_tracker is not None:
             self.ghost_tracker.reset(head)
         once, self.track_once_per_call = self.track_once_per_call, False   # the scene's rest
+        sv = self.scene.solver
         try:
-            self._begin_ghosts()
-            settle = int(round(self.scene.solver.settle_time / self.scene.solver.dt))
-            self._run(self.scene.solver.dt, head, [head] * settle)
-            self._track_ghosts(self.scene.solver.dt * settle, settle)
+            steps = int(round(sv.settle_time / sv.dt))
+            self._settle(head, steps)
+            self.settled_s = steps * sv.dt
+            if sv.settle_speed > 0.0:
+                chunk = max(1, int(round(SETTLE_CHUNK_S / sv.dt)))
+                while self.settled_s + chunk * sv.dt <= MAX_SETTLE_S + 1e-9:
+                    before = self._settling_nodes()
+                    self._settle(head, chunk)
+                    self.settled_s += chunk * sv.dt
+                    moved = max(float(np.max(np.abs(a - b))) if a.size else 0.0
+                                for a, b in zip(self._settling_nodes(), before))
+                    if moved <= sv.settle_speed * chunk * sv.dt:
+                        break
         finally:
             self.track_once_per_call = once
         for strands in (self.guides, self.ghosts):
             if strands is not None:
                 strands.v[...] = 0.0
         self._last_speed = 0.0
+
+    def _settle(self, head: HeadPose, steps: int) -> None:
+        """``steps`` substeps with the head still at ``head``, the ghosts tracked as the scene
+        says."""
+        self._begin_ghosts()
+        self._run(self.scene.solver.dt, head, [head] * steps)
+        self._track_ghosts(self.scene.solver.dt * steps, steps)
+
+    def _settling_nodes(self):
+        """Copies of the positions that settle: the guides, and the paper tracker's ghosts
+        (the blend and turn trackers place theirs from the guides)."""
+        out = [self.guides.x.copy()]
+        if self.ghosts is not None and not self._stateless(self.scene):
+            out.append(self.ghosts.x.copy())
+        return out
 
     def _carry_rigidly(self, old: HeadPose, new: HeadPose) -> None:
         """Move all hair with the head from ``old`` to ``new``, at rest (no whip)."""
@@ -461,8 +508,9 @@ def _threshold_for(stages):
 def warm_up(scene: Scene) -> HairSimulator:
     """Compile (or load from numba's on-disk cache) every kernel ``scene`` uses.
 
-    Runs a tiny copy of the scene (same solver, collider, tracking and output options, at most
-    two guides with two ghosts each) through a moving, turning head and the stretch and
+    Runs a tiny copy of the scene (same solver, collider, tracking and output options and
+    node counts, at most two guides with two ghosts each, a procedural groom: an imported one
+    is read for its strand counts only) through a moving, turning head and the stretch and
     penetration checks, so the first real steps are not late: every stage through the variant,
     serial or parallel, that the full scene will run
     (:func:`~hair_tracking.guides.integrate.runs_parallel`), and only that one.  Returns the
@@ -471,12 +519,16 @@ def warm_up(scene: Scene) -> HairSimulator:
     g = scene.groom
     small = scene.with_changes(groom__guides=min(g.guides, 2),
                                groom__ghosts_per_guide=min(g.ghosts_per_guide, 2),
-                               solver__settle_time=0.0)
+                               groom__file='', solver__settle_time=0.0)
     guide_len = g.ghost_nodes if scene.tracking.mode in GUIDES_AMONG_STRANDS else g.guide_nodes
-    stages = [(small.groom.guides * guide_len, runs_parallel(g.guides * guide_len))]
-    if g.ghosts_per_guide > 0:
+    guides, ghosts = g.guides, g.guides * g.ghosts_per_guide
+    if g.file:
+        groom = build_groom(g)
+        guides, ghosts = groom.guide_rest.shape[0], groom.ghost_rest.shape[0]
+    stages = [(small.groom.guides * guide_len, runs_parallel(guides * guide_len))]
+    if ghosts > 0:
         stages.append((small.groom.guides * small.groom.ghosts_per_guide * g.ghost_nodes,
-                       runs_parallel(g.guides * g.ghosts_per_guide * g.ghost_nodes)))
+                       runs_parallel(ghosts * g.ghost_nodes)))
     threshold = _threshold_for(stages)
     sim = HairSimulator(small)
     dt_ns = max(1, int(round(small.solver.dt * 1e9)))

@@ -12,12 +12,12 @@ ADAPTERS = os.path.join(ROOT, 'msg_adapters')
 
 #: Layers from the bottom up: a module may import its own layer and the ones below it only.
 #: The top-level helpers (resources, process_tuning) are leaves any layer may use.
-LAYERS = ['core', 'motion', 'guides', 'ghosts', 'simulator', 'output', 'bags', 'evaluation',
-          'ros']
+LAYERS = ['core', 'motion', 'grooms', 'guides', 'ghosts', 'simulator', 'output', 'bags',
+          'evaluation', 'ros']
 LEAVES = {'resources', 'process_tuning'}
 #: Layers that simulate or describe head motion: numpy, numba and yaml only, no ROS messages,
 #: no rclpy, no adapters.
-SIMULATION = {'core', 'motion', 'guides', 'ghosts', 'simulator'}
+SIMULATION = {'core', 'motion', 'grooms', 'guides', 'ghosts', 'simulator'}
 #: Layers that join no ROS graph (no rclpy): they run without a ROS installation's middleware.
 NO_GRAPH = SIMULATION | {'output', 'bags', 'evaluation'}
 ROS_ROOTS = {'rclpy', 'rosidl_runtime_py', 'rosgraph_msgs', 'std_msgs', 'geometry_msgs',
@@ -28,7 +28,7 @@ MAX_TOP_MODULES = 4
 #: All that msg_adapters (ROS messages <-> numpy, nothing of hair) may use of hair_tracking.
 ADAPTERS_MAY_USE = ('hair_tracking.core.transforms',)
 #: Optional packages (not installed with the package) and the only modules that import them.
-OPTIONAL = {'viser': {'hair_tracking.ros.view'}}
+OPTIONAL = {'viser': {'hair_tracking.ros.view'}, 'pxr': {'hair_tracking.grooms.usd'}}
 
 
 def modules():
@@ -107,7 +107,8 @@ def test_msg_adapters_use_nothing_of_hair_but_the_quaternion_maths():
 
 
 def test_optional_packages_are_imported_only_where_they_are_used():
-    """viser (the browser viewer's library) stays out of the node and the simulation."""
+    """viser (the browser viewer's library) stays out of the node and the simulation, usd-core
+    (pxr) in the USD reader."""
     users = {root: set() for root in OPTIONAL}
     for name, path in modules():
         for target in imports(path, name):
@@ -137,7 +138,7 @@ def test_the_numba_cache_key_covers_every_subpackage(tmp_path, monkeypatch):
     shutil.copytree(PACKAGE, copy, ignore=shutil.ignore_patterns('__pycache__', 'data'))
     monkeypatch.setattr(hair_tracking, '_HERE', str(copy))
     before = hair_tracking.source_hash()
-    for sub in ('ghosts', 'guides', 'core'):
+    for sub in ('ghosts', 'guides', 'grooms', 'core'):
         kernel = next(p for p in sorted((copy / sub).iterdir()) if p.name != '__init__.py')
         kernel.write_text(kernel.read_text() + '\n# edited\n')
         after = hair_tracking.source_hash()

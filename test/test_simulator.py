@@ -308,3 +308,30 @@ def test_a_nan_ghost_is_reported_as_nan_stretch_by_both_checks():
     sim.ghosts.x = x
     assert np.isnan(sim.max_stretch())
     assert np.isnan(sim.audit(0, 2)[0])
+
+
+@pytest.mark.parametrize('mode', ['paper', 'blend'])
+def test_settle_speed_settles_until_the_hair_is_still(mode):
+    """solver.settle_speed: after settle_time, settling goes on a tenth of a second at a time
+    until no node moved faster than that; the hair then starts near its settled shape (after
+    the fixed settle alone it keeps falling for seconds).  What is left is FTL's: its stored
+    velocities do not vanish at rest, and the first pose zeroes them."""
+    def drift(sim):
+        before = [sim.guides.x.copy(), sim.frame().ghosts]
+        sim.push_pose(10**9, [0.0, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0])
+        worst = 0.0
+        for k in range(1, 6):
+            sim.advance_to(10**9 + k * 100 * MS)
+            worst = max(worst, np.abs(sim.guides.x - before[0]).max(),
+                        np.abs(sim.frame().ghosts - before[1]).max())
+        return worst
+    fixed = HairSimulator(scene(tracking__mode=mode, solver__settle_time=0.2))
+    assert fixed.settled_s == pytest.approx(0.2)
+    still = HairSimulator(scene(tracking__mode=mode, solver__settle_time=0.2,
+                                solver__settle_speed=0.002))
+    assert 0.3 <= still.settled_s <= 30.0
+    assert drift(still) < min(0.01, 0.25 * drift(fixed))
+    again = HairSimulator(scene(tracking__mode=mode, solver__settle_time=0.2,
+                                solver__settle_speed=0.002))
+    again.reset()                                   # a reset settles the same way
+    assert again.settled_s == pytest.approx(still.settled_s)

@@ -29,11 +29,11 @@ import numpy as np
 import yaml
 
 from hair_tracking.bags import io as bag_io
-from hair_tracking.bags.io import BagError, EXIT_CONTENT, EXIT_FAILURE, EXIT_USAGE
+from hair_tracking.bags.io import BagError, EXIT_CONTENT, EXIT_FAILURE, EXIT_INPUT, EXIT_USAGE
 from hair_tracking.core.params import ParamError
 from hair_tracking.core.scene import Scene, SceneError
 from hair_tracking.output.params_check import load_params_file, node_parameters, ParamsFileError
-from hair_tracking.output.settings import make_settings, NODE_NAME, Settings
+from hair_tracking.output.settings import check_groom_file, make_settings, NODE_NAME, Settings
 from hair_tracking.output.strand_colors import StrandColorCache
 
 POINTS_TOPIC = '/hair/points'
@@ -79,7 +79,8 @@ def parse_overrides(items: Sequence[str]) -> Dict[str, object]:
 def load_settings(scene: Optional[str] = None, params_file: Optional[str] = None,
                   overrides: Optional[Dict[str, object]] = None) -> Settings:
     """Validated node settings: ``scene`` (YAML path or preset) as the base scene, then the
-    params file's values, then ``overrides``; BagError (EXIT_USAGE) naming the bad entry."""
+    params file's values, then ``overrides``; BagError (EXIT_USAGE) naming the bad entry, or
+    (EXIT_INPUT) saying why a groom file (``groom.file``) cannot be imported."""
     from hair_tracking.resources import config_path
 
     values: Dict[str, object] = {}
@@ -95,9 +96,14 @@ def load_settings(scene: Optional[str] = None, params_file: Optional[str] = None
             except FileNotFoundError as exc:
                 raise BagError(str(exc), EXIT_USAGE) from None
             base = Scene.from_yaml(path)
-        return make_settings(values, base)
+        settings = make_settings(values, base)
     except (SceneError, ParamError) as exc:
         raise BagError(f'bad settings: {exc}', EXIT_USAGE) from None
+    try:
+        check_groom_file(settings.scene)
+    except ParamError as exc:
+        raise BagError(str(exc), EXIT_INPUT) from None
+    return settings
 
 
 # ================================================================ encoding
@@ -253,6 +259,7 @@ class RunSummary:
     strands: int = 0
     nodes: int = 0
     finite: bool = True
+    groom: str = ''              # an imported groom's report line ('' for the procedural one)
 
     @property
     def ms_per_pose(self) -> float:
@@ -269,6 +276,7 @@ class RunSummary:
             f'{self.bag_duration_s:.2f} s)',
             f'output: {self.output}',
             '  ' + ', '.join(f'{t}: {n}' for t, n in self.topics.items()),
+        ] + ([self.groom] if self.groom else []) + [
             f'hair: {self.strands} strands x {self.nodes} points; frames written: {self.frames}'
             + (f' ({self.loop_s * 1e3 / self.frames:.2f} ms of the loop per frame)'
                if self.frames else ''),
@@ -383,6 +391,7 @@ def run_bag(input_path: str, output_path: str, settings: Settings,
         for guides, ns in ((False, 'hair'), (True, 'guides')):
             warm.cloud(*tiny.record_writer(guides, head_out), 'warmup', 1, ns)
     sim = HairSimulator(scene)
+    summary.groom = sim.groom_note
     enc = FrameEncoder(settings)
     if after_setup is not None:
         after_setup()

@@ -50,7 +50,8 @@ class ScalpSpec:
 
 @dataclass(frozen=True)
 class GroomSpec:
-    """The strands: how many, how long, their rest shape and where their roots grow."""
+    """The strands: how many, how long, their rest shape and where their roots grow; or a groom
+    file to import (``file``) and how to put it on the head."""
 
     guides: int = _default('groom.guides')
     ghosts_per_guide: int = _default('groom.ghosts_per_guide')
@@ -60,6 +61,13 @@ class GroomSpec:
     length_variation: float = _default('groom.length_variation')
     droop: float = _default('groom.droop')
     seed: int = _default('groom.seed')
+    file: str = _default('groom.file')
+    max_strands: int = _default('groom.max_strands')
+    units: str = _default('groom.units')
+    up_axis: str = _default('groom.up_axis')
+    fit: str = _default('groom.fit')
+    file_rotation_deg: Tuple[float, float, float] = _default('groom.file_rotation_deg')
+    file_offset: Tuple[float, float, float] = _default('groom.file_offset')
     scalp: ScalpSpec = field(default_factory=ScalpSpec)
 
 
@@ -91,6 +99,7 @@ class SolverSpec:
     shock_propagation: float = _default('solver.shock_propagation')
     max_displacement: float = _default('solver.max_displacement')
     settle_time: float = _default('solver.settle_time')
+    settle_speed: float = _default('solver.settle_speed')
 
 
 @dataclass(frozen=True)

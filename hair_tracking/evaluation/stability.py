@@ -100,13 +100,16 @@ class CaseResult:
     sim_s: float
 
 
-def energy_bound(motion: HeadMotion, scene: Scene) -> float:
+def energy_bound(motion: HeadMotion, scene: Scene, length: Optional[float] = None) -> float:
     """Largest kinetic energy per node [J/kg] a stable simulation of ``motion`` may reach (see
-    the module docstring): ``4 (0.5 (v_head + w_head (r_head + L))^2 + |g| L) + 0.5``."""
+    the module docstring): ``4 (0.5 (v_head + w_head (r_head + L))^2 + |g| L) + 0.5``, with
+    ``L`` the longest strand: ``length`` [m] when given (an imported groom's), else the
+    procedural groom's longest."""
     v = float(linear_speed(motion).max()) if len(motion) > 1 else 0.0
     w = float(angular_speed(motion).max()) if len(motion) > 1 else 0.0
     r = float(max(scene.collider.radii + (scene.collider.radius,)))
-    length = scene.groom.length * (1.0 + scene.groom.length_variation)
+    if length is None:
+        length = scene.groom.length * (1.0 + scene.groom.length_variation)
     g = float(np.linalg.norm(scene.gravity))
     return 4.0 * (0.5 * (v + w * (r + length)) ** 2 + g * length) + 0.5
 
@@ -158,9 +161,10 @@ def run_case(case: Case) -> CaseResult:
         pos = np.concatenate([pos, np.repeat(pos[last:last + 1], len(extra), 0)])
         quat = np.concatenate([quat, np.repeat(quat[last:last + 1], len(extra), 0)])
     tail_start = int(t_ns[-1] - round(case.tail_s * 1e9))
-    ke_max = energy_bound(motion_for_bound, scene)
     sim = HairSimulator(scene)
     sets = [s for s in (sim.guides, sim.ghosts) if s is not None]
+    ke_max = energy_bound(motion_for_bound, scene, length=max(
+        float(s.strand_length.max()) for s in sets) if scene.groom.file else None)
     f32_ghosts = sim.ghost_tracker is not None and \
         sim.ghost_tracker.positions().dtype == np.float32
     if sim.ghosts is not None:         # the shortest ghost segment, for float32 rounding

@@ -14,27 +14,15 @@ from numba import njit
 
 from hair_tracking.core.model import HeadPose, StrandSet, strand_part
 from hair_tracking.core.point_records import points_to_records, record_target
+from hair_tracking.grooms.guides import farthest_points
 from hair_tracking.guides.collision import outside_distance, world_center
 
 
 def choose_guides(roots: np.ndarray, count: int) -> np.ndarray:
     """Indices of ``count`` strands spread evenly over the scalp: farthest-point sampling of the
-    root positions (S, 3), starting from the root nearest their centroid; deterministic.
-    Sorted ascending."""
-    roots = np.asarray(roots, dtype=np.float64)
-    s = roots.shape[0]
-    if not 1 <= count <= s:
-        raise ValueError(f'guides: need 1..{s} guides among {s} strands, got {count}')
-    if count == s:
-        return np.arange(s)
-    first = int(np.argmin(np.sum((roots - roots.mean(axis=0)) ** 2, axis=1)))
-    chosen = [first]
-    dist = np.sum((roots - roots[first]) ** 2, axis=1)
-    for _ in range(count - 1):
-        nxt = int(np.argmax(dist))
-        chosen.append(nxt)
-        dist = np.minimum(dist, np.sum((roots - roots[nxt]) ** 2, axis=1))
-    return np.sort(np.asarray(chosen, dtype=np.int64))
+    root positions (S, 3) (:func:`~hair_tracking.grooms.guides.farthest_points`), starting from
+    the root nearest their centroid; deterministic.  Sorted ascending."""
+    return farthest_points(roots, count)
 
 
 def node_map(ghost_nodes: int, guide_nodes: int) -> Tuple[np.ndarray, np.ndarray]:

@@ -36,7 +36,8 @@ node's settings plus every scene field), each declared with a descriptor built f
 (:func:`descriptor`: description, range, read-only); changes are validated in the on-set callback
 (a rejection names the parameter and the allowed values and changes nothing) and stored by the
 post-set callback as a frozen :class:`~hair_tracking.output.settings.Settings` snapshot that the
-next step applies (a groom change rebuilds the hair at the current head pose).
+next step applies (a groom change rebuilds the hair at the current head pose; a ``groom.file``
+that cannot be imported is refused in the on-set callback, and the hair is kept).
 
 Everything runs in one thread (a SingleThreadedExecutor), so callbacks never race.
 """
@@ -79,6 +80,7 @@ from hair_tracking import process_tuning
 from hair_tracking.core.head_track import PoseResult
 from hair_tracking.core.params import Param, ParamError
 from hair_tracking.core.scene import Scene, SceneError
+from hair_tracking.grooms.polylines import GroomFileError
 from hair_tracking.core.transforms import quat_to_matrix
 from hair_tracking.output.params_check import params_files_problem, rcl_arguments_problem, \
     unknown_parameters
@@ -201,7 +203,12 @@ class HairSimNode(Node):
         self._apply_threads(settings.numba_threads)
         self.shedder = LoadShedder(settings.load_shedding_budget)
         self._work_clock = work_clock    # times the step and publish work (load shedding)
-        self.sim = HairSimulator(settings.scene, clock=work_clock)
+        try:
+            self.sim = HairSimulator(settings.scene, clock=work_clock)
+        except GroomFileError as e:
+            raise ParamError('groom.file', str(e)) from None
+        if self.sim.groom_note:
+            self.get_logger().info(self.sim.groom_note)
         if settings.warmup:
             secs = warm_up(settings.scene)
             self.get_logger().info(f'kernels and encoders ready in {secs:.2f} s')
@@ -368,12 +375,19 @@ class HairSimNode(Node):
             return
         old, self._settings = self._settings, new
         if new.scene != old.scene:
-            if self.sim.update_scene(new.scene):
+            try:
+                rebuilt = self.sim.update_scene(new.scene)
+            except GroomFileError as e:      # the file changed since the change was checked
+                self.get_logger().error(f'groom.file: {e}; the hair is kept')
+                self._settings = self._pending = old
+                return
+            if rebuilt:
                 self.shedder.reset()
                 self.rebuilds += 1
                 self.get_logger().info(
                     f'groom changed: hair rebuilt ({self.sim.guides.count} guides, '
-                    f'{self.sim.ghosts.count if self.sim.ghosts is not None else 0} ghosts)')
+                    f'{self.sim.ghosts.count if self.sim.ghosts is not None else 0} ghosts)'
+                    + (f'; {self.sim.groom_note}' if self.sim.groom_note else ''))
             self._gravity_used = None
             self._update_gravity()
         self._invalidate()
