@@ -15,6 +15,8 @@ from hair_tracking.core.scene import Scene
 from hair_tracking.grooms.build import import_groom
 from hair_tracking.grooms.formats import read_strands
 
+from recordings import write_walk_bag
+
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
@@ -104,10 +106,7 @@ def test_usage_errors_exit_2_without_a_traceback(files, tmp_path):
 
 @pytest.fixture(scope='module')
 def walk(tmp_path_factory):
-    out = tmp_path_factory.mktemp('walk') / 'walk.mcap'
-    hp = bag_io.read_head_poses(bag_io.bundled_bag(), duration_s=0.4)
-    bag_io.write_head_pose_bag(out, hp.t_ns, hp.position, hp.quaternion)
-    return out
+    return write_walk_bag(tmp_path_factory.mktemp('walk') / 'walk.mcap', 0.4)
 
 
 @pytest.mark.parametrize('ext', list(gf.WRITERS))
