@@ -50,8 +50,8 @@ from hair_tracking.core import params as P  # noqa: E402
 from cpu_steal import format_share, StealMeter  # noqa: E402  (scripts/cpu_steal.py)
 from hair_tracking.ros.node import HairSimNode  # noqa: E402
 from msg_adapters.pose import pose_stamped_msg  # noqa: E402
-from msg_adapters.rcl_serialized import SerializedTaker, SerializedWaiter  # noqa: E402
 from msg_adapters.stamps import time_to_ns  # noqa: E402
+from rcl_take import SerializedTaker, SerializedWaiter  # noqa: E402  (scripts/rcl_take.py)
 
 FRAME_MS = 1000.0 / 60.0
 

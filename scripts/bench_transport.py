@@ -35,8 +35,8 @@ from hair_tracking import process_tuning  # noqa: E402
 from hair_tracking.core.params import CLOUD_FIELDS  # noqa: E402
 from hair_tracking.ros.node import output_qos  # noqa: E402
 from msg_adapters.pointcloud import CloudBuffer, pack_rgb_u32  # noqa: E402
-from msg_adapters.rcl_serialized import (SerializedPublisher, SerializedTaker,  # noqa: E402
-                                         SerializedWaiter, unusable_reason)
+from msg_adapters.rcl_serialized import SerializedPublisher, unusable_reason  # noqa: E402
+from rcl_take import SerializedTaker, SerializedWaiter  # noqa: E402  (scripts/rcl_take.py)
 
 
 def run_case(strands, points, fields, through_rcl, args, domain_id):
