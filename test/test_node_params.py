@@ -10,6 +10,7 @@ import numba
 import numpy as np
 import pytest
 from rcl_interfaces.msg import ParameterType
+import rclpy
 from rclpy.parameter import Parameter
 from rclpy.parameter_client import AsyncParameterClient
 import yaml
@@ -131,6 +132,34 @@ def test_integer_for_a_double_is_taken_as_a_double(rig):
     res = set_(rig, gravity=[0, 0, -3])                              # an all-integer list too
     assert res[0].successful, res[0].reason
     assert rig.node._pending.scene.gravity == (0.0, 0.0, -3.0)
+
+
+def test_integer_overrides_of_doubles_at_start_are_taken_as_doubles():
+    """`-p damping:=2` at start (rclpy refuses an integer for a double parameter): the node
+    declares the double it means, through rclpy's public API; a value that is not a number is
+    still refused, naming the parameter."""
+    h = Harness(overrides={'damping': 2, 'gravity': [0, 0, -3]}, domain_id=next(_DOMAINS))
+    try:
+        damping = h.node.get_parameter('damping')
+        assert damping.type_ == Parameter.Type.DOUBLE and damping.value == 2.0
+        gravity = h.node.get_parameter('gravity')
+        assert gravity.type_ == Parameter.Type.DOUBLE_ARRAY
+        assert list(gravity.value) == [0.0, 0.0, -3.0]
+        assert h.node._settings.scene.damping == 2.0
+        assert h.node._settings.scene.gravity == (0.0, 0.0, -3.0)
+        assert h.node.describe_parameter('damping').floating_point_range   # its descriptor
+    finally:
+        h.close()
+    from rclpy.context import Context
+    from rclpy.exceptions import InvalidParameterTypeException
+    from hair_tracking.ros.node import HairSimNode
+    ctx = Context()
+    rclpy.init(context=ctx, domain_id=next(_DOMAINS))
+    try:
+        with pytest.raises(InvalidParameterTypeException, match='damping'):
+            HairSimNode(context=ctx, parameter_overrides=[Parameter('damping', value='soft')])
+    finally:
+        rclpy.try_shutdown(context=ctx)
 
 
 @pytest.mark.parametrize('name, value, words', [

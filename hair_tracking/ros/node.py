@@ -53,7 +53,7 @@ import numpy as np
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, \
     SetParametersResult
 import rclpy
-from rclpy.exceptions import ParameterException
+from rclpy.exceptions import InvalidParameterTypeException, ParameterException
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -288,15 +288,9 @@ class HairSimNode(Node):
         scene_file = self.get_parameter('scene_file').value
         self._base = load_base_scene(scene_file)
         table = P.table(self._base)
-        overrides = getattr(self, '_parameter_overrides', None)
         for p in table:
-            if p.name == 'scene_file':
-                continue
-            if isinstance(overrides, dict) and p.name in overrides:
-                fixed = _coerce_parameter(p, overrides[p.name])
-                if fixed is not None:            # `-p damping:=2` means 2.0
-                    overrides[p.name] = fixed
-            self.declare_parameter(p.name, p.default, descriptor(p))
+            if p.name != 'scene_file':
+                self._declare(p)
         values = {p.name: _plain(self.get_parameter(p.name).value) for p in table}
         self._settings = P.make_settings(values, self._base)    # ParamError if invalid
         self._pending = self._settings
@@ -304,6 +298,22 @@ class HairSimNode(Node):
         self.add_pre_set_parameters_callback(self._pre_set)
         self.add_on_set_parameters_callback(self._on_set)
         self.add_post_set_parameters_callback(self._post_set)
+
+    def _declare(self, p: P.Param) -> None:
+        """Declare ``p``, taking an integer given for a double (``-p damping:=2``) as the double
+        it means: rclpy refuses the declaration; the value as given is read through a
+        dynamically typed declaration, which is then undeclared, and ``p`` is declared with
+        that value as a double (public rclpy API only)."""
+        try:
+            self.declare_parameter(p.name, p.default, descriptor(p))
+        except InvalidParameterTypeException as refused:
+            given = self.declare_parameter(p.name, None,
+                                           ParameterDescriptor(dynamic_typing=True))
+            self.undeclare_parameter(p.name)
+            fixed = _coerce_parameter(p, given)
+            if fixed is None:
+                raise refused
+            self.declare_parameter(p.name, fixed.value, descriptor(p), ignore_override=True)
 
     def _pre_set(self, parameters: List[Parameter]) -> List[Parameter]:
         """Integers given for doubles become doubles (``ros2 param set ... damping 2``)."""
@@ -609,10 +619,8 @@ class HairSimNode(Node):
 
     def _on_publish_timer(self) -> None:
         """The publishing rate: resend or rebuild the frame, unless a pose just sent one, or
-        ``publish_on_pose`` sent one within the last period (the poses keep the rate; a resend
-        would repeat their frame: at 10 k ghosts with poses at the publishing rate the timer
-        resent about one 3.2 MB cloud per pose before, and twice as many poses went without a
-        cloud of their own while the node was busy sending them)."""
+        ``publish_on_pose`` sent one within the last period (the poses keep the rate then; a
+        resend would only repeat their frame and keep the node from the next pose)."""
         self._apply_pending()
         now, period = time.monotonic(), self._settings.publish_period
         if now - self._last_publish < 0.5 * period:
