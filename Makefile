@@ -42,7 +42,7 @@ $(STAMP): setup.py Makefile package.xml interfaces/build_tf2_msgs.sh $(wildcard 
 	touch $(STAMP)
 
 $(KERNELS): $(STAMP) $(SOURCES)
-	$(TEST_ENV) $(PY) -m hair_tracking.ros.warmup
+	$(TEST_ENV) $(VENV)/bin/hair_sim_warmup
 	touch $(KERNELS)
 
 test: install
@@ -58,7 +58,7 @@ demo: install
 
 # The offline core demo: simulator only, numbers and a picture (no DDS).
 demo-core: install
-	$(TEST_ENV) $(PY) -m hair_tracking.evaluation.demo --out out/demo-core
+	$(TEST_ENV) $(VENV)/bin/hair_sim_demo --out out/demo-core
 
 bench: install
 	$(PY) -m pip install -q pypbd
@@ -72,13 +72,13 @@ bench: install
 
 # The full matrix of stiff and extreme cases (a few minutes); writes docs/results/stability.*
 stability: install
-	$(PY) -m hair_tracking.evaluation.cli stability
+	$(VENV)/bin/hair_sim_eval stability
 
 # Error against run time of every method (installs the peer pypbd); writes docs/results and
 # docs/figures.  VR_TRACE=path/to/vr360_user1_quaternion.txt adds the headset trace.
 eval: install
 	$(PY) -m pip install -q pypbd
-	$(PY) -m hair_tracking.evaluation.cli accuracy $(if $(VR_TRACE),--vr $(VR_TRACE))
+	$(VENV)/bin/hair_sim_eval accuracy $(if $(VR_TRACE),--vr $(VR_TRACE))
 
 clean:
 	rm -rf $(VENV) out build *.egg-info hair_tracking/__pycache__/numba-*

@@ -30,8 +30,11 @@ from sensor_msgs.msg import PointCloud2
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
+from hair_tracking import executable  # noqa: E402
+
+executable.use_numba_cache()    # before numba loads: the cache make install fills
+
 from bench_latency import copy_ms, stamp_of, stats  # noqa: E402  (scripts/bench_latency.py)
-from hair_tracking import process_tuning  # noqa: E402
 from hair_tracking.core.params import CLOUD_FIELDS  # noqa: E402
 from hair_tracking.ros.node import output_qos  # noqa: E402
 from msg_adapters.pointcloud import CloudBuffer, pack_rgb_u32  # noqa: E402
@@ -119,9 +122,9 @@ def main(argv=None):
     ap.add_argument('--warmup-s', type=float, default=1.0, help='first seconds not counted')
     ap.add_argument('--domain-id', type=int, default=78)
     ap.add_argument('--json', metavar='PATH', help='also write the results as JSON')
-    process_tuning.add_arguments(ap)
+    executable.add_arguments(ap, omp_wait_policy=None, gc_freeze=False)
     args = ap.parse_args(argv)
-    for line in process_tuning.apply(args):     # as hair_sim_node's main() does
+    for line in executable.apply(args):     # as hair_sim_node's main() does
         print(line)
     if 'rcl' in args.paths and unusable_reason() is not None:
         print(f'rcl path unusable here ({unusable_reason()}); measuring rclpy only')

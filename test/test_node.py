@@ -721,7 +721,8 @@ def test_executable_reads_the_params_file_and_overrides_and_exits_cleanly_on_ctr
     # --omp-wait-policy (default passive) is applied before numba starts its threads
     wanted = os.environ.get('OMP_WAIT_POLICY')
     assert (f'OMP_WAIT_POLICY={wanted} from the environment kept' if wanted else
-            'OpenMP worker threads wait passive (OMP_WAIT_POLICY=PASSIVE)') in text, text
+            'OpenMP worker threads wait passive (numba threading layer omp, '
+            'OMP_WAIT_POLICY=PASSIVE)') in text, text
 
 
 def test_executable_takes_its_process_settings_from_its_own_options():
@@ -734,7 +735,8 @@ def test_executable_takes_its_process_settings_from_its_own_options():
     assert proc.returncode == 0, text
     assert 'malloc retention 0: glibc malloc defaults kept' in text, text
     assert (f'OMP_WAIT_POLICY={env_policy} from the environment kept' if env_policy else
-            'OpenMP worker threads wait active (OMP_WAIT_POLICY=ACTIVE)') in text, text
+            'OpenMP worker threads wait active (numba threading layer omp, '
+            'OMP_WAIT_POLICY=ACTIVE)') in text, text
 
 
 def test_executable_rejects_a_bad_process_setting_before_starting():

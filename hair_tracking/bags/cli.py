@@ -13,9 +13,11 @@ Sub-commands (``hair_sim_bag <command> --help`` for every option; guide: docs/ba
 directories or single ``.mcap``/``.db3`` files (ROS 1 ``.bag`` too, for reading); no ROS
 installation is needed for info/import/run/render.
 
-Exit codes: 0 success, 1 the run failed, 2 bad command line, 3 input missing/not a bag/corrupt,
-4 the bag lacks what was asked for (no head-pose topic, unknown frame), 5 output exists or cannot
-be written, 130 interrupted.  Errors are one line on stderr, never a traceback.
+Exit codes: 0 success, or stopped by SIGINT (Ctrl-C) or SIGTERM (run and record close their
+output bag as it is, a complete bag; import and render leave nothing); 1 the run failed, 2 bad
+command line, 3 input missing/not a bag/corrupt, 4 the bag lacks what was asked for (no head-pose
+topic, unknown frame), 5 output exists or cannot be written.  Errors are one line on stderr,
+never a traceback.
 """
 import argparse
 import math
@@ -25,10 +27,10 @@ from typing import List, Optional
 
 import numpy as np
 
-from hair_tracking import process_tuning
-from hair_tracking.bags.io import (BagError, EXIT_CONTENT, EXIT_FAILURE, EXIT_INPUT,
-                                   EXIT_INTERRUPTED, EXIT_OK, EXIT_OUTPUT, EXIT_USAGE,
-                                   POSE_KIND_TOPICS, POSE_KINDS, STORAGES)
+from hair_tracking import executable
+from hair_tracking.bags.io import (BagError, EXIT_CONTENT, EXIT_FAILURE, EXIT_INPUT, EXIT_OK,
+                                   EXIT_OUTPUT, EXIT_USAGE, POSE_KIND_TOPICS, POSE_KINDS,
+                                   STORAGES)
 
 #: seconds since the epoch given to the first sample of an import (reproducible, non-zero:
 #: a stamp of 0 means "now" to the node); 1e9 s is 2001-09-09T01:46:40Z.
@@ -250,9 +252,16 @@ def cmd_run(args) -> int:
             bar = Progress(total, label='run')
         bar.update(done)
 
+    def set_up():
+        if not args.quiet:
+            print(f'running {src} -> {args.output} (Ctrl-C to stop; the bag is closed as it '
+                  f'is)', file=sys.stderr, flush=True)
+        if args.gc_freeze:
+            executable.freeze_heap()
+
     try:
-        summary = run_bag(src, args.output, settings, opts, progress,
-                          after_setup=process_tuning.freeze_heap if args.gc_freeze else None)
+        summary = run_bag(src, args.output, settings, opts, progress, after_setup=set_up,
+                          should_stop=lambda: args.stop.requested)
     finally:
         if bar is not None:
             bar.close()
@@ -279,9 +288,9 @@ def cmd_render(args) -> int:
 # ================================================================ parser
 def build_parser() -> argparse.ArgumentParser:
     ap = _Parser(prog='hair_sim_bag', description=__doc__.split('\n')[0],
-                 epilog='Exit codes: 0 ok, 1 run failed, 2 usage, 3 bad input bag/file, '
-                        '4 missing topic/frame, 5 output exists/unwritable, 130 interrupted. '
-                        'Guide: docs/bags.md')
+                 epilog='Exit codes: 0 ok (also when stopped by Ctrl-C / SIGTERM), 1 run '
+                        'failed, 2 usage, 3 bad input bag/file, 4 missing topic/frame, 5 output '
+                        'exists/unwritable. Guide: docs/bags.md')
     sub = ap.add_subparsers(dest='command', metavar='COMMAND', parser_class=_Parser)
     sub.required = True
 
@@ -389,7 +398,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--no-head-pose', action='store_true', help='do not copy /head_pose')
     p.add_argument('--overwrite', action='store_true', help='replace an existing output')
     p.add_argument('-q', '--quiet', action='store_true', help='no progress bar')
-    process_tuning.add_arguments(p, omp_wait_policy='active')
+    executable.add_arguments(p)
     p.set_defaults(func=cmd_run)
 
     # ---- play
@@ -409,7 +418,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--delay', type=float, default=0.0, help='sleep this long before playing')
     p.add_argument('--domain-id', type=int, help='ROS_DOMAIN_ID to use')
     p.add_argument('-q', '--quiet', action='store_true', help='no progress line')
-    process_tuning.add_arguments(p)
+    executable.add_arguments(p, omp_wait_policy=None, gc_freeze=False)
     p.set_defaults(func=cmd_play)
 
     # ---- record
@@ -430,7 +439,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--domain-id', type=int, help='ROS_DOMAIN_ID to use')
     p.add_argument('--overwrite', action='store_true', help='replace an existing output')
     p.add_argument('-q', '--quiet', action='store_true', help='no progress line')
-    process_tuning.add_arguments(p)
+    executable.add_arguments(p, omp_wait_policy=None, gc_freeze=False)
     p.set_defaults(func=cmd_record)
 
     # ---- render
@@ -452,37 +461,48 @@ def build_parser() -> argparse.ArgumentParser:
     return ap
 
 
+#: Commands that run plain Python and numba, writing under a temporary name: a stop request
+#: interrupts them anywhere (the others check it between messages or poses)
+INTERRUPTIBLE = ('info', 'import', 'render')
+
+
 def main(argv: Optional[List[str]] = None) -> int:
     """Console entry point ``hair_sim_bag``; returns the exit code (see module doc)."""
     parser = build_parser()
     args = parser.parse_args(argv)
-    try:
-        if hasattr(args, 'malloc_retain_mb'):       # run, play, record: process-wide settings
-            try:
-                process_tuning.apply(args)
-            except ValueError as e:
-                raise BagError(str(e), EXIT_USAGE) from None
-        return int(args.func(args) or 0)
-    except BagError as exc:
-        print(f'hair_sim_bag {args.command}: error: {exc}', file=sys.stderr)
-        return exc.code
-    except KeyboardInterrupt:
-        print(f'hair_sim_bag {args.command}: interrupted', file=sys.stderr)
-        return EXIT_INTERRUPTED
-    except BrokenPipeError:
-        return EXIT_OK
-    except OSError as exc:
-        where = f' ({exc.filename})' if getattr(exc, 'filename', None) else ''
-        print(f'hair_sim_bag {args.command}: error: {exc.strerror or exc}{where}',
-              file=sys.stderr)
-        return EXIT_OUTPUT if isinstance(exc, (PermissionError, IsADirectoryError)) \
-            or getattr(exc, 'errno', None) == 28 else EXIT_FAILURE
-    except Exception as exc:       # noqa: B902 - a user sees one line, never a traceback
-        if os.environ.get('HAIR_SIM_BAG_DEBUG'):
-            raise
-        print(f'hair_sim_bag {args.command}: error: {type(exc).__name__}: {exc} '
-              f'(set HAIR_SIM_BAG_DEBUG=1 for the traceback)', file=sys.stderr)
-        return EXIT_FAILURE
+    with executable.started() as stop:
+        args.stop = stop
+        try:
+            if hasattr(args, 'malloc_retain_mb'):       # run, play, record: process settings
+                try:
+                    executable.apply(args)
+                except ValueError as e:
+                    raise BagError(str(e), EXIT_USAGE) from None
+            if args.command in INTERRUPTIBLE:
+                with stop.interruptible():
+                    return int(args.func(args) or 0)
+            return int(args.func(args) or 0)
+        except BagError as exc:
+            print(f'hair_sim_bag {args.command}: error: {exc}', file=sys.stderr)
+            return exc.code
+        except KeyboardInterrupt:                       # a stop inside an interruptible command
+            print(f'hair_sim_bag {args.command}: stopped ({stop.signal_name}), nothing written',
+                  file=sys.stderr)
+            return EXIT_OK
+        except BrokenPipeError:
+            return EXIT_OK
+        except OSError as exc:
+            where = f' ({exc.filename})' if getattr(exc, 'filename', None) else ''
+            print(f'hair_sim_bag {args.command}: error: {exc.strerror or exc}{where}',
+                  file=sys.stderr)
+            return EXIT_OUTPUT if isinstance(exc, (PermissionError, IsADirectoryError)) \
+                or getattr(exc, 'errno', None) == 28 else EXIT_FAILURE
+        except Exception as exc:       # noqa: B902 - a user sees one line, never a traceback
+            if os.environ.get('HAIR_SIM_BAG_DEBUG'):
+                raise
+            print(f'hair_sim_bag {args.command}: error: {type(exc).__name__}: {exc} '
+                  f'(set HAIR_SIM_BAG_DEBUG=1 for the traceback)', file=sys.stderr)
+            return EXIT_FAILURE
 
 
 if __name__ == '__main__':

@@ -1,7 +1,7 @@
 """``hair_sim``: the ROS 2 node that makes hair follow a head pose stream.
 
     ros2 run hair_tracking hair_sim_node --ros-args --params-file config/hair_sim.yaml
-    python -m hair_tracking.ros.node --ros-args -p groom.guides:=32 -r head_pose:=/face/pose
+    hair_sim_node --ros-args -p groom.guides:=32 -r head_pose:=/face/pose
 
 Inputs (all remappable, subscribed with the sensor-data QoS, so reliable and best-effort
 publishers both connect):
@@ -41,7 +41,6 @@ import argparse
 import collections
 import dataclasses
 import math
-import signal
 import sys
 import time
 from typing import Callable, Dict, List, Optional
@@ -72,7 +71,8 @@ from msg_adapters.rcl_serialized import SerializedPublisher
 from msg_adapters.stamps import time_to_ns
 from msg_adapters.tf import transform_message, transforms as tf_transforms
 
-from hair_tracking import process_tuning
+from hair_tracking import executable, shutdown
+from hair_tracking.bags.warmup import warm_up
 from hair_tracking.core import params as P
 from hair_tracking.core.head_track import PoseResult
 from hair_tracking.core.params_check import unknown_parameters
@@ -81,9 +81,8 @@ from hair_tracking.core.strand_colors import StrandColorCache
 from hair_tracking.core.tf_tree import compose as tf_compose, TfTree
 from hair_tracking.core.transforms import quat_to_matrix
 from hair_tracking.resources import config_path
-from hair_tracking.ros.interrupt import interrupt_between_callbacks
 from hair_tracking.ros.load_shedding import LoadShedder
-from hair_tracking.simulator import HairSimulator, warm_up as warm_up_simulator
+from hair_tracking.simulator import HairSimulator
 
 try:                                    # optional: /tf input
     from tf2_msgs.msg import TFMessage
@@ -134,27 +133,6 @@ def load_base_scene(scene_file: str) -> Scene:
     except FileNotFoundError as e:
         raise SceneError('scene_file', str(e)) from None
     return Scene.from_yaml(path)
-
-
-def warm_up(scene: Scene) -> float:
-    """Compile (or load from numba's on-disk cache) the kernels and encoders ``scene`` uses.
-
-    Runs a tiny copy of the scene (same solver, collider, tracking and output options, few
-    strands) through every call the node makes, so the first real frames are not late.
-    Returns the seconds it took.
-    """
-    start = time.perf_counter()
-    sim = warm_up_simulator(scene)
-    for head_frame in (False, True):
-        f = sim.frame(head_frame=head_frame, copy=False)
-        for guides, strands in ((False, f.strands), (True, f.guides)):
-            n_strands, n_points, write = sim.record_writer(guides, head_frame)
-            CloudBuffer().encode(n_strands, n_points, write, frame_id='warmup', stamp_ns=1,
-                                 packed_rgb=pack_rgb_u32(np.ones((n_strands, 4))))
-            for style in P.MARKER_STYLES:
-                strands_to_marker_array_cdr(strands, frame_id='warmup', style=style,
-                                            delete_all_first=True)
-    return time.perf_counter() - start
 
 
 class _Output:
@@ -850,61 +828,59 @@ def make_parser() -> argparse.ArgumentParser:
         epilog='ROS arguments follow --ros-args, e.g. hair_sim_node --ros-args '
                '--params-file config/hair_sim.yaml -p scene_file:=long_hair '
                '-r head_pose:=/face/pose')
-    process_tuning.add_arguments(parser)
+    executable.add_arguments(parser)
     return parser
 
 
 def main(args=None) -> int:
-    """Console entry point ``hair_sim_node``: init, spin, clean exit on Ctrl-C.
+    """Console entry point ``hair_sim_node``: init, spin until a stop is asked for, clean up.
 
     ``args`` is the whole command line (``sys.argv`` by default): the options before
     ``--ros-args`` are this executable's (``--help``, the process settings of
-    :mod:`hair_tracking.process_tuning`), the rest goes to rclpy.  Returns 0 on Ctrl-C or an
-    external shutdown, 2 when the start parameters are invalid (the message names the parameter
-    and the allowed values).
+    :mod:`hair_tracking.executable`), the rest goes to rclpy.  Returns 0 once stopped (SIGINT or
+    SIGTERM, in any state: :mod:`hair_tracking.shutdown`), 2 when the start parameters are
+    invalid (the message names the parameter and the allowed values).
     """
     argv = list(sys.argv if args is None else args)
     split = argv.index('--ros-args') if '--ros-args' in argv else len(argv)
     options = make_parser().parse_args(argv[1:split])
-    try:
-        done = process_tuning.apply(options)
-    except ValueError as e:
-        print(f'[hair_sim] {e}', file=sys.stderr)
-        return 2
-    node = executor = None
-    code = 0
-    try:
-        # Ctrl-C is a KeyboardInterrupt in the main thread (handled below), not rclpy's C-level
-        # handler shutting the context down under a running callback: until the node exists
-        # Python's own, then raised between the executor's callbacks
-        # (interrupt_between_callbacks); rclpy still turns SIGTERM into a shutdown
-        # (ExternalShutdownException).  Installed even where the parent left SIGINT ignored (a
-        # background job), as rclpy's own handler would be.
-        signal.signal(signal.SIGINT, signal.default_int_handler)
-        rclpy.init(args=argv[:1] + argv[split:],
-                   signal_handler_options=SignalHandlerOptions.SIGTERM)
-        for line in done:
-            rclpy.logging.get_logger(P.NODE_NAME).info(line)
-        executor = SingleThreadedExecutor()   # before the node: Ctrl-C may come at any time
-        node = HairSimNode()
-        node.warn_unknown_parameters(argv)
-        if options.gc_freeze:
-            process_tuning.freeze_heap()
-        executor.add_node(node)
-        interrupt_between_callbacks(node)
-        executor.spin()
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except (P.ParamError, SceneError, ParameterException) as e:
-        print(f'[hair_sim] invalid parameters: {e}', file=sys.stderr)
-        code = 2
-    finally:
-        if executor is not None:
-            executor.shutdown(timeout_sec=1.0)
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-    return code
+    with executable.started() as stop:
+        try:
+            done = executable.apply(options)
+        except ValueError as e:
+            print(f'[hair_sim] {e}', file=sys.stderr)
+            return 2
+        # no rclpy signal handler: it would shut the context down from another thread, under
+        # whatever the executor runs; the stop request wakes the executor instead
+        rclpy.init(args=argv[:1] + argv[split:], signal_handler_options=SignalHandlerOptions.NO)
+        node = executor = None
+        code = 0
+        try:
+            log = rclpy.logging.get_logger(P.NODE_NAME)
+            for line in done:
+                log.info(line)
+            executor = SingleThreadedExecutor()
+            if not stop.requested:
+                node = HairSimNode()
+                node.warn_unknown_parameters(argv)
+                if options.gc_freeze:
+                    executable.freeze_heap()
+                executor.add_node(node)
+                shutdown.spin_until_stopped(executor, stop)
+            if stop.requested:
+                log.info(f'{stop.signal_name}: stopping')
+        except ExternalShutdownException:
+            pass
+        except (P.ParamError, SceneError, ParameterException) as e:
+            print(f'[hair_sim] invalid parameters: {e}', file=sys.stderr)
+            code = 2
+        finally:
+            if executor is not None:
+                executor.shutdown(timeout_sec=1.0)
+            if node is not None:
+                node.destroy_node()
+            rclpy.try_shutdown()
+        return code
 
 
 if __name__ == '__main__':
