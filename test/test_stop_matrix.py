@@ -8,6 +8,9 @@ that state, sends the signal, and asserts exit code 0 within ``STOP_S`` seconds:
 seconds, far above the fraction of a second a stop takes, so the test does not depend on the
 machine's speed, only on the executable stopping at all.  The signal variants: SIGINT, SIGTERM,
 and SIGINT to a process started with SIGINT ignored (a background job of a shell script).
+"Start-up" begins where the executable's own code has installed its handlers (read from
+``/proc/<pid>/status``): before that, in the interpreter's own start, a signal has its default
+effect, as on any program.
 
 How many times: a failure of the kind the stop design was made against showed up in about 1 of
 6 stops.  A cell that fails with probability p passes n runs in a row with probability
@@ -73,11 +76,28 @@ class Proc:
             self.lines.put(line)
         self.lines.put(None)
 
+    def handlers_installed(self) -> bool:
+        """Whether the process catches SIGINT and SIGTERM (its stop request is installed)."""
+        try:
+            with open(f'/proc/{self.proc.pid}/status', encoding='ascii') as f:
+                caught = next(int(line.split()[1], 16) for line in f
+                              if line.startswith('SigCgt:'))
+        except (OSError, StopIteration):
+            return False
+        return all(caught >> (s - 1) & 1 for s in (signal.SIGINT, signal.SIGTERM))
+
     def wait_for(self, text, timeout=READY_S):
-        """Until a line with ``text`` (None: any line) is printed; a number: that many seconds
-        (the state of an executable that prints nothing in it)."""
-        if isinstance(text, float):
-            assert not self.exited(text), f'{self.name} exited:\n{self.text()}'
+        """Until a line with ``text`` (None: any line) is printed; ``STARTED``: until the stop
+        request is installed; a number: that many seconds after that (the state of an
+        executable that prints nothing in it)."""
+        if text is STARTED or isinstance(text, float):
+            deadline = time.monotonic() + timeout
+            while not self.handlers_installed():
+                assert time.monotonic() < deadline and self.proc.poll() is None, \
+                    f'{self.name}: no signal handlers within {timeout:g} s:\n{self.text()}'
+                time.sleep(0.005)
+            if isinstance(text, float):
+                assert not self.exited(text), f'{self.name} exited:\n{self.text()}'
             return ''
         deadline = time.monotonic() + timeout
         while True:
@@ -127,8 +147,6 @@ class Proc:
 
 
 # ==================================================================== states
-# each: (executable, arguments, what is beside it, what shows the state: a text it prints, None
-# for its first line, or seconds after its start for a state in which it prints nothing)
 def _free_port():
     with socket.socket() as s:
         s.bind(('127.0.0.1', 0))
@@ -150,8 +168,12 @@ def _viser():
     return True
 
 
+#: the state "starting": the stop request installed, start-up under way
+STARTED = 'the stop request installed'
+# each: (executable, arguments, what is beside it, what shows the state: a text it prints, None
+# for its first line, STARTED, or seconds after STARTED for a state in which it prints nothing)
 STATES = {
-    'node: start-up': ('hair_sim_node', ['--ros-args', *NODE_PARAMS], None, None),
+    'node: start-up': ('hair_sim_node', ['--ros-args', *NODE_PARAMS], None, STARTED),
     'node: wall clock': ('hair_sim_node', ['--ros-args', *NODE_PARAMS], None, 'ready:'),
     'node: sim time, /clock never came': (
         'hair_sim_node', ['--ros-args', '-p', 'use_sim_time:=true', *NODE_PARAMS], None,
@@ -163,7 +185,7 @@ STATES = {
         'hair_sim_node', ['--ros-args', '-p', 'use_sim_time:=true', *NODE_PARAMS], 'ended',
         'ready:'),
     'play: waiting for subscribers': (
-        'hair_sim_bag', ['play', '--wait-for-subscribers', '600'], None, 3.0),
+        'hair_sim_bag', ['play', '--wait-for-subscribers', '600'], None, 2.0),
     'play: playing': ('hair_sim_bag', ['play', '--loop', '--wait-for-subscribers', '0'], None,
                       'playing'),
     'record: wall clock, no publisher': (
@@ -175,7 +197,7 @@ STATES = {
         'hair_sim_bag', ['record', '/head_pose', '/clock', '--use-sim-time', '-o', '{out}'],
         'clock', 'recording to'),
     'run: start-up': ('hair_sim_bag', ['run', '-o', '{out}', '--set', 'groom.guides=32'], None,
-                      0.5),
+                      STARTED),
     'run: simulating': ('hair_sim_bag', ['run', '-o', '{out}', '--set', 'groom.guides=256',
                                          '--set', 'groom.ghosts_per_guide=32'], None,
                         'running'),
@@ -184,7 +206,7 @@ STATES = {
         'hair_sim_view', ['--port', '{port}', '--ros-args', '-p', 'use_sim_time:=true'],
         'viser', 'serving http'),
     'ctl: waiting for a node that is not there': (
-        'hair_sim_ctl', ['--timeout', '600', 'param', 'list', '/nobody'], None, 3.0),
+        'hair_sim_ctl', ['--timeout', '600', 'param', 'list', '/nobody'], None, 2.0),
     'warmup: compiling': ('hair_sim_warmup', ['--all-presets'], None, 'numba cache'),
 }
 
