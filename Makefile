@@ -42,7 +42,7 @@ $(STAMP): setup.py Makefile package.xml interfaces/build_tf2_msgs.sh $(wildcard 
 	touch $(STAMP)
 
 $(KERNELS): $(STAMP) $(SOURCES)
-	$(TEST_ENV) $(PY) -m hair_tracking.ros.warmup
+	$(TEST_ENV) $(VENV)/bin/hair_sim_warmup
 	touch $(KERNELS)
 
 test: install
@@ -58,7 +58,7 @@ demo: install
 
 # The offline core demo: simulator only, numbers and a picture (no DDS).
 demo-core: install
-	$(TEST_ENV) $(PY) -m hair_tracking.evaluation.demo --out out/demo-core
+	$(TEST_ENV) $(VENV)/bin/hair_sim_demo --out out/demo-core
 
 bench: install
 	$(PY) -m pip install -q pypbd
@@ -73,14 +73,14 @@ bench: install
 # The full matrix of stiff and extreme cases; refreshes the committed docs/results/stability.*
 # (hair_sim_eval itself writes under out/eval/ unless told).
 stability: install
-	$(PY) -m hair_tracking.evaluation.cli stability --out docs/results
+	$(VENV)/bin/hair_sim_eval stability --out docs/results
 
 # Error against run time of every method (installs the peer pypbd); refreshes the committed
 # docs/results/accuracy.* and docs/figures.  VR_TRACE=path/to/vr360_user1_quaternion.txt adds
 # the headset trace.
 eval: install
 	$(PY) -m pip install -q pypbd
-	$(PY) -m hair_tracking.evaluation.cli accuracy $(if $(VR_TRACE),--vr $(VR_TRACE)) \
+	$(VENV)/bin/hair_sim_eval accuracy $(if $(VR_TRACE),--vr $(VR_TRACE)) \
 	    --out docs/results --figures docs/figures
 
 clean:

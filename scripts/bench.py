@@ -38,11 +38,13 @@ import subprocess  # noqa: E402
 import tempfile  # noqa: E402
 import time  # noqa: E402
 
-import numba  # noqa: E402
-import numpy as np  # noqa: E402
-
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, ROOT)
+from hair_tracking.executable import use_numba_cache  # noqa: E402
+use_numba_cache()      # before numba loads: the cache make install fills
+
+import numba  # noqa: E402
+import numpy as np  # noqa: E402
 
 from hair_tracking.core.groom import make_groom  # noqa: E402
 from hair_tracking.core.head_track import IDENTITY  # noqa: E402

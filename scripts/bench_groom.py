@@ -32,6 +32,8 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, ROOT)
 sys.path.insert(0, os.path.join(ROOT, 'scripts'))
 
+from hair_tracking.executable import use_numba_cache  # noqa: E402
+use_numba_cache()      # before numba loads: the cache make install fills
 import numba  # noqa: E402
 import numpy as np  # noqa: E402
 

@@ -11,10 +11,12 @@ PACKAGE = os.path.join(ROOT, 'hair_tracking')
 ADAPTERS = os.path.join(ROOT, 'msg_adapters')
 
 #: Layers from the bottom up: a module may import its own layer and the ones below it only.
-#: The top-level helpers (resources, process_tuning) are leaves any layer may use.
+#: The top-level helpers (resources, executable, shutdown) are leaves any layer may use; the
+#: console entry points at the end of executable.py import the executables' modules inside
+#: their functions.
 LAYERS = ['core', 'motion', 'grooms', 'guides', 'ghosts', 'simulator', 'output', 'bags',
           'evaluation', 'ros']
-LEAVES = {'resources', 'process_tuning'}
+LEAVES = {'resources', 'executable', 'shutdown'}
 #: Layers that simulate or describe head motion: numpy, numba and yaml only, no ROS messages,
 #: no rclpy, no adapters.
 SIMULATION = {'core', 'motion', 'grooms', 'guides', 'ghosts', 'simulator'}
@@ -133,14 +135,14 @@ def test_the_numba_cache_key_covers_every_subpackage(tmp_path, monkeypatch):
     of all its sources: an edit in any subpackage must change that key."""
     import shutil
 
-    import hair_tracking
+    from hair_tracking import executable
     copy = tmp_path / 'hair_tracking'
     shutil.copytree(PACKAGE, copy, ignore=shutil.ignore_patterns('__pycache__', 'data'))
-    monkeypatch.setattr(hair_tracking, '_HERE', str(copy))
-    before = hair_tracking.source_hash()
+    monkeypatch.setattr(executable, '_PACKAGE', str(copy))
+    before = executable.source_hash()
     for sub in ('ghosts', 'guides', 'grooms', 'core'):
         kernel = next(p for p in sorted((copy / sub).iterdir()) if p.name != '__init__.py')
         kernel.write_text(kernel.read_text() + '\n# edited\n')
-        after = hair_tracking.source_hash()
+        after = executable.source_hash()
         assert after != before, sub
         before = after

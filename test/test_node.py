@@ -5,7 +5,6 @@ uses 35-49), discovery limited to localhost (conftest.py), and every wait is bou
 """
 import itertools
 import os
-import signal
 import subprocess
 import sys
 import time
@@ -35,6 +34,8 @@ from hair_tracking.simulator import HairSimulator
 from msg_adapters.pointcloud import pointcloud2_to_strands
 from msg_adapters.pose import pose_stamped_msg, transform_stamped_msg
 from msg_adapters.stamps import time_msg, time_to_ns
+
+from node_process import until_ready_then_ctrl_c
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 _DOMAINS = itertools.cycle(range(20, 35))
@@ -688,40 +689,19 @@ def _run_node(args, domain_id, options=()):
                             stderr=subprocess.STDOUT, text=True)
 
 
-def _until_ready_then_ctrl_c(proc) -> str:
-    """Read the node's output until it says ready (at most 120 s), send Ctrl-C, wait for it to
-    exit; returns everything it printed."""
-    lines = []
-    try:
-        deadline = time.monotonic() + 120
-        while time.monotonic() < deadline:
-            line = proc.stdout.readline()
-            if not line:
-                break
-            lines.append(line)
-            if 'ready:' in line:
-                break
-        proc.send_signal(signal.SIGINT)
-        out, _ = proc.communicate(timeout=30)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.communicate()
-    return ''.join(lines) + out
-
-
 def test_executable_reads_the_params_file_and_overrides_and_exits_cleanly_on_ctrl_c():
     proc = _run_node(['--params-file', os.path.join(ROOT, 'config', 'hair_sim.yaml'),
                       '-p', 'groom.guides:=3', '-p', 'groom.ghosts_per_guide:=2',
                       '-p', 'solver.settle_time:=0.0', '-p', 'damping:=2'], 34)
-    text = _until_ready_then_ctrl_c(proc)
+    text = until_ready_then_ctrl_c(proc)
     assert any('ready: 3 guides' in ln and '6 ghosts' in ln for ln in text.splitlines()), text
     assert proc.returncode == 0, text
     assert 'Traceback' not in text
     # --omp-wait-policy (default passive) is applied before numba starts its threads
     wanted = os.environ.get('OMP_WAIT_POLICY')
     assert (f'OMP_WAIT_POLICY={wanted} from the environment kept' if wanted else
-            'OpenMP worker threads wait passive (OMP_WAIT_POLICY=PASSIVE)') in text, text
+            'OpenMP worker threads wait passive (numba threading layer omp, '
+            'OMP_WAIT_POLICY=PASSIVE)') in text, text
 
 
 def test_executable_takes_its_process_settings_from_its_own_options():
@@ -730,11 +710,12 @@ def test_executable_takes_its_process_settings_from_its_own_options():
                       '-p', 'solver.settle_time:=0.0'], 56,
                      options=['--omp-wait-policy', 'active', '--malloc-retain-mb', '0',
                               '--no-gc-freeze'])
-    text = _until_ready_then_ctrl_c(proc)
+    text = until_ready_then_ctrl_c(proc)
     assert proc.returncode == 0, text
     assert 'malloc retention 0: glibc malloc defaults kept' in text, text
     assert (f'OMP_WAIT_POLICY={env_policy} from the environment kept' if env_policy else
-            'OpenMP worker threads wait active (OMP_WAIT_POLICY=ACTIVE)') in text, text
+            'OpenMP worker threads wait active (numba threading layer omp, '
+            'OMP_WAIT_POLICY=ACTIVE)') in text, text
 
 
 def test_executable_rejects_a_bad_process_setting_before_starting():

@@ -10,6 +10,7 @@ import numba
 import numpy as np
 import pytest
 from rcl_interfaces.msg import ParameterType
+import rclpy
 from rclpy.parameter import Parameter
 from rclpy.parameter_client import AsyncParameterClient
 import yaml
@@ -140,6 +141,34 @@ def test_integer_for_a_double_is_taken_as_a_double(rig):
 def test_out_of_range_is_refused_in_the_readme_form(rig, name, value, reason):
     res = call(rig, rig.client.set_parameters([Parameter(name, value=value)]), 'set').results
     assert not res[0].successful and res[0].reason == reason
+
+
+def test_integer_overrides_of_doubles_at_start_are_taken_as_doubles():
+    """`-p damping:=2` at start (rclpy refuses an integer for a double parameter): the node
+    declares the double it means, through rclpy's public API; a value that is not a number is
+    still refused, naming the parameter."""
+    h = Harness(overrides={'damping': 2, 'gravity': [0, 0, -3]}, domain_id=next(_DOMAINS))
+    try:
+        damping = h.node.get_parameter('damping')
+        assert damping.type_ == Parameter.Type.DOUBLE and damping.value == 2.0
+        gravity = h.node.get_parameter('gravity')
+        assert gravity.type_ == Parameter.Type.DOUBLE_ARRAY
+        assert list(gravity.value) == [0.0, 0.0, -3.0]
+        assert h.node._settings.scene.damping == 2.0
+        assert h.node._settings.scene.gravity == (0.0, 0.0, -3.0)
+        assert h.node.describe_parameter('damping').additional_constraints == '[0.0, 1000.0]'
+    finally:
+        h.close()
+    from rclpy.context import Context
+    from rclpy.exceptions import InvalidParameterTypeException
+    from hair_tracking.ros.node import HairSimNode
+    ctx = Context()
+    rclpy.init(context=ctx, domain_id=next(_DOMAINS))
+    try:
+        with pytest.raises(InvalidParameterTypeException, match='damping'):
+            HairSimNode(context=ctx, parameter_overrides=[Parameter('damping', value='soft')])
+    finally:
+        rclpy.try_shutdown(context=ctx)
 
 
 @pytest.mark.parametrize('name, value, words', [

@@ -11,13 +11,13 @@ their typesupports through their RPATH.
 """
 import glob
 import os
-import signal
 import subprocess
 import sys
 import sysconfig
-import time
 
 import pytest
+
+from node_process import until_ready_then_ctrl_c
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 DOMAIN = 85
@@ -61,23 +61,7 @@ def test_node_with_tf_starts_under_a_foreign_library_path(tmp_path):
     env = dict(os.environ, LD_LIBRARY_PATH=_foreign_library_path(folder), PYTHONPATH=path,
                ROS_DOMAIN_ID=str(DOMAIN), PYTHONUNBUFFERED='1', **{GUARD: '1'})
     proc = _start_node(env)
-    lines = []
-    try:
-        deadline = time.monotonic() + 120
-        while time.monotonic() < deadline:
-            line = proc.stdout.readline()
-            if not line:
-                break
-            lines.append(line)
-            if 'ready:' in line:
-                break
-        proc.send_signal(signal.SIGINT)
-        out, _ = proc.communicate(timeout=30)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.communicate()
-    text = ''.join(lines) + out
+    text = until_ready_then_ctrl_c(proc)
     assert 'cannot open shared object file' not in text, text
-    assert any('ready: 3 guides' in ln for ln in lines), text
+    assert any('ready: 3 guides' in ln for ln in text.splitlines()), text
     assert proc.returncode == 0, text

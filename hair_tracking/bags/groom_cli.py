@@ -11,25 +11,30 @@ groom options (``--units``, ``--up-axis``, ``--fit``, ``--rotation``, ``--offset
 ``--max-strands``) are the ``groom.*`` parameters of the same names, and ``--scene`` takes the
 others (the scalp, the node counts) from a scene file.
 
-Exit codes (those of ``hair_sim_bag``): 0 success, 2 bad command line, 3 the file is missing or
-cannot be read (the message names the byte and what was expected there), 5 the output exists or
-cannot be written.  Errors are one line on stderr, never a traceback.
+Exit codes (those of ``hair_sim_bag``, whose :func:`~hair_tracking.bags.cli.run_command` runs
+the commands): 0 success, or stopped by SIGINT (Ctrl-C) or SIGTERM (nothing written then: an
+output is written under a temporary name and renamed when whole), 1 an unexpected error, 2 bad
+command line, 3 the file is missing or cannot be read (the message names the byte and what was
+expected there), 5 the output exists or cannot be written.  Errors are one line on stderr,
+never a traceback.
 """
 import argparse
+import contextlib
 from dataclasses import replace
 import os
+from pathlib import Path
 import sys
 from typing import List, Optional
 
 import numpy as np
 
-from hair_tracking.bags.io import (BagError, check_output_path, EXIT_INPUT, EXIT_OK,
-                                   EXIT_OUTPUT, EXIT_USAGE)
+from hair_tracking import executable
+from hair_tracking.bags.cli import run_command
+from hair_tracking.bags.io import BagError, check_output_path, EXIT_OK, EXIT_USAGE
 from hair_tracking.core.scene import Scene, SceneError
 from hair_tracking.core.scene_params import GROOM_FITS, GROOM_UNITS, GROOM_UP_AXES
 from hair_tracking.grooms.build import import_groom, survey
 from hair_tracking.grooms.npz import write_npz
-from hair_tracking.grooms.polylines import GroomFileError
 
 PROG = 'hair_sim_groom'
 
@@ -66,6 +71,19 @@ def _xyz(v) -> str:
     return '[' + ', '.join(f'{float(x):.4g}' for x in v) + ']'
 
 
+@contextlib.contextmanager
+def _whole(out: Path):
+    """A temporary name beside ``out`` (same extension) to write to; it becomes ``out`` when the
+    block ends, and is removed when the block is left by an exception (a stop among them)."""
+    tmp = out.with_name(f'.{out.stem}.partial{out.suffix}')
+    try:
+        yield tmp
+        os.replace(tmp, out)
+    finally:
+        if tmp.exists():
+            tmp.unlink()
+
+
 def cmd_info(args) -> int:
     info, _ = survey(args.file, args.units, args.up_axis)
     lo, hi = info.lengths[0], info.lengths[2]
@@ -97,12 +115,14 @@ def cmd_convert(args) -> int:
             spec = replace(spec, ghost_nodes=args.nodes)
         imported = import_groom(spec)
         s = imported.strands
-        write_npz(out, s.reshape(-1, 3), np.full(s.shape[0], s.shape[1]), 1.0, 'z')
+        with _whole(out) as tmp:
+            write_npz(tmp, s.reshape(-1, 3), np.full(s.shape[0], s.shape[1]), 1.0, 'z')
         print(f'wrote {out}: {s.shape[0]} strands x {s.shape[1]} nodes on the head '
               f'(metres, head frame); {imported.note}')
         return EXIT_OK
     info, poly = survey(args.file, args.units, args.up_axis)
-    write_npz(out, poly.points, poly.counts, info.unit, info.up)
+    with _whole(out) as tmp:
+        write_npz(tmp, poly.points, poly.counts, info.unit, info.up)
     print(f'wrote {out}: {poly.count} strands, {poly.points.shape[0]} vertices as read '
           f'(units {info.units_words}; up {info.up_words})')
     return EXIT_OK
@@ -119,15 +139,17 @@ def cmd_preview(args) -> int:
     imported = import_groom(spec)
     strands = imported.strands
     title = f'{os.path.basename(args.file)}: {strands.shape[0]} strands on the head'
-    picture(strands, out, title, head_radii=spec.scalp.radii, max_strands=args.max_drawn)
+    with _whole(out) as tmp:
+        picture(strands, tmp, title, head_radii=spec.scalp.radii, max_strands=args.max_drawn)
     print(f'wrote {out}; {imported.note}')
     return EXIT_OK
 
 
 def build_parser() -> argparse.ArgumentParser:
     ap = _Parser(prog=PROG, description=__doc__.split('\n')[0],
-                 epilog='Exit codes: 0 ok, 2 usage, 3 the file is missing or cannot be read, '
-                        '5 output exists/unwritable. Guide: docs/grooms.md')
+                 epilog='Exit codes: 0 ok (also when stopped by Ctrl-C / SIGTERM), 1 failed, 2 '
+                        'usage, 3 the file is missing or cannot be read, 5 output '
+                        'exists/unwritable. Guide: docs/grooms.md')
     sub = ap.add_subparsers(dest='command', metavar='COMMAND', parser_class=_Parser)
     sub.required = True
 
@@ -170,22 +192,12 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Optional[List[str]] = None) -> int:
-    """Console entry point ``hair_sim_groom``; returns the exit code (see module doc)."""
+    """Console entry point ``hair_sim_groom``; returns the exit code (see module doc).  Every
+    command is plain Python and numba work: a stop request interrupts it anywhere."""
     args = build_parser().parse_args(argv)
-    try:
-        return int(args.func(args) or 0)
-    except GroomFileError as exc:
-        print(f'{PROG} {args.command}: error: {exc}', file=sys.stderr)
-        return EXIT_INPUT
-    except BagError as exc:
-        print(f'{PROG} {args.command}: error: {exc}', file=sys.stderr)
-        return exc.code
-    except BrokenPipeError:
-        return EXIT_OK
-    except OSError as exc:
-        where = f' ({exc.filename})' if getattr(exc, 'filename', None) else ''
-        print(f'{PROG} {args.command}: error: {exc.strerror or exc}{where}', file=sys.stderr)
-        return EXIT_OUTPUT
+    with executable.started() as stop:
+        args.stop = stop
+        return run_command(PROG, args, interruptible=True)
 
 
 if __name__ == '__main__':

@@ -260,6 +260,7 @@ class RunSummary:
     nodes: int = 0
     finite: bool = True
     groom: str = ''              # an imported groom's report line ('' for the procedural one)
+    stopped_after: Optional[int] = None   # poses run when a stop was asked for (else None)
 
     @property
     def ms_per_pose(self) -> float:
@@ -290,6 +291,9 @@ class RunSummary:
             f'poses rejected: {self.rejected}; resets: {self.resets}; substeps: {self.substeps} '
             f'run, {self.substeps_dropped} dropped',
         ]
+        if self.stopped_after is not None:
+            lines.append(f'stopped after {self.stopped_after} of {self.poses} poses; the output '
+                         f'holds what was written until then')
         if not self.finite:
             lines.append('ERROR: the hair became non-finite')
         return '\n'.join(lines)
@@ -351,13 +355,16 @@ def progress_bar(label: str, quiet: bool = False):
 def run_bag(input_path: str, output_path: str, settings: Settings,
             options: Optional[RunOptions] = None,
             progress: Optional[Callable[[int, int], None]] = None,
-            after_setup: Optional[Callable[[], None]] = None) -> RunSummary:
+            after_setup: Optional[Callable[[], None]] = None,
+            should_stop: Optional[Callable[[], bool]] = None) -> RunSummary:
     """Simulate the hair on the head poses of ``input_path`` and write ``output_path``.
 
     Returns the summary; raises BagError for unusable input or output (nothing is left at the
     output path then).  ``progress(done, total)`` is called as poses are processed,
     ``after_setup()`` once the hair is built and the kernels are loaded, before the loop (the
-    ``hair_sim_bag run`` executable freezes its start-up objects there).
+    ``hair_sim_bag run`` executable freezes its start-up objects there); ``should_stop()``
+    before each pose: when it says so the run ends there and the output is closed as it is (a
+    complete bag of the poses run, ``summary.stopped_after``).
     """
     from hair_tracking.core.head_track import PoseResult
     from hair_tracking.simulator import HairSimulator, warm_up
@@ -426,6 +433,9 @@ def run_bag(input_path: str, output_path: str, settings: Settings,
         worst_stretch = worst_depth = 0.0
         t_loop = time.perf_counter()
         for i in range(total):
+            if should_stop is not None and should_stop():
+                summary.stopped_after = i
+                break
             t = int(poses.t_ns[i])
             log_t = int(poses.log_ns[i])
             p, q = poses.position[i], poses.quaternion[i]
