@@ -24,7 +24,8 @@ SIMULATION = {'core', 'motion', 'grooms', 'guides', 'ghosts', 'simulator'}
 NO_GRAPH = SIMULATION | {'output', 'bags', 'evaluation'}
 ROS_ROOTS = {'rclpy', 'rosidl_runtime_py', 'rosgraph_msgs', 'std_msgs', 'geometry_msgs',
              'sensor_msgs', 'visualization_msgs', 'diagnostic_msgs', 'std_srvs', 'tf2_msgs',
-             'rcl_interfaces', 'builtin_interfaces', 'msg_adapters', 'rosbags'}
+             'hri_msgs', 'hair_tracking_msgs', 'rcl_interfaces', 'builtin_interfaces',
+             'msg_adapters', 'rosbags'}
 #: At most this many modules at the top of hair_tracking/ (besides __init__.py).
 MAX_TOP_MODULES = 4
 #: All that msg_adapters (ROS messages <-> numpy, nothing of hair) may use of hair_tracking.

@@ -15,6 +15,7 @@ ROSDEP_KEYS = {
     'builtin_interfaces': 'builtin_interfaces',
     'diagnostic_msgs': 'diagnostic_msgs',
     'geometry_msgs': 'geometry_msgs',
+    'hair_tracking_msgs': 'hair_tracking_msgs',
     'hri_msgs': 'hri_msgs',
     'launch': 'launch',
     'launch_ros': 'launch_ros',
