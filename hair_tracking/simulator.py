@@ -18,6 +18,11 @@ Time handling
 * Ghosts are tracked after every guide substep, or - with ``tracking.every_substep: false`` or
   while ``track_once_per_call`` is set (the live node's load shedding) - once per
   ``advance_to`` call (one head pose) over all its substeps, 2-4x cheaper.
+* The ghost tracker keeps the ghosts' state
+  (:class:`~hair_tracking.ghosts.interface.GhostTracking`); :meth:`frame`,
+  :meth:`record_writer`, :meth:`max_stretch`, :meth:`penetration` and :meth:`audit` ask it for
+  the ghosts.  The blend and turn trackers place the ghosts there, from their last step, and
+  only then: once per output frame however many head poses came in between.
 * The guide solver takes the substeps of a pose (or of a whole settle) in one call
   (:meth:`~hair_tracking.guides.solver.GuideSolver.advance`), up to the first that needs
   splitting (below): it applies the split rule after every substep, so the hair is that of
@@ -45,11 +50,12 @@ from hair_tracking.core import curves
 from hair_tracking.core.groom import make_groom
 from hair_tracking.core.head_track import HeadTrack, IDENTITY, PoseResult
 from hair_tracking.core.metrics import max_stretch
-from hair_tracking.core.model import HeadPose, StrandSet, strand_part
+from hair_tracking.core.model import carry_rigidly, HeadPose, StrandSet
 from hair_tracking.core.point_records import points_to_records
 from hair_tracking.core.scene import GUIDES_AMONG_STRANDS, Scene
 from hair_tracking.core.transforms import quat_angle, quat_to_matrix, slerp
 from hair_tracking.ghosts.blend import BlendTracker
+from hair_tracking.ghosts.interface import GhostTracking, TrackStep
 from hair_tracking.ghosts.stateless import choose_guides
 from hair_tracking.ghosts.turn import TurnTracker
 from hair_tracking.ghosts.tracker import GhostTracker
@@ -126,8 +132,8 @@ class HairSimulator:
             self.guides = StrandSet.from_rest(groom.guide_rest)
         self.collider = make_collider(scene.collider)
         self.guide_solver = GuideSolver(self.guides, scene)
-        self.ghosts = None
-        self.ghost_tracker = None
+        self.ghosts = None             # the ghost strands' rest data (state: the tracker's)
+        self.ghost_tracker: Optional[GhostTracking] = None
         if groom.ghost_rest.shape[0] > 0:
             self.ghosts = StrandSet.from_rest(groom.ghost_rest)
             self.ghost_tracker = self._make_tracker(scene)
@@ -161,7 +167,10 @@ class HairSimulator:
         self.guide_solver = GuideSolver(self.guides, scene)
         if self.ghosts is not None:
             if scene.tracking != old.tracking or scene.collider != old.collider:
-                self.ghost_tracker = self._make_tracker(scene, keep_state=True)
+                # the new tracker starts where the old one leaves the ghosts
+                np.copyto(self.ghosts.x, self.ghost_tracker.positions())
+                np.copyto(self.ghosts.v, self.ghost_tracker.velocities())
+                self.ghost_tracker = self._make_tracker(scene)
         self.dt_ns = max(1, int(round(scene.solver.dt * 1e9)))
         self._gravity_norm = float(np.linalg.norm(scene.gravity))
         return False
@@ -172,14 +181,15 @@ class HairSimulator:
         and places every strand once per read, without state."""
         return scene.tracking.mode in GUIDES_AMONG_STRANDS
 
-    def _make_tracker(self, scene: Scene, keep_state: bool = False):
+    def _make_tracker(self, scene: Scene) -> GhostTracking:
+        """The scene's ghost tracker, started from ``self.ghosts.x`` and ``.v``."""
         collider = self.collider if scene.tracking.collide else None
         if scene.tracking.mode == 'turn':
             return TurnTracker(self.ghosts, self.guides, self.guide_index, scene, collider)
         if self._stateless(scene):
             return BlendTracker(self.ghosts, self.guides, self.guide_index, scene, collider,
                                 k=scene.tracking.blend_guides)
-        return GhostTracker(self.ghosts, self.guides, scene, collider, keep_state=keep_state)
+        return GhostTracker(self.ghosts, self.guides, scene, collider)
 
     # ---------------------------------------------------------------- input
     def push_pose(self, t_ns: int, position, quaternion) -> PoseResult:
@@ -235,7 +245,7 @@ class HairSimulator:
     def frame(self, head_frame: bool = False, copy: bool = True) -> Frame:
         """The hair now; with ``copy`` false the arrays may be read-only views of the state."""
         g = self.guides.x
-        s = self._ghost_x()
+        s = self._ghost_positions()
         if head_frame:
             g = self.head.to_head(g)
             s = self.head.to_head(s) if s is not None else None
@@ -274,7 +284,7 @@ class HairSimulator:
         has a NaN length)."""
         m = max_stretch(self.guides.x, self.guides.rest_length)
         if self.ghosts is not None:
-            m = _worst(m, max_stretch(self._ghost_x(), self.ghosts.rest_length))
+            m = _worst(m, max_stretch(self._ghost_positions(), self.ghosts.rest_length))
         return m
 
     def penetration(self) -> float:
@@ -283,7 +293,7 @@ class HairSimulator:
             return 0.0
         d = self.collider.penetration(self.guides.x, self.head)
         if self.ghosts is not None:
-            d = max(d, self.collider.penetration(self._ghost_x(), self.head))
+            d = max(d, self.collider.penetration(self._ghost_positions(), self.head))
         return d
 
     def audit(self, part: int = 0, parts: int = 1) -> Tuple[float, float, np.ndarray]:
@@ -295,25 +305,21 @@ class HairSimulator:
         stretch = max_stretch(self.guides.x, self.guides.rest_length)
         depth = 0.0 if self.collider is None else \
             self.collider.penetration(self.guides.x, self.head)
-        if self.ghosts is None:
+        if self.ghost_tracker is None:
             return stretch, depth, np.zeros(0, dtype=np.int64)
-        if self.ghost_tracker is not None:
-            idx, x = self.ghost_tracker.part_positions(part, parts)
-        else:
-            idx = strand_part(self.ghosts.count, part, parts)
-            x = self.ghosts.x[idx]
+        idx, x = self.ghost_tracker.part_positions(part, parts)
         stretch = _worst(stretch, max_stretch(x, self.ghosts.rest_length[idx]))
         if self.collider is not None and idx.size:
             depth = max(depth, self.collider.penetration(x, self.head))
         return stretch, depth, idx
 
     # ------------------------------------------------------------ internals
-    def _ghost_x(self) -> Optional[np.ndarray]:
-        """Ghost positions to read (output, checks) without taking the state away from the
-        tracker, which keeps it in its kernel's layout between steps."""
-        if self.ghost_tracker is not None:
-            return self.ghost_tracker.positions()
-        return self.ghosts.x if self.ghosts is not None else None
+    def _ghost_positions(self) -> Optional[np.ndarray]:
+        """The ghost positions now, from the tracker (which places them here if it defers
+        placing to the read: the blend and turn trackers), or None without ghosts."""
+        if self.ghost_tracker is None:
+            return None
+        return self.ghost_tracker.positions()
 
     def _run(self, dt: float, head_prev: HeadPose, heads) -> None:
         """Substeps ``dt`` from ``head_prev`` through ``heads``: the guide solver takes them in
@@ -388,7 +394,7 @@ class HairSimulator:
                 np.copyto(self._x_old, self.guides.x)
                 steps = self.guide_solver.advance(dt, head_prev, (head,), measure=True)
                 start = self.clock()
-                self.ghost_tracker.step(dt, self._x_old, head)
+                self.ghost_tracker.step(TrackStep(dt, 1, self._x_old, self.guides.x, head))
                 self.counters.last_track_ms += (self.clock() - start) * 1e3
                 head_prev = head
         self._last_speed = math.sqrt(steps[-1]) / dt
@@ -403,17 +409,16 @@ class HairSimulator:
             and not self._stateless(self.scene)
 
     def _begin_ghosts(self) -> None:
-        """Keep the guides where the paper's once-per-call tracker starts from (its ``x_old``;
-        the stateless trackers read only the guides' new positions)."""
-        if self.ghost_tracker is not None and not self._every_substep() and \
-                not self._stateless(self.scene):
+        """Keep the guides where a once-per-call tracking step starts from."""
+        if self.ghost_tracker is not None and not self._every_substep():
             np.copyto(self._ghost_guide_x, self.guides.x)
 
     def _track_ghosts(self, dt: float, substeps: int) -> None:
         if self.ghost_tracker is None or self._every_substep() or substeps == 0:
             return
         start = self.clock()
-        self.ghost_tracker.step(dt, self._ghost_guide_x, self.head, substeps=substeps)
+        self.ghost_tracker.step(TrackStep(dt, substeps, self._ghost_guide_x, self.guides.x,
+                                          self.head))
         self.counters.last_track_ms += (self.clock() - start) * 1e3
 
     def _rest_at(self, head: HeadPose) -> None:
@@ -428,18 +433,17 @@ class HairSimulator:
             self._track_ghosts(self.scene.solver.dt * settle, settle)
         finally:
             self.track_once_per_call = once
-        for strands in (self.guides, self.ghosts):
-            if strands is not None:
-                strands.v[...] = 0.0
+        self.guides.v[...] = 0.0
+        if self.ghost_tracker is not None:
+            self.ghost_tracker.zero_velocities()
         self._last_speed = 0.0
 
     def _carry_rigidly(self, old: HeadPose, new: HeadPose) -> None:
         """Move all hair with the head from ``old`` to ``new``, at rest (no whip)."""
-        rot = new.rotation @ old.rotation.T
-        for strands in (self.guides, self.ghosts):
-            if strands is not None:
-                strands.x[...] = (strands.x - old.position) @ rot.T + new.position
-                strands.v[...] = 0.0
+        self.guides.x[...] = carry_rigidly(self.guides.x, old, new)
+        self.guides.v[...] = 0.0
+        if self.ghost_tracker is not None:
+            self.ghost_tracker.carry(old, new)
         self._last_speed = 0.0
 
 

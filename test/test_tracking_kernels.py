@@ -5,6 +5,7 @@ import pytest
 from hair_tracking.core.model import HeadPose, StrandSet
 from hair_tracking.core.scene import Scene
 from hair_tracking.core.transforms import quat_normalize, quat_to_matrix, rotation_between
+from hair_tracking.ghosts.interface import TrackStep
 from hair_tracking.ghosts.kernels import guide_frames
 from hair_tracking.ghosts.reference import ghost_step
 from hair_tracking.ghosts.tracker import GhostTracker
@@ -71,16 +72,18 @@ def test_kernel_matches_numpy_reference(options, regroup, even):
     ghosts.place_at(head)
     ghosts.v[...] = rng.normal(scale=0.2, size=ghosts.v.shape)
     ghosts.x[...] += rng.normal(scale=0.003, size=ghosts.x.shape)
+    tracker.set_state(ghosts.x, ghosts.v)
     for _ in range(4):
         old = guides.x.copy()
         head = head_pose(rng)
         guides.x[...] = head.to_world(guides.rest) + rng.normal(scale=0.004, size=old.shape)
         want_x, want_v = ghost_step(
-            ghosts.x, ghosts.v, ghosts.rest, ghosts.rest_length, tracker.guide_of,
-            tracker.seg, tracker.t, guides.rest, guides.x, old, head, dt, scene.tracking)
-        tracker.step(dt, old, head)
-        np.testing.assert_allclose(ghosts.x, want_x, rtol=0, atol=1e-11)
-        np.testing.assert_allclose(ghosts.v, want_v, rtol=1e-9, atol=1e-8)
+            tracker.positions(), tracker.velocities(), ghosts.rest, ghosts.rest_length,
+            tracker.guide_of, tracker.seg, tracker.t, guides.rest, guides.x, old, head, dt,
+            scene.tracking)
+        tracker.step(TrackStep(dt, 1, old, guides.x, head))
+        np.testing.assert_allclose(tracker.positions(), want_x, rtol=0, atol=1e-11)
+        np.testing.assert_allclose(tracker.velocities(), want_v, rtol=1e-9, atol=1e-8)
     assert tracker.stats['steps'] == 4
 
 
@@ -90,20 +93,20 @@ def _steps_match_reference(rng, tracker, guides, ghosts, scene, collider, steps)
     dt = 1.0 / 240.0
     head = head_pose(rng, angle_scale=0.05, shift=0.005)
     guides.place_at(head)
-    ghosts.place_at(head)
+    tracker.reset(head)
     contacts = 0
     for _ in range(steps):
         old = guides.x.copy()
         head = head_pose(rng, angle_scale=0.05, shift=0.005)
         guides.x[...] = head.to_world(guides.rest) + rng.normal(scale=0.004, size=old.shape)
         want_x, want_v = ghost_step(
-            ghosts.x, ghosts.v, ghosts.rest, ghosts.rest_length, tracker.guide_of,
-            tracker.seg, tracker.t, guides.rest, guides.x, old, head, dt, scene.tracking,
-            collider)
-        tracker.step(dt, old, head)
+            tracker.positions(), tracker.velocities(), ghosts.rest, ghosts.rest_length,
+            tracker.guide_of, tracker.seg, tracker.t, guides.rest, guides.x, old, head, dt,
+            scene.tracking, collider)
+        tracker.step(TrackStep(dt, 1, old, guides.x, head))
         contacts += tracker.stats['contacts']
-        np.testing.assert_allclose(ghosts.x, want_x, rtol=0, atol=1e-10)
-        np.testing.assert_allclose(ghosts.v, want_v, rtol=1e-8, atol=1e-7)
+        np.testing.assert_allclose(tracker.positions(), want_x, rtol=0, atol=1e-10)
+        np.testing.assert_allclose(tracker.velocities(), want_v, rtol=1e-8, atol=1e-7)
     return contacts
 
 
@@ -214,8 +217,9 @@ def test_parallel_and_serial_kernels_agree_bit_for_bit(monkeypatch):
         for _ in range(5):
             old = guides.x.copy()
             guides.x[:, 2:] += rng.normal(scale=0.01, size=guides.x[:, 2:].shape)
-            tracker.step(1.0 / 240.0, old, head_pose(rng))
-        runs.append((ghosts.x.copy(), ghosts.v.copy(), tracker.stats['contacts']))
+            tracker.step(TrackStep(1.0 / 240.0, 1, old, guides.x, head_pose(rng)))
+        runs.append((tracker.positions().copy(), tracker.velocities().copy(),
+                     tracker.stats['contacts']))
     assert runs[0][2] == runs[1][2] and runs[0][2] > 0
     np.testing.assert_array_equal(runs[0][0], runs[1][0])
     np.testing.assert_array_equal(runs[0][1], runs[1][1])
