@@ -137,16 +137,16 @@ _KERNEL_ROWS = 12
 TMP_ROWS = _KERNEL_ROWS + CONTACT_ROWS
 
 #: Lanes (ghosts) a block of consecutive groups holds at most (a larger group is a block of its
-#: own).  Every loop has a fixed cost (set-up, runtime alias checks, remainder), which groups of
-#: 4-16 ghosts felt: on one thread 10 k ghosts took 19 / 16 / 7.5 / 5.2 / 5.4 ms a substep with
-#: 4 / 8 / 16 / 32 / 128 ghosts per group when every loop ran over one group.
+#: own).  Every loop has a fixed cost (set-up, runtime alias checks, remainder), which loops
+#: over single groups of 4-16 ghosts would pay again and again: packing groups into blocks of
+#: a few dozen ghosts spreads it.
 BLOCK_LANES = 64
 
 
 #: The arguments of :func:`track_groups`, grouped as NVIDIA Warp / Newton separate a solver's
 #: inputs; the fields are described in :func:`track_groups`.  The kernel takes them as plain
 #: tuples in these fields' order (``tuple(GhostModel(...))``): numba types a named tuple by
-#: encoding its class and field names on every call, a few microseconds a call.
+#: encoding its class and field names on every call.
 #: Static data of the ghosts and guides, built once
 # (:class:`~hair_tracking.ghosts.tracker.GhostTracker`).
 GhostModel = namedtuple('GhostModel', [
@@ -221,9 +221,8 @@ def track_groups(model, state, motion, params, work):
       R (3, 3), pos (3,)      head pose
       inv_dt                  1 / dt [1/s], the substep's inverse, computed by the caller:
                               computed in here, LLVM's reassociation (``TRACK_FASTMATH``)
-                              turned every ``(x_new - x_old) * (1 / dt)`` back into a division,
-                              three vector divisions a node (11 % of the kernel's perf samples
-                              at 100 k ghosts)
+                              would turn every ``(x_new - x_old) * (1 / dt)`` back into a
+                              division, three vector divisions a node
     params
       elastic_mode            weights.ELASTIC_OFF / KEPT / CHANGED
       use_tip, com_w, max_weight, k_off, k_com, spread, ftl   switches and strengths
@@ -259,8 +258,7 @@ def track_groups(model, state, motion, params, work):
 @njit(cache=True, nogil=True, fastmath=TRACK_FASTMATH, error_model='numpy')
 def track_groups_serial(model, state, motion, params, work):
     """:func:`track_groups` on the calling thread, for small problems: no parallel region to
-    launch (which costs a few hundred microseconds a call on this shared machine, more than a
-    1 k-ghost substep's arithmetic).  Same results."""
+    launch (which costs more than a small substep's arithmetic).  Same results."""
     n_chunks = work[1].shape[0]
     for c in range(n_chunks):
         _track_chunk(c, n_chunks, model, state, motion, params, work)
@@ -270,7 +268,7 @@ def track_groups_serial(model, state, motion, params, work):
 def _track_chunk(c, n_chunks, model, state, motion, params, work):
     """Chunk ``c`` of :func:`track_groups` (its blocks ``c B / C .. (c+1) B / C - 1``).  A
     function of its own so that the parallel loop's body stays small (numba's parfor lowering
-    copies the body's IR, which took most of the compile time when everything was inlined)."""
+    copies the body's IR: the smaller the body, the shorter the compilation)."""
     (rest, seg_len, order, group_start, block_group, group_guide, group_row, node_table,
      node_row, rest_off, root_rest, inv_len, var_target, tan_rest) = model      # GhostModel
     xb, vb = state                                                              # GhostState
@@ -432,9 +430,7 @@ def _predict_group(X0, V0, P, off, inv_len, l0, l1, gi, j, row, node_table, guid
     Per lane the same arithmetic as :func:`_targets` + :func:`_com_lanes` + :func:`_predict`
     (which the rare groups with mixed layouts still take), without writing the per-group values
     out into a row per lane and reading them back, and with the sums of (d) taken in the same
-    loop: two loops fewer per group and node index.  Old and new kernels in alternating
-    processes (two threads): 10 k ghosts 3.45-3.59 -> 3.17-3.40 ms, 100 k 33.3-35.3 ->
-    30.8-31.1 ms (skipping the broadcast altogether, as an upper bound: 2.9 / 24-30 ms)."""
+    loop: two loops fewer per group and node index."""
     (px, py, pz, dx, dy, dz, tw, q00, q01, q02, q10, q11, q12, q20, q21,
      q22) = _group_point(gi, j, row, node_table, guide_x, guide_x_old, frames, fg, m_last,
                          need_target)
@@ -481,9 +477,8 @@ def _targets(T, l0, l1, k0, gi, j, node_table, node_row, off, guide_x, guide_x_o
 
     The lanes of a group are indexed with unsigned integers (``uint64``): numba wraps negative
     signed indices around, and that select turns the loop's loads into gathers LLVM does not
-    vectorise; views of the lanes (indices from 0) vectorise too but cost about 20 ns each to
-    create, which small groups felt (8 ghosts a group: 7 of a 16 ms substep of 10 k ghosts
-    went to this function with views, 3 with unsigned indices)."""
+    vectorise; views of the lanes (indices from 0) vectorise too but cost an allocation each,
+    which small groups would pay once per group and node."""
     u0 = uint64(l0)
     n = uint64(l1 - l0)
     for kk in range(n):

@@ -69,10 +69,8 @@ TINY_SQ = 1e-30
 #: constant distance from the others, so LLVM proves that a projection's loads and stores do not
 #: overlap and vectorises the loop over the strands.  It did not with the row length a run-time
 #: value, with 3-d indexing (numba reads the strides at run time) or with signed indices (see
-#: :func:`pbd_sweep_lanes`): the loop ran scalar.  Guide step against pypbd, 4 iterations, in
-#: turns in one process (scripts/bench.py's method): 100 / 1000 / 4000 strands 3.2 / 4.0 / 6.5x
-#: with the strand-by-strand sweep, 6.8 / 10.1 / 20.6x with these blocks.  16 strands are four
-#: AVX2 vectors, enough to overlap the square-root and division chains of consecutive nodes.
+#: :func:`pbd_sweep_lanes`): the loop ran scalar.  16 strands are four AVX2 vectors, enough
+#: to overlap the square-root and division chains of consecutive nodes.
 LANES = 16
 
 
