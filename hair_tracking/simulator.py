@@ -38,11 +38,10 @@ Time handling
   (docs/stability.md), up to 1500 % stretch.  The split count depends only on the state, so runs
   stay deterministic; ``counters.extra['split_substeps']`` counts the extra substeps.
 """
-from contextlib import nullcontext
 from dataclasses import dataclass, field
 import math
 import time
-from typing import Callable, Dict, Optional, Tuple
+from typing import Callable, Dict, NamedTuple, Optional, Tuple
 
 import numpy as np
 
@@ -60,7 +59,7 @@ from hair_tracking.ghosts.stateless import choose_guides
 from hair_tracking.ghosts.turn import TurnTracker
 from hair_tracking.ghosts.tracker import GhostTracker
 from hair_tracking.guides.collision import make_collider
-from hair_tracking.guides.integrate import parallel_from, runs_parallel
+from hair_tracking.guides.integrate import runs_parallel
 from hair_tracking.guides.solver import GuideSolver
 
 #: Most parts one substep is split into when the hair moves fast (see the module docstring).
@@ -92,6 +91,24 @@ class Frame:
         return self.ghosts if self.ghosts is not None else self.guides
 
 
+class Parallelism(NamedTuple):
+    """Which variant of their kernels the guide and the ghost stages run: the parallel one
+    (True) or the serial one (:func:`~hair_tracking.guides.integrate.runs_parallel`)."""
+
+    guides: bool
+    ghosts: bool
+
+
+def parallelism(scene: Scene) -> Parallelism:
+    """The kernel variants of ``scene``'s stages, from the node counts of its guides and
+    ghosts (:func:`~hair_tracking.guides.integrate.runs_parallel`)."""
+    g = scene.groom
+    ghosts = g.guides * g.ghosts_per_guide
+    among = scene.tracking.mode in GUIDES_AMONG_STRANDS and ghosts > 0
+    return Parallelism(runs_parallel(g.guides * (g.ghost_nodes if among else g.guide_nodes)),
+                       runs_parallel(ghosts * g.ghost_nodes))
+
+
 @dataclass
 class Counters:
     substeps: int = 0
@@ -106,11 +123,15 @@ class Counters:
 class HairSimulator:
     """Guides + ghosts driven by a head-pose stream, assembled from a :class:`Scene`."""
 
-    def __init__(self, scene: Scene, clock: Callable[[], float] = time.perf_counter):
-        """``clock()`` [s] times the work reported in :attr:`counters` (a test injects one)."""
+    def __init__(self, scene: Scene, clock: Callable[[], float] = time.perf_counter,
+                 parallel: Optional[Parallelism] = None):
+        """``clock()`` [s] times the work reported in :attr:`counters` (a test injects one);
+        ``parallel`` the kernel variants of the stages (default: :func:`parallelism` of the
+        scene; :func:`warm_up` runs a tiny scene through the variants of a large one)."""
         scene.validate()
         self.scene = scene
         self.clock = clock
+        self._parallel = parallel
         self.track = HeadTrack(scene.head_track)
         self.counters = Counters()
         self.time_ns: Optional[int] = None
@@ -123,6 +144,8 @@ class HairSimulator:
     def _build(self, head: HeadPose = IDENTITY) -> None:
         scene = self.scene
         groom = make_groom(scene.groom)
+        #: the kernel variants of the guide and ghost stages (:class:`Parallelism`)
+        self.parallel = self._parallel if self._parallel is not None else parallelism(scene)
         self.guide_index = None
         if self._stateless(scene) and groom.ghost_rest.shape[0] > 0:
             # the guides are some of the strands themselves (1:1 is full simulation)
@@ -131,7 +154,7 @@ class HairSimulator:
         else:
             self.guides = StrandSet.from_rest(groom.guide_rest)
         self.collider = make_collider(scene.collider)
-        self.guide_solver = GuideSolver(self.guides, scene)
+        self.guide_solver = GuideSolver(self.guides, scene, self.parallel.guides)
         self.ghosts = None             # the ghost strands' rest data (state: the tracker's)
         self.ghost_tracker: Optional[GhostTracking] = None
         if groom.ghost_rest.shape[0] > 0:
@@ -164,7 +187,7 @@ class HairSimulator:
             self._build(self.head)
             return True
         self.collider = make_collider(scene.collider)
-        self.guide_solver = GuideSolver(self.guides, scene)
+        self.guide_solver = GuideSolver(self.guides, scene, self.parallel.guides)
         if self.ghosts is not None:
             if scene.tracking != old.tracking or scene.collider != old.collider:
                 # the new tracker starts where the old one leaves the ghosts
@@ -189,7 +212,8 @@ class HairSimulator:
         if self._stateless(scene):
             return BlendTracker(self.ghosts, self.guides, self.guide_index, scene, collider,
                                 k=scene.tracking.blend_guides)
-        return GhostTracker(self.ghosts, self.guides, scene, collider)
+        return GhostTracker(self.ghosts, self.guides, scene, collider,
+                            parallel=self.parallel.ghosts)
 
     # ---------------------------------------------------------------- input
     def push_pose(self, t_ns: int, position, quaternion) -> PoseResult:
@@ -291,9 +315,10 @@ class HairSimulator:
         """Deepest hair node inside the head collider [m]; 0 without a collider."""
         if self.collider is None:
             return 0.0
-        d = self.collider.penetration(self.guides.x, self.head)
+        d = self.collider.penetration(self.guides.x, self.head, parallel=self.parallel.guides)
         if self.ghosts is not None:
-            d = max(d, self.collider.penetration(self._ghost_positions(), self.head))
+            d = max(d, self.collider.penetration(self._ghost_positions(), self.head,
+                                                 parallel=self.parallel.ghosts))
         return d
 
     def audit(self, part: int = 0, parts: int = 1) -> Tuple[float, float, np.ndarray]:
@@ -304,13 +329,14 @@ class HairSimulator:
         the ghost strands checked)``; ``parts`` = 1 is the whole hair."""
         stretch = max_stretch(self.guides.x, self.guides.rest_length)
         depth = 0.0 if self.collider is None else \
-            self.collider.penetration(self.guides.x, self.head)
+            self.collider.penetration(self.guides.x, self.head, parallel=self.parallel.guides)
         if self.ghost_tracker is None:
             return stretch, depth, np.zeros(0, dtype=np.int64)
         idx, x = self.ghost_tracker.part_positions(part, parts)
         stretch = _worst(stretch, max_stretch(x, self.ghosts.rest_length[idx]))
         if self.collider is not None and idx.size:
-            depth = max(depth, self.collider.penetration(x, self.head))
+            depth = max(depth, self.collider.penetration(x, self.head,
+                                                         parallel=self.parallel.ghosts))
         return stretch, depth, idx
 
     # ------------------------------------------------------------ internals
@@ -453,47 +479,25 @@ def _worst(a: float, b: float) -> float:
     return math.nan if math.isnan(a) or math.isnan(b) else max(a, b)
 
 
-def _threshold_for(stages):
-    """A node count ``T`` such that every ``(tiny_nodes, parallel)`` stage runs parallel in the
-    tiny copy exactly when its full-size stage does (``tiny_nodes >= T``), or None."""
-    for t in sorted({0, 1 << 62} | {n for n, _ in stages} | {n + 1 for n, _ in stages}):
-        if all((n >= t) == par for n, par in stages):
-            return t
-    return None
-
-
 def warm_up(scene: Scene) -> HairSimulator:
     """Compile (or load from numba's on-disk cache) every kernel ``scene`` uses.
 
     Runs a tiny copy of the scene (same solver, collider, tracking and output options, at most
     two guides with two ghosts each) through a moving, turning head and the stretch and
     penetration checks, so the first real steps are not late: every stage through the variant,
-    serial or parallel, that the full scene will run
-    (:func:`~hair_tracking.guides.integrate.runs_parallel`), and only that one.  Returns the
-    tiny simulator (callers may warm their own output code on its frames).
+    serial or parallel, that the full scene will run (:func:`parallelism` of ``scene``, handed
+    to the tiny copy), and only that one.  Returns the tiny simulator (callers may warm their
+    own output code on its frames).
     """
     g = scene.groom
     small = scene.with_changes(groom__guides=min(g.guides, 2),
                                groom__ghosts_per_guide=min(g.ghosts_per_guide, 2),
                                solver__settle_time=0.0)
-    guide_len = g.ghost_nodes if scene.tracking.mode in GUIDES_AMONG_STRANDS else g.guide_nodes
-    stages = [(small.groom.guides * guide_len, runs_parallel(g.guides * guide_len))]
-    if g.ghosts_per_guide > 0:
-        stages.append((small.groom.guides * small.groom.ghosts_per_guide * g.ghost_nodes,
-                       runs_parallel(g.guides * g.ghosts_per_guide * g.ghost_nodes)))
-    threshold = _threshold_for(stages)
-    sim = HairSimulator(small)
+    sim = HairSimulator(small, parallel=parallelism(scene))
     dt_ns = max(1, int(round(small.solver.dt * 1e9)))
-    passes = [threshold] if threshold is not None else [None, 0]
-    for k, t in enumerate(passes):
-        # each stage decides serial or parallel on its own node count, as GuideSolver and
-        # GhostTracker do: the threshold puts every stage of the tiny copy on the side its
-        # full-size stage is on, so exactly the variants the scene will run are compiled
-        with parallel_from(t) if t is not None else nullcontext():
-            t0 = 1 + 8 * k * dt_ns
-            sim.push_pose(t0, [0.0, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0])
-            sim.push_pose(t0 + 4 * dt_ns, [0.01, 0.0, 0.0], [0.0, 0.0, 0.0871557, 0.9961947])
-            sim.advance_to(t0 + 4 * dt_ns)
-            sim.max_stretch()
-            sim.penetration()
+    sim.push_pose(1, [0.0, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0])
+    sim.push_pose(1 + 4 * dt_ns, [0.01, 0.0, 0.0], [0.0, 0.0, 0.0871557, 0.9961947])
+    sim.advance_to(1 + 4 * dt_ns)
+    sim.max_stretch()
+    sim.penetration()
     return sim

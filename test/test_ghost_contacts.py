@@ -50,13 +50,13 @@ def test_contact_lanes_match_node_by_node(refine, ftl, friction, axes):
     want = P.copy()
     pushed = 0
     for kk in range(n):
-        moved, y0, y1, y2 = push_out(*P[:, kk], *X0[:, kk], R, *c, ax, ay, az, friction, refine)
+        contact = (R, *c, ax, ay, az, friction, refine)
+        moved, y0, y1, y2 = push_out(*P[:, kk], *X0[:, kk], contact)
         pushed += moved
         if moved and ftl:
             s = order[kk]
-            y0, y1, y2 = restore_node(y0, y1, y2, *B[:, kk], seg_len[kk],
-                                      *(rest[s, j] - rest[s, j - 1]), R, *c, ax, ay, az,
-                                      refine, 0)
+            y0, y1, y2 = restore_node((y0, y1, y2), tuple(B[:, kk]), seg_len[kk],
+                                      tuple(rest[s, j] - rest[s, j - 1]), contact, 0)
         want[:, kk] = (y0, y1, y2)
     got = P.copy()
     W = np.full((ghost_contacts.CONTACT_ROWS, n), np.nan)

@@ -200,20 +200,19 @@ def test_tip_weights_follow_arc_length():
         arc_fractions(np.zeros(3))
 
 
-def test_parallel_and_serial_kernels_agree_bit_for_bit(monkeypatch):
-    """Below PARALLEL_MIN_NODES the tracker calls the serial kernel; forcing the parallel one (any
-    thread count) gives the same bits, with the fused collider on."""
+def test_parallel_and_serial_kernels_agree_bit_for_bit():
+    """Below PARALLEL_MIN_NODES the tracker calls the serial kernel; asking for the parallel one
+    (any thread count) gives the same bits, with the fused collider on."""
     from hair_tracking.guides.collision import make_collider
-    import hair_tracking.guides.integrate as integrate_module
     scene = scene_with(spread=0.5, spread_target=1.5)
     collider = make_collider(scene.collider)
     runs = []
-    for threshold in (1 << 40, 0):
-        monkeypatch.setattr(integrate_module, 'PARALLEL_MIN_NODES', threshold)
+    for parallel in (None, True):
         rng = np.random.default_rng(5)
         guides = StrandSet.from_rest(random_strands(rng, 6, 8) + [0.0, 0.0, 0.12])
         ghosts = StrandSet.from_rest(random_strands(rng, 70, 8, seg=0.015) + [0.0, 0.0, 0.12])
-        tracker = GhostTracker(ghosts, guides, scene, collider)
+        tracker = GhostTracker(ghosts, guides, scene, collider, parallel=parallel)
+        assert tracker.stats['parallel'] == (parallel is True)
         for _ in range(5):
             old = guides.x.copy()
             guides.x[:, 2:] += rng.normal(scale=0.01, size=guides.x[:, 2:].shape)
@@ -249,26 +248,3 @@ def test_blocks_of_groups_large_small_and_single():
     assert lanes.max() == BLOCK_LANES + 37 and blocks.size - 1 == 2
     assert np.array_equal(block_groups(np.array([0])), [0, 0])            # no ghosts
     assert _steps_match_reference(rng, tracker, guides, ghosts, scene, collider, 3) > 20
-
-
-def test_kernel_bodies_compile_without_reference_counting():
-    """The per-block kernel bodies are built without numba's NRT reference counting
-    (``integrate.NO_REFCOUNT``): its atomic counts of array views were a quarter of the ghost
-    kernel's time.  A numba without the option is reported as a skip (the kernels then run,
-    slower, with reference counting)."""
-    from hair_tracking.ghosts import kernels as tk
-    from hair_tracking.guides import collision
-    from hair_tracking.guides import ftl
-    from hair_tracking.guides import integrate
-    from hair_tracking.guides import pbd_constraints
-    if not integrate.NO_REFCOUNT:
-        pytest.skip('this numba has no _nrt option: kernels keep reference counting')
-    assert integrate.NO_REFCOUNT == {'_nrt': False}
-    bodies = (tk._track_chunk, tk.copy_blocks, integrate.head_motion, integrate.predict_block,
-              integrate.finalize_block, integrate.carry_rigid_block, collision.project_block,
-              ftl.ftl_block, ftl.ftl_pass_block, ftl.ftl_restore_block,
-              pbd_constraints.pbd_sweep_block, pbd_constraints.pbd_sweep_lanes,
-              pbd_constraints.xpbd_sweep_lanes, pbd_constraints._pbd_block,
-              pbd_constraints._xpbd_block, pbd_constraints.lanes_in, pbd_constraints.lanes_out)
-    for body in bodies:
-        assert body.targetoptions.get('_nrt') is False, body.__name__

@@ -154,11 +154,11 @@ def collide_lanes(X0, B, P, W, n, k0, order, seg_len, rest, R, j, ftl, cx, cy, c
             hx, hy, hz = to_head(wx, wy, wz, R, cx, cy, cz)
             yx, yy, yz = surface_point(hx, hy, hz, ax, ay, az, refine)
             wx, wy, wz = restore_node(
-                R[0, 0] * yx + R[0, 1] * yy + R[0, 2] * yz + cx,
-                R[1, 0] * yx + R[1, 1] * yy + R[1, 2] * yz + cy,
-                R[2, 0] * yx + R[2, 1] * yy + R[2, 2] * yz + cz,
-                W[_BX, c], W[_BY, c], W[_BZ, c], W[_LEN, c], W[_EX, c], W[_EY, c], W[_EZ, c],
-                R, cx, cy, cz, ax, ay, az, refine, 1)
+                (R[0, 0] * yx + R[0, 1] * yy + R[0, 2] * yz + cx,
+                 R[1, 0] * yx + R[1, 1] * yy + R[1, 2] * yz + cy,
+                 R[2, 0] * yx + R[2, 1] * yy + R[2, 2] * yz + cz),
+                (W[_BX, c], W[_BY, c], W[_BZ, c]), W[_LEN, c], (W[_EX, c], W[_EY, c], W[_EZ, c]),
+                (R, cx, cy, cz, ax, ay, az, friction, refine), 1)
         P[0, kk] = wx
         P[1, kk] = wy
         P[2, kk] = wz
@@ -172,15 +172,15 @@ def _collide_scalar(X0, B, P, W, m, k0, order, seg_len, rest, R, j, ftl, cx, cy,
     (more refinements than the vectorised pass unrolls)."""
     for c in range(m):
         kk = int(W[_IDX, c])
+        contact = (R, cx, cy, cz, ax, ay, az, friction, refine)
         moved, y0, y1, y2 = push_out(P[0, kk], P[1, kk], P[2, kk],
-                                     X0[0, kk], X0[1, kk], X0[2, kk],
-                                     R, cx, cy, cz, ax, ay, az, friction, refine)
+                                     X0[0, kk], X0[1, kk], X0[2, kk], contact)
         if moved and ftl:
             s = order[k0 + kk]
             y0, y1, y2 = restore_node(
-                y0, y1, y2, B[0, kk], B[1, kk], B[2, kk], seg_len[kk],
-                rest[s, j, 0] - rest[s, j - 1, 0], rest[s, j, 1] - rest[s, j - 1, 1],
-                rest[s, j, 2] - rest[s, j - 1, 2], R, cx, cy, cz, ax, ay, az, refine, 0)
+                (y0, y1, y2), (B[0, kk], B[1, kk], B[2, kk]), seg_len[kk],
+                (rest[s, j, 0] - rest[s, j - 1, 0], rest[s, j, 1] - rest[s, j - 1, 1],
+                 rest[s, j, 2] - rest[s, j - 1, 2]), contact, 0)
         P[0, kk] = y0
         P[1, kk] = y1
         P[2, kk] = y2

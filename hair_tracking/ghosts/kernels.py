@@ -41,7 +41,6 @@ from hair_tracking.ghosts.contacts import collide_lanes, CONTACT_ROWS
 from hair_tracking.ghosts.spread import group_variance, spread_factor
 from hair_tracking.ghosts.weights import com_weight, elastic_weight, ELASTIC_OFF, weighted_position
 from hair_tracking.guides.collision import world_center
-from hair_tracking.guides.integrate import NO_REFCOUNT
 
 
 @njit(cache=True, inline='always')
@@ -264,7 +263,7 @@ def track_groups_serial(model, state, motion, params, work):
         _track_chunk(c, n_chunks, model, state, motion, params, work)
 
 
-@njit(cache=True, fastmath=TRACK_FASTMATH, error_model='numpy', **NO_REFCOUNT)
+@njit(cache=True, fastmath=TRACK_FASTMATH, error_model='numpy', _nrt=False)
 def _track_chunk(c, n_chunks, model, state, motion, params, work):
     """Chunk ``c`` of :func:`track_groups` (its blocks ``c B / C .. (c+1) B / C - 1``).  A
     function of its own so that the parallel loop's body stays small (numba's parfor lowering
@@ -652,7 +651,7 @@ def _follow(B, P, T, n, k0, order, seg_len, rest, R, j):
         P[2, kk] = B[2, kk] + R[2, 0] * r0 + R[2, 1] * r1 + R[2, 2] * r2
 
 
-@njit(cache=True, nogil=True, **NO_REFCOUNT)
+@njit(cache=True, nogil=True)
 def copy_blocks(x, v, order, block_rows, xb, vb, into_blocks, with_v):
     """Ghost state between the user's ``x``, ``v`` (S, N, 3) and the kernel's ``xb``, ``vb``
     (S * N * 3,) (block by block, [node][axis][ghost]; see :func:`group_blocks`): into the

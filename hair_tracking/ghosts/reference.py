@@ -136,10 +136,10 @@ def _collide_nodes(p, start, prev, seg_len, rest_seg, head, collider, restore):
     a = collider.radii + collider.margin
     out = p.copy()
     for k in range(p.shape[0]):
-        moved, y0, y1, y2 = push_out(*p[k], *start[k], R, *c, *a, collider.friction,
-                                     collider.refine)
+        contact = (R, *c, *a, collider.friction, collider.refine)
+        moved, y0, y1, y2 = push_out(*p[k], *start[k], contact)
         if moved and restore:
-            y0, y1, y2 = restore_node(y0, y1, y2, *prev[k], seg_len[k], *rest_seg[k], R, *c,
-                                      *a, collider.refine, 0)
+            y0, y1, y2 = restore_node((y0, y1, y2), tuple(prev[k]), seg_len[k],
+                                      tuple(rest_seg[k]), contact, 0)
         out[k] = (y0, y1, y2)
     return out

@@ -7,6 +7,7 @@ margin rule (:func:`collider_axes`), and every strand is placed from the guides 
 of the last step when the hair is next read (:class:`StatelessTracker`), once per output frame
 however many head poses came in between.
 """
+from collections import namedtuple
 from typing import Dict, Tuple
 
 import numpy as np
@@ -16,6 +17,19 @@ from hair_tracking.core.model import carry_rigidly, HeadPose, StrandSet, strand_
 from hair_tracking.core.point_records import points_to_records, record_target
 from hair_tracking.ghosts.interface import TrackStep
 from hair_tracking.guides.collision import outside_distance, world_center
+
+
+#: Where a placement kernel writes, a plain tuple in these fields' order (numba types a named
+#: tuple by encoding its class and field names on every call): ``out`` (S, N, >= 3) the
+#: positions as x y z, or with ``check`` point records (the points that are not finite counted),
+#: carried to ``rot (x - origin)`` when ``moved``
+#: (:func:`~hair_tracking.core.point_records.record_target`,
+#: :func:`~hair_tracking.core.point_records.put_record`).
+Placement = namedtuple('Placement', ['out', 'rot', 'origin', 'moved', 'check'])
+#: What a placement kernel places the ghosts from (a plain tuple in these fields' order): the
+#: guides at the ghosts' node fractions ``gcol`` (G, 3, N), component-major
+#: (:func:`guide_columns`), and the head pose ``rot`` (3, 3), ``pos`` (3,).
+GuidePose = namedtuple('GuidePose', ['gcol', 'rot', 'pos'])
 
 
 def choose_guides(roots: np.ndarray, count: int) -> np.ndarray:
@@ -169,17 +183,20 @@ class StatelessTracker:
         self.seg, self.t = node_map(ghosts.rest.shape[1], guides.rest.shape[1])
         self._gcol = np.empty((guides.count, 3, ghosts.rest.shape[1]))
         self._rot, self._pos = np.empty((3, 3)), np.empty(3)
+        self._pose = (self._gcol, self._rot, self._pos)       # GuidePose of the last step
         self._pending = False         # a step not yet placed into _x32
         self._x32 = ghosts.x.astype(np.float32)
-        self._x32_out = (self._x32, np.eye(3), np.zeros(3), False, False)
+        self._x32_target = (self._x32, np.eye(3), np.zeros(3), False, False)      # Placement
         self._x64 = None              # the positions set by reset or carry, until a step
         self._v = np.zeros(ghosts.rest.shape)
         self._v.flags.writeable = False
         self.collide = bool(scene.tracking.collide and collider is not None)
+        #: the ellipsoid the ghosts are kept out of, head frame (:func:`collider_axes`; a
+        #: stand-in without a collider)
         if self.collide:
-            self._center, self._axes = collider_axes(ghosts, collider)
+            self.center, self.axes = collider_axes(ghosts, collider)
         else:
-            self._center, self._axes = np.zeros(3), np.ones(3)
+            self.center, self.axes = np.zeros(3), np.ones(3)
         self.stats: Dict[str, int] = {'ghosts': int(ghosts.count), 'steps': 0, 'evaluations': 0,
                                       'contacts': 0, 'parallel': 1}
 
@@ -198,18 +215,17 @@ class StatelessTracker:
         if not self._pending:
             return
         self._pending = False
-        self._placed_into(*self._x32_out)
+        self._placed_into(self._x32_target)
 
-    def _placed_into(self, out, rot, origin, moved, check) -> bool:
-        contacts, finite = self._place(out, rot, origin, moved, check)
+    def _placed_into(self, target) -> bool:
+        contacts, finite = self._place(target)
         self.stats['contacts'] = int(contacts)
         self.stats['evaluations'] += 1
         return bool(finite)
 
-    def _place(self, out, rot, origin, moved, check) -> Tuple[int, bool]:
-        """Every ghost from ``_gcol``, ``_rot``, ``_pos`` as float32 x y z into ``out`` (S, N,
-        >= 3): ``_x32`` as it is, or with ``check`` records carried by ``rot``, ``origin`` when
-        ``moved`` (:func:`~hair_tracking.core.point_records.record_target`); returns the number
+    def _place(self, target) -> Tuple[int, bool]:
+        """Every ghost from the last step (``_pose``) as float32 x y z into ``target`` (the
+        fields of :data:`Placement`: ``_x32`` as it is, or point records); returns the number
         of head contacts and whether every coordinate written is finite (true without
         ``check``)."""
         raise NotImplementedError
@@ -271,5 +287,5 @@ class StatelessTracker:
         when read."""
         if self._pending:
             s, n = self.ghosts.rest.shape[:2]
-            return self._placed_into(*record_target(words, stride, s, n, rot, origin), True)
+            return self._placed_into(record_target(words, stride, s, n, rot, origin) + (True,))
         return points_to_records(words, stride, self.positions(), rot, origin)

@@ -31,7 +31,7 @@ group through ``order`` (ghost indices sorted by guide, stable); group ``g`` is
 ``order[group_start[g]:group_start[g + 1]]`` and follows guide ``group_guide[g]``.
 """
 import math
-from typing import Dict, Tuple
+from typing import Dict, Optional, Tuple
 
 import numba
 import numpy as np
@@ -71,10 +71,14 @@ class GhostTracker:
     now in row ``i`` (identity when the set was already grouped, e.g. when a tracker is rebuilt
     on the same ghosts).  With ``regroup=False`` the rows are left alone and visited through
     ``order``.
+
+    ``parallel``: run the parallel kernel rather than its serial variant (default: by the ghost
+    node count, :func:`~hair_tracking.guides.integrate.runs_parallel`; the simulator decides
+    for the whole scene).
     """
 
     def __init__(self, ghosts: StrandSet, guides: StrandSet, scene: Scene, collider=None,
-                 regroup: bool = True):
+                 regroup: bool = True, parallel: Optional[bool] = None):
         tr = scene.tracking
         self.ghosts = ghosts
         self.guides = guides
@@ -89,6 +93,7 @@ class GhostTracker:
         if self.collide and not callable(getattr(collider, 'apply', None)):
             raise ValueError('collider must expose apply(x, x_prev, inv_mass, head)')
         s_count, n_nodes = ghosts.count, ghosts.nodes
+        self.parallel = bool(runs_parallel(s_count * n_nodes) if parallel is None else parallel)
 
         # -- correspondence (equation (1)) and node correspondence by arc length
         self.guide_of, self.cost = assign_guides(ghosts.rest, guides.rest, tr.candidates)
@@ -194,19 +199,21 @@ class GhostTracker:
             self._friction, self._refine = 0.0, 0
         self._collide_after = self.collide and not self._fused_collider
         self._x_prev = np.empty(ghosts.rest.shape) if self._collide_after else None
-        # the kernel's static arguments, plain tuples in the fields' order (see
-        # tracking_kernels.GhostModel)
-        self._model = tuple(GhostModel(
+        #: the kernel's static data: the fields of
+        #: :data:`~hair_tracking.ghosts.kernels.GhostModel` (a plain tuple)
+        self.model = tuple(GhostModel(
             ghosts.rest, self._seg_len_blocks, self.order, self.group_start, self.block_group,
             self.group_guide, self._group_row, self._node_table, self._node_row,
             self._rest_off_blocks, self._root_blocks, self._inv_len, self._var_target,
             self._tan_rest))
-        self._work = tuple(TrackWork(self._q_buf, self._buf, self._tmp, self._clamped,
-                                     self._contacts))
+        #: the kernel's work space and counters: the fields of
+        #: :data:`~hair_tracking.ghosts.kernels.TrackWork` (a plain tuple)
+        self.work = tuple(TrackWork(self._q_buf, self._buf, self._tmp, self._clamped,
+                                    self._contacts))
         self.stats: Dict[str, int] = {
             'ghosts': int(s_count), 'groups': int(n_groups),
             'largest_group': int(group_size.max()) if n_groups else 0,
-            'steps': 0, 'clamped': 0, 'contacts': 0, 'parallel': 0,
+            'steps': 0, 'clamped': 0, 'contacts': 0, 'parallel': int(self.parallel),
         }
         self.set_state(ghosts.x, ghosts.v)      # the start state
 
@@ -303,7 +310,6 @@ class GhostTracker:
         tr = self.tracking
         if self._collide_after:
             np.copyto(self._x_prev, self.positions())
-        nodes = self._xb.size // 3
         # plain tuples in the fields' order of GhostState, GuideMotion and TrackParams
         drive = (_f64(gx), _f64(guide_x_old), _f64(head.rotation), _f64(head.position),
                  1.0 / float(dt))
@@ -311,12 +317,10 @@ class GhostTracker:
                   _per(tr.offset_strength, substeps), _per(tr.com_strength, substeps),
                   _per(tr.spread, substeps), tr.length_restore, self._fused_collider,
                   self._center, self._axes, self._friction, self._refine)
-        parallel = runs_parallel(nodes)
-        kernel = track_groups if parallel else track_groups_serial
-        kernel(self._model, (self._xb, self._vb), drive, params, self._work)
+        kernel = track_groups if self.parallel else track_groups_serial
+        kernel(self.model, (self._xb, self._vb), drive, params, self.work)
         self._synced_x = self._synced_v = False
         self.stats['steps'] += 1
-        self.stats['parallel'] = int(parallel)
         self.stats['clamped'] = int(self._clamped.sum())
         if self._fused_collider:
             self.stats['contacts'] = int(self._contacts.sum())
