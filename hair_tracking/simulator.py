@@ -435,16 +435,18 @@ class HairSimulator:
             and not self._stateless(self.scene)
 
     def _begin_ghosts(self) -> None:
-        """Keep the guides where a once-per-call tracking step starts from."""
-        if self.ghost_tracker is not None and not self._every_substep():
+        """Keep the guides where the paper's once-per-call tracking step starts from (the blend
+        and turn trackers place the ghosts from the guides at the end alone)."""
+        if self.ghost_tracker is not None and not self._every_substep() and \
+                not self._stateless(self.scene):
             np.copyto(self._ghost_guide_x, self.guides.x)
 
     def _track_ghosts(self, dt: float, substeps: int) -> None:
         if self.ghost_tracker is None or self._every_substep() or substeps == 0:
             return
         start = self.clock()
-        self.ghost_tracker.step(TrackStep(dt, substeps, self._ghost_guide_x, self.guides.x,
-                                          self.head))
+        start_x = None if self._stateless(self.scene) else self._ghost_guide_x
+        self.ghost_tracker.step(TrackStep(dt, substeps, start_x, self.guides.x, self.head))
         self.counters.last_track_ms += (self.clock() - start) * 1e3
 
     def _rest_at(self, head: HeadPose) -> None:

@@ -447,7 +447,7 @@ def turning_heads(count, start=0):
                  solver__max_displacement=0.004)),
     ('ftl', dict(collider__shape='none')),
     ('pbd', dict(collider__shape='ellipsoid'))])
-@pytest.mark.parametrize('strands', [40, 600])          # serial twin, parallel kernel
+@pytest.mark.parametrize('strands', [40, 600])          # serial variant, parallel kernel
 def test_advance_is_its_substeps_one_after_another(kind, changes, strands):
     """A run of substeps in one call (FTL: every block through all of them in turn) gives the
     state, counters and per-substep displacements of the same substeps taken one by one:

@@ -277,7 +277,7 @@ class BlendTracking(Method):
 
     def output(self, head):
         # the blend and turn trackers place the strands from the guides now and the head
-        self.tracker.step(TrackStep(self.dt, 1, self.guides.x, self.guides.x, head))
+        self.tracker.step(TrackStep(self.dt, 1, None, self.guides.x, head))
         return self.tracker.positions()
 
 

@@ -24,11 +24,13 @@ class TrackStep(NamedTuple):
     """What one tracking step follows: the guides moved from ``guide_x_old`` to ``guide_x``
     ((G, M, 3), world [m]) over ``substeps`` guide substeps lasting ``dt`` [s] in all, and the
     head is at ``head`` at the end.  The paper's tracker integrates over the step (it reads
-    every field); the blend and turn trackers place the ghosts from ``guide_x`` and ``head``."""
+    every field); the blend and turn trackers place the ghosts from ``guide_x`` and ``head``
+    (a caller that runs only those may leave ``guide_x_old`` None instead of keeping a copy of
+    the guides)."""
 
     dt: float
     substeps: int
-    guide_x_old: np.ndarray
+    guide_x_old: Optional[np.ndarray]
     guide_x: np.ndarray
     head: HeadPose
 

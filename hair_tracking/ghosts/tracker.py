@@ -304,9 +304,10 @@ class GhostTracker:
         dt, substeps, guide_x_old, gx, head = motion
         if not (dt > 0.0 and math.isfinite(dt)):
             raise ValueError(f'dt must be a finite number > 0 [s], got {dt!r}')
-        if guide_x_old.shape != gx.shape or gx.shape != self.guides.rest.shape:
+        if guide_x_old is None or guide_x_old.shape != gx.shape or \
+                gx.shape != self.guides.rest.shape:
             raise ValueError(f'guide_x_old must be shaped {self.guides.rest.shape} like the '
-                             f'guides, got {guide_x_old.shape}')
+                             f'guides, got {getattr(guide_x_old, "shape", None)}')
         tr = self.tracking
         if self._collide_after:
             np.copyto(self._x_prev, self.positions())

@@ -51,9 +51,11 @@ PENETRATION_REFINEMENTS = 6
 #: ``friction`` 0..1, ``refine`` projection refinements.
 ColliderModel = namedtuple('ColliderModel', ['center', 'radii', 'margin', 'friction', 'refine'])
 #: The collider placed by the head pose of one substep, as the per-node functions take it
-#: (:func:`placed`): the head rotation ``rot`` (3, 3), the ellipsoid's centre in the world
-#: ``cx, cy, cz`` [m], its semi-axes ``ax, ay, az`` [m] (the margin included, head axes),
-#: ``friction`` and ``refine``.
+#: (:func:`placed`): the head rotation's nine entries ``rot`` (:func:`rotation_entries`), the
+#: ellipsoid's centre in the world ``cx, cy, cz`` [m], its semi-axes ``ax, ay, az`` [m] (the
+#: margin included, head axes), ``friction`` and ``refine``.  Numbers only: numba counts the
+#: references of an array handed to an inlined function, and in a loop over nodes that also
+#: calls a compiled function (:func:`surface_point`) it keeps the count in the loop.
 Contact = namedtuple('Contact', ['rot', 'cx', 'cy', 'cz', 'ax', 'ay', 'az', 'friction',
                                  'refine'])
 
@@ -99,11 +101,40 @@ def world_center(rot, pos, center):
 
 @njit(cache=True, inline='always', fastmath=FASTMATH, error_model='numpy')
 def to_head(x0, x1, x2, rot, cx, cy, cz):
-    """``R^T (x - c)``: a world point [m] relative to the world point ``c``, in the head axes."""
+    """``R^T (x - c)``: a world point [m] relative to the world point ``c``, in the head axes
+    (``rot`` the rotation matrix ``R``; the collision-aware FTL pass,
+    :func:`~hair_tracking.guides.ftl.restore_node`)."""
     dx, dy, dz = x0 - cx, x1 - cy, x2 - cz
     return (rot[0, 0] * dx + rot[1, 0] * dy + rot[2, 0] * dz,
             rot[0, 1] * dx + rot[1, 1] * dy + rot[2, 1] * dz,
             rot[0, 2] * dx + rot[1, 2] * dy + rot[2, 2] * dz)
+
+
+@njit(cache=True, inline='always')
+def rotation_entries(rot):
+    """The entries of the rotation ``rot`` (3, 3) as nine numbers, row by row (``R_ij`` at
+    ``3 i + j``): the rotation of a :data:`Contact`."""
+    return (rot[0, 0], rot[0, 1], rot[0, 2], rot[1, 0], rot[1, 1], rot[1, 2], rot[2, 0],
+            rot[2, 1], rot[2, 2])
+
+
+@njit(cache=True, inline='always', fastmath=FASTMATH, error_model='numpy')
+def entries_to_head(x0, x1, x2, r, cx, cy, cz):
+    """:func:`to_head` with the rotation given by its entries ``r``
+    (:func:`rotation_entries`), as a :data:`Contact` holds it."""
+    dx, dy, dz = x0 - cx, x1 - cy, x2 - cz
+    return (r[0] * dx + r[3] * dy + r[6] * dz,
+            r[1] * dx + r[4] * dy + r[7] * dz,
+            r[2] * dx + r[5] * dy + r[8] * dz)
+
+
+@njit(cache=True, inline='always', fastmath=FASTMATH, error_model='numpy')
+def entries_to_world(y0, y1, y2, r, cx, cy, cz):
+    """``R y + c``: a point ``y`` in the head axes relative to the world point ``c`` [m], back
+    in the world (``r`` the entries of ``R``, :func:`rotation_entries`)."""
+    return (r[0] * y0 + r[1] * y1 + r[2] * y2 + cx,
+            r[3] * y0 + r[4] * y1 + r[5] * y2 + cy,
+            r[6] * y0 + r[7] * y1 + r[8] * y2 + cz)
 
 
 @njit(cache=True, inline='always', fastmath=FASTMATH, error_model='numpy')
@@ -126,10 +157,17 @@ def apply_friction(yx, yy, yz, px, py, pz, ix, iy, iz, friction):
 def placed(collider, rot, pos):
     """The :data:`Contact` of ``collider`` (the fields of :data:`ColliderModel`) for the head
     pose ``rot``, ``pos``."""
+    return (rotation_entries(rot),) + placed_shape(collider, rot, pos)
+
+
+@njit(cache=True, inline='always', fastmath=FASTMATH, error_model='numpy')
+def placed_shape(collider, rot, pos):
+    """The fields of :func:`placed`'s :data:`Contact` after the rotation: ``(cx, cy, cz, ax,
+    ay, az, friction, refine)`` (a parallel loop takes numbers and arrays, not tuples: it
+    rebuilds the contact from these and the rotation)."""
     center, radii, margin, friction, refine = collider
     cx, cy, cz = world_center(rot, pos, center)
-    return (rot, cx, cy, cz, radii[0] + margin, radii[1] + margin, radii[2] + margin, friction,
-            refine)
+    return cx, cy, cz, radii[0] + margin, radii[1] + margin, radii[2] + margin, friction, refine
 
 
 @njit(cache=True, inline='always', fastmath=FASTMATH, error_model='numpy')
@@ -140,18 +178,16 @@ def push_out(x0, x1, x2, r0, r1, r2, contact):
     position ``r``.  Returns ``(moved, y0, y1, y2)``; an outside node comes back unchanged
     with ``moved`` false."""
     rot, cx, cy, cz, ax, ay, az, friction, refine = contact
-    qx, qy, qz = to_head(x0, x1, x2, rot, cx, cy, cz)
+    qx, qy, qz = entries_to_head(x0, x1, x2, rot, cx, cy, cz)
     ix, iy, iz = 1.0 / (ax * ax), 1.0 / (ay * ay), 1.0 / (az * az)
     if qx * qx * ix + qy * qy * iy + qz * qz * iz >= 1.0:
         return False, x0, x1, x2
     yx, yy, yz = surface_point(qx, qy, qz, ax, ay, az, refine)
     if friction > 0.0:
-        px, py, pz = to_head(r0, r1, r2, rot, cx, cy, cz)
+        px, py, pz = entries_to_head(r0, r1, r2, rot, cx, cy, cz)
         yx, yy, yz = apply_friction(yx, yy, yz, px, py, pz, ix, iy, iz, friction)
-    return (True,
-            rot[0, 0] * yx + rot[0, 1] * yy + rot[0, 2] * yz + cx,
-            rot[1, 0] * yx + rot[1, 1] * yy + rot[1, 2] * yz + cy,
-            rot[2, 0] * yx + rot[2, 1] * yy + rot[2, 2] * yz + cz)
+    wx, wy, wz = entries_to_world(yx, yy, yz, rot, cx, cy, cz)
+    return True, wx, wy, wz
 
 
 @njit(cache=True, nogil=True, parallel=True, fastmath=FASTMATH, error_model='numpy')
@@ -162,10 +198,11 @@ def project_ellipsoid(x, x_prev, inv_mass, rot, pos, collider):
     reference); ``inv_mass`` (S, N); ``rot`` (3, 3), ``pos`` (3,) the head pose; ``collider``
     the fields of :data:`ColliderModel`. Returns the number of nodes projected.
     """
-    contact = placed(collider, rot, pos)
+    cx, cy, cz, ax, ay, az, fr, refine = placed_shape(collider, rot, pos)
     contacts = 0
     for s in prange(x.shape[0]):
         i = np.int64(s)       # (the index as in the serial variant: one compiled block body)
+        contact = (rotation_entries(rot), cx, cy, cz, ax, ay, az, fr, refine)
         contacts += project_block(x, x_prev, inv_mass, contact, i, i + 1)
     return contacts
 
@@ -208,8 +245,10 @@ def penetration_ellipsoid(x, inv_mass, use_mass, rot, pos, center, radii, refine
     The bare ellipsoid ``radii`` (no margin); only nodes with ``inv_mass > 0`` if ``use_mass``.
     Distance to the (approximate, see :func:`surface_point`) closest surface point; 0 if none.
     """
-    contact = placed((center, radii, 0.0, 0.0, refine), rot, pos)
+    cx, cy, cz, ax, ay, az, fr, n_ref = placed_shape((center, radii, 0.0, 0.0, refine), rot,
+                                                     pos)
     for s in prange(x.shape[0]):
+        contact = (rotation_entries(rot), cx, cy, cz, ax, ay, az, fr, n_ref)
         out[s] = strand_depth(x, inv_mass, use_mass, contact, np.int64(s))
 
 
@@ -231,7 +270,7 @@ def strand_depth(x, inv_mass, use_mass, contact, s):
     for i in range(x.shape[1]):
         if use_mass and inv_mass[s, i] <= 0.0:
             continue
-        qx, qy, qz = to_head(x[s, i, 0], x[s, i, 1], x[s, i, 2], rot, cx, cy, cz)
+        qx, qy, qz = entries_to_head(x[s, i, 0], x[s, i, 1], x[s, i, 2], rot, cx, cy, cz)
         if qx * qx * ix + qy * qy * iy + qz * qz * iz >= 1.0:
             continue
         yx, yy, yz = surface_point(qx, qy, qz, ax, ay, az, refine)

@@ -31,7 +31,8 @@ import math
 import numpy as np
 from numba import int64, njit, prange
 
-from hair_tracking.guides.collision import (placed, project_block, surface_point, to_head,
+from hair_tracking.guides.collision import (placed, placed_shape, project_block,
+                                            rotation_entries, surface_point, to_head,
                                             world_center)
 from hair_tracking.guides.integrate import (BLOCK, carry_rigid_block, FASTMATH, finalize_block,
                                             max_step_sq_block, predict_block, split_due)
@@ -139,22 +140,37 @@ def restore_f_ok(ax, ay, az):
     return f_ok * f_ok
 
 
+#: The ellipsoid of the collision-aware FTL pass, a plain tuple in these fields' order: its
+#: centre in the world ``cx, cy, cz`` [m], its semi-axes ``ax, ay, az`` [m] (the margin
+#: included, head axes) and the projection refinements ``refine``
+#: (:func:`ellipsoid_of`).
+Ellipsoid = namedtuple('Ellipsoid', ['cx', 'cy', 'cz', 'ax', 'ay', 'az', 'refine'])
+
+
+@njit(cache=True, inline='always')
+def ellipsoid_of(contact):
+    """The :data:`Ellipsoid` of a :data:`~hair_tracking.guides.collision.Contact`."""
+    return contact[1], contact[2], contact[3], contact[4], contact[5], contact[6], contact[8]
+
+
 @njit(cache=True, inline='always', fastmath=FASTMATH, error_model='numpy')
-def restore_node(p, b, r, e, contact, first):
+def restore_node(p, b, r, e, rot, ellipsoid, first):
     """One node of the collision-aware FTL pass (see :func:`ftl_restore`): ``p`` put at the rest
-    distance ``r`` from its predecessor ``b`` and out of the ellipsoid of ``contact`` (the
-    fields of :data:`~hair_tracking.guides.collision.Contact`: semi-axes ``a``, world centre
-    ``c``, head rotation ``rot``), at most :data:`RESTORE_ITERATIONS` times: it stops as soon
-    as a placement lies outside or less than :data:`RESTORE_TOLERANCE` inside (``F(q) >= (1 -
-    tol / a_max)^2``, which bounds the depth by ``tol``).  ``e`` is the rest segment in the
-    head frame, the direction used when ``p`` and ``b`` coincide.  World [m]; ``p``, ``b``,
-    ``e`` are (x, y, z) tuples.  ``first`` (0 normally): the placements already made, for a
-    caller that made the first ones itself (``p`` is then the surface point the next placement
-    starts from).  Returns the node (x, y, z)."""
+    distance ``r`` from its predecessor ``b`` and out of the ellipsoid (:data:`Ellipsoid`:
+    semi-axes ``a``, world centre ``c``, turned by the head rotation ``rot`` (3, 3)), at most
+    :data:`RESTORE_ITERATIONS` times: it stops as soon as a placement lies outside or less than
+    :data:`RESTORE_TOLERANCE` inside (``F(q) >= (1 - tol / a_max)^2``, which bounds the depth
+    by ``tol``).  ``e`` is the rest segment in the head frame, the direction used when ``p``
+    and ``b`` coincide.  World [m]; ``p``, ``b``, ``e`` are (x, y, z) tuples.  ``first`` (0
+    normally): the placements already made, for a caller that made the first ones itself
+    (``p`` is then the surface point the next placement starts from).  Returns the node (x, y,
+    z).  The rotation is the matrix here, not a contact's entries
+    (:func:`~hair_tracking.guides.collision.entries_to_head`): the pass's placements follow its
+    arithmetic to the last bit."""
     px, py, pz = p
     bx, by, bz = b
     ex, ey, ez = e
-    rot, cx, cy, cz, ax, ay, az, _, refine = contact
+    cx, cy, cz, ax, ay, az, refine = ellipsoid
     ix, iy, iz = 1.0 / (ax * ax), 1.0 / (ay * ay), 1.0 / (az * az)
     f_ok = restore_f_ok(ax, ay, az)
     for k in range(first, RESTORE_ITERATIONS + 1):
@@ -192,19 +208,19 @@ def ftl_restore(x, rest, rest_length, rot, pos, center, axes, refine, corr):
     friction here: the collider applied it.
     """
     cx, cy, cz = world_center(rot, pos, center)
-    contact = (rot, cx, cy, cz, axes[0], axes[1], axes[2], 0.0, refine)
+    ellipsoid = (cx, cy, cz, axes[0], axes[1], axes[2], refine)
     for s in prange(x.shape[0]):
         i = int64(s)
-        ftl_restore_block(x, rest, rest_length, contact, corr, i, i + 1)
+        ftl_restore_block(x, rest, rest_length, rot, ellipsoid, corr, i, i + 1)
 
 
 @njit(cache=True, fastmath=FASTMATH, error_model='numpy')
-def ftl_restore_block(x, rest, rest_length, contact, corr, s0, s1):
-    """:func:`ftl_restore` on the strands ``s0 <= s < s1`` (``contact`` the fields of
-    :data:`~hair_tracking.guides.collision.Contact`).  A function of its own, so every kernel
+def ftl_restore_block(x, rest, rest_length, rot, ellipsoid, corr, s0, s1):
+    """:func:`ftl_restore` on the strands ``s0 <= s < s1`` (``rot`` the head rotation (3, 3),
+    ``ellipsoid`` the fields of :data:`Ellipsoid`).  A function of its own, so every kernel
     that runs it runs the same compiled code (inlined into each, LLVM may contract the
     arithmetic differently: the results would differ in the last bits)."""
-    rot, cx, cy, cz, ax, ay, az, _, _ = contact
+    cx, cy, cz, ax, ay, az, _ = ellipsoid
     ix, iy, iz = 1.0 / (ax * ax), 1.0 / (ay * ay), 1.0 / (az * az)
     f_ok = restore_f_ok(ax, ay, az)
     n = x.shape[1]
@@ -225,7 +241,7 @@ def ftl_restore_block(x, rest, rest_length, contact, corr, s0, s1):
                 (ox, oy, oz), (x[s, i - 1, 0], x[s, i - 1, 1], x[s, i - 1, 2]),
                 rest_length[s, i - 1],
                 (rest[s, i, 0] - rest[s, i - 1, 0], rest[s, i, 1] - rest[s, i - 1, 1],
-                 rest[s, i, 2] - rest[s, i - 1, 2]), contact, 0)
+                 rest[s, i, 2] - rest[s, i - 1, 2]), rot, ellipsoid, 0)
             corr[s, i, 0] += px - ox
             corr[s, i, 1] += py - oy
             corr[s, i, 2] += pz - oz
@@ -300,13 +316,15 @@ def ftl_collide_step(model, state, motion, params, work, collider):
     fields of :data:`~hair_tracking.guides.collision.ColliderModel`.  ``params``'
     ``do_finalize`` is ignored (always finalizes).  Returns ``(clamped, contacts)``.
     """
-    contact = placed(collider, motion[0], motion[1])
+    rot = motion[0]
+    cx, cy, cz, ax, ay, az, fr, refine = placed_shape(collider, rot, motion[1])
     n = state[0].shape[0]
     nblk = (n + BLOCK - 1) // BLOCK
     clamped = 0
     contacts = 0
     for blk in prange(nblk):
         s0 = np.int64(blk) * BLOCK
+        contact = (rotation_entries(rot), cx, cy, cz, ax, ay, az, fr, refine)
         c, p = ftl_collide_block(model, state, motion, params, work, contact, s0,
                                  min(s0 + BLOCK, n))
         clamped += c
@@ -349,7 +367,7 @@ def ftl_collide_block(model, state, motion, params, work, contact, s0, s1):
     ftl_block(model, state, motion, bend_passes, bend_stiffness, corr, s0, s1)
     pushed = project_block(x, ref, inv_mass, contact, s0, s1)
     if pushed:
-        ftl_restore_block(x, rest, rest_length, contact, corr, s0, s1)
+        ftl_restore_block(x, rest, rest_length, rot, ellipsoid_of(contact), corr, s0, s1)
     return finalize_block(x, v, x_old, inv_mass, corr, s0, s1, dt, max_disp, s_damp), pushed
 
 
