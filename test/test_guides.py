@@ -395,6 +395,10 @@ def test_ftl_collide_step_is_the_separate_kernels_in_one_block_loop(friction):
     fused, split = GuideSolver(fused_st, sc), GuideSolver(split_st, sc)
     c = split.collider
     x_ref = np.empty_like(split_st.x)
+    x_old = np.empty_like(split_st.x)
+    corr = np.zeros_like(split_st.x)
+    gravity = np.asarray(sc.gravity, dtype=np.float64)
+    shock, max_disp = sc.solver.shock_propagation, sc.solver.max_displacement
     dt = 1.0 / 120.0
     h_prev = pose([0, 0, 0])
     fused.reset(h_prev)
@@ -412,24 +416,24 @@ def test_ftl_collide_step_is_the_separate_kernels_in_one_block_loop(friction):
         rot_rel = np.empty((3, 3))
         integrate.head_motion(h_prev.rotation, h_prev.position, rot, pos, rot_rel)
         integrate.carry_rigid(st.x, rot_rel, h_prev.position, pos, x_ref)
-        motion = (rot, pos, rot_rel, h_prev.position, split._gravity,
-                  np.exp(-sc.damping * dt), dt, split._shock)
+        motion = (rot, pos, rot_rel, h_prev.position, gravity, np.exp(-sc.damping * dt), dt,
+                  shock)
         params = (guides.FTL_BEND_PASSES, guides.ftl_bend_stiffness(sc.solver.bend_stiffness, dt),
-                  float(sc.solver.ftl_damping), split._max_disp, False)
-        ftl.ftl_step(split.model, (st.x, st.v, split._x_old), motion, params, split._corr)
-        ref = x_ref if friction > 0 else split._x_old
+                  float(sc.solver.ftl_damping), max_disp, False)
+        ftl.ftl_step(split.model, (st.x, st.v, x_old), motion, params, corr)
+        ref = x_ref if friction > 0 else x_old
         pushed = c.project(st.x, ref, st.inv_mass, rot, pos)
         if pushed:
             ftl.ftl_restore(st.x, st.rest, st.rest_length, rot, pos, c.center, c.radii + c.margin,
-                            c.refine, split._corr)
-        clamped += integrate.finalize(st.x, st.v, split._x_old, st.inv_mass, split._corr, dt,
-                                      split._max_disp, float(sc.solver.ftl_damping))
+                            c.refine, corr)
+        clamped += integrate.finalize(st.x, st.v, x_old, st.inv_mass, corr, dt, max_disp,
+                                      float(sc.solver.ftl_damping))
         contacts += pushed
         h_prev = head
         assert fused.stats['contacts'] == pushed
         np.testing.assert_allclose(fused_st.x, split_st.x, rtol=0, atol=1e-12)
         np.testing.assert_allclose(fused_st.v, split_st.v, rtol=0, atol=1e-9)
-        np.testing.assert_allclose(fused._corr, split._corr, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(fused._corr, corr, rtol=0, atol=1e-12)
     assert contacts > 0 and fused.stats['contacts_total'] == contacts
     assert fused.stats['clamped_total'] == clamped
 
