@@ -65,7 +65,7 @@ FASTMATH = {'contract'}
 #: :func:`hair_tracking.guides.ftl.ftl_step`), grouped as NVIDIA Warp / Newton separate a
 #: solver's inputs.  The kernels take them as plain tuples in these fields' order
 #: (``tuple(GuideState(x, v, x_old))``): numba types a named tuple by encoding its class and
-#: field names on every call, a few microseconds a call.
+#: field names on every call.
 #: The guides' state, advanced in place: positions ``x`` and velocities ``v`` (S, N, 3) [m],
 #: [m/s], and ``x_old`` (S, N, 3), written: the start positions after the rigid carry.
 GuideState = namedtuple('GuideState', ['x', 'v', 'x_old'])
