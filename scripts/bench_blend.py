@@ -29,6 +29,7 @@ import numpy as np  # noqa: E402
 
 from hair_tracking.core.scene import Scene  # noqa: E402
 from hair_tracking.evaluation.provenance import command_line, provenance  # noqa: E402
+from hair_tracking.ghosts.interface import TrackStep  # noqa: E402
 from hair_tracking.simulator import HairSimulator  # noqa: E402
 
 BYTES_PER_NODE = {'blend': 16 + 12, 'turn': 12 + 3 + 12}
@@ -80,7 +81,7 @@ def main(argv=None):
                 tr, head = sim.ghost_tracker, sim.head
                 gx_old = sim.guides.x.copy()
                 t = time.perf_counter()
-                tr.step(sim.scene.solver.dt, gx_old, head)
+                tr.step(TrackStep(sim.scene.solver.dt, 1, gx_old, sim.guides.x, head))
                 tr.positions()
                 times[name].append(time.perf_counter() - t)
         nodes = sims['blend'].ghosts.count * sims['blend'].ghosts.rest.shape[1]
