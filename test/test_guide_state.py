@@ -6,13 +6,13 @@ The tests that need the generated hair_tracking_msgs (make install) are skipped 
 Domain id 89.
 """
 import os
-import time
 
 import numpy as np
 import pytest
 from rosbags.typesys import get_typestore, Stores
 from rosbags.typesys.msg import get_types_from_msg
 
+from loopback import publish_and_receive
 from msg_adapters.cdr import ENCAPSULATION_LE
 from msg_adapters.guide_state import (GUIDE_STATE_FIELDS, GuideState, guide_state_cdr,
                                       guide_state_from_cdr, guide_state_from_msg, guide_state_msg,
@@ -203,30 +203,6 @@ def test_bytes_that_are_no_whole_guide_state_are_refused():
 @generated
 def test_published_bytes_arrive_as_the_message():
     """Publisher.publish(CDR bytes) -> a GuideState subscriber in the same process, over DDS."""
-    import rclpy
-    from rclpy.executors import SingleThreadedExecutor
     x, kw = _args(np.random.default_rng(8), 64, 16)
-    ctx = rclpy.Context()
-    rclpy.init(context=ctx, domain_id=DOMAIN)
-    executor = SingleThreadedExecutor(context=ctx)
-    try:
-        node = rclpy.create_node('guide_state_test', context=ctx)
-        executor.add_node(node)
-        received = []
-        node.create_subscription(GuideState, 'hair/guides', received.append, 10)
-        pub = node.create_publisher(GuideState, 'hair/guides', 10)
-        assert _spin_until(executor, lambda: pub.get_subscription_count() >= 1, 10.0)
-        pub.publish(guide_state_cdr(x, **kw))
-        assert _spin_until(executor, lambda: received, 10.0), 'nothing received'
-        assert received[0] == guide_state_msg(x, **kw)
-        node.destroy_node()
-    finally:
-        executor.shutdown()
-        rclpy.try_shutdown(context=ctx)
-
-
-def _spin_until(executor, predicate, timeout_s):
-    deadline = time.monotonic() + timeout_s
-    while not predicate() and time.monotonic() < deadline:
-        executor.spin_once(timeout_sec=0.05)
-    return predicate()
+    got = publish_and_receive(GuideState, [guide_state_cdr(x, **kw)], DOMAIN, 'hair/guides')
+    assert got[0] == guide_state_msg(x, **kw)

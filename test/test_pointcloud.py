@@ -1,15 +1,13 @@
 """Strands <-> organized PointCloud2: layout, round trip, CDR fast path, DDS."""
 import struct
-import time
 
 import numpy as np
 import pytest
-import rclpy
-from rclpy.executors import SingleThreadedExecutor
 from rclpy.serialization import deserialize_message, serialize_message
 from rosbags.typesys import get_typestore, Stores
 from sensor_msgs.msg import PointCloud2, PointField
 
+from loopback import publish_and_receive
 from msg_adapters.pointcloud import (CloudBuffer, pack_rgb, pack_rgb_u32, pointcloud2_to_strands,
                                      strands_to_pointcloud2, strands_to_pointcloud2_cdr)
 
@@ -176,32 +174,11 @@ def test_publish_cloud_bytes_over_dds():
     x = rng.normal(size=(1000, 16, 3))                 # 320 kB
     kw = dict(frame_id='head', stamp_ns=5, colors=rng.random((1000, 3)))
     expected = strands_to_pointcloud2(x, **kw)
-    ctx = rclpy.Context()
-    rclpy.init(context=ctx, domain_id=72)
-    executor = SingleThreadedExecutor(context=ctx)
-    try:
-        node = rclpy.create_node('cloud_cdr_test', context=ctx)
-        executor.add_node(node)
-        got = []
-        node.create_subscription(PointCloud2, 'strands', got.append, 10)
-        pub = node.create_publisher(PointCloud2, 'strands', 10)
-        deadline = time.monotonic() + 10.0
-        while pub.get_subscription_count() < 1 and time.monotonic() < deadline:
-            executor.spin_once(timeout_sec=0.05)
-        assert pub.get_subscription_count() >= 1, 'subscription never matched'
-        pub.publish(strands_to_pointcloud2_cdr(x, **kw))
-        deadline = time.monotonic() + 10.0
-        while not got and time.monotonic() < deadline:
-            executor.spin_once(timeout_sec=0.05)
-        assert got, 'nothing received'
-        assert got[0] == expected
-        y, ids = pointcloud2_to_strands(got[0])
-        np.testing.assert_array_equal(y, x.astype(np.float32))
-        np.testing.assert_array_equal(ids, np.arange(1000))
-        node.destroy_node()
-    finally:
-        executor.shutdown()
-        rclpy.try_shutdown(context=ctx)
+    got = publish_and_receive(PointCloud2, [strands_to_pointcloud2_cdr(x, **kw)], 72)
+    assert got[0] == expected
+    y, ids = pointcloud2_to_strands(got[0])
+    np.testing.assert_array_equal(y, x.astype(np.float32))
+    np.testing.assert_array_equal(ids, np.arange(1000))
 
 
 @pytest.mark.parametrize('rgb_mode', ['none', 'strand', 'point'])
