@@ -727,14 +727,8 @@ def test_executable_rejects_a_bad_process_setting_before_starting():
 
 
 def test_executable_rejects_a_bad_parameter_with_its_name():
-    proc = _run_node(['-p', 'solver.type:=rk4', '-p', 'warmup:=false'], 33)
-    try:
-        out, _ = proc.communicate(timeout=120)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.communicate()
-    assert proc.returncode == 2, out
+    code, out = _exit_of(['-p', 'solver.type:=rk4', '-p', 'warmup:=false'], 33)
+    assert code == 2, out
     assert 'solver.type' in out and 'ftl' in out
     assert 'Traceback' not in out
 

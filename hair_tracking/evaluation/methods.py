@@ -147,15 +147,8 @@ class Method:
         """Release external resources (pypbd)."""
 
 
-class FullSim(Method):
-    """All ghost strands simulated as guides (the reference at high fidelity)."""
-
-    family = 'full'
-
-    def __init__(self, name, workload, scene, knobs=None):
-        super().__init__(name, workload, scene, knobs or {})
-        self.strands = StrandSet.from_rest(workload.ghost_rest)
-        self.solver = GuideSolver(self.strands, scene)
+class _Solved(Method):
+    """A method whose strands the scene's guide solver ``self.solver`` advances."""
 
     def reset(self, head):
         self.solver.reset(head)
@@ -166,6 +159,17 @@ class FullSim(Method):
     def advance(self, dt, head_prev, heads):
         self.solver.advance(dt, head_prev, heads)
 
+
+class FullSim(_Solved):
+    """All ghost strands simulated as guides (the reference at high fidelity)."""
+
+    family = 'full'
+
+    def __init__(self, name, workload, scene, knobs=None):
+        super().__init__(name, workload, scene, knobs or {})
+        self.strands = StrandSet.from_rest(workload.ghost_rest)
+        self.solver = GuideSolver(self.strands, scene)
+
     def output(self, head):
         return self.strands.x
 
@@ -173,7 +177,7 @@ class FullSim(Method):
         self.strands.v[...] = 0.0
 
 
-class _GuidedMethod(Method):
+class _GuidedMethod(_Solved):
     """Shared: guides grown at a ratio and simulated by the scene's solver."""
 
     def __init__(self, name, workload, scene, ratio, knobs):
@@ -241,7 +245,7 @@ class GhostTracking(_GuidedMethod):
         self.tracker.zero_velocities()
 
 
-class BlendTracking(Method):
+class BlendTracking(_Solved):
     """Guides chosen among the strands (``S / ratio`` of them, :func:`choose_guides`) simulated
     by the scene's solver; every strand blended from its ``k`` nearest guides once per output
     frame (:class:`~hair_tracking.ghosts.blend.BlendTracker`).  At 1:1 this is :class:`FullSim`.
@@ -266,14 +270,8 @@ class BlendTracking(Method):
         return BlendTracker(self.ghosts, self.guides, self.guide_index, scene, collider, k=k)
 
     def reset(self, head):
-        self.solver.reset(head)
+        super().reset(head)
         self.tracker.reset(head)
-
-    def step(self, dt, head_prev, head):
-        self.solver.step(dt, head_prev, head)
-
-    def advance(self, dt, head_prev, heads):
-        self.solver.advance(dt, head_prev, heads)
 
     def output(self, head):
         # the blend and turn trackers place the strands from the guides now and the head
@@ -308,15 +306,6 @@ class RigidOffset(_GuidedMethod):
         point_rest = (1.0 - self._t) * gr[self._g, seg] + self._t * gr[self._g, seg + 1]
         self._offset = np.ascontiguousarray(workload.ghost_rest - point_rest)   # head frame
         self._out = np.empty_like(workload.ghost_rest)
-
-    def reset(self, head):
-        self.solver.reset(head)
-
-    def step(self, dt, head_prev, head):
-        self.solver.step(dt, head_prev, head)
-
-    def advance(self, dt, head_prev, heads):
-        self.solver.advance(dt, head_prev, heads)
 
     def output(self, head):
         gx = self.guides.x
