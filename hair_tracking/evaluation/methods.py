@@ -224,8 +224,8 @@ class GhostTracking(_GuidedMethod):
             self._pending += 1
 
     def advance(self, dt, head_prev, heads):
-        if self.every_substep:
-            super().advance(dt, head_prev, heads)
+        if self.every_substep:          # a step a pose, the ghosts tracked in each
+            Method.advance(self, dt, head_prev, heads)
         else:
             self.solver.advance(dt, head_prev, heads)
             self._pending += len(heads)
