@@ -9,6 +9,8 @@ ROS_WHEELS := ros-jazzy-rclpy[fastrtps] ros-jazzy-common-interfaces
 PY_DEPS := setuptools wheel numpy numba pyyaml rosbags matplotlib pytest flake8
 # hair_sim_view's optional web viewer, and Playwright, which drives Debian's chromium in its test.
 VIEW_DEPS := viser playwright
+# groom.file's optional USD reader (the extra [usd]), so its test runs.
+GROOM_DEPS := usd-core
 # The rosidl/ament_cmake build wheels that generate the interface packages no wheel exists of
 # (interfaces/build_interfaces.sh), and colcon for the ROS-style build (test/test_colcon.py).
 ROS_BUILD_WHEELS := ros-jazzy-ament-cmake ros-jazzy-ament-cmake-include-directories \
@@ -36,13 +38,13 @@ $(STAMP): setup.py Makefile package.xml $(INTERFACE_FILES)
 	$(PIP) install -q --upgrade pip
 	$(PIP) install -q '$(firstword $(ROS_WHEELS))' $(wordlist 2,99,$(ROS_WHEELS)) $(PY_DEPS)
 	$(PIP) install -q $(ROS_BUILD_WHEELS) $(COLCON)
-	$(PIP) install -q $(VIEW_DEPS)
+	$(PIP) install -q $(VIEW_DEPS) $(GROOM_DEPS)
 	command -v chromium >/dev/null || { apt-get update -qq && \
 		DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium; } || \
 		echo 'no chromium (apt-get install chromium as root): the browser test is skipped'
 	interfaces/build_interfaces.sh $(VENV) $(INTERFACES)
 	$(PIP) install -q --no-deps --no-build-isolation -e .
-	$(PY) -c "import rclpy, numba, rosbags, yaml, matplotlib, ament_index_python, \
+	$(PY) -c "import rclpy, numba, rosbags, yaml, matplotlib, ament_index_python, pxr, \
 		tf2_msgs.msg, hri_msgs.msg, hair_tracking_msgs.msg"
 	touch $(STAMP)
 
