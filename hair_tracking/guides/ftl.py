@@ -319,7 +319,7 @@ def ftl_collide_step(model, state, motion, params, work, collider):
     """Kernel: one FTL substep of all strands with the head collider, block by block (the
     block's strands stay in cache): :func:`ftl_step`'s predict, bending and FTL pass, the
     collider's projection with friction (:func:`~hair_tracking.guides.collision.project_block`),
-    when it moved a node of the block the collision-aware pass (:func:`ftl_restore_block`),
+    on every strand of which it moved a node the collision-aware pass (:func:`ftl_restore_block`),
     then finalize.  The same per-strand arithmetic as those kernels run one after another.
 
     ``work``: ``(corr, x_ref)``, the first two fields of :data:`FtlWork`; ``collider``: the

@@ -84,7 +84,7 @@ class GuideSolver:
     the first substep on: its gains depend on ``dt``).
 
     With FTL and a collider, a substep is predict, bend, FTL pass, collide and, when a node of
-    the strand's block was pushed, a collision-aware second FTL pass
+    the strand was pushed, a collision-aware second FTL pass over it
     (:func:`~hair_tracking.guides.ftl.ftl_restore_block`), then finalize, in one kernel: lengths
     stay exact and nodes outside the bare collider (measured in the stability matrix,
     ``docs/stability.md``).
