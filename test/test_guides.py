@@ -418,7 +418,8 @@ def test_ftl_collide_step_is_the_separate_kernels_in_one_block_loop(friction):
         integrate.carry_rigid(st.x, rot_rel, h_prev.position, pos, x_ref)
         motion = (rot, pos, rot_rel, h_prev.position, gravity, np.exp(-sc.damping * dt), dt,
                   shock)
-        params = (guides.FTL_BEND_PASSES, guides.ftl_bend_stiffness(sc.solver.bend_stiffness, dt),
+        params = (guides.ftl_bend_rounds(dt),
+                  guides.ftl_bend_stiffness(sc.solver.bend_stiffness, dt),
                   float(sc.solver.ftl_damping), max_disp, False)
         ftl.ftl_step(split.model, (st.x, st.v, x_old), motion, params, corr)
         ref = x_ref if friction > 0 else x_old

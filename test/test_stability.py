@@ -17,7 +17,8 @@ from hair_tracking.evaluation import stability
 from hair_tracking.evaluation.provenance import provenance
 from hair_tracking.evaluation import synthetic_motion as sm
 from hair_tracking.guides.collision import Collider, outside_distance, surface_point
-from hair_tracking.guides.solver import BEND_REFERENCE_DT, GuideSolver, ftl_bend_stiffness
+from hair_tracking.guides.solver import (BEND_REFERENCE_DT, GuideSolver, ftl_bend_rounds,
+                                         ftl_bend_stiffness)
 from hair_tracking.simulator import HairSimulator
 
 QUICK = stability.matrix(quick=True)
@@ -248,13 +249,30 @@ def test_outside_distance_matches_brute_force():
     assert np.all(d[~inside] <= brute + 1e-12)               # exact closest is never farther
 
 
-def test_ftl_bend_stiffness_is_per_second():
+def test_ftl_bending_acts_as_dt_squared():
     k = 0.3
     assert ftl_bend_stiffness(k, BEND_REFERENCE_DT) == k
+    assert ftl_bend_rounds(BEND_REFERENCE_DT) == 1
     half = ftl_bend_stiffness(k, 0.5 * BEND_REFERENCE_DT)
-    assert math.isclose((1 - half) ** 2, 1 - k, rel_tol=1e-12)   # two half substeps = one
-    assert ftl_bend_stiffness(k, 4 * BEND_REFERENCE_DT) > k
+    assert ftl_bend_rounds(0.5 * BEND_REFERENCE_DT) == 1
+    assert math.isclose((1 - half) ** 4, 1 - k, rel_tol=1e-12)   # a quarter of the push
+    assert ftl_bend_rounds(4 * BEND_REFERENCE_DT) == 4
+    long = ftl_bend_stiffness(k, 4 * BEND_REFERENCE_DT)
+    assert math.isclose((1 - long) ** 4, (1 - k) ** 16, rel_tol=1e-12)   # 16 times the push
     assert ftl_bend_stiffness(0.0, 0.001) == 0.0 and ftl_bend_stiffness(1.0, 0.001) == 1.0
+
+
+def test_settled_shape_hardly_depends_on_the_step():
+    base = Scene().with_changes(tracking__mode='paper', groom__ghosts_per_guide=0,
+                                groom__guides=16, solver__settle_time=0.5,
+                                solver__settle_speed=0.002)
+    shapes = {}
+    for dt in (1 / 60, 1 / 240):
+        sim = HairSimulator(base.with_changes(solver__dt=dt))
+        shapes[dt] = sim.frame(head_frame=True).guides
+    length = sim.guides.strand_length[:, None]
+    d = np.linalg.norm(shapes[1 / 60] - shapes[1 / 240], axis=2) / length
+    assert np.sqrt(np.mean(d * d)) < 0.02          # 1.3 % L measured
 
 
 def test_guide_margin_fits_short_segments_only():

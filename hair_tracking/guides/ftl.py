@@ -16,10 +16,11 @@ not vanish (each substep gravity's prediction is undone by the pass, and ``v_i =
 g dt)`` settles at up to ``s_damp g dt / (1 - s_damp)``, 0.37 m/s at dt = 1/240 s and
 ``s_damp = 0.9``); use displacements, not ``v``, to judge whether FTL hair is at rest.
 
-Bending comes first: ``bend_passes`` PBD Gauss–Seidel sweeps of the second-neighbour distance
-constraints with ``bend_stiffness``
-(:func:`hair_tracking.guides.pbd_constraints.pbd_sweep_block`), then the FTL pass restores the
-lengths exactly. ``iterations`` of the scene does not apply to FTL.
+Bending comes first: a PBD Gauss–Seidel sweep of the second-neighbour distance constraints
+with ``bend_stiffness`` (:func:`hair_tracking.guides.pbd_constraints.pbd_sweep_block`), then the
+FTL pass restores the lengths exactly; ``bend_passes`` rounds of both (one at the default
+substep, more at long ones: :func:`hair_tracking.guides.solver.ftl_bend_rounds`), the
+corrections ``d_i`` of the rounds summed. ``iterations`` of the scene does not apply to FTL.
 
 Degenerate input: if a segment has collapsed (``|p_i - p_{i-1}| < 1e-12`` m) the node is placed
 along the segment's rest direction carried by the head (``R (rest_i - rest_{i-1})``); a
@@ -42,8 +43,9 @@ from hair_tracking.guides.pbd_constraints import pbd_sweep_block
 #: ``rest_length`` (S, N-1), ``bend_rest`` (S, N-2) second-neighbour rest distances [m],
 #: ``bend_w`` from :func:`hair_tracking.guides.pbd_constraints.pair_weights` with gap 2.
 FtlModel = namedtuple('FtlModel', ['rest', 'inv_mass', 'rest_length', 'bend_rest', 'bend_w'])
-#: Parameters of :func:`ftl_step`: bending sweeps and stiffness (0: no bending), the velocity
-#: correction ``s_damp`` 0..1, the displacement clamp [m] (0: off), whether to finalize.
+#: Parameters of :func:`ftl_step`: rounds of a bending sweep and the FTL pass, the bending
+#: stiffness (0: no bending), the velocity correction ``s_damp`` 0..1, the displacement clamp
+#: [m] (0: off), whether to finalize.
 FtlParams = namedtuple('FtlParams', ['bend_passes', 'bend_stiffness', 's_damp', 'max_disp',
                                      'do_finalize'])
 #: Work space of the FTL kernels: ``corr`` (S, N, 3) the FTL corrections, ``x_ref`` (S, N, 3)
@@ -65,17 +67,19 @@ FTL_TINY_SQ = 1e-24
 
 
 @njit(cache=True, fastmath=FASTMATH, error_model='numpy')
-def ftl_pass_block(x, rest, rest_length, rot, corr, s0, s1):
-    """FTL pass over strands ``s0..s1-1`` in place; ``corr`` (S, N, 3) receives the ``d_i``.
+def ftl_pass_block(x, rest, rest_length, rot, corr, s0, s1, add):
+    """FTL pass over strands ``s0..s1-1`` in place; ``corr`` (S, N, 3) receives the ``d_i``
+    (``add``: added to what it holds, a later round of :func:`ftl_block`).
 
     ``rot`` (3, 3) is the head rotation (only used for collapsed segments).
     """
     n = x.shape[1]
     for s in range(s0, s1):
         for i in range(2):
-            corr[s, i, 0] = 0.0
-            corr[s, i, 1] = 0.0
-            corr[s, i, 2] = 0.0
+            if not add:
+                corr[s, i, 0] = 0.0
+                corr[s, i, 1] = 0.0
+                corr[s, i, 2] = 0.0
     for i in range(2, n):
         for s in range(s0, s1):
             r = rest_length[s, i - 1]
@@ -88,9 +92,14 @@ def ftl_pass_block(x, rest, rest_length, rot, corr, s0, s1):
             nx = x[s, i - 1, 0] + f * dx
             ny = x[s, i - 1, 1] + f * dy
             nz = x[s, i - 1, 2] + f * dz
-            corr[s, i, 0] = nx - x[s, i, 0]
-            corr[s, i, 1] = ny - x[s, i, 1]
-            corr[s, i, 2] = nz - x[s, i, 2]
+            if add:
+                corr[s, i, 0] += nx - x[s, i, 0]
+                corr[s, i, 1] += ny - x[s, i, 1]
+                corr[s, i, 2] += nz - x[s, i, 2]
+            else:
+                corr[s, i, 0] = nx - x[s, i, 0]
+                corr[s, i, 1] = ny - x[s, i, 1]
+                corr[s, i, 2] = nz - x[s, i, 2]
             x[s, i, 0] = nx
             x[s, i, 1] = ny
             x[s, i, 2] = nz
@@ -293,15 +302,16 @@ def ftl_step_block(model, state, motion, params, corr, blk):
 
 @njit(cache=True, fastmath=FASTMATH, error_model='numpy')
 def ftl_block(model, state, motion, bend_passes, bend_stiffness, corr, s0, s1):
-    """Predict, ``bend_passes`` bending sweeps and the FTL pass of the strands ``s0 <= s < s1``:
-    a substep up to the collision and finalize (:func:`ftl_step`, :func:`ftl_collide_step`)."""
+    """Predict and ``bend_passes`` rounds of a bending sweep and the FTL pass of the strands
+    ``s0 <= s < s1``: a substep up to the collision and finalize (:func:`ftl_step`,
+    :func:`ftl_collide_step`)."""
     x = state[0]
     rest, inv_mass, rest_length, bend_rest, bend_w = model              # FtlModel
     predict_block(state, rest, inv_mass, motion, s0, s1)
-    if bend_stiffness > 0.0:
-        for _ in range(bend_passes):
+    for r in range(bend_passes):
+        if bend_stiffness > 0.0:
             pbd_sweep_block(x, bend_rest, bend_w, 2, bend_stiffness, s0, s1)
-    ftl_pass_block(x, rest, rest_length, motion[0], corr, s0, s1)
+        ftl_pass_block(x, rest, rest_length, motion[0], corr, s0, s1, r > 0)
 
 
 @njit(cache=True, nogil=True, parallel=True, fastmath=FASTMATH, error_model='numpy')
@@ -309,7 +319,7 @@ def ftl_collide_step(model, state, motion, params, work, collider):
     """Kernel: one FTL substep of all strands with the head collider, block by block (the
     block's strands stay in cache): :func:`ftl_step`'s predict, bending and FTL pass, the
     collider's projection with friction (:func:`~hair_tracking.guides.collision.project_block`),
-    when it moved a node of the block the collision-aware pass (:func:`ftl_restore_block`),
+    on every strand of which it moved a node the collision-aware pass (:func:`ftl_restore_block`),
     then finalize.  The same per-strand arithmetic as those kernels run one after another.
 
     ``work``: ``(corr, x_ref)``, the first two fields of :data:`FtlWork`; ``collider``: the
@@ -365,9 +375,12 @@ def ftl_collide_block(model, state, motion, params, work, contact, s0, s1):
     if friction > 0.0:
         carry_rigid_block(x, rot_rel, pos_prev, pos, x_ref, s0, s1)
     ftl_block(model, state, motion, bend_passes, bend_stiffness, corr, s0, s1)
-    pushed = project_block(x, ref, inv_mass, contact, s0, s1)
-    if pushed:
-        ftl_restore_block(x, rest, rest_length, rot, ellipsoid_of(contact), corr, s0, s1)
+    pushed = 0
+    for s in range(s0, s1):      # strand by strand: only the strands pushed are walked again
+        p = project_block(x, ref, inv_mass, contact, s, s + 1)
+        if p:
+            ftl_restore_block(x, rest, rest_length, rot, ellipsoid_of(contact), corr, s, s + 1)
+        pushed += p
     return finalize_block(x, v, x_old, inv_mass, corr, s0, s1, dt, max_disp, s_damp), pushed
 
 

@@ -154,12 +154,14 @@ def xpbd_step(x, v, rest, inv_mass, rest_length, bend_rest, motion, dt, iteratio
 
 def ftl_step(x, v, rest, inv_mass, rest_length, bend_rest, motion, dt, bend_passes,
              bend_stiffness, s_damp, max_disp):
-    """One FTL substep of all guides: predict, ``bend_passes`` PBD bending sweeps (if
-    ``bend_stiffness > 0``), the FTL pass, finalize with the velocity correction ``s_damp``.
-    As :func:`pbd_step`; returns ``(x, v, clamped, corrections)``."""
+    """One FTL substep of all guides: predict, ``bend_passes`` rounds of a PBD bending sweep
+    (if ``bend_stiffness > 0``) and the FTL pass (the corrections of the rounds summed),
+    finalize with the velocity correction ``s_damp``.  As :func:`pbd_step`; returns ``(x, v,
+    clamped, corrections)``."""
     p, xc, _ = guide_predict(x, v, rest, inv_mass, dt=dt, **motion)
-    if bend_stiffness > 0.0:
-        for _ in range(bend_passes):
+    corr = np.zeros_like(p)
+    for _ in range(bend_passes):
+        if bend_stiffness > 0.0:
             pbd_sweep(p, bend_rest, inv_mass, 2, bend_stiffness)
-    corr = ftl_pass(p, rest, rest_length, motion['rot'])
+        corr += ftl_pass(p, rest, rest_length, motion['rot'])
     return guide_finalize(p, xc, inv_mass, corr, dt, max_disp, s_damp) + (corr,)

@@ -48,11 +48,13 @@ from hair_tracking.core.metrics import max_stretch
 from hair_tracking.core.model import HeadPose, StrandSet
 from hair_tracking.guides import pbd_constraints
 
-#: PBD sweeps of the second-neighbour (bending) constraints per FTL substep, before the FTL pass.
-FTL_BEND_PASSES = 1
-#: Substep [s] at which ``solver.bend_stiffness`` applies as given to FTL (the default dt); see
-#: :func:`ftl_bend_stiffness`.
+#: Substep [s] at which ``solver.bend_stiffness`` applies as given to FTL (the default dt), with
+#: one round of a bending sweep and the FTL pass; see :func:`ftl_bend_stiffness` and
+#: :func:`ftl_bend_rounds`.
 BEND_REFERENCE_DT = 1.0 / 240.0
+#: A substep within this fraction of :data:`BEND_REFERENCE_DT` is that substep (the presets'
+#: 0.004166667 s is 1/240 s).
+REFERENCE_TOLERANCE = 1e-6
 #: What the FTL kernels take as the collider where there is none (not read; the fields of
 #: :data:`~hair_tracking.guides.collision.ColliderModel`).
 NO_COLLIDER = (np.zeros(3), np.ones(3), 0.0, 0.0, 0)
@@ -82,7 +84,7 @@ class GuideSolver:
     the first substep on: its gains depend on ``dt``).
 
     With FTL and a collider, a substep is predict, bend, FTL pass, collide and, when a node of
-    the strand's block was pushed, a collision-aware second FTL pass
+    the strand was pushed, a collision-aware second FTL pass over it
     (:func:`~hair_tracking.guides.ftl.ftl_restore_block`), then finalize, in one kernel: lengths
     stay exact and nodes outside the bare collider (measured in the stability matrix,
     ``docs/stability.md``).
@@ -285,7 +287,7 @@ class GuideSolver:
     def _ftl_params(self, dt: float, finalize: bool) -> tuple:
         """The FTL kernels' :data:`~hair_tracking.guides.ftl.FtlParams` for a substep ``dt``."""
         sv = self.scene.solver
-        return (FTL_BEND_PASSES, ftl_bend_stiffness(sv.bend_stiffness, dt),
+        return (ftl_bend_rounds(dt), ftl_bend_stiffness(sv.bend_stiffness, dt),
                 float(sv.ftl_damping), self._max_disp, finalize)
 
     def _collider_model(self) -> tuple:
@@ -360,21 +362,41 @@ class GuideSolver:
         return a_stretch, a_bend
 
 
-def ftl_bend_stiffness(k: float, dt: float) -> float:
-    """Per-substep bending stiffness of the FTL solver for a substep ``dt`` [s].
+def ftl_bend_rounds(dt: float) -> int:
+    """Rounds of a bending sweep and the FTL pass in an FTL substep ``dt`` [s]: one up to
+    :data:`BEND_REFERENCE_DT`, beyond it as many as substeps of that length would take
+    (``ceil(dt / dt_ref)``, a step within :data:`REFERENCE_TOLERANCE` of a multiple counted
+    as that multiple), so a long step iterates bending and lengths as often per second.
+    """
+    return max(1, math.ceil(dt / BEND_REFERENCE_DT - REFERENCE_TOLERANCE))
 
-    ``solver.bend_stiffness`` ``k`` is the fraction of the bending violation removed per substep
-    of :data:`BEND_REFERENCE_DT`; for another ``dt`` it becomes ``1 - (1 - k)^(dt / dt_ref)``,
-    the same fraction per second (Müller et al. 2007, section 3.3, make stiffness independent of
-    the iteration count the same way).  Without it the bending correction per substep does not
-    shrink with ``dt`` while FTL's velocity correction ``s_damp d / dt`` grows as ``1 / dt``:
-    measured, 25 cm strands at dt = 1/4000 s and 1.5 m strands already at 1/480 s never came to
-    rest after a head shake (kinetic energy growing instead of decaying).
+
+def ftl_bend_stiffness(k: float, dt: float) -> float:
+    """Bending stiffness of each of the :func:`ftl_bend_rounds` ``n`` rounds of an FTL substep
+    ``dt`` [s].
+
+    ``solver.bend_stiffness`` ``k`` is the fraction of the bending violation one sweep removes
+    at the substep :data:`BEND_REFERENCE_DT`.  At rest, each substep gravity's prediction pushes
+    a bend by an amount proportional to ``g dt^2`` (FTL's stored velocities at rest are ``g dt``
+    times a constant, :mod:`~hair_tracking.guides.ftl`), which the sweeps take back; for the
+    hair to settle to the same bend at any ``dt``, the sweeps of a substep must act as
+    ``(dt / dt_ref)^2`` sweeps of ``k`` do.  Spread over the ``n`` rounds with Müller et al.
+    2007's rule for a stiffness independent of the iteration count (section 3.3: ``n`` sweeps
+    of ``1 - (1 - k)^(m / n)`` remove what ``m`` sweeps of ``k`` remove):
+
+        k(dt) = 1 - (1 - k)^((dt / dt_ref)^2 / n).
+
+    At short steps the stiffness falls as ``dt^2``, faster than FTL's velocity correction
+    ``s_damp d / dt`` grows: a stiffness that does not fall let 25 cm strands at dt = 1/4000 s
+    and 1.5 m strands at 1/480 s never come to rest after a head shake (measured).  At long steps
+    one sweep saturates (a fraction of 0.997 at 1/60 s for ``k`` 0.3 leaves the hair sagging
+    more than at 1/240 s): the rounds carry the rest.
     """
     k = float(k)
-    if dt == BEND_REFERENCE_DT or k <= 0.0 or k >= 1.0:
+    ratio = dt / BEND_REFERENCE_DT
+    if abs(ratio - 1.0) <= REFERENCE_TOLERANCE or k <= 0.0 or k >= 1.0:
         return k
-    return 1.0 - (1.0 - k) ** (dt / BEND_REFERENCE_DT)
+    return 1.0 - (1.0 - k) ** (ratio * ratio / ftl_bend_rounds(dt))
 
 
 def _check_dt(dt) -> float:
