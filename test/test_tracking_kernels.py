@@ -200,9 +200,11 @@ def test_tip_weights_follow_arc_length():
         arc_fractions(np.zeros(3))
 
 
-def test_parallel_and_serial_kernels_agree_bit_for_bit():
+def test_parallel_and_serial_kernels_agree():
     """Below PARALLEL_MIN_NODES the tracker calls the serial kernel; asking for the parallel one
-    (any thread count) gives the same bits, with the fused collider on."""
+    gives the same contacts and the same hair, with the fused collider on.  The two variants are
+    separately compiled functions and the kernels may fuse multiply-adds
+    (``integrate.FASTMATH``), so they agree to rounding, not necessarily bit for bit."""
     from hair_tracking.guides.collision import make_collider
     scene = scene_with(spread=0.5, spread_target=1.5)
     collider = make_collider(scene.collider)
@@ -220,8 +222,8 @@ def test_parallel_and_serial_kernels_agree_bit_for_bit():
         runs.append((tracker.positions().copy(), tracker.velocities().copy(),
                      tracker.stats['contacts']))
     assert runs[0][2] == runs[1][2] and runs[0][2] > 0
-    np.testing.assert_array_equal(runs[0][0], runs[1][0])
-    np.testing.assert_array_equal(runs[0][1], runs[1][1])
+    np.testing.assert_allclose(runs[0][0], runs[1][0], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(runs[0][1], runs[1][1], rtol=0, atol=1e-9)      # x / dt
 
 
 def test_blocks_of_groups_large_small_and_single():
