@@ -12,12 +12,12 @@ ADAPTERS = os.path.join(ROOT, 'msg_adapters')
 
 #: Layers from the bottom up: a module may import its own layer and the ones below it only.
 #: The top-level helpers (resources, process_tuning) are leaves any layer may use.
-LAYERS = ['core', 'motion', 'guides', 'ghosts', 'simulator', 'output', 'bags', 'evaluation',
-          'ros']
+LAYERS = ['core', 'motion', 'colliders', 'guides', 'ghosts', 'simulator', 'output', 'bags',
+          'evaluation', 'ros']
 LEAVES = {'resources', 'process_tuning'}
 #: Layers that simulate or describe head motion: numpy, numba and yaml only, no ROS messages,
 #: no rclpy, no adapters.
-SIMULATION = {'core', 'motion', 'guides', 'ghosts', 'simulator'}
+SIMULATION = {'core', 'motion', 'colliders', 'guides', 'ghosts', 'simulator'}
 #: Layers that join no ROS graph (no rclpy): they run without a ROS installation's middleware.
 NO_GRAPH = SIMULATION | {'output', 'bags', 'evaluation'}
 ROS_ROOTS = {'rclpy', 'rosidl_runtime_py', 'rosgraph_msgs', 'std_msgs', 'geometry_msgs',

@@ -1,0 +1,338 @@
+"""The contact model: one node against one posed shape, as scalar functions that every guide
+solver and ghost tracker calls inside its own loops (``@njit(inline='always')``: no call, no
+array created; a kernel reads the shape from its posed table ``sh`` at row ``k``, see
+:mod:`hair_tracking.colliders.shapes`).
+
+**Projection** (:func:`push_out`, :func:`project`): a node inside a shape's surface + margin is
+moved onto it, to the closest point of the surface:
+
+- sphere, capsule: radially from the closest point of the core segment (the centre for a
+  sphere; a node on the segment itself goes out along the shape's local x axis);
+- plane: along its normal;
+- ellipsoid: in its own axes ``q = R^T (x - C)``, the radial projection in the unit-sphere
+  space ``y0 = q / sqrt(F(q))`` with ``F(q) = sum (q_k / a_k)^2``, which lies on the surface,
+  then ``refine`` times the intersection of the surface with the line from ``q`` along the
+  outward normal ``(y_k / a_k^2)_k`` at the current estimate (a quadratic in the line parameter
+  with one positive root, ``q`` being inside).  The closest point is the fixed point of this
+  map; every iterate lies exactly on the surface.  A node at the centre goes out along the
+  shortest semi-axis.  Distance to the true closest point with 2 refinements on the head
+  ellipsoid (0.095, 0.08, 0.105) m: 3e-7 m at 2 mm depth, 4e-5 m at 1 cm.
+
+**Friction** (:func:`friction`), position-level as in Macklin, Müller, Chentanez & Kim 2014
+("Unified Particle Physics for Real-Time Applications"), a proportional reduction in place of a
+Coulomb cone: the displacement of the projected node ``y`` from its reference ``r`` is split at
+the contact normal ``n`` and its tangential part reduced by the factor ``friction`` (0:
+frictionless, 1: sticks).  The reference is where the node would be had it stuck to the shape
+over the substep (:func:`carried`: its start position moved with the shape's frame), so a
+moving collider drags the hair with its surface velocity.  The node stays on the tangent plane,
+outside a convex surface.
+
+**Push-out velocity bound** (:func:`bounded_start`): a position-based solver makes velocity of
+every position change, ``v = (x - x_start) / dt``, so a node found inside a shape that appeared
+around it, jumped onto it or was reset into it would leave with ``depth / dt`` (5 cm at
+dt = 1/240 s: 12 m/s).  The normal part of the node's displacement relative to the shape,
+``(y - r) . n``, is allowed up to ``cap`` [m] (a speed bound times ``dt``); the excess is a
+push-out and is applied to the start position as well (the "pre-stabilization" of Macklin et al.
+2014, section 4.4), so it adds no velocity: a pushed node leaves with at most the shape's
+normal surface speed plus ``cap / dt``.
+
+The ellipsoid's projection and friction work in the shape's axes and reproduce the head
+collider's arithmetic in its order (same results bit for bit under the same compile flags); the
+round shapes and the plane work in the world.  :mod:`hair_tracking.colliders.reference` states
+every rule in plain numpy.
+"""
+import math
+
+from numba import njit
+
+from hair_tracking.colliders.shapes import (A0, A1, A2, CX, CY, CZ, ELLIPSOID, FRICTION, I0, I1,
+                                            I2, KIND, M00, M01, M02, M10, M11, M12, M20, M21,
+                                            M22, OX, OY, OZ, PLANE, PX, PY, PZ, R00, R01, R02,
+                                            R10, R11, R12, R20, R21, R22, REFINE)
+
+#: LLVM fast-math flags of the contact kernels: only ``contract`` (fused multiply-add); NaN and
+#: infinity semantics kept.  The guide and ghost kernels compile with (at least) these.
+FASTMATH = {'contract'}
+#: Below this ellipsoid level ``F(q)`` a node is at the centre (no radial direction).
+CENTRE_LEVEL = 1e-24
+#: Below this squared distance [m^2] from a capsule's core segment a node has no radial
+#: direction (it goes out along the shape's local x axis).
+TINY_SQ = 1e-24
+
+
+# ----------------------------------------------------------------------------- frames
+@njit(cache=True, inline='always')
+def to_local(x0, x1, x2, sh, k):
+    """``R^T (x - C)``: a world point [m] in the axes of shape ``k``, relative to its centre."""
+    dx, dy, dz = x0 - sh[k, CX], x1 - sh[k, CY], x2 - sh[k, CZ]
+    return (sh[k, R00] * dx + sh[k, R10] * dy + sh[k, R20] * dz,
+            sh[k, R01] * dx + sh[k, R11] * dy + sh[k, R21] * dz,
+            sh[k, R02] * dx + sh[k, R12] * dy + sh[k, R22] * dz)
+
+
+@njit(cache=True, inline='always')
+def from_local(yx, yy, yz, sh, k):
+    """``R y + C``: a point in the axes of shape ``k`` back in the world."""
+    return (sh[k, R00] * yx + sh[k, R01] * yy + sh[k, R02] * yz + sh[k, CX],
+            sh[k, R10] * yx + sh[k, R11] * yy + sh[k, R12] * yz + sh[k, CY],
+            sh[k, R20] * yx + sh[k, R21] * yy + sh[k, R22] * yz + sh[k, CZ])
+
+
+@njit(cache=True, inline='always')
+def carried(x0, x1, x2, sh, k):
+    """Where the world point ``x`` is after moving with the frame of shape ``k`` over the
+    substep: ``M (x - O_prev) + O`` (the friction reference of a node that started at ``x``;
+    the guide solver's rigid carry of the head, in its arithmetic)."""
+    ax, ay, az = x0 - sh[k, PX], x1 - sh[k, PY], x2 - sh[k, PZ]
+    return (sh[k, M00] * ax + sh[k, M01] * ay + sh[k, M02] * az + sh[k, OX],
+            sh[k, M10] * ax + sh[k, M11] * ay + sh[k, M12] * az + sh[k, OY],
+            sh[k, M20] * ax + sh[k, M21] * ay + sh[k, M22] * az + sh[k, OZ])
+
+
+# ----------------------------------------------------------------------------- ellipsoid
+@njit(cache=True, inline='always')
+def ellipsoid_level(qx, qy, qz, ix, iy, iz):
+    """``F(q) = sum q_k^2 / a_k^2`` (``i`` the inverse squared semi-axes): below 1 inside."""
+    return qx * qx * ix + qy * qy * iy + qz * qz * iz
+
+
+@njit(cache=True, inline='always')
+def ellipsoid_radial(qx, qy, qz, ix, iy, iz):
+    """``(F(q), 1 / sqrt(F(q)))``: the level of ``q`` and the scale of its radial projection
+    ``q / sqrt(F)`` onto the ellipsoid (scale 1 at the centre, ``F <`` :data:`CENTRE_LEVEL`,
+    where :func:`centre_exit` replaces the projection)."""
+    f = ellipsoid_level(qx, qy, qz, ix, iy, iz)
+    return f, 1.0 / math.sqrt(f if not f < CENTRE_LEVEL else 1.0)
+
+
+@njit(cache=True, inline='always')
+def ellipsoid_refine(qx, qy, qz, yx, yy, yz, c, ix, iy, iz):
+    """One normal-line refinement: the surface point on the line from ``q`` along the outward
+    normal at the estimate ``y`` (``c = F(q) - 1``); the branch on the root's form as a
+    select."""
+    nx, ny, nz = yx * ix, yy * iy, yz * iz
+    a = nx * nx * ix + ny * ny * iy + nz * nz * iz
+    b = qx * nx * ix + qy * ny * iy + qz * nz * iz
+    disc = math.sqrt(b * b - a * c)
+    t = -c / (b + disc) if b > 0.0 else (disc - b) / a
+    return qx + t * nx, qy + t * ny, qz + t * nz
+
+
+@njit(cache=True, inline='always')
+def centre_exit(ax, ay, az):
+    """Where a node at the ellipsoid's centre goes: the end of the shortest semi-axis (the
+    first of equal ones)."""
+    ex = ax if ax <= ay and ax <= az else 0.0
+    ey = ay if ex == 0.0 and ay <= az else 0.0
+    ez = az if ex == 0.0 and ey == 0.0 else 0.0
+    return ex, ey, ez
+
+
+@njit(cache=True, fastmath=FASTMATH, error_model='numpy')
+def surface_point(qx, qy, qz, ax, ay, az, refine):
+    """Approximate closest point on the ellipsoid ``sum (y_k / a_k)^2 = 1`` of the point ``q``
+    (its axes, relative to its centre; inside): the radial projection then ``refine``
+    normal-line refinements (module docstring).  A plain call, not inlined (a caller's
+    arithmetic around it is not fused with its own)."""
+    ix, iy, iz = 1.0 / (ax * ax), 1.0 / (ay * ay), 1.0 / (az * az)
+    f, sc = ellipsoid_radial(qx, qy, qz, ix, iy, iz)
+    yx, yy, yz = qx * sc, qy * sc, qz * sc
+    c = f - 1.0
+    for _ in range(refine):
+        yx, yy, yz = ellipsoid_refine(qx, qy, qz, yx, yy, yz, c, ix, iy, iz)
+    ex, ey, ez = centre_exit(ax, ay, az)
+    deg = f < CENTRE_LEVEL
+    return (ex if deg else yx), (ey if deg else yy), (ez if deg else yz)
+
+
+@njit(cache=True, inline='always')
+def ellipsoid_normal(yx, yy, yz, ix, iy, iz):
+    """Outward unit normal ``(y_k / a_k^2)_k / |.|`` of the ellipsoid at its surface point
+    ``y`` (its axes)."""
+    nx, ny, nz = yx * ix, yy * iy, yz * iz
+    nn = 1.0 / math.sqrt(nx * nx + ny * ny + nz * nz)
+    return nx * nn, ny * nn, nz * nn
+
+
+# ----------------------------------------------------------------------------- rules
+@njit(cache=True, inline='always')
+def friction(yx, yy, yz, px, py, pz, nx, ny, nz, mu):
+    """The friction rule: the projected node ``y`` moved back toward its reference ``p`` by
+    ``mu`` times the tangential part (to the unit normal ``n``) of ``y - p``.  Any one frame
+    for the three points."""
+    mx, my, mz = yx - px, yy - py, yz - pz
+    dn = mx * nx + my * ny + mz * nz
+    return yx - mu * (mx - dn * nx), yy - mu * (my - dn * ny), yz - mu * (mz - dn * nz)
+
+
+@njit(cache=True, inline='always')
+def bounded_start(s0, s1, s2, y0, y1, y2, r0, r1, r2, n0, n1, n2, cap):
+    """The push-out velocity bound: the start position ``s`` of a node pushed to ``y`` (unit
+    normal ``n`` there; ``r`` where it would be had it stuck to the shape, :func:`carried`)
+    moved along ``n`` by the part of ``(y - r) . n`` beyond ``cap`` [m], so that ``(y - s) / dt``
+    gains no more than ``cap / dt`` along the normal beyond the shape's own motion.  ``cap < 0``
+    (or a node within it) leaves ``s`` as it is."""
+    e = (y0 - r0) * n0 + (y1 - r1) * n1 + (y2 - r2) * n2 - cap
+    if cap < 0.0 or not e > 0.0:
+        return s0, s1, s2
+    return s0 + e * n0, s1 + e * n1, s2 + e * n2
+
+
+# ----------------------------------------------------------------------------- one node
+@njit(cache=True, inline='always')
+def core_point(x0, x1, x2, sh, k):
+    """Sphere, capsule: the closest point of the core segment to ``x`` and ``x`` minus it."""
+    ux, uy, uz = sh[k, R02], sh[k, R12], sh[k, R22]
+    h = sh[k, A1]
+    dx, dy, dz = x0 - sh[k, CX], x1 - sh[k, CY], x2 - sh[k, CZ]
+    t = min(max(dx * ux + dy * uy + dz * uz, -h), h)
+    bx, by, bz = sh[k, CX] + t * ux, sh[k, CY] + t * uy, sh[k, CZ] + t * uz
+    return bx, by, bz, x0 - bx, x1 - by, x2 - bz
+
+
+@njit(cache=True, inline='always')
+def round_normal(ex, ey, ez, dd, sh, k):
+    """Unit ``e`` (``dd = |e|^2``), the shape's local x axis when ``e`` has no direction."""
+    if dd > TINY_SQ:
+        s = 1.0 / math.sqrt(dd)
+        return ex * s, ey * s, ez * s
+    return sh[k, R00], sh[k, R10], sh[k, R20]
+
+
+@njit(cache=True, inline='always')
+def plane_level(x0, x1, x2, sh, k):
+    """Signed height [m] of ``x`` over the plane + margin (negative inside)."""
+    return (x0 - sh[k, CX]) * sh[k, R02] + (x1 - sh[k, CY]) * sh[k, R12] + \
+        (x2 - sh[k, CZ]) * sh[k, R22] - sh[k, A0]
+
+
+@njit(cache=True, inline='always')
+def contact_ellipsoid(x0, x1, x2, r0, r1, r2, sh, k, mu):
+    """:func:`contact` of an ellipsoid, friction ``mu`` (0: none): in its axes, in the head
+    collider's arithmetic."""
+    qx, qy, qz = to_local(x0, x1, x2, sh, k)
+    ix, iy, iz = sh[k, I0], sh[k, I1], sh[k, I2]
+    if ellipsoid_level(qx, qy, qz, ix, iy, iz) >= 1.0:
+        return False, x0, x1, x2
+    yx, yy, yz = surface_point(qx, qy, qz, sh[k, A0], sh[k, A1], sh[k, A2], int(sh[k, REFINE]))
+    if mu > 0.0:
+        px, py, pz = to_local(r0, r1, r2, sh, k)
+        nx, ny, nz = ellipsoid_normal(yx, yy, yz, ix, iy, iz)
+        yx, yy, yz = friction(yx, yy, yz, px, py, pz, nx, ny, nz, mu)
+    y0, y1, y2 = from_local(yx, yy, yz, sh, k)
+    return True, y0, y1, y2
+
+
+@njit(cache=True, inline='always')
+def contact_round(x0, x1, x2, r0, r1, r2, sh, k, mu):
+    """:func:`contact` of a sphere or capsule, friction ``mu`` (0: none): radially from the
+    closest point of the core segment, in the world."""
+    bx, by, bz, ex, ey, ez = core_point(x0, x1, x2, sh, k)
+    dd = ex * ex + ey * ey + ez * ez
+    if dd * sh[k, I0] >= 1.0:
+        return False, x0, x1, x2
+    nx, ny, nz = round_normal(ex, ey, ez, dd, sh, k)
+    r = sh[k, A0]
+    y0, y1, y2 = bx + r * nx, by + r * ny, bz + r * nz
+    if mu > 0.0:
+        y0, y1, y2 = friction(y0, y1, y2, r0, r1, r2, nx, ny, nz, mu)
+    return True, y0, y1, y2
+
+
+@njit(cache=True, inline='always')
+def contact_plane(x0, x1, x2, r0, r1, r2, sh, k, mu):
+    """:func:`contact` of a plane, friction ``mu`` (0: none): along its normal."""
+    phi = plane_level(x0, x1, x2, sh, k)
+    if phi >= 0.0:
+        return False, x0, x1, x2
+    nx, ny, nz = sh[k, R02], sh[k, R12], sh[k, R22]
+    y0, y1, y2 = x0 - phi * nx, x1 - phi * ny, x2 - phi * nz
+    if mu > 0.0:
+        y0, y1, y2 = friction(y0, y1, y2, r0, r1, r2, nx, ny, nz, mu)
+    return True, y0, y1, y2
+
+
+@njit(cache=True, inline='always')
+def contact(x0, x1, x2, r0, r1, r2, sh, k, with_friction):
+    """One node ``x`` (world [m]) out of shape ``k``'s surface + margin, then, with
+    ``with_friction``, the friction rule relative to the reference ``r``.  Returns ``(moved,
+    y0, y1, y2)``; a node outside comes back as it is with ``moved`` false.  (A kernel that
+    runs lanes side by side switches on the kind outside its lane loop and calls
+    :func:`contact_ellipsoid`, :func:`contact_round` or :func:`contact_plane`.)"""
+    kind = int(sh[k, KIND])
+    mu = sh[k, FRICTION] if with_friction else 0.0
+    if kind == ELLIPSOID:
+        return contact_ellipsoid(x0, x1, x2, r0, r1, r2, sh, k, mu)
+    if kind == PLANE:
+        return contact_plane(x0, x1, x2, r0, r1, r2, sh, k, mu)
+    return contact_round(x0, x1, x2, r0, r1, r2, sh, k, mu)
+
+
+@njit(cache=True, inline='always')
+def push_out(x0, x1, x2, r0, r1, r2, sh, k):
+    """:func:`contact` with the shape's friction relative to the reference ``r`` (the guide
+    solver's and the paper tracker's contact)."""
+    return contact(x0, x1, x2, r0, r1, r2, sh, k, True)
+
+
+@njit(cache=True, inline='always')
+def project(x0, x1, x2, sh, k):
+    """:func:`contact` without friction: ``(moved, y0, y1, y2)`` (the collision-aware
+    Follow-The-Leader pass)."""
+    return contact(x0, x1, x2, x0, x1, x2, sh, k, False)
+
+
+@njit(cache=True, inline='always')
+def surface_normal(y0, y1, y2, sh, k):
+    """Outward unit normal (world) of shape ``k`` at (or nearest to) ``y``, a point of its
+    surface + margin."""
+    kind = int(sh[k, KIND])
+    if kind == ELLIPSOID:
+        qx, qy, qz = to_local(y0, y1, y2, sh, k)
+        nx, ny, nz = ellipsoid_normal(qx, qy, qz, sh[k, I0], sh[k, I1], sh[k, I2])
+        return (sh[k, R00] * nx + sh[k, R01] * ny + sh[k, R02] * nz,
+                sh[k, R10] * nx + sh[k, R11] * ny + sh[k, R12] * nz,
+                sh[k, R20] * nx + sh[k, R21] * ny + sh[k, R22] * nz)
+    if kind == PLANE:
+        return sh[k, R02], sh[k, R12], sh[k, R22]
+    bx, by, bz, ex, ey, ez = core_point(y0, y1, y2, sh, k)
+    return round_normal(ex, ey, ez, ex * ex + ey * ey + ez * ez, sh, k)
+
+
+@njit(cache=True, inline='always')
+def outside_within(x0, x1, x2, sh, k, tol):
+    """Whether ``x`` lies outside shape ``k``'s surface + margin or less than ``tol`` [m]
+    inside it (the ellipsoid: ``F >= (1 - tol / a_max)^2``, which bounds the depth by
+    ``tol``)."""
+    kind = int(sh[k, KIND])
+    if kind == ELLIPSOID:
+        qx, qy, qz = to_local(x0, x1, x2, sh, k)
+        f_ok = 1.0 - tol / max(sh[k, A0], sh[k, A1], sh[k, A2])
+        f_ok = f_ok * f_ok
+        return ellipsoid_level(qx, qy, qz, sh[k, I0], sh[k, I1], sh[k, I2]) >= f_ok
+    if kind == PLANE:
+        return plane_level(x0, x1, x2, sh, k) >= -tol
+    bx, by, bz, ex, ey, ez = core_point(x0, x1, x2, sh, k)
+    inner = max(sh[k, A0] - tol, 0.0)
+    return ex * ex + ey * ey + ez * ez >= inner * inner
+
+
+@njit(cache=True, inline='always')
+def depth(x0, x1, x2, sh, k):
+    """How deep [m] ``x`` lies inside shape ``k``'s surface + margin (0 outside): for the
+    ellipsoid the distance to its surface point of :func:`surface_point`."""
+    kind = int(sh[k, KIND])
+    if kind == ELLIPSOID:
+        qx, qy, qz = to_local(x0, x1, x2, sh, k)
+        if ellipsoid_level(qx, qy, qz, sh[k, I0], sh[k, I1], sh[k, I2]) >= 1.0:
+            return 0.0
+        yx, yy, yz = surface_point(qx, qy, qz, sh[k, A0], sh[k, A1], sh[k, A2],
+                                   int(sh[k, REFINE]))
+        return math.sqrt((yx - qx) ** 2 + (yy - qy) ** 2 + (yz - qz) ** 2)
+    if kind == PLANE:
+        return max(-plane_level(x0, x1, x2, sh, k), 0.0)
+    bx, by, bz, ex, ey, ez = core_point(x0, x1, x2, sh, k)
+    dd = ex * ex + ey * ey + ez * ez
+    if dd * sh[k, I0] >= 1.0:
+        return 0.0
+    return sh[k, A0] - math.sqrt(dd)

@@ -1,0 +1,180 @@
+"""The contact of the trackers without state (blend and turn), on the same shapes: a node
+placed at a fixed distance from its predecessor slides along the surface instead of into it,
+then goes onto the surface if the curvature still leaves it inside.
+
+For node ``n`` (inside shape ``k``'s surface + margin) after its predecessor ``p``, with ``g``
+an outward normal of the shape at ``p``'s level (not of unit length: ``Q (p - C)`` for the
+ellipsoid, ``p`` minus its closest core point for a sphere or capsule, the normal for the
+plane), the step ``d = n - p`` loses its inward part, ``d - min(0, d.g) / (g.g) g``, and the
+node is put at ``length`` from ``p`` along it (:func:`slide`).  For ``p`` outside a convex
+shape the result lies outside too (on the outer side of the tangent plane of the convex level
+set through ``p``) but for the curvature between; :func:`push_radial` then moves a node still
+inside onto the surface: along the ray from the centre for the ellipsoid, from the closest core
+point for the sphere and capsule, along the normal for the plane.
+
+The inside test of these trackers (:func:`level`) and the ellipsoid's normal use the shape's
+world quadric ``(x - C)^T Q (x - C)`` with ``Q = R diag(1 / a^2) R^T``: one matrix-vector
+product, no change of axes, so a block of lanes tests in one vector pass.  It is the same
+level set as :func:`~hair_tracking.colliders.contact.contact` uses (``F(R^T (x - C))``) and
+agrees with it to rounding.
+
+Each rule exists per kind (``*_ellipsoid``, ``*_round``, ``*_plane``: one straight run of
+arithmetic) and once with a switch on the kind.  A kernel that runs lanes side by side switches
+on the kind outside its lane loop and calls the per-kind function: no branch per lane, and the
+ellipsoid's arithmetic fused as the blend tracker's (through a switch whose branches join, LLVM
+fuses the multiply-adds differently: the last bit of a few nodes in a thousand changes).
+"""
+import math
+
+from numba import njit
+
+from hair_tracking.colliders.contact import core_point, plane_level
+from hair_tracking.colliders.shapes import (A0, CX, CY, CZ, ELLIPSOID, I0, KIND, PLANE, Q00,
+                                            Q01, Q02, Q11, Q12, Q22, R02, R12, R22)
+
+
+# ----------------------------------------------------------------------------- inside test
+@njit(cache=True, inline='always')
+def quadric_form(dx, dy, dz, sh, k):
+    """``d^T Q d`` for the ellipsoid quadric of shape ``k`` (below 1 inside for ``d = x -
+    C``)."""
+    return sh[k, Q00] * dx * dx + sh[k, Q11] * dy * dy + sh[k, Q22] * dz * dz + \
+        2.0 * (sh[k, Q01] * dx * dy + sh[k, Q02] * dx * dz + sh[k, Q12] * dy * dz)
+
+
+@njit(cache=True, inline='always')
+def level_round(x0, x1, x2, sh, k):
+    """``|x - core|^2 / (radius + margin)^2 - 1`` of a sphere or capsule (negative inside)."""
+    bx, by, bz, ex, ey, ez = core_point(x0, x1, x2, sh, k)
+    return (ex * ex + ey * ey + ez * ez) * sh[k, I0] - 1.0
+
+
+@njit(cache=True, inline='always')
+def level(x0, x1, x2, sh, k):
+    """Negative where ``x`` is inside shape ``k``'s surface + margin: the ellipsoid's world
+    quadric minus 1, :func:`level_round`, the height over the plane + margin."""
+    kind = int(sh[k, KIND])
+    if kind == ELLIPSOID:
+        return quadric_form(x0 - sh[k, CX], x1 - sh[k, CY], x2 - sh[k, CZ], sh, k) - 1.0
+    if kind == PLANE:
+        return plane_level(x0, x1, x2, sh, k)
+    return level_round(x0, x1, x2, sh, k)
+
+
+# ----------------------------------------------------------------------------- slide
+@njit(cache=True, inline='always')
+def slide_along(n0, n1, n2, p0, p1, p2, gx, gy, gz, length):
+    """The node ``n`` at ``length`` from ``p`` along ``n - p`` without its part against the
+    outward normal ``g`` (any length); a step of no length leaves ``n`` as it is.  ``d - (d.g /
+    g.g) g`` needs no unit normal: one square root and two divisions."""
+    dx, dy, dz = n0 - p0, n1 - p1, n2 - p2
+    inward = dx * gx + dy * gy + dz * gz
+    gg = gx * gx + gy * gy + gz * gz
+    if inward < 0.0 and gg > 0.0:
+        a = inward / gg
+        dx, dy, dz = dx - a * gx, dy - a * gy, dz - a * gz
+    d = math.sqrt(dx * dx + dy * dy + dz * dz)
+    if d <= 0.0:
+        return n0, n1, n2
+    f = length / d
+    return p0 + f * dx, p1 + f * dy, p2 + f * dz
+
+
+@njit(cache=True, inline='always')
+def slide_ellipsoid(n0, n1, n2, p0, p1, p2, length, sh, k):
+    """:func:`slide` of an ellipsoid: the outward normal ``Q (p - C)``."""
+    ex, ey, ez = p0 - sh[k, CX], p1 - sh[k, CY], p2 - sh[k, CZ]
+    gx = sh[k, Q00] * ex + sh[k, Q01] * ey + sh[k, Q02] * ez
+    gy = sh[k, Q01] * ex + sh[k, Q11] * ey + sh[k, Q12] * ez
+    gz = sh[k, Q02] * ex + sh[k, Q12] * ey + sh[k, Q22] * ez
+    return slide_along(n0, n1, n2, p0, p1, p2, gx, gy, gz, length)
+
+
+@njit(cache=True, inline='always')
+def slide_round(n0, n1, n2, p0, p1, p2, length, sh, k):
+    """:func:`slide` of a sphere or capsule: the outward normal ``p`` minus its core point."""
+    bx, by, bz, gx, gy, gz = core_point(p0, p1, p2, sh, k)
+    return slide_along(n0, n1, n2, p0, p1, p2, gx, gy, gz, length)
+
+
+@njit(cache=True, inline='always')
+def slide_plane(n0, n1, n2, p0, p1, p2, length, sh, k):
+    """:func:`slide` of a plane: its normal."""
+    return slide_along(n0, n1, n2, p0, p1, p2, sh[k, R02], sh[k, R12], sh[k, R22], length)
+
+
+@njit(cache=True, inline='always')
+def slide(n0, n1, n2, p0, p1, p2, length, sh, k):
+    """The node ``n`` at ``length`` from its predecessor ``p`` along its step with the inward
+    part removed (module docstring)."""
+    kind = int(sh[k, KIND])
+    if kind == ELLIPSOID:
+        return slide_ellipsoid(n0, n1, n2, p0, p1, p2, length, sh, k)
+    if kind == PLANE:
+        return slide_plane(n0, n1, n2, p0, p1, p2, length, sh, k)
+    return slide_round(n0, n1, n2, p0, p1, p2, length, sh, k)
+
+
+# ----------------------------------------------------------------------------- push
+@njit(cache=True, inline='always')
+def push_ellipsoid(x0, x1, x2, sh, k):
+    """:func:`push_radial` of an ellipsoid: along the ray from its centre (a point at the
+    centre stays)."""
+    dx, dy, dz = x0 - sh[k, CX], x1 - sh[k, CY], x2 - sh[k, CZ]
+    e = quadric_form(dx, dy, dz, sh, k)
+    if not 0.0 < e < 1.0:
+        return x0, x1, x2
+    f = 1.0 / math.sqrt(e)
+    return sh[k, CX] + f * dx, sh[k, CY] + f * dy, sh[k, CZ] + f * dz
+
+
+@njit(cache=True, inline='always')
+def push_round(x0, x1, x2, sh, k):
+    """:func:`push_radial` of a sphere or capsule: along the ray from the closest core point
+    (a point on the core segment stays)."""
+    bx, by, bz, ex, ey, ez = core_point(x0, x1, x2, sh, k)
+    dd = ex * ex + ey * ey + ez * ez
+    if not 0.0 < dd * sh[k, I0] < 1.0:
+        return x0, x1, x2
+    f = sh[k, A0] / math.sqrt(dd)
+    return bx + f * ex, by + f * ey, bz + f * ez
+
+
+@njit(cache=True, inline='always')
+def push_plane(x0, x1, x2, sh, k):
+    """:func:`push_radial` of a plane: along its normal."""
+    phi = plane_level(x0, x1, x2, sh, k)
+    if not phi < 0.0:
+        return x0, x1, x2
+    return x0 - phi * sh[k, R02], x1 - phi * sh[k, R12], x2 - phi * sh[k, R22]
+
+
+@njit(cache=True, inline='always')
+def push_radial(x0, x1, x2, sh, k):
+    """A point inside shape ``k``'s surface + margin moved onto it (module docstring); a point
+    outside is returned as it is."""
+    kind = int(sh[k, KIND])
+    if kind == ELLIPSOID:
+        return push_ellipsoid(x0, x1, x2, sh, k)
+    if kind == PLANE:
+        return push_plane(x0, x1, x2, sh, k)
+    return push_round(x0, x1, x2, sh, k)
+
+
+@njit(cache=True, inline='always')
+def slide_push(n0, n1, n2, p0, p1, p2, length, sliding, sh, k):
+    """The stateless trackers' contact of node ``n`` after ``p`` with shape ``k``: the slide
+    (when ``sliding``: the trackers that keep segment lengths), then the push onto the
+    surface."""
+    kind = int(sh[k, KIND])
+    if kind == ELLIPSOID:
+        if sliding:
+            n0, n1, n2 = slide_ellipsoid(n0, n1, n2, p0, p1, p2, length, sh, k)
+        return push_ellipsoid(n0, n1, n2, sh, k)
+    if kind == PLANE:
+        if sliding:
+            n0, n1, n2 = slide_plane(n0, n1, n2, p0, p1, p2, length, sh, k)
+        return push_plane(n0, n1, n2, sh, k)
+    if sliding:
+        n0, n1, n2 = slide_round(n0, n1, n2, p0, p1, p2, length, sh, k)
+    return push_round(n0, n1, n2, sh, k)
