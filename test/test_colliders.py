@@ -9,7 +9,8 @@ import pytest
 
 from hair_tracking.colliders import bounds, contact, kernels, margin, pose, reference
 from hair_tracking.colliders import slide as stateless_slide
-from hair_tracking.colliders.shapes import (A0, BOUND, CX, CZ, FIXED_FRAME, HEAD_FRAME, KIND, M00,
+from hair_tracking.colliders.shapes import (A0, BOUND, CX, CZ, FIXED_FRAME, FRICTION, HEAD_FRAME,
+                                            KIND, M00,
                                             OX, OZ, PX, PZ, R00, capsule_between, frame_names,
                                             Shape, shape_table, WIDTH)
 from hair_tracking.core.transforms import quat_from_axis_angle, quat_normalize, quat_to_matrix
@@ -22,8 +23,9 @@ FASTMATH = contact.FASTMATH
 def push_points(x, r, sh, k, with_friction, out):
     moved = np.zeros(x.shape[0], dtype=np.bool_)
     for i in range(x.shape[0]):
-        m, y0, y1, y2 = contact.contact(x[i, 0], x[i, 1], x[i, 2], r[i, 0], r[i, 1], r[i, 2],
-                                        sh, k, with_friction)
+        mu = sh[k, FRICTION] if with_friction else 0.0
+        m, y0, y1, y2 = contact.contact_of(int(sh[k, KIND]), x[i, 0], x[i, 1], x[i, 2], r[i, 0],
+                                           r[i, 1], r[i, 2], sh, k, mu)
         moved[i] = m
         out[i, 0], out[i, 1], out[i, 2] = y0, y1, y2
     return moved

@@ -3,8 +3,8 @@ solver and ghost tracker calls inside its own loops (``@njit(inline='always')``:
 array created; a kernel reads the shape from its posed table ``sh`` at row ``k``, see
 :mod:`hair_tracking.colliders.shapes`).
 
-**Projection** (:func:`push_out`, :func:`project`): a node inside a shape's surface + margin is
-moved onto it, to the closest point of the surface:
+**Projection** (:func:`contact_of`, :func:`push_out`, :func:`project`): a node inside a
+shape's surface + margin is moved onto it, to the closest point of the surface:
 
 - sphere, capsule: radially from the closest point of the core segment (the centre for a
   sphere; a node on the segment itself goes out along the shape's local x axis);
@@ -208,7 +208,7 @@ def plane_level(x0, x1, x2, sh, k):
 
 @njit(cache=True, inline='always')
 def contact_ellipsoid(x0, x1, x2, r0, r1, r2, sh, k, mu):
-    """:func:`contact` of an ellipsoid, friction ``mu`` (0: none): in its axes, in the head
+    """:func:`contact_of` an ellipsoid, friction ``mu`` (0: none): in its axes, in the head
     collider's arithmetic."""
     qx, qy, qz = to_local(x0, x1, x2, sh, k)
     ix, iy, iz = sh[k, I0], sh[k, I1], sh[k, I2]
@@ -225,7 +225,7 @@ def contact_ellipsoid(x0, x1, x2, r0, r1, r2, sh, k, mu):
 
 @njit(cache=True, inline='always')
 def contact_round(x0, x1, x2, r0, r1, r2, sh, k, mu):
-    """:func:`contact` of a sphere or capsule, friction ``mu`` (0: none): radially from the
+    """:func:`contact_of` a sphere or capsule, friction ``mu`` (0: none): radially from the
     closest point of the core segment, in the world."""
     bx, by, bz, ex, ey, ez = core_point(x0, x1, x2, sh, k)
     dd = ex * ex + ey * ey + ez * ez
@@ -241,7 +241,7 @@ def contact_round(x0, x1, x2, r0, r1, r2, sh, k, mu):
 
 @njit(cache=True, inline='always')
 def contact_plane(x0, x1, x2, r0, r1, r2, sh, k, mu):
-    """:func:`contact` of a plane, friction ``mu`` (0: none): along its normal."""
+    """:func:`contact_of` a plane, friction ``mu`` (0: none): along its normal."""
     phi = plane_level(x0, x1, x2, sh, k)
     if phi >= 0.0:
         return False, x0, x1, x2
@@ -253,14 +253,16 @@ def contact_plane(x0, x1, x2, r0, r1, r2, sh, k, mu):
 
 
 @njit(cache=True, inline='always')
-def contact(x0, x1, x2, r0, r1, r2, sh, k, with_friction):
-    """One node ``x`` (world [m]) out of shape ``k``'s surface + margin, then, with
-    ``with_friction``, the friction rule relative to the reference ``r``.  Returns ``(moved,
-    y0, y1, y2)``; a node outside comes back as it is with ``moved`` false.  (A kernel that
-    runs lanes side by side switches on the kind outside its lane loop and calls
-    :func:`contact_ellipsoid`, :func:`contact_round` or :func:`contact_plane`.)"""
-    kind = int(sh[k, KIND])
-    mu = sh[k, FRICTION] if with_friction else 0.0
+def contact_of(kind, x0, x1, x2, r0, r1, r2, sh, k, mu):
+    """One node ``x`` (world [m]) out of shape ``k`` (of kind ``kind``)'s surface + margin,
+    then the friction rule with ``mu`` (0: none) relative to the reference ``r``.  Returns
+    ``(moved, y0, y1, y2)``; a node outside comes back as it is with ``moved`` false.
+
+    Called with ``kind`` a constant (a kernel switches on ``sh[k, KIND]`` outside its loop
+    and calls a loop written once with the constant in each branch), each branch compiles to
+    the straight code of its kind; switched inside a loop, the branches join there and LLVM
+    fuses the ellipsoid's multiply-adds differently from the head collider's (a few nodes in
+    a thousand change in the last bit)."""
     if kind == ELLIPSOID:
         return contact_ellipsoid(x0, x1, x2, r0, r1, r2, sh, k, mu)
     if kind == PLANE:
@@ -270,16 +272,16 @@ def contact(x0, x1, x2, r0, r1, r2, sh, k, with_friction):
 
 @njit(cache=True, inline='always')
 def push_out(x0, x1, x2, r0, r1, r2, sh, k):
-    """:func:`contact` with the shape's friction relative to the reference ``r`` (the guide
-    solver's and the paper tracker's contact)."""
-    return contact(x0, x1, x2, r0, r1, r2, sh, k, True)
+    """:func:`contact_of` shape ``k`` with its friction relative to the reference ``r`` (the
+    guide solver's and the paper tracker's contact)."""
+    return contact_of(int(sh[k, KIND]), x0, x1, x2, r0, r1, r2, sh, k, sh[k, FRICTION])
 
 
 @njit(cache=True, inline='always')
 def project(x0, x1, x2, sh, k):
-    """:func:`contact` without friction: ``(moved, y0, y1, y2)`` (the collision-aware
-    Follow-The-Leader pass)."""
-    return contact(x0, x1, x2, x0, x1, x2, sh, k, False)
+    """:func:`contact_of` shape ``k`` without friction: ``(moved, y0, y1, y2)`` (the
+    collision-aware Follow-The-Leader pass)."""
+    return contact_of(int(sh[k, KIND]), x0, x1, x2, x0, x1, x2, sh, k, 0.0)
 
 
 @njit(cache=True, inline='always')

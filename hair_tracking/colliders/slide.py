@@ -6,7 +6,7 @@ For node ``n`` (inside shape ``k``'s surface + margin) after its predecessor ``p
 an outward normal of the shape at ``p``'s level (not of unit length: ``Q (p - C)`` for the
 ellipsoid, ``p`` minus its closest core point for a sphere or capsule, the normal for the
 plane), the step ``d = n - p`` loses its inward part, ``d - min(0, d.g) / (g.g) g``, and the
-node is put at ``length`` from ``p`` along it (:func:`slide`).  For ``p`` outside a convex
+node is put at ``length`` from ``p`` along it (:func:`slide_along`).  For ``p`` outside a convex
 shape the result lies outside too (on the outer side of the tangent plane of the convex level
 set through ``p``) but for the curvature between; :func:`push_radial` then moves a node still
 inside onto the surface: along the ray from the centre for the ellipsoid, from the closest core
@@ -19,10 +19,11 @@ level set as :func:`~hair_tracking.colliders.contact.contact` uses (``F(R^T (x -
 agrees with it to rounding.
 
 Each rule exists per kind (``*_ellipsoid``, ``*_round``, ``*_plane``: one straight run of
-arithmetic) and once with a switch on the kind.  A kernel that runs lanes side by side switches
-on the kind outside its lane loop and calls the per-kind function: no branch per lane, and the
-ellipsoid's arithmetic fused as the blend tracker's (through a switch whose branches join, LLVM
-fuses the multiply-adds differently: the last bit of a few nodes in a thousand changes).
+arithmetic) and once with a switch on the kind (:func:`slide_push_of`).  A kernel that runs
+lanes side by side switches on the kind outside its lane loop and calls the per-kind function
+(or the switch with a constant kind): no branch per lane, and the ellipsoid's arithmetic fused
+as the blend tracker's (through a switch whose branches join inside the loop, LLVM fuses the
+multiply-adds differently: the last bit of a few nodes in a thousand changes).
 """
 import math
 
@@ -82,7 +83,7 @@ def slide_along(n0, n1, n2, p0, p1, p2, gx, gy, gz, length):
 
 @njit(cache=True, inline='always')
 def slide_ellipsoid(n0, n1, n2, p0, p1, p2, length, sh, k):
-    """:func:`slide` of an ellipsoid: the outward normal ``Q (p - C)``."""
+    """:func:`slide_along` an ellipsoid's outward normal ``Q (p - C)`` at ``p``."""
     ex, ey, ez = p0 - sh[k, CX], p1 - sh[k, CY], p2 - sh[k, CZ]
     gx = sh[k, Q00] * ex + sh[k, Q01] * ey + sh[k, Q02] * ez
     gy = sh[k, Q01] * ex + sh[k, Q11] * ey + sh[k, Q12] * ez
@@ -92,27 +93,16 @@ def slide_ellipsoid(n0, n1, n2, p0, p1, p2, length, sh, k):
 
 @njit(cache=True, inline='always')
 def slide_round(n0, n1, n2, p0, p1, p2, length, sh, k):
-    """:func:`slide` of a sphere or capsule: the outward normal ``p`` minus its core point."""
+    """:func:`slide_along` a sphere's or capsule's outward normal at ``p`` (``p`` minus its
+    closest core point)."""
     bx, by, bz, gx, gy, gz = core_point(p0, p1, p2, sh, k)
     return slide_along(n0, n1, n2, p0, p1, p2, gx, gy, gz, length)
 
 
 @njit(cache=True, inline='always')
 def slide_plane(n0, n1, n2, p0, p1, p2, length, sh, k):
-    """:func:`slide` of a plane: its normal."""
+    """:func:`slide_along` a plane's normal."""
     return slide_along(n0, n1, n2, p0, p1, p2, sh[k, R02], sh[k, R12], sh[k, R22], length)
-
-
-@njit(cache=True, inline='always')
-def slide(n0, n1, n2, p0, p1, p2, length, sh, k):
-    """The node ``n`` at ``length`` from its predecessor ``p`` along its step with the inward
-    part removed (module docstring)."""
-    kind = int(sh[k, KIND])
-    if kind == ELLIPSOID:
-        return slide_ellipsoid(n0, n1, n2, p0, p1, p2, length, sh, k)
-    if kind == PLANE:
-        return slide_plane(n0, n1, n2, p0, p1, p2, length, sh, k)
-    return slide_round(n0, n1, n2, p0, p1, p2, length, sh, k)
 
 
 # ----------------------------------------------------------------------------- push
@@ -150,23 +140,11 @@ def push_plane(x0, x1, x2, sh, k):
 
 
 @njit(cache=True, inline='always')
-def push_radial(x0, x1, x2, sh, k):
-    """A point inside shape ``k``'s surface + margin moved onto it (module docstring); a point
-    outside is returned as it is."""
-    kind = int(sh[k, KIND])
-    if kind == ELLIPSOID:
-        return push_ellipsoid(x0, x1, x2, sh, k)
-    if kind == PLANE:
-        return push_plane(x0, x1, x2, sh, k)
-    return push_round(x0, x1, x2, sh, k)
-
-
-@njit(cache=True, inline='always')
-def slide_push(n0, n1, n2, p0, p1, p2, length, sliding, sh, k):
-    """The stateless trackers' contact of node ``n`` after ``p`` with shape ``k``: the slide
-    (when ``sliding``: the trackers that keep segment lengths), then the push onto the
-    surface."""
-    kind = int(sh[k, KIND])
+def slide_push_of(kind, n0, n1, n2, p0, p1, p2, length, sliding, sh, k):
+    """The stateless trackers' contact of node ``n`` after ``p`` with shape ``k`` of kind
+    ``kind``: the slide (when ``sliding``: the trackers that keep segment lengths), then the
+    push onto the surface.  ``kind`` a constant gives the kind's straight code (see
+    :func:`~hair_tracking.colliders.contact.contact_of`)."""
     if kind == ELLIPSOID:
         if sliding:
             n0, n1, n2 = slide_ellipsoid(n0, n1, n2, p0, p1, p2, length, sh, k)
@@ -178,3 +156,16 @@ def slide_push(n0, n1, n2, p0, p1, p2, length, sliding, sh, k):
     if sliding:
         n0, n1, n2 = slide_round(n0, n1, n2, p0, p1, p2, length, sh, k)
     return push_round(n0, n1, n2, sh, k)
+
+
+@njit(cache=True, inline='always')
+def slide_push(n0, n1, n2, p0, p1, p2, length, sliding, sh, k):
+    """:func:`slide_push_of` shape ``k``."""
+    return slide_push_of(int(sh[k, KIND]), n0, n1, n2, p0, p1, p2, length, sliding, sh, k)
+
+
+@njit(cache=True, inline='always')
+def push_radial(x0, x1, x2, sh, k):
+    """A point inside shape ``k``'s surface + margin moved onto it (module docstring); a point
+    outside is returned as it is."""
+    return slide_push_of(int(sh[k, KIND]), x0, x1, x2, x0, x1, x2, 0.0, False, sh, k)
