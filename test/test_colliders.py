@@ -1,13 +1,13 @@
 """The contact model (hair_tracking.colliders): shapes and their tables, the compiled rules
 against their plain-numpy references, the bound test, the push-out velocity bound, friction
-against moving colliders, the stateless trackers' slide, the fitted margin."""
+against moving colliders, the stateless trackers' slide, the fitted margin and the bust."""
 import math
 
 import numpy as np
 from numba import njit
 import pytest
 
-from hair_tracking.colliders import bounds, contact, kernels, margin, pose, reference
+from hair_tracking.colliders import body, bounds, contact, kernels, margin, pose, reference
 from hair_tracking.colliders import slide as stateless_slide
 from hair_tracking.colliders.shapes import (A0, BOUND, CX, CZ, FIXED_FRAME, FRICTION, HEAD_FRAME,
                                             KIND, M00,
@@ -497,3 +497,56 @@ def test_outside_distance_is_the_distance_to_the_ellipsoid():
     a = np.array([0.095, 0.08, 0.105])
     q = np.array([[0.2, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.09, 0.0]])
     assert np.allclose(margin.outside_distance(q, a), [0.105, 0.0, 0.01], atol=1e-12)
+
+
+# ----------------------------------------------------------------------------- body
+@pytest.mark.parametrize('height', [1.65, 1.8])
+def test_the_bust_has_human_description_proportions(height):
+    unit = height / 7.5
+    b = body.body(height)
+    assert np.isclose(b.unit, unit) and np.isclose(b.head_radius, unit / 2)
+    assert np.isclose(b.shoulder, 0.8 * unit) and np.isclose(b.neck_length, 0.25 * unit)
+    assert np.isclose(b.torso_height, 2.75 * unit) and b.limb_radius == 0.03
+    bust = {s.name: s for s in body.bust(height, frame='torso_1', margin=0.002, friction=0.2)}
+    assert list(bust) == ['neck', 'l_shoulder', 'r_shoulder', 'chest', 'trunk']
+    assert all(s.kind == 'capsule' and s.frame == 'torso_1' and s.margin == 0.002 and
+               s.friction == 0.2 for s in bust.values())
+
+    def ends(s):
+        axis = quat_to_matrix(s.rotation)[:, 2] * s.half_length
+        return np.asarray(s.center) - axis, np.asarray(s.center) + axis
+
+    for side, sign in (('l_shoulder', 1.0), ('r_shoulder', -1.0)):
+        a, e = ends(bust[side])                 # out to the shoulder joint, 0.8 unit
+        assert np.allclose(e, [0.0, sign * 0.8 * unit, 0.0])
+    a, e = ends(bust['neck'])                   # up to the head's pivot
+    assert np.allclose(e, [0.0, 0.0, 0.25 * unit])
+    a, e = ends(bust['trunk'])                  # the spine, 3/4 of the torso height down
+    assert np.allclose(e, [0.0, 0.0, -0.75 * 2.75 * unit])
+    assert np.isclose(bust['neck'].radius, unit / 4)
+    arms = body.upper_arms(height, '1')
+    assert [a.frame for a in arms] == ['l_shoulder_1', 'r_shoulder_1']
+    for arm in arms:
+        a, e = ends(arm)
+        assert arm.radius == 0.03 and np.allclose(a, 0.0)
+        assert np.allclose(e, [0.0, 0.0, -1.6 * unit])
+    for shape in body.bust(height) + arms:
+        shape.validate()
+    with pytest.raises(ValueError, match='body.height'):
+        body.body(17.0)
+
+
+def test_the_neck_frame_hangs_under_the_head_upright_and_turned_with_it():
+    height = 1.7
+    b = body.body(height)
+    rot, pos = body.neck_frame(np.eye(3), np.array([0.1, 0.2, 1.6]), height)
+    assert np.allclose(rot, np.eye(3))
+    assert np.allclose(pos, [0.1, 0.2, 1.6 - b.head_radius - b.neck_length])
+    yaw = quat_to_matrix(quat_from_axis_angle([0.0, 0.0, 1.0], 0.7))
+    pitch = quat_to_matrix(quat_from_axis_angle([0.0, 1.0, 0.0], 0.4))
+    pivot = np.array([0.0, 0.0, 1.5])
+    head = yaw @ pitch                                     # nods about the pivot, turned
+    centre = pivot + head @ np.array([0.0, 0.0, b.head_radius])
+    rot, pos = body.neck_frame(head, centre, height)
+    assert np.allclose(rot, yaw, atol=1e-12)               # upright, with the head's heading
+    assert np.allclose(pos, pivot - [0.0, 0.0, b.neck_length])
