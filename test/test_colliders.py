@@ -60,6 +60,11 @@ def bounded_points(s, y, r, nrm, cap, out):
 
 
 @njit(error_model='numpy')
+def lane_boxes(x, n):
+    return bounds.lane_box(x[0], x[1], x[2], n)
+
+
+@njit(error_model='numpy')
 def box_tests(lo, hi, sh, k):
     out = np.zeros(lo.shape[0], dtype=np.bool_)
     for i in range(lo.shape[0]):
@@ -279,6 +284,25 @@ def test_the_bound_test_never_misses_a_contact():
         assert np.all(hits[inside[idx].any(axis=1)]), k
         want = [reference.reference_box_near(lo[i], hi[i], sh[k]) for i in range(len(lo))]
         assert hits.tolist() == want
+
+
+def test_the_box_of_a_blocks_lanes_holds_every_finite_lane():
+    rng = np.random.default_rng(13)
+    for n in (1, 2, 64, 77):
+        x = np.ascontiguousarray(rng.normal(size=(3, n)))
+        box = np.array(lane_boxes(x, n))
+        assert np.array_equal(box[:3], x.min(axis=1)) and np.array_equal(box[3:], x.max(axis=1))
+        if n > 1:
+            y = x.copy()
+            y[:, n // 2] = np.nan                            # a lane that is not finite
+            box = np.array(lane_boxes(y, n))
+            keep = np.delete(x, n // 2, axis=1)
+            assert np.array_equal(box[:3], keep.min(axis=1))
+            assert np.array_equal(box[3:], keep.max(axis=1))
+    box = lane_boxes(np.full((3, 4), np.nan), 4)                 # no finite lane: near nothing
+    local, sh, _ = posed_scene(rng, shapes_of_every_kind())
+    for k in range(sh.shape[0]):
+        assert not box_tests(np.array([box[:3]]), np.array([box[3:]]), sh, k)[0]
 
 
 def test_depth_level_and_normals_match_the_reference():

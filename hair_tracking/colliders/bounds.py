@@ -9,6 +9,8 @@ sphere; its test is its exact one (one dot product), and a box's is the plane's 
 box's lowest corner.  The tests never miss a contact (``test/test_colliders.py`` holds them
 to that); they may pass nodes that are not in contact.
 """
+import math
+
 from numba import njit
 
 from hair_tracking.colliders.shapes import (A0, BOUND, CX, CY, CZ, KIND, PLANE, R02, R12,
@@ -57,3 +59,24 @@ def near_shapes(lo0, lo1, lo2, hi0, hi1, hi2, sh, out):
             out[m] = k
             m += 1
     return m
+
+
+@njit(cache=True, inline='always')
+def lane_box(xs, ys, zs, n):
+    """The box ``(lo0, lo1, lo2, hi0, hi1, hi2)`` of ``n`` lanes whose coordinates are the
+    first ``n`` entries of the rows ``xs``, ``ys``, ``zs`` (a block's lanes at one node
+    index).  A coordinate that is not finite is left out (the other lanes keep their bound;
+    no finite lane gives an empty box, near no shape)."""
+    lo0 = lo1 = lo2 = math.inf
+    hi0 = hi1 = hi2 = -math.inf
+    for i in range(n):
+        v = xs[i]
+        lo0 = v if v < lo0 else lo0
+        hi0 = v if v > hi0 else hi0
+        v = ys[i]
+        lo1 = v if v < lo1 else lo1
+        hi1 = v if v > hi1 else hi1
+        v = zs[i]
+        lo2 = v if v < lo2 else lo2
+        hi2 = v if v > hi2 else hi2
+    return lo0, lo1, lo2, hi0, hi1, hi2

@@ -32,9 +32,11 @@ every position change, ``v = (x - x_start) / dt``, so a node found inside a shap
 around it, jumped onto it or was reset into it would leave with ``depth / dt`` (5 cm at
 dt = 1/240 s: 12 m/s).  The normal part of the node's displacement relative to the shape,
 ``(y - r) . n``, is allowed up to ``cap`` [m] (a speed bound times ``dt``); the excess is a
-push-out and is applied to the start position as well (the "pre-stabilization" of Macklin et al.
-2014, section 4.4), so it adds no velocity: a pushed node leaves with at most the shape's
-normal surface speed plus ``cap / dt``.
+push-out and is applied to the start position as well (the stabilisation of Macklin et al. 2014:
+a correction applied to both the original and the predicted position adds no velocity), so a
+pushed node leaves with at most the shape's normal surface speed plus ``cap / dt`` (the cap on
+the speed of resolving penetration that rigid-body engines have, PhysX's maximum
+depenetration velocity, Bepu's maximum recovery velocity).
 
 The ellipsoid's projection and friction work in the shape's axes and reproduce the head
 collider's arithmetic in its order (same results bit for bit under the same compile flags); the
