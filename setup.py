@@ -22,7 +22,8 @@ setup(
     ],
     package_data={package_name: ['data/*']},
     install_requires=['setuptools', 'numpy', 'numba', 'pyyaml', 'rosbags'],
-    extras_require={'view': ['viser']},        # hair_sim_view's web page
+    extras_require={'view': ['viser'],         # hair_sim_view's web page
+                    'usd': ['usd-core']},      # groom.file: USD BasisCurves
     zip_safe=True,
     maintainer='hair_tracking developers',
     maintainer_email='hair-tracking@example.invalid',
@@ -31,13 +32,16 @@ setup(
     tests_require=['pytest'],
     entry_points={
         'console_scripts': [
-            'hair_sim_node = hair_tracking.ros.node:main',
-            'hair_sim_bag = hair_tracking.ros.bag_cli:main',
-            'hair_sim_eval = hair_tracking.evaluation.cli:main',
-            'hair_sim_demo = hair_tracking.evaluation.demo:main',
-            'hair_sim_warmup = hair_tracking.ros.warmup:main',
-            'hair_sim_ctl = hair_tracking.ros.ctl:main',
-            'hair_sim_view = hair_tracking.ros.view:main',
+            # each sets numba's cache folder and the stop request up before it imports its
+            # executable's module (hair_tracking/executable.py)
+            'hair_sim_node = hair_tracking.executable:hair_sim_node',
+            'hair_sim_bag = hair_tracking.executable:hair_sim_bag',
+            'hair_sim_groom = hair_tracking.executable:hair_sim_groom',
+            'hair_sim_eval = hair_tracking.executable:hair_sim_eval',
+            'hair_sim_demo = hair_tracking.executable:hair_sim_demo',
+            'hair_sim_warmup = hair_tracking.executable:hair_sim_warmup',
+            'hair_sim_ctl = hair_tracking.executable:hair_sim_ctl',
+            'hair_sim_view = hair_tracking.executable:hair_sim_view',
         ],
     },
 )

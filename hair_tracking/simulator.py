@@ -18,6 +18,11 @@ Time handling
 * Ghosts are tracked after every guide substep, or - with ``tracking.every_substep: false`` or
   while ``track_once_per_call`` is set (the live node's load shedding) - once per
   ``advance_to`` call (one head pose) over all its substeps, 2-4x cheaper.
+* The ghost tracker keeps the ghosts' state
+  (:class:`~hair_tracking.ghosts.interface.GhostTracking`); :meth:`frame`,
+  :meth:`record_writer`, :meth:`max_stretch`, :meth:`penetration` and :meth:`audit` ask it for
+  the ghosts.  The blend and turn trackers place the ghosts there, from their last step, and
+  only then: once per output frame however many head poses came in between.
 * The guide solver takes the substeps of a pose (or of a whole settle) in one call
   (:meth:`~hair_tracking.guides.solver.GuideSolver.advance`), up to the first that needs
   splitting (below): it applies the split rule after every substep, so the hair is that of
@@ -33,28 +38,29 @@ Time handling
   (docs/stability.md), up to 1500 % stretch.  The split count depends only on the state, so runs
   stay deterministic; ``counters.extra['split_substeps']`` counts the extra substeps.
 """
-from contextlib import nullcontext
 from dataclasses import dataclass, field
 import math
 import time
-from typing import Callable, Dict, Optional, Tuple
+from typing import Callable, Dict, NamedTuple, Optional, Tuple
 
 import numpy as np
 
 from hair_tracking.core import curves
-from hair_tracking.core.groom import make_groom
+from hair_tracking.core.groom import Groom
 from hair_tracking.core.head_track import HeadTrack, IDENTITY, PoseResult
 from hair_tracking.core.metrics import max_stretch
-from hair_tracking.core.model import HeadPose, StrandSet, strand_part
+from hair_tracking.core.model import carry_rigidly, HeadPose, StrandSet
 from hair_tracking.core.point_records import points_to_records
 from hair_tracking.core.scene import GUIDES_AMONG_STRANDS, Scene
 from hair_tracking.core.transforms import quat_angle, quat_to_matrix, slerp
 from hair_tracking.ghosts.blend import BlendTracker
+from hair_tracking.ghosts.interface import GhostTracking, TrackStep
 from hair_tracking.ghosts.stateless import choose_guides
 from hair_tracking.ghosts.turn import TurnTracker
 from hair_tracking.ghosts.tracker import GhostTracker
+from hair_tracking.grooms.build import build_groom
 from hair_tracking.guides.collision import make_collider
-from hair_tracking.guides.integrate import parallel_from, runs_parallel
+from hair_tracking.guides.integrate import runs_parallel
 from hair_tracking.guides.solver import GuideSolver
 
 #: Most parts one substep is split into when the hair moves fast (see the module docstring).
@@ -66,6 +72,10 @@ MIN_SPLIT_DT = 1.0 / 960.0
 SPLIT_FRACTION = 0.5
 #: ... or this distance [m] when the clamp is off (``solver.max_displacement = 0``).
 SPLIT_DISTANCE = 0.025
+#: A settle until still (``solver.settle_speed``) goes on this long [s] at a time ...
+SETTLE_CHUNK_S = 0.1
+#: ... and, with ``solver.settle_time``, at most this long [s] in all.
+MAX_SETTLE_S = 30.0
 
 
 @dataclass
@@ -86,6 +96,31 @@ class Frame:
         return self.ghosts if self.ghosts is not None else self.guides
 
 
+class Parallelism(NamedTuple):
+    """Which variant of their kernels the guide and the ghost stages run: the parallel one
+    (True) or the serial one (:func:`~hair_tracking.guides.integrate.runs_parallel`)."""
+
+    guides: bool
+    ghosts: bool
+
+
+def parallelism(scene: Scene, groom: Optional[Groom] = None) -> Parallelism:
+    """The kernel variants of ``scene``'s stages, from the node counts of its guides and
+    ghosts (:func:`~hair_tracking.guides.integrate.runs_parallel`): the strand counts of
+    ``groom``, the scene's groom already built, when given; else of the procedural groom the
+    scene describes, or of the imported one (``groom.file``, read for its strand counts)."""
+    g = scene.groom
+    if groom is None and g.file:
+        groom = build_groom(g)
+    if groom is not None:
+        guides, ghosts = groom.guide_rest.shape[0], groom.ghost_rest.shape[0]
+    else:
+        guides, ghosts = g.guides, g.guides * g.ghosts_per_guide
+    among = scene.tracking.mode in GUIDES_AMONG_STRANDS and ghosts > 0
+    return Parallelism(runs_parallel(guides * (g.ghost_nodes if among else g.guide_nodes)),
+                       runs_parallel(ghosts * g.ghost_nodes))
+
+
 @dataclass
 class Counters:
     substeps: int = 0
@@ -100,11 +135,15 @@ class Counters:
 class HairSimulator:
     """Guides + ghosts driven by a head-pose stream, assembled from a :class:`Scene`."""
 
-    def __init__(self, scene: Scene, clock: Callable[[], float] = time.perf_counter):
-        """``clock()`` [s] times the work reported in :attr:`counters` (a test injects one)."""
+    def __init__(self, scene: Scene, clock: Callable[[], float] = time.perf_counter,
+                 parallel: Optional[Parallelism] = None):
+        """``clock()`` [s] times the work reported in :attr:`counters` (a test injects one);
+        ``parallel`` the kernel variants of the stages (default: :func:`parallelism` of the
+        scene; :func:`warm_up` runs a tiny scene through the variants of a large one)."""
         scene.validate()
         self.scene = scene
         self.clock = clock
+        self._parallel = parallel
         self.track = HeadTrack(scene.head_track)
         self.counters = Counters()
         self.time_ns: Optional[int] = None
@@ -114,20 +153,30 @@ class HairSimulator:
         self._build()
 
     # ------------------------------------------------------------- assembly
-    def _build(self, head: HeadPose = IDENTITY) -> None:
+    def _build(self, head: HeadPose = IDENTITY, groom: Optional[Groom] = None) -> None:
+        """Assemble every stage from the scene (``groom``: the scene's groom, if already
+        built), the hair at rest at ``head``."""
         scene = self.scene
-        groom = make_groom(scene.groom)
+        if groom is None:
+            groom = build_groom(scene.groom)
+        #: Where the strands came from (an imported groom's report; '' for the procedural one).
+        self.groom_note = groom.note
+        #: the kernel variants of the guide and ghost stages (:class:`Parallelism`)
+        self.parallel = self._parallel if self._parallel is not None else \
+            parallelism(scene, groom)
         self.guide_index = None
         if self._stateless(scene) and groom.ghost_rest.shape[0] > 0:
-            # the guides are some of the strands themselves (1:1 is full simulation)
-            self.guide_index = choose_guides(groom.ghost_rest[:, 0], scene.groom.guides)
+            # the guides are some of the strands themselves (1:1 is full simulation); an
+            # imported groom has chosen them by root and shape
+            self.guide_index = groom.guide_index if groom.guide_index is not None else \
+                choose_guides(groom.ghost_rest[:, 0], scene.groom.guides)
             self.guides = StrandSet.from_rest(groom.ghost_rest[self.guide_index])
         else:
             self.guides = StrandSet.from_rest(groom.guide_rest)
         self.collider = make_collider(scene.collider)
-        self.guide_solver = GuideSolver(self.guides, scene)
-        self.ghosts = None
-        self.ghost_tracker = None
+        self.guide_solver = GuideSolver(self.guides, scene, self.parallel.guides)
+        self.ghosts = None             # the ghost strands' rest data (state: the tracker's)
+        self.ghost_tracker: Optional[GhostTracking] = None
         if groom.ghost_rest.shape[0] > 0:
             self.ghosts = StrandSet.from_rest(groom.ghost_rest)
             self.ghost_tracker = self._make_tracker(scene)
@@ -148,20 +197,28 @@ class HairSimulator:
     def update_scene(self, scene: Scene) -> bool:
         """Adopt a changed scene; returns True when the hair had to be rebuilt.
 
-        A changed groom (strand counts, nodes, lengths, seed ...) rebuilds the hair in its rest
-        shape at the current head pose; anything else keeps the hair where it is.
+        A changed groom (strand counts, nodes, lengths, seed, file ...) rebuilds the hair in its
+        rest shape at the current head pose; anything else keeps the hair where it is.  A groom
+        file that cannot be read raises
+        :class:`~hair_tracking.grooms.polylines.GroomFileError` and changes nothing.
         """
         scene.validate()
+        rebuild = scene.groom != self.scene.groom or \
+            scene.tracking.mode != self.scene.tracking.mode
+        groom = build_groom(scene.groom) if rebuild else None
         old, self.scene = self.scene, scene
         self.track.spec = scene.head_track
-        if scene.groom != old.groom or scene.tracking.mode != old.tracking.mode:
-            self._build(self.head)
+        if rebuild:
+            self._build(self.head, groom)
             return True
         self.collider = make_collider(scene.collider)
-        self.guide_solver = GuideSolver(self.guides, scene)
+        self.guide_solver = GuideSolver(self.guides, scene, self.parallel.guides)
         if self.ghosts is not None:
             if scene.tracking != old.tracking or scene.collider != old.collider:
-                self.ghost_tracker = self._make_tracker(scene, keep_state=True)
+                # the new tracker starts where the old one leaves the ghosts
+                np.copyto(self.ghosts.x, self.ghost_tracker.positions())
+                np.copyto(self.ghosts.v, self.ghost_tracker.velocities())
+                self.ghost_tracker = self._make_tracker(scene)
         self.dt_ns = max(1, int(round(scene.solver.dt * 1e9)))
         self._gravity_norm = float(np.linalg.norm(scene.gravity))
         return False
@@ -172,14 +229,16 @@ class HairSimulator:
         and places every strand once per read, without state."""
         return scene.tracking.mode in GUIDES_AMONG_STRANDS
 
-    def _make_tracker(self, scene: Scene, keep_state: bool = False):
+    def _make_tracker(self, scene: Scene) -> GhostTracking:
+        """The scene's ghost tracker, started from ``self.ghosts.x`` and ``.v``."""
         collider = self.collider if scene.tracking.collide else None
         if scene.tracking.mode == 'turn':
             return TurnTracker(self.ghosts, self.guides, self.guide_index, scene, collider)
         if self._stateless(scene):
             return BlendTracker(self.ghosts, self.guides, self.guide_index, scene, collider,
                                 k=scene.tracking.blend_guides)
-        return GhostTracker(self.ghosts, self.guides, scene, collider, keep_state=keep_state)
+        return GhostTracker(self.ghosts, self.guides, scene, collider,
+                            parallel=self.parallel.ghosts)
 
     # ---------------------------------------------------------------- input
     def push_pose(self, t_ns: int, position, quaternion) -> PoseResult:
@@ -235,7 +294,7 @@ class HairSimulator:
     def frame(self, head_frame: bool = False, copy: bool = True) -> Frame:
         """The hair now; with ``copy`` false the arrays may be read-only views of the state."""
         g = self.guides.x
-        s = self._ghost_x()
+        s = self._ghost_positions()
         if head_frame:
             g = self.head.to_head(g)
             s = self.head.to_head(s) if s is not None else None
@@ -274,16 +333,17 @@ class HairSimulator:
         has a NaN length)."""
         m = max_stretch(self.guides.x, self.guides.rest_length)
         if self.ghosts is not None:
-            m = _worst(m, max_stretch(self._ghost_x(), self.ghosts.rest_length))
+            m = _worst(m, max_stretch(self._ghost_positions(), self.ghosts.rest_length))
         return m
 
     def penetration(self) -> float:
         """Deepest hair node inside the head collider [m]; 0 without a collider."""
         if self.collider is None:
             return 0.0
-        d = self.collider.penetration(self.guides.x, self.head)
+        d = self.collider.penetration(self.guides.x, self.head, parallel=self.parallel.guides)
         if self.ghosts is not None:
-            d = max(d, self.collider.penetration(self._ghost_x(), self.head))
+            d = max(d, self.collider.penetration(self._ghost_positions(), self.head,
+                                                 parallel=self.parallel.ghosts))
         return d
 
     def audit(self, part: int = 0, parts: int = 1) -> Tuple[float, float, np.ndarray]:
@@ -294,26 +354,23 @@ class HairSimulator:
         the ghost strands checked)``; ``parts`` = 1 is the whole hair."""
         stretch = max_stretch(self.guides.x, self.guides.rest_length)
         depth = 0.0 if self.collider is None else \
-            self.collider.penetration(self.guides.x, self.head)
-        if self.ghosts is None:
+            self.collider.penetration(self.guides.x, self.head, parallel=self.parallel.guides)
+        if self.ghost_tracker is None:
             return stretch, depth, np.zeros(0, dtype=np.int64)
-        if self.ghost_tracker is not None:
-            idx, x = self.ghost_tracker.part_positions(part, parts)
-        else:
-            idx = strand_part(self.ghosts.count, part, parts)
-            x = self.ghosts.x[idx]
+        idx, x = self.ghost_tracker.part_positions(part, parts)
         stretch = _worst(stretch, max_stretch(x, self.ghosts.rest_length[idx]))
         if self.collider is not None and idx.size:
-            depth = max(depth, self.collider.penetration(x, self.head))
+            depth = max(depth, self.collider.penetration(x, self.head,
+                                                         parallel=self.parallel.ghosts))
         return stretch, depth, idx
 
     # ------------------------------------------------------------ internals
-    def _ghost_x(self) -> Optional[np.ndarray]:
-        """Ghost positions to read (output, checks) without taking the state away from the
-        tracker, which keeps it in its kernel's layout between steps."""
-        if self.ghost_tracker is not None:
-            return self.ghost_tracker.positions()
-        return self.ghosts.x if self.ghosts is not None else None
+    def _ghost_positions(self) -> Optional[np.ndarray]:
+        """The ghost positions now, from the tracker (which places them here if it defers
+        placing to the read: the blend and turn trackers), or None without ghosts."""
+        if self.ghost_tracker is None:
+            return None
+        return self.ghost_tracker.positions()
 
     def _run(self, dt: float, head_prev: HeadPose, heads) -> None:
         """Substeps ``dt`` from ``head_prev`` through ``heads``: the guide solver takes them in
@@ -388,7 +445,7 @@ class HairSimulator:
                 np.copyto(self._x_old, self.guides.x)
                 steps = self.guide_solver.advance(dt, head_prev, (head,), measure=True)
                 start = self.clock()
-                self.ghost_tracker.step(dt, self._x_old, head)
+                self.ghost_tracker.step(TrackStep(dt, 1, self._x_old, self.guides.x, head))
                 self.counters.last_track_ms += (self.clock() - start) * 1e3
                 head_prev = head
         self._last_speed = math.sqrt(steps[-1]) / dt
@@ -403,8 +460,8 @@ class HairSimulator:
             and not self._stateless(self.scene)
 
     def _begin_ghosts(self) -> None:
-        """Keep the guides where the paper's once-per-call tracker starts from (its ``x_old``;
-        the stateless trackers read only the guides' new positions)."""
+        """Keep the guides where the paper's once-per-call tracking step starts from (the blend
+        and turn trackers place the ghosts from the guides at the end alone)."""
         if self.ghost_tracker is not None and not self._every_substep() and \
                 not self._stateless(self.scene):
             np.copyto(self._ghost_guide_x, self.guides.x)
@@ -413,33 +470,64 @@ class HairSimulator:
         if self.ghost_tracker is None or self._every_substep() or substeps == 0:
             return
         start = self.clock()
-        self.ghost_tracker.step(dt, self._ghost_guide_x, self.head, substeps=substeps)
+        start_x = None if self._stateless(self.scene) else self._ghost_guide_x
+        self.ghost_tracker.step(TrackStep(dt, substeps, start_x, self.guides.x, self.head))
         self.counters.last_track_ms += (self.clock() - start) * 1e3
 
     def _rest_at(self, head: HeadPose) -> None:
+        """The rest shape at ``head``, settled: ``solver.settle_time`` with the head still,
+        then, with ``solver.settle_speed``, :data:`SETTLE_CHUNK_S` at a time until no node
+        moved faster than that over the last one (at most :data:`MAX_SETTLE_S` in all).
+        ``settled_s`` is the time simulated.  The velocities are then zero (FTL's stored
+        velocities do not vanish at rest, :mod:`hair_tracking.guides.ftl`: zeroing them sets
+        still FTL hair moving by a few millimetres, which settles again)."""
         self.guide_solver.reset(head)
         if self.ghost_tracker is not None:
             self.ghost_tracker.reset(head)
         once, self.track_once_per_call = self.track_once_per_call, False   # the scene's rest
+        sv = self.scene.solver
         try:
-            self._begin_ghosts()
-            settle = int(round(self.scene.solver.settle_time / self.scene.solver.dt))
-            self._run(self.scene.solver.dt, head, [head] * settle)
-            self._track_ghosts(self.scene.solver.dt * settle, settle)
+            steps = int(round(sv.settle_time / sv.dt))
+            self._settle(head, steps)
+            self.settled_s = steps * sv.dt
+            if sv.settle_speed > 0.0:
+                chunk = max(1, int(round(SETTLE_CHUNK_S / sv.dt)))
+                while self.settled_s + chunk * sv.dt <= MAX_SETTLE_S + 1e-9:
+                    before = self._settling_nodes()
+                    self._settle(head, chunk)
+                    self.settled_s += chunk * sv.dt
+                    moved = max(float(np.max(np.abs(a - b))) if a.size else 0.0
+                                for a, b in zip(self._settling_nodes(), before))
+                    if moved <= sv.settle_speed * chunk * sv.dt:
+                        break
         finally:
             self.track_once_per_call = once
-        for strands in (self.guides, self.ghosts):
-            if strands is not None:
-                strands.v[...] = 0.0
+        self.guides.v[...] = 0.0
+        if self.ghost_tracker is not None:
+            self.ghost_tracker.zero_velocities()
         self._last_speed = 0.0
+
+    def _settle(self, head: HeadPose, steps: int) -> None:
+        """``steps`` substeps with the head still at ``head``, the ghosts tracked as the scene
+        says."""
+        self._begin_ghosts()
+        self._run(self.scene.solver.dt, head, [head] * steps)
+        self._track_ghosts(self.scene.solver.dt * steps, steps)
+
+    def _settling_nodes(self):
+        """Copies of the positions that settle: the guides, and the paper tracker's ghosts
+        (the blend and turn trackers place theirs from the guides)."""
+        out = [self.guides.x.copy()]
+        if self.ghost_tracker is not None and not self._stateless(self.scene):
+            out.append(self.ghost_tracker.positions().copy())
+        return out
 
     def _carry_rigidly(self, old: HeadPose, new: HeadPose) -> None:
         """Move all hair with the head from ``old`` to ``new``, at rest (no whip)."""
-        rot = new.rotation @ old.rotation.T
-        for strands in (self.guides, self.ghosts):
-            if strands is not None:
-                strands.x[...] = (strands.x - old.position) @ rot.T + new.position
-                strands.v[...] = 0.0
+        self.guides.x[...] = carry_rigidly(self.guides.x, old, new)
+        self.guides.v[...] = 0.0
+        if self.ghost_tracker is not None:
+            self.ghost_tracker.carry(old, new)
         self._last_speed = 0.0
 
 
@@ -449,47 +537,26 @@ def _worst(a: float, b: float) -> float:
     return math.nan if math.isnan(a) or math.isnan(b) else max(a, b)
 
 
-def _threshold_for(stages):
-    """A node count ``T`` such that every ``(tiny_nodes, parallel)`` stage runs parallel in the
-    tiny copy exactly when its full-size stage does (``tiny_nodes >= T``), or None."""
-    for t in sorted({0, 1 << 62} | {n for n, _ in stages} | {n + 1 for n, _ in stages}):
-        if all((n >= t) == par for n, par in stages):
-            return t
-    return None
-
-
 def warm_up(scene: Scene) -> HairSimulator:
     """Compile (or load from numba's on-disk cache) every kernel ``scene`` uses.
 
-    Runs a tiny copy of the scene (same solver, collider, tracking and output options, at most
-    two guides with two ghosts each) through a moving, turning head and the stretch and
+    Runs a tiny copy of the scene (same solver, collider, tracking and output options and
+    node counts, at most two guides with two ghosts each, a procedural groom: an imported one
+    is read for its strand counts only) through a moving, turning head and the stretch and
     penetration checks, so the first real steps are not late: every stage through the variant,
-    serial or parallel, that the full scene will run
-    (:func:`~hair_tracking.guides.integrate.runs_parallel`), and only that one.  Returns the
-    tiny simulator (callers may warm their own output code on its frames).
+    serial or parallel, that the full scene will run (:func:`parallelism` of ``scene``, handed
+    to the tiny copy), and only that one.  Returns the tiny simulator (callers may warm their
+    own output code on its frames).
     """
     g = scene.groom
     small = scene.with_changes(groom__guides=min(g.guides, 2),
                                groom__ghosts_per_guide=min(g.ghosts_per_guide, 2),
-                               solver__settle_time=0.0)
-    guide_len = g.ghost_nodes if scene.tracking.mode in GUIDES_AMONG_STRANDS else g.guide_nodes
-    stages = [(small.groom.guides * guide_len, runs_parallel(g.guides * guide_len))]
-    if g.ghosts_per_guide > 0:
-        stages.append((small.groom.guides * small.groom.ghosts_per_guide * g.ghost_nodes,
-                       runs_parallel(g.guides * g.ghosts_per_guide * g.ghost_nodes)))
-    threshold = _threshold_for(stages)
-    sim = HairSimulator(small)
+                               groom__file='', solver__settle_time=0.0)
+    sim = HairSimulator(small, parallel=parallelism(scene))
     dt_ns = max(1, int(round(small.solver.dt * 1e9)))
-    passes = [threshold] if threshold is not None else [None, 0]
-    for k, t in enumerate(passes):
-        # each stage decides serial or parallel on its own node count, as GuideSolver and
-        # GhostTracker do: the threshold puts every stage of the tiny copy on the side its
-        # full-size stage is on, so exactly the variants the scene will run are compiled
-        with parallel_from(t) if t is not None else nullcontext():
-            t0 = 1 + 8 * k * dt_ns
-            sim.push_pose(t0, [0.0, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0])
-            sim.push_pose(t0 + 4 * dt_ns, [0.01, 0.0, 0.0], [0.0, 0.0, 0.0871557, 0.9961947])
-            sim.advance_to(t0 + 4 * dt_ns)
-            sim.max_stretch()
-            sim.penetration()
+    sim.push_pose(1, [0.0, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0])
+    sim.push_pose(1 + 4 * dt_ns, [0.01, 0.0, 0.0], [0.0, 0.0, 0.0871557, 0.9961947])
+    sim.advance_to(1 + 4 * dt_ns)
+    sim.max_stretch()
+    sim.penetration()
     return sim

@@ -4,6 +4,9 @@
 - :mod:`msg_adapters.pointcloud`: strands (S, N, 3) <-> organized PointCloud2 (+ CDR bytes)
 - :mod:`msg_adapters.markers`: strands -> MarkerArray message objects
 - :mod:`msg_adapters.marker_cdr`: strands -> the same MarkerArray as CDR bytes, fast
+- :mod:`msg_adapters.guide_state`: guide strands (G, N, 3) <-> hair_tracking_msgs/GuideState
+  (+ CDR bytes); not imported here: its message package is generated (make install) or built
+  by colcon beside hair_tracking
 - :mod:`msg_adapters.rcl_serialized`: serialized publish / take through rcl, the GIL released
 - :mod:`msg_adapters.stamps`, :mod:`msg_adapters.arrays`, :mod:`msg_adapters.cdr`: helpers
 """

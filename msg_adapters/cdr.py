@@ -1,9 +1,10 @@
-"""A small plain-CDR (XCDR1) little-endian writer for the fixed parts of a ROS 2 message.
+"""A small plain-CDR (XCDR1) little-endian writer and reader for the fixed parts of a ROS 2
+message.
 
 Layout rules (OMG CDR as used by Fast-CDR / rmw_fastrtps for ROS 2 messages):
 - a 4-byte encapsulation header ``00 01 00 00`` (CDR_LE, no options) precedes the body;
 - every primitive is aligned to its own size (bool/uint8 1, int32/uint32/float32 4,
-  float64 8) *relative to the start of the body*, i.e. after the 4-byte header;
+  uint64/float64 8) *relative to the start of the body*, i.e. after the 4-byte header;
 - a string is a uint32 length that counts the terminating NUL, then the UTF-8 bytes and NUL;
 - a sequence is a uint32 element count, then the elements (the first element aligns as its
   first primitive does; an empty sequence adds no padding);
@@ -14,7 +15,8 @@ Padding bytes are written as zeros. (Fast-CDR leaves them uninitialised, so
 identical, and any deserializer ignores padding.)
 
 Bulk data (point arrays) is not copied through this writer: :meth:`CdrWriter.hole` reserves
-space and returns its offset, and the caller fills it in the final buffer with numpy.
+space and returns its offset, and the caller fills it in the final buffer with numpy;
+:meth:`CdrReader.array` reads it back as a numpy view.
 """
 import ctypes
 import struct
@@ -66,6 +68,9 @@ class CdrWriter:
     def float32(self, v):
         return self._put('<f', 4, v)
 
+    def uint64(self, v):
+        return self._put('<Q', 8, v)
+
     def float64(self, v):
         return self._put('<d', 8, v)
 
@@ -108,6 +113,77 @@ class CdrWriter:
         for at, data in self.pieces():
             out[at - self._origin:at - self._origin + len(data)] = data
         return bytes(out)
+
+
+class CdrReader:
+    """Reads the CDR primitives of one serialized message (``bytes``, a ``memoryview`` or a uint8
+    array, encapsulation header included) in field order.
+
+    Little-endian plain CDR only; ValueError names ``what`` (the message type) when the header is
+    another encapsulation or the data ends before a field does.
+    """
+
+    def __init__(self, data, what='message'):
+        self._data = memoryview(data).cast('B')
+        self._what = what
+        if len(self._data) < len(ENCAPSULATION_LE):
+            raise ValueError(f'{what}: {len(self._data)} bytes are no CDR message')
+        head = bytes(self._data[:2])
+        if head != ENCAPSULATION_LE[:2]:
+            raise ValueError(f'{what}: encapsulation {head.hex()} is not little-endian plain CDR '
+                             f'({ENCAPSULATION_LE[:2].hex()})')
+        self._at = 0                    # body offset of the next byte
+
+    @property
+    def remaining(self):
+        """Body bytes after the last one read."""
+        return len(self._data) - len(ENCAPSULATION_LE) - self._at
+
+    def _take(self, size, align, field):
+        self._at += -self._at % align
+        start = len(ENCAPSULATION_LE) + self._at
+        if start + size > len(self._data):
+            raise ValueError(f'{self._what}: the data ends at byte {len(self._data)}, inside '
+                             f'{field} (bytes {start}..{start + size})')
+        self._at += size
+        return start
+
+    def _get(self, fmt, size, field):
+        return struct.unpack_from(fmt, self._data, self._take(size, size, field))[0]
+
+    def int32(self, field='int32'):
+        return self._get('<i', 4, field)
+
+    def uint32(self, field='uint32'):
+        return self._get('<I', 4, field)
+
+    def uint64(self, field='uint64'):
+        return self._get('<Q', 8, field)
+
+    def float64(self, field='float64'):
+        return self._get('<d', 8, field)
+
+    def string(self, field='string'):
+        """A CDR string (its length counts the terminating NUL)."""
+        n = self.uint32(field)
+        start = self._take(n, 1, field)
+        raw = bytes(self._data[start:start + n])
+        if not n or raw[-1] != 0:
+            raise ValueError(f'{self._what}: {field} is not a NUL-terminated CDR string')
+        return raw[:-1].decode('utf-8')
+
+    def time(self, field='stamp'):
+        """builtin_interfaces/Time or Duration -> ``(sec, nanosec)``."""
+        return self.int32(field + '.sec'), self.uint32(field + '.nanosec')
+
+    def array(self, dtype, count, field='array'):
+        """``count`` elements of the little-endian numpy ``dtype`` (aligned to its item size) as
+        a read-only view of the data."""
+        dt = np.dtype(dtype)
+        start = self._take(count * dt.itemsize, dt.itemsize, field)
+        out = np.frombuffer(self._data, dtype=dt, count=count, offset=start)
+        out.flags.writeable = False
+        return out
 
 
 def _bytes_allocator():

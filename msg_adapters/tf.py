@@ -1,7 +1,7 @@
 """tf2_msgs/TFMessage helpers: one head transform out, every transform's numbers in.
 
 ``tf2_msgs`` comes from a ROS installation, or in the pip-only venv from
-``interfaces/build_tf2_msgs.sh`` (``make install``); :data:`TFMessage` is None without it.
+``interfaces/build_interfaces.sh`` (``make install``); :data:`TFMessage` is None without it.
 """
 from typing import Iterator, Tuple
 

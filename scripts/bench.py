@@ -38,11 +38,13 @@ import subprocess  # noqa: E402
 import tempfile  # noqa: E402
 import time  # noqa: E402
 
-import numba  # noqa: E402
-import numpy as np  # noqa: E402
-
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, ROOT)
+from hair_tracking.executable import use_numba_cache  # noqa: E402
+use_numba_cache()      # before numba loads: the cache make install fills
+
+import numba  # noqa: E402
+import numpy as np  # noqa: E402
 
 from hair_tracking.core.groom import make_groom  # noqa: E402
 from hair_tracking.core.head_track import IDENTITY  # noqa: E402
@@ -50,6 +52,7 @@ from hair_tracking.core.model import StrandSet  # noqa: E402
 from hair_tracking.core.scene import Scene  # noqa: E402
 from hair_tracking.evaluation.provenance import command_line, provenance  # noqa: E402
 from cpu_steal import format_share, StealMeter  # noqa: E402  (scripts/cpu_steal.py)
+from hair_tracking.ghosts.interface import TrackStep  # noqa: E402
 from hair_tracking.ghosts.tracker import GhostTracker  # noqa: E402
 from hair_tracking.guides.solver import GuideSolver  # noqa: E402
 
@@ -171,7 +174,7 @@ def bench_ghosts(ghosts, repeats):
         phase[0] += 0.05
         np.copyto(x_old, guides.x)
         guides.x[:, 2:, 0] = groom.guide_rest[:, 2:, 0] + 0.01 * np.sin(phase[0])
-        tracker.step(DT, x_old, IDENTITY)
+        tracker.step(TrackStep(DT, 1, x_old, guides.x, IDENTITY))
     return median_ms(step, repeats)
 
 

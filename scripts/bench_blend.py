@@ -22,11 +22,14 @@ import time
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
+from hair_tracking.executable import use_numba_cache  # noqa: E402
+use_numba_cache()      # before numba loads: the cache make install fills
 import numba  # noqa: E402
 import numpy as np  # noqa: E402
 
 from hair_tracking.core.scene import Scene  # noqa: E402
 from hair_tracking.evaluation.provenance import command_line, provenance  # noqa: E402
+from hair_tracking.ghosts.interface import TrackStep  # noqa: E402
 from hair_tracking.simulator import HairSimulator  # noqa: E402
 
 BYTES_PER_NODE = {'blend': 16 + 12, 'turn': 12 + 3 + 12}
@@ -78,7 +81,7 @@ def main(argv=None):
                 tr, head = sim.ghost_tracker, sim.head
                 gx_old = sim.guides.x.copy()
                 t = time.perf_counter()
-                tr.step(sim.scene.solver.dt, gx_old, head)
+                tr.step(TrackStep(sim.scene.solver.dt, 1, gx_old, sim.guides.x, head))
                 tr.positions()
                 times[name].append(time.perf_counter() - t)
         nodes = sims['blend'].ghosts.count * sims['blend'].ghosts.rest.shape[1]

@@ -23,6 +23,8 @@ import time
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
+from hair_tracking.executable import use_numba_cache  # noqa: E402
+use_numba_cache()      # before numba loads: the cache make install fills
 import numba  # noqa: E402
 import numpy as np  # noqa: E402
 
@@ -33,6 +35,38 @@ from hair_tracking.simulator import HairSimulator, warm_up  # noqa: E402
 from msg_adapters.pointcloud import CloudBuffer, pack_rgb_u32  # noqa: E402
 
 WARM_FRAMES = 30
+
+
+def frame_times(sim, frames, warm=WARM_FRAMES):
+    """Per-frame times [ms] of ``sim`` following the bundled walk at 60 Hz for ``frames``
+    frames after ``warm`` untimed ones: ``{'guides', 'ghosts_cloud', 'frame'}`` lists (see the
+    module docstring) and ``'frame_cpu'``, the CPU time of this process a frame (on a shared
+    machine, what the frame's work costs whatever else runs)."""
+    poses = bag_io.read_head_poses(bag_io.bundled_bag())
+    idx = np.arange(0, len(poses), 2)
+    n_frames = min(frames + warm, len(idx))
+    cloud = CloudBuffer()
+    rgb = pack_rgb_u32(np.ones((sim.ghosts.count, 4)))
+    parts = {'guides': [], 'ghosts_cloud': [], 'frame': [], 'frame_cpu': []}
+    for k in range(n_frames):
+        i = idx[k]
+        t = int(poses.t_ns[i])
+        c0 = time.process_time()
+        t0 = time.perf_counter()
+        sim.push_pose(t, poses.position[i], poses.quaternion[i])
+        sim.advance_to(t)
+        t1 = time.perf_counter()
+        n_strands, n_points, write = sim.record_writer()
+        cloud.encode(n_strands, n_points, write, frame_id='world', stamp_ns=t, packed_rgb=rgb)
+        t2 = time.perf_counter()
+        c2 = time.process_time()
+        if k >= warm:
+            parts['frame_cpu'].append((c2 - c0) * 1e3)
+            parts['guides'].append((t1 - t0) * 1e3)
+            parts['ghosts_cloud'].append((t2 - t1) * 1e3)
+            parts['frame'].append((t2 - t0) * 1e3)
+    parts['substeps_per_frame'] = sim.counters.substeps / max(1, n_frames)
+    return parts
 
 
 def main(argv=None):
@@ -50,33 +84,14 @@ def main(argv=None):
                                  groom__ghosts_per_guide=16, tracking__mode=args.mode)
     warm_up(scene)
     sim = HairSimulator(scene)
-    poses = bag_io.read_head_poses(bag_io.bundled_bag())
-    idx = np.arange(0, len(poses), 2)
-    n_frames = min(args.frames + WARM_FRAMES, len(idx))
-    cloud = CloudBuffer()
-    rgb = pack_rgb_u32(np.ones((sim.ghosts.count, 4)))
-    parts = {'guides': [], 'ghosts_cloud': [], 'frame': []}
-    for k in range(n_frames):
-        i = idx[k]
-        t = int(poses.t_ns[i])
-        t0 = time.perf_counter()
-        sim.push_pose(t, poses.position[i], poses.quaternion[i])
-        sim.advance_to(t)
-        t1 = time.perf_counter()
-        n_strands, n_points, write = sim.record_writer()
-        cloud.encode(n_strands, n_points, write, frame_id='world', stamp_ns=t, packed_rgb=rgb)
-        t2 = time.perf_counter()
-        if k >= WARM_FRAMES:
-            parts['guides'].append((t1 - t0) * 1e3)
-            parts['ghosts_cloud'].append((t2 - t1) * 1e3)
-            parts['frame'].append((t2 - t0) * 1e3)
+    parts = frame_times(sim, args.frames)
     f = np.asarray(parts['frame'])
     row = {'mode': args.mode, 'ghosts': int(sim.ghosts.count), 'guides': int(sim.guides.count),
            'threads': args.threads, 'frames': len(f), 'median_ms': float(np.median(f)),
            'p95_ms': float(np.percentile(f, 95)), 'max_ms': float(f.max()),
            'guides_median_ms': statistics.median(parts['guides']),
            'ghosts_cloud_median_ms': statistics.median(parts['ghosts_cloud']),
-           'substeps_per_frame': sim.counters.substeps / max(1, n_frames)}
+           'substeps_per_frame': parts['substeps_per_frame']}
     print(f"{args.mode}: {row['ghosts']} ghosts x 16 ({row['guides']} guides), "
           f"{args.threads} thread(s), "
           f"{row['frames']} frames at 60 Hz: median {row['median_ms']:.2f} ms, p95 "

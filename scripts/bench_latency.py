@@ -21,11 +21,14 @@ a frame goes out right after its pose was simulated (rate still capped).  Also r
 node's own step time (simulation of one pose) and publish time (encoding + handing the bytes to
 DDS), median and p99, and the cloud's size with the time of one single-threaded copy of its
 bytes measured right after the case (the middleware copies each cloud at least three times
-between the publish call and the probe's take, docs/node.md).  Goals: p99 latency of 8 ms at
-10 k ghosts and 33 ms at 100 k.  Numbers depend on the machine; the JSON starts with its
-provenance (machine, date, command: hair_tracking/evaluation/provenance.py).
+between the publish call and the probe's take, docs/node.md), and the garbage collector's
+pauses (the full collections during the stream, and one made after it: what ``--no-gc-freeze``
+leaves the node to walk; :class:`GcPauses`).  Goals: p99 latency of 8 ms at 10 k ghosts and
+33 ms at 100 k.  Numbers depend on the machine; the JSON starts with its provenance (machine,
+date, command: hair_tracking/evaluation/provenance.py).
 """
 import argparse
+import gc
 import json
 import os
 import platform
@@ -46,14 +49,17 @@ from visualization_msgs.msg import MarkerArray
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
-from hair_tracking import process_tuning  # noqa: E402
+from hair_tracking import executable  # noqa: E402
+
+executable.use_numba_cache()    # before numba loads: the cache make install fills
+
 from hair_tracking.output.settings import by_name  # noqa: E402
 from hair_tracking.evaluation.provenance import command_line, provenance  # noqa: E402
 from cpu_steal import format_share, StealMeter  # noqa: E402  (scripts/cpu_steal.py)
 from hair_tracking.ros.node import HairSimNode  # noqa: E402
 from msg_adapters.pose import pose_stamped_msg  # noqa: E402
-from msg_adapters.rcl_serialized import SerializedTaker, SerializedWaiter  # noqa: E402
 from msg_adapters.stamps import time_to_ns  # noqa: E402
+from rcl_take import SerializedTaker, SerializedWaiter  # noqa: E402  (scripts/rcl_take.py)
 
 FRAME_MS = 1000.0 / 60.0
 
@@ -177,6 +183,39 @@ class StageClock:
         return out
 
 
+class GcPauses:
+    """The cyclic garbage collector's pauses while a case runs (``gc.callbacks``), per
+    generation; a full (generation 2) collection walks every tracked object that is not frozen
+    (``--no-gc-freeze`` leaves the start-up objects in its reach)."""
+
+    def __init__(self):
+        self.pauses = {0: [], 1: [], 2: []}
+        self._start = None
+
+    def __call__(self, phase, info):
+        if phase == 'start':
+            self._start = time.perf_counter()
+        elif self._start is not None:
+            self.pauses[info['generation']].append((time.perf_counter() - self._start) * 1e3)
+            self._start = None
+
+    def __enter__(self):
+        gc.callbacks.append(self)
+        return self
+
+    def __exit__(self, *exc):
+        gc.callbacks.remove(self)
+
+    def summary(self):
+        """{'gen0'..'gen2': {n, max_ms}} and ``full_ms``, one full collection made now."""
+        out = {f'gen{g}': {'n': len(v), 'max_ms': max(v, default=0.0)}
+               for g, v in self.pauses.items()}
+        start = time.perf_counter()
+        gc.collect()
+        out['full_ms'] = (time.perf_counter() - start) * 1e3
+        return out
+
+
 def timed_node(clock):
     """A :class:`HairSimNode` subclass that marks its stages on ``clock``."""
     class TimedNode(HairSimNode):
@@ -221,7 +260,7 @@ def run_case(ghosts, mode, args, domain_id):
     node = node_type(context=ctx, parameter_overrides=[
         Parameter(k, value=v) for k, v in overrides.items()])
     if args.gc_freeze:
-        process_tuning.freeze_heap()      # as hair_sim_node's main() does once set up
+        executable.freeze_heap()      # as hair_sim_node's main() does once set up
     probe = rclpy.create_node('bench_probe', context=ctx)
     sent, received = {}, {}
     lock = threading.Lock()
@@ -308,11 +347,12 @@ def run_case(ghosts, mode, args, domain_id):
     # The node's thread waits as ``executor.spin()`` in hair_sim_node does, woken by work; the
     # timeout only bounds the loop.  (A 5 ms timeout cost about 0.5 ms of CPU per empty spin
     # here: rclpy rebuilds its wait set on every spin_once, 10 % of a core at 200 spins/s.)
-    while pose_thread.is_alive():
-        node_ex.spin_once(timeout_sec=0.05)
-    end = time.monotonic() + 0.5
-    while time.monotonic() < end:
-        node_ex.spin_once(timeout_sec=0.05)
+    with GcPauses() as pauses:
+        while pose_thread.is_alive():
+            node_ex.spin_once(timeout_sec=0.05)
+        end = time.monotonic() + 0.5
+        while time.monotonic() < end:
+            node_ex.spin_once(timeout_sec=0.05)
     stop.set()
     probe_thread.join(2.0)
     for taker in takers.values():
@@ -344,6 +384,7 @@ def run_case(ghosts, mode, args, domain_id):
         'substeps_dropped': int(c.substeps_dropped), 'poses_rejected': int(node.rejected),
         'load_shedding_switches': int(node.shedder.switches),
         'load_shedding_at_end': bool(node.sim.track_once_per_call),
+        'gc': pauses.summary(),
     }
     if args.stages:
         result['stages'] = clock.stages(stamps)
@@ -393,10 +434,10 @@ def main(argv=None):
     ap.add_argument('--switch-interval', type=float, default=0.0005,
                     help="Python's GIL switch interval [s] (default 5 ms makes the node wait "
                          'for the probe threads)')
-    process_tuning.add_arguments(ap)
+    executable.add_arguments(ap)
     args = ap.parse_args(argv)
     args.set = dict(args.set)
-    for line in process_tuning.apply(args):     # as hair_sim_node's main() does
+    for line in executable.apply(args):     # as hair_sim_node's main() does
         print(line)
     os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
     sys.setswitchinterval(args.switch_interval)
@@ -427,6 +468,8 @@ def main(argv=None):
                   f"; load shedding switched {r['load_shedding_switches']}x"
                   f"{', on at the end' if r['load_shedding_at_end'] else ''}"
                   f"; CPU stolen {format_share(r['cpu_steal_share'])}"
+                  f"; {r['gc']['gen2']['n']} full GC pauses (longest "
+                  f"{r['gc']['gen2']['max_ms']:.1f} ms), one full GC {r['gc']['full_ms']:.1f} ms"
                   f"; cloud {r['cloud_bytes'] / 1e6:.1f} MB, one copy of it "
                   f"{r['copy_ms'] or float('nan'):.2f} ms",
                   flush=True)

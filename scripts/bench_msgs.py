@@ -16,6 +16,8 @@ import time
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
+from hair_tracking.executable import use_numba_cache  # noqa: E402
+use_numba_cache()      # before numba loads: the cache make install fills
 import numpy as np  # noqa: E402
 from rclpy.serialization import deserialize_message, serialize_message  # noqa: E402
 from sensor_msgs.msg import PointCloud2  # noqa: E402

@@ -30,14 +30,17 @@ from sensor_msgs.msg import PointCloud2
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
+from hair_tracking import executable  # noqa: E402
+
+executable.use_numba_cache()    # before numba loads: the cache make install fills
+
 from bench_latency import copy_ms, stamp_of, stats  # noqa: E402  (scripts/bench_latency.py)
-from hair_tracking import process_tuning  # noqa: E402
 from hair_tracking.output.settings import CLOUD_FIELDS  # noqa: E402
 from hair_tracking.evaluation.provenance import command_line, provenance  # noqa: E402
 from hair_tracking.ros.node import output_qos  # noqa: E402
 from msg_adapters.pointcloud import CloudBuffer, pack_rgb_u32  # noqa: E402
-from msg_adapters.rcl_serialized import (SerializedPublisher, SerializedTaker,  # noqa: E402
-                                         SerializedWaiter, unusable_reason)
+from msg_adapters.rcl_serialized import SerializedPublisher, unusable_reason  # noqa: E402
+from rcl_take import SerializedTaker, SerializedWaiter  # noqa: E402  (scripts/rcl_take.py)
 
 
 def run_case(strands, points, fields, through_rcl, args, domain_id):
@@ -121,9 +124,9 @@ def main(argv=None):
     ap.add_argument('--warmup-s', type=float, default=1.0, help='first seconds not counted')
     ap.add_argument('--domain-id', type=int, default=78)
     ap.add_argument('--json', metavar='PATH', help='also write the results as JSON')
-    process_tuning.add_arguments(ap)
+    executable.add_arguments(ap, omp_wait_policy=None, gc_freeze=False)
     args = ap.parse_args(argv)
-    for line in process_tuning.apply(args):     # as hair_sim_node's main() does
+    for line in executable.apply(args):     # as hair_sim_node's main() does
         print(line)
     if 'rcl' in args.paths and unusable_reason() is not None:
         print(f'rcl path unusable here ({unusable_reason()}); measuring rclpy only')

@@ -1,6 +1,7 @@
 """Test-wide settings: ROS message field checks on, discovery kept on this machine, and numba's
-cache keyed by the package's sources (importing :mod:`hair_tracking` sets that up, see its
-docstring: an edit to one kernel module must not leave a stale compiled caller behind).
+cache in the folder keyed by the package's sources that the executables use (set before numba is
+imported; :mod:`hair_tracking.executable` says why: an edit to one kernel module must not leave
+a stale compiled caller behind).  The processes the tests start inherit all three.
 """
 import os
 
@@ -9,7 +10,9 @@ import pytest
 os.environ.setdefault('ROS_PYTHON_CHECK_FIELDS', '1')
 os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
 
-import hair_tracking  # noqa: E402,F401  (before numba: it points NUMBA_CACHE_DIR at the hash)
+from hair_tracking import executable  # noqa: E402
+
+executable.use_numba_cache()           # before numba is imported (it reads the variable then)
 
 
 @pytest.fixture(scope='module')

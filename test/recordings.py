@@ -15,3 +15,12 @@ WALK_FIRST_FRAME = WALK_FRAMES[0]
 #: VR360 user 1 headset trace, the rows stamped VR_WINDOW_S
 VR_TRACE = os.path.join(FIXTURES, VR_EXCERPT)
 VR_START_S = VR_WINDOW_S[0]
+
+
+def write_walk_bag(path, seconds: float):
+    """Write the first ``seconds`` of the bundled walk bag's head poses to ``path`` (a
+    head-pose bag) and return ``path``."""
+    from hair_tracking.bags import io as bag_io
+    hp = bag_io.read_head_poses(bag_io.bundled_bag(), duration_s=seconds)
+    bag_io.write_head_pose_bag(path, hp.t_ns, hp.position, hp.quaternion)
+    return path

@@ -11,24 +11,27 @@ PACKAGE = os.path.join(ROOT, 'hair_tracking')
 ADAPTERS = os.path.join(ROOT, 'msg_adapters')
 
 #: Layers from the bottom up: a module may import its own layer and the ones below it only.
-#: The top-level helpers (resources, process_tuning) are leaves any layer may use.
-LAYERS = ['core', 'motion', 'colliders', 'guides', 'ghosts', 'simulator', 'output', 'bags',
-          'evaluation', 'ros']
-LEAVES = {'resources', 'process_tuning'}
+#: The top-level helpers (resources, executable, shutdown) are leaves any layer may use; the
+#: console entry points at the end of executable.py import the executables' modules inside
+#: their functions.
+LAYERS = ['core', 'motion', 'colliders', 'grooms', 'guides', 'ghosts', 'simulator', 'output',
+          'bags', 'evaluation', 'ros']
+LEAVES = {'resources', 'executable', 'shutdown'}
 #: Layers that simulate or describe head motion: numpy, numba and yaml only, no ROS messages,
 #: no rclpy, no adapters.
-SIMULATION = {'core', 'motion', 'colliders', 'guides', 'ghosts', 'simulator'}
+SIMULATION = {'core', 'motion', 'colliders', 'grooms', 'guides', 'ghosts', 'simulator'}
 #: Layers that join no ROS graph (no rclpy): they run without a ROS installation's middleware.
 NO_GRAPH = SIMULATION | {'output', 'bags', 'evaluation'}
 ROS_ROOTS = {'rclpy', 'rosidl_runtime_py', 'rosgraph_msgs', 'std_msgs', 'geometry_msgs',
              'sensor_msgs', 'visualization_msgs', 'diagnostic_msgs', 'std_srvs', 'tf2_msgs',
-             'rcl_interfaces', 'builtin_interfaces', 'msg_adapters', 'rosbags'}
+             'hri_msgs', 'hair_tracking_msgs', 'rcl_interfaces', 'builtin_interfaces',
+             'msg_adapters', 'rosbags'}
 #: At most this many modules at the top of hair_tracking/ (besides __init__.py).
 MAX_TOP_MODULES = 4
 #: All that msg_adapters (ROS messages <-> numpy, nothing of hair) may use of hair_tracking.
 ADAPTERS_MAY_USE = ('hair_tracking.core.transforms',)
 #: Optional packages (not installed with the package) and the only modules that import them.
-OPTIONAL = {'viser': {'hair_tracking.ros.view'}}
+OPTIONAL = {'viser': {'hair_tracking.ros.view'}, 'pxr': {'hair_tracking.grooms.usd'}}
 
 
 def modules():
@@ -107,7 +110,8 @@ def test_msg_adapters_use_nothing_of_hair_but_the_quaternion_maths():
 
 
 def test_optional_packages_are_imported_only_where_they_are_used():
-    """viser (the browser viewer's library) stays out of the node and the simulation."""
+    """viser (the browser viewer's library) stays out of the node and the simulation, usd-core
+    (pxr) in the USD reader."""
     users = {root: set() for root in OPTIONAL}
     for name, path in modules():
         for target in imports(path, name):
@@ -132,14 +136,14 @@ def test_the_numba_cache_key_covers_every_subpackage(tmp_path, monkeypatch):
     of all its sources: an edit in any subpackage must change that key."""
     import shutil
 
-    import hair_tracking
+    from hair_tracking import executable
     copy = tmp_path / 'hair_tracking'
     shutil.copytree(PACKAGE, copy, ignore=shutil.ignore_patterns('__pycache__', 'data'))
-    monkeypatch.setattr(hair_tracking, '_HERE', str(copy))
-    before = hair_tracking.source_hash()
-    for sub in ('ghosts', 'guides', 'core'):
+    monkeypatch.setattr(executable, '_PACKAGE', str(copy))
+    before = executable.source_hash()
+    for sub in ('ghosts', 'guides', 'grooms', 'core'):
         kernel = next(p for p in sorted((copy / sub).iterdir()) if p.name != '__init__.py')
         kernel.write_text(kernel.read_text() + '\n# edited\n')
-        after = hair_tracking.source_hash()
+        after = executable.source_hash()
         assert after != before, sub
         before = after

@@ -15,6 +15,8 @@ from hair_tracking.bags.offline import load_settings, Progress, run_bag, RunOpti
 from hair_tracking.simulator import HairSimulator
 from msg_adapters.pointcloud import pointcloud2_to_strands
 
+from recordings import write_walk_bag
+
 ROOT = Path(__file__).resolve().parents[1]
 SMALL = ['groom.guides=6', 'groom.ghosts_per_guide=3', 'groom.guide_nodes=8',
          'groom.ghost_nodes=8', 'solver.settle_time=0.1']
@@ -82,10 +84,7 @@ def one_numba_thread():
 @pytest.fixture(scope='module')
 def walk_bag(tmp_path_factory):
     """The first 1.5 s of the bundled CMU walk bag."""
-    out = tmp_path_factory.mktemp('walk') / 'walk.mcap'
-    hp = bag_io.read_head_poses(bag_io.bundled_bag(), duration_s=1.5)
-    bag_io.write_head_pose_bag(out, hp.t_ns, hp.position, hp.quaternion)
-    return out
+    return write_walk_bag(tmp_path_factory.mktemp('walk') / 'walk.mcap', 1.5)
 
 
 def _reference(bag, settings, every_pose=False):

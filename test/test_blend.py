@@ -70,6 +70,11 @@ def test_node_map_is_node_to_node_for_equal_counts():
     assert seg.tolist() == [0, 2, 3] and np.allclose(t, [0.0, 0.0, 1.0])
 
 
+def model(tr):
+    """The blend tracker's kernel model with its fields named."""
+    return blend.BlendModel(*tr.model)
+
+
 def _random_case(seed, guides=7, nodes=12, guide_nodes=12, k=3):
     rng = np.random.default_rng(seed)
     sim = HairSimulator(small_scene(groom__guides=guides, groom__ghosts_per_guide=5,
@@ -87,11 +92,11 @@ def _kernel(sim, tr, h, gx, restore=True, collide=True):
     gcol = np.empty((gx.shape[0], 3, tr.seg.shape[0]))
     stateless.guide_columns(gx, tr.seg, tr.t, gcol)
     out = np.empty_like(sim.ghosts.rest)        # float64 records of stride 3: x as computed
-    axes = tr._axes if collide else np.ones(3)
+    axes = tr.axes if collide else np.ones(3)
     contacts, finite = blend.blend_strands(
-        out, np.eye(3), np.zeros(3), False, True, tr._offset32, tr._roots, tr._len32,
-        tr._guide_pad, tr._weight_pad, gcol, rot, pos, restore, collide, tr._center, axes,
-        tr.is_guide, tr._guide_len)
+        tuple(stateless.Placement(out, np.eye(3), np.zeros(3), False, True)), tr.model,
+        tuple(stateless.GuidePose(gcol, rot, pos)),
+        tuple(blend.BlendParams(restore, collide, tr.center, axes)))
     assert finite == bool(np.isfinite(out).all())
     return out, contacts
 
@@ -101,9 +106,9 @@ def _kernel(sim, tr, h, gx, restore=True, collide=True):
 def test_kernel_matches_the_numpy_reference(restore, collide):
     sim, tr, h, gx = _random_case(3)
     out, contacts = _kernel(sim, tr, h, gx, restore, collide)
-    ref = blend.reference_blend(gx, sim.guides.rest, sim.ghosts.rest, tr._len32, tr.guide_of,
-                                tr.weight, h, restore, tr._axes if collide else None,
-                                tr._center, tr.is_guide, tr._guide_len)
+    ref = blend.reference_blend(gx, sim.guides.rest, sim.ghosts.rest, model(tr).rest_length,
+                                tr.guide_of, tr.weight, h, restore, tr.axes if collide else None,
+                                tr.center, tr.is_guide, model(tr).guide_length)
     assert (tr.is_guide >= 0).sum() == gx.shape[0]
     # the kernel keeps the rest offsets in float32 (a few cm, so ~1e-9 m)
     np.testing.assert_allclose(out, ref, atol=1e-8)
@@ -116,12 +121,12 @@ def test_any_number_of_guides_a_ghost_matches_the_reference(k):
     sim, tr, h, gx = _random_case(7, k=k)
     assert tr.guide_of.shape[1] == k
     # padded to whole groups of three, but one guide runs its own pass (the follow-hair case)
-    assert tr._guide_pad.shape[1] == (1 if k == 1 else -(-k // blend.GUIDE_GROUP) *
-                                      blend.GUIDE_GROUP)
+    assert model(tr).guide.shape[1] == (1 if k == 1 else -(-k // blend.GUIDE_GROUP) *
+                                        blend.GUIDE_GROUP)
     out, _ = _kernel(sim, tr, h, gx)
-    ref = blend.reference_blend(gx, sim.guides.rest, sim.ghosts.rest, tr._len32, tr.guide_of,
-                                tr.weight, h, True, tr._axes, tr._center, tr.is_guide,
-                                tr._guide_len)
+    ref = blend.reference_blend(gx, sim.guides.rest, sim.ghosts.rest, model(tr).rest_length,
+                                tr.guide_of, tr.weight, h, True, tr.axes, tr.center, tr.is_guide,
+                                model(tr).guide_length)
     np.testing.assert_allclose(out, ref, atol=1e-7)
 
 
@@ -132,7 +137,7 @@ def test_every_lane_of_a_block_is_placed_and_guides_keep_their_points_or_lengths
     assert np.isfinite(out).all()
     # every strand, guides included (their points here are noisy), at its rest lengths
     seg = np.linalg.norm(np.diff(out, axis=1), axis=2)
-    np.testing.assert_allclose(seg[:, 1:], tr._len32[:, 1:], rtol=1e-6)
+    np.testing.assert_allclose(seg[:, 1:], model(tr).rest_length[:, 1:], rtol=1e-6)
     # without the length pass and contacts a guide strand is its guide, exactly
     raw, _ = _kernel(sim, tr, h, gx, restore=False, collide=False)
     for s, g in enumerate(tr.is_guide):
@@ -143,18 +148,18 @@ def test_every_lane_of_a_block_is_placed_and_guides_keep_their_points_or_lengths
 def test_nodes_pushed_into_the_head_slide_along_it():
     sim, tr, h, gx = _random_case(6)
     # every guide swung through the head: the blend would put ghosts inside it
-    center = h.to_world(tr._center[None])[0]
+    center = h.to_world(tr.center[None])[0]
     gx = center + 0.3 * (gx - center)
     gx[:, :2] = h.to_world(sim.guides.rest[:, :2])
     out, contacts = _kernel(sim, tr, h, gx)
-    ref = blend.reference_blend(gx, sim.guides.rest, sim.ghosts.rest, tr._len32, tr.guide_of,
-                                tr.weight, h, True, tr._axes, tr._center, tr.is_guide,
-                                tr._guide_len)
+    ref = blend.reference_blend(gx, sim.guides.rest, sim.ghosts.rest, model(tr).rest_length,
+                                tr.guide_of, tr.weight, h, True, tr.axes, tr.center, tr.is_guide,
+                                model(tr).guide_length)
     assert contacts > 0
     # the float32 offsets' rounding, turned by the slide's geometry
     np.testing.assert_allclose(out, ref, atol=1e-7)
     free = tr.is_guide < 0
-    inside = ((h.to_head(out[free][:, 2:]) - tr._center) / tr._axes) ** 2
+    inside = ((h.to_head(out[free][:, 2:]) - tr.center) / tr.axes) ** 2
     assert inside.sum(axis=-1).min() >= 1.0 - 1e-9
 
 
@@ -163,9 +168,9 @@ def test_different_node_counts_match_the_reference():
     # the blend's guides are ghost strands, so their node count is the ghosts' own
     assert sim.guides.rest.shape[1] == 9
     out, _ = _kernel(sim, tr, h, gx, True, False)
-    ref = blend.reference_blend(gx, sim.guides.rest, sim.ghosts.rest, tr._len32, tr.guide_of,
-                                tr.weight, h, True, is_guide=tr.is_guide,
-                                guide_length=tr._guide_len)
+    ref = blend.reference_blend(gx, sim.guides.rest, sim.ghosts.rest, model(tr).rest_length,
+                                tr.guide_of, tr.weight, h, True, is_guide=tr.is_guide,
+                                guide_length=model(tr).guide_length)
     np.testing.assert_allclose(out, ref, atol=1e-8)
 
 
@@ -196,7 +201,7 @@ def test_the_blend_runs_when_the_hair_is_read_from_the_guides_of_its_step():
         for s in (sim, eager):
             s.push_pose(t, [0.01 * k, 0.0, 0.0], q)
             s.advance_to(t)
-        eager.ghosts.x                                    # read after every pose
+        eager.ghost_tracker.positions()                   # read after every pose
         if k == 3:
             assert tr.stats['steps'] == 3 and tr.stats['evaluations'] == evaluated
             first = sim.frame().ghosts
@@ -208,17 +213,17 @@ def test_the_blend_runs_when_the_hair_is_read_from_the_guides_of_its_step():
     want = eager.frame().ghosts
     saved = sim.guides.x.copy()
     sim.guides.x[...] += 0.5
-    np.testing.assert_array_equal(sim.ghosts.x, want)
+    np.testing.assert_array_equal(sim.frame().ghosts, want)
     assert not np.array_equal(first, want)
     sim.guides.x[...] = saved
     # a pose reset carries the hair of the last step rigidly, as an evaluated one would be
     for s in (sim, eager):
         s.push_pose(t + 8_333_333, [0.07, 0.0, 0.0], q)
         s.advance_to(t + 8_333_333)
-    eager.ghosts.x
+    eager.ghost_tracker.positions()
     for s in (sim, eager):
         assert s.push_pose(t + 60_000_000_000, [1.0, 0.0, 0.0], q).is_reset
-    np.testing.assert_allclose(sim.ghosts.x, eager.ghosts.x, atol=1e-12)
+    np.testing.assert_allclose(sim.frame().ghosts, eager.frame().ghosts, atol=1e-12)
 
 
 def test_the_mode_is_validated_and_a_change_rebuilds():
@@ -248,5 +253,5 @@ def test_stretching_guides_are_shown_at_their_rest_lengths():
         sim.advance_to(t0 + k * 16_666_667)
     guide_len = np.linalg.norm(np.diff(sim.guides.x, axis=1), axis=2)
     assert np.abs(guide_len / sim.guides.rest_length - 1).max() > 1e-3     # PBD stretches
-    ghost_len = np.linalg.norm(np.diff(sim.ghosts.x, axis=1), axis=2)
+    ghost_len = np.linalg.norm(np.diff(sim.frame().ghosts, axis=1), axis=2)
     np.testing.assert_allclose(ghost_len, sim.ghosts.rest_length, rtol=2e-6)

@@ -1,11 +1,16 @@
-"""The ROS user's path: ``colcon build`` into a fresh workspace, source it, run the installed
-``hair_sim_node`` with ``scene_file:=long_hair`` (found through the ament index, since the
-installed package has no source tree beside it) and receive a cloud over DDS.
+"""The ROS user's path: ``colcon build`` of hair_tracking and its message package
+hair_tracking_msgs (``interfaces/``, a second base path: colcon does not look for packages inside
+a package) into a fresh workspace, source it, serialize a GuideState with the built message
+package, run the installed ``hair_sim_node`` with ``scene_file:=long_hair`` (found through the
+ament index, since the installed package has no source tree beside it) and receive a cloud over
+DDS.
 
 Needs colcon (``make install`` puts colcon-core, colcon-ros and colcon-python-setup-py in the
-venv; skipped where no colcon is found).  The installed copy compiles its numba kernels afresh
-(numba's cache is keyed by the source files' paths): about 35 s in all on two cores, so the
-waits are generous.  Domain id 76.
+venv; skipped where no colcon is found).  In the pip-only venv the build is given what a ROS
+installation's environment has (the venv on ``AMENT_PREFIX_PATH``) and the wheels' CMake
+fix-ups (``interfaces/cmake/wheel_prefix.cmake``), as docs/ros.md says.  The installed copy
+compiles its numba kernels afresh (numba's cache is keyed by the source files' paths): about
+35 s in all on two cores, so the waits are generous.  Domain id 76.
 """
 import os
 import shutil
@@ -46,15 +51,25 @@ def test_colcon_build_install_and_run_long_hair(tmp_path):
     ws = tmp_path / 'ws'
     shutil.copytree(ROOT, ws / 'src' / 'hair_tracking',
                     ignore=shutil.ignore_patterns(*IGNORED), symlinks=True)
-    build = subprocess.run([COLCON, 'build', '--packages-select', 'hair_tracking'], cwd=ws,
-                           env=_child_env(), capture_output=True, text=True, timeout=600)
+    src = ws / 'src' / 'hair_tracking'
+    prefixes = os.pathsep.join(filter(None, [os.environ.get('AMENT_PREFIX_PATH'), sys.prefix]))
+    build = subprocess.run(
+        [COLCON, 'build', '--base-paths', 'src', 'src/hair_tracking/interfaces',
+         '--packages-up-to', 'hair_tracking', '--cmake-args',
+         f'-DCMAKE_PROJECT_INCLUDE={src}/interfaces/cmake/wheel_prefix.cmake'],
+        cwd=ws, env=_child_env(AMENT_PREFIX_PATH=prefixes), capture_output=True, text=True,
+        timeout=900)
     assert build.returncode == 0, build.stdout[-3000:] + build.stderr[-3000:]
+    assert 'Finished <<< hair_tracking_msgs' in build.stdout, build.stdout[-3000:]
     share = ws / 'install' / 'hair_tracking' / 'share' / 'hair_tracking'
     for rel in ('package.xml', 'config/hair_sim.yaml', 'config/scene_long_hair.yaml',
                 'launch/hair_sim.launch.py', 'rviz/hair_sim.rviz'):
         assert (share / rel).is_file(), rel
+    assert not (ws / 'install' / 'tf2_msgs').exists()      # a ROS installation has them
+    assert not (ws / 'install' / 'hri_msgs').exists()
 
     env = _sourced_env(ws)
+    _expect_guide_state_package(ws, env)
     env.update(ROS_DOMAIN_ID=str(DOMAIN), ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST',
                PYTHONUNBUFFERED='1')
     # what `ros2 run hair_tracking hair_sim_node` runs: <prefix>/lib/<package>/<executable>,
@@ -82,6 +97,24 @@ def test_colcon_build_install_and_run_long_hair(tmp_path):
         log.close()
     text = (tmp_path / 'node.log').read_text()
     assert node.returncode == 0, text[-3000:]
+
+
+def _expect_guide_state_package(ws, env):
+    """The workspace's hair_tracking_msgs: found first, its type support serializes."""
+    code = ('import hair_tracking_msgs\n'
+            'from ament_index_python.packages import get_package_prefix\n'
+            'from hair_tracking_msgs.msg import GuideState\n'
+            'from rclpy.serialization import deserialize_message, serialize_message\n'
+            'm = GuideState(guides=1, nodes=1, positions=[0.5, 1.5, 2.5])\n'
+            'print(get_package_prefix("hair_tracking_msgs"), hair_tracking_msgs.__file__,\n'
+            '      deserialize_message(serialize_message(m), GuideState) == m)\n')
+    out = subprocess.run([sys.executable, '-c', code], env=env, capture_output=True, text=True,
+                         timeout=120)
+    assert out.returncode == 0, out.stderr[-3000:]
+    prefix, module, same = out.stdout.split()
+    install = ws / 'install' / 'hair_tracking_msgs'
+    assert prefix == str(install) and module.startswith(str(install) + os.sep), out.stdout
+    assert same == 'True'
 
 
 def _expect_cloud(node, log, guides, ghosts_per_guide):

@@ -234,7 +234,7 @@ def hanging_strands(s=6, n=8, radius=0.1):
 
 
 def counting_spy(monkeypatch, module, name):
-    """Calls of the kernel ``module.name`` or of its serial twin (small problems)."""
+    """Calls of the kernel ``module.name`` or of its serial variant (small problems)."""
     calls = []
     for variant in (name, name + '_serial'):
         real = getattr(module, variant)

@@ -24,13 +24,13 @@ def test_equations_2_and_3_and_the_spread_step():
     rng = np.random.default_rng(4)
     p = rng.normal(size=(3, 9))
     m = p.mean(axis=1)
-    var = group_variance(p, 0, 9, *m)
+    var = group_variance(p[None], 0, 0, 9, tuple(m))
     assert var == pytest.approx(((p - m[:, None]) ** 2).sum())
     assert spread_penalty(var, 2.0 * var, 3.0) == pytest.approx(3.0 * var ** 2)
     # full strength: one step scales the offsets so that (2) is zero
     f = spread_factor(var, 1.5 * var, 1.0)
     q = m[:, None] + f * (p - m[:, None])
-    assert spread_penalty(group_variance(q, 0, 9, *m), 1.5 * var, 1.0) < 1e-20
+    assert spread_penalty(group_variance(q[None], 0, 0, 9, tuple(m)), 1.5 * var, 1.0) < 1e-20
     assert spread_factor(var, 100.0 * var, 1.0) == 2.0          # ratio clipped to [0.5, 2]
     assert spread_factor(var, 0.0, 0.5) == 0.75
     assert spread_factor(0.0, 1.0, 1.0) == 1.0                  # no spread to scale

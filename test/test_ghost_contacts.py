@@ -50,19 +50,28 @@ def test_contact_lanes_match_node_by_node(refine, ftl, friction, axes):
     want = P.copy()
     pushed = 0
     for kk in range(n):
-        moved, y0, y1, y2 = push_out(*P[:, kk], *X0[:, kk], R, *c, ax, ay, az, friction, refine)
+        contact = (tuple(R.reshape(-1)), *c, ax, ay, az, friction, refine)
+        moved, y0, y1, y2 = push_out(*P[:, kk], *X0[:, kk], contact)
         pushed += moved
         if moved and ftl:
             s = order[kk]
-            y0, y1, y2 = restore_node(y0, y1, y2, *B[:, kk], seg_len[kk],
-                                      *(rest[s, j] - rest[s, j - 1]), R, *c, ax, ay, az,
-                                      refine, 0)
+            y0, y1, y2 = restore_node((y0, y1, y2), tuple(B[:, kk]), seg_len[kk],
+                                      tuple(rest[s, j] - rest[s, j - 1]), R,
+                                      (*c, ax, ay, az, refine), 0)
         want[:, kk] = (y0, y1, y2)
-    got = P.copy()
+    # the block's nodes (N, 3, n): node j - 1 final, node j the one pushed
+    got = np.full((j + 1, 3, n), np.nan)
+    got[j - 1], got[j] = B, P
+    start_nodes = np.full((j + 1, 3, n), np.nan)
+    start_nodes[j] = X0
+    lengths = np.full((j, n), np.nan)
+    lengths[j - 1] = seg_len
     W = np.full((ghost_contacts.CONTACT_ROWS, n), np.nan)
-    m = ghost_contacts.collide_lanes(X0, B, got, W, n, 0, order, seg_len, rest, R, j, ftl,
-                                     *c, ax, ay, az, friction, refine)
+    m = ghost_contacts.collide_lanes(start_nodes, got, W, j, (n, 0), (order, lengths, rest), ftl,
+                                     contact, R)
     assert m == pushed > n // 3
+    np.testing.assert_array_equal(got[j - 1], B)
+    got = got[j]
     np.testing.assert_allclose(got, want, rtol=0, atol=1e-13)
     assert np.isfinite(got).all()
 
@@ -73,7 +82,9 @@ def test_no_contact_changes_nothing():
     P = rng.normal(size=(3, n)) + 1.0                        # far outside
     before = P.copy()
     W = np.zeros((ghost_contacts.CONTACT_ROWS, n))
-    m = ghost_contacts.collide_lanes(P, P, P, W, n, 0, np.arange(n), np.ones(n),
-                                     np.zeros((n, 4, 3)), np.eye(3), 2, True, 0.0, 0.0, 0.0,
-                                     0.1, 0.1, 0.1, 0.3, 2)
-    assert m == 0 and np.array_equal(P, before)
+    contact = (tuple(np.eye(3).reshape(-1)), 0.0, 0.0, 0.0, 0.1, 0.1, 0.1, 0.3, 2)
+    nodes = np.stack([P, P, P])
+    m = ghost_contacts.collide_lanes(nodes, nodes, W, 2, (n, 0),
+                                     (np.arange(n), np.ones((2, n)), np.zeros((n, 4, 3))), True,
+                                     contact, np.eye(3))
+    assert m == 0 and np.array_equal(nodes[2], before)

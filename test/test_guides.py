@@ -4,9 +4,13 @@ roots, shock propagation, extreme inputs, kernel selection, input errors.
 Numbers quoted in docstrings were measured with this code (dt = 1/240 s, 4 strands x 16 nodes,
 0.25 m long, uniform masses).
 """
+import inspect
+
 import numba
 import numpy as np
 import pytest
+
+from hair_tracking.guides import collision
 
 from hair_tracking.guides import ftl
 
@@ -303,7 +307,7 @@ def test_deterministic():
 
 # ---------------------------------------------------------------------- kernel selection
 def spy_on(monkeypatch, module, name, calls):
-    """Record ``name`` whenever the kernel or its serial twin (small problems) runs."""
+    """Record ``name`` whenever the kernel or its serial variant (small problems) runs."""
     for variant in (name, name + '_serial'):
         real = getattr(module, variant)
 
@@ -331,14 +335,14 @@ def test_only_the_chosen_solver_kernel_runs(monkeypatch, kind, kernel):
 
 
 @pytest.mark.parametrize('kind', SOLVERS)
-def test_serial_twins_run_small_problems_with_the_same_results(monkeypatch, kind):
-    """Below PARALLEL_MIN_NODES the guide kernels run as serial twins (no parallel region to
-    launch); above it the parallel kernels.  Both give the same hair to rounding (LLVM may
-    contract a body inlined into each variant differently), with the head collider
-    (collision, FTL restore, finalize and the friction reference) in play."""
+def test_serial_variants_run_small_problems_with_the_same_results(monkeypatch, kind):
+    """Below PARALLEL_MIN_NODES the guide kernels run their serial variants (no parallel region
+    to launch); above it, or when asked, the parallel kernels.  Both run the same compiled
+    block bodies and give the same hair bit for bit, with the head collider (collision, FTL
+    restore, finalize and the friction reference) in play."""
     sc = scene(kind, collider__shape='ellipsoid', solver__shock_propagation=0.5)
     runs = {}
-    for label, threshold in (('serial', 1 << 40), ('parallel', 0)):
+    for label in ('serial', 'parallel'):
         calls = []
         for module, name in ((pbd_constraints, 'pbd_step'), (pbd_constraints, 'xpbd_step'),
                              (ftl, 'ftl_step'), (ftl, 'ftl_collide_step'),
@@ -350,12 +354,12 @@ def test_serial_twins_run_small_problems_with_the_same_results(monkeypatch, kind
                     calls.append(variant)
                     return real(*args)
                 monkeypatch.setattr(module, variant, spy)
-        monkeypatch.setattr(integrate, 'PARALLEL_MIN_NODES', threshold)
         rest = np.zeros((6, 12, 3))
         rest[:, :, 0] = np.linspace(-0.05, 0.05, 6)[:, None]
         rest[:, :, 2] = 0.11 - 0.02 * np.arange(12)[None, :]
         st = StrandSet.from_rest(rest)
-        g = GuideSolver(st, sc)
+        g = GuideSolver(st, sc, parallel=label == 'parallel' or None)
+        assert g.parallel == (label == 'parallel')      # 72 nodes: serial unless asked
         h_prev = pose([0, 0, 0])
         g.reset(h_prev)
         for k in range(1, 60):
@@ -370,8 +374,8 @@ def test_serial_twins_run_small_problems_with_the_same_results(monkeypatch, kind
                'ftl': ['ftl_collide_step']}[kind]
     assert runs['serial'][2] == {k + '_serial' for k in kernels}
     assert runs['parallel'][2] == set(kernels)
-    np.testing.assert_allclose(runs['serial'][0], runs['parallel'][0], rtol=0, atol=1e-12)
-    np.testing.assert_allclose(runs['serial'][1], runs['parallel'][1], rtol=0, atol=1e-9)
+    np.testing.assert_array_equal(runs['serial'][0], runs['parallel'][0])
+    np.testing.assert_array_equal(runs['serial'][1], runs['parallel'][1])
 
 
 @pytest.mark.parametrize('friction', [0.0, 0.3])
@@ -391,6 +395,10 @@ def test_ftl_collide_step_is_the_separate_kernels_in_one_block_loop(friction):
     fused, split = GuideSolver(fused_st, sc), GuideSolver(split_st, sc)
     c = split.collider
     x_ref = np.empty_like(split_st.x)
+    x_old = np.empty_like(split_st.x)
+    corr = np.zeros_like(split_st.x)
+    gravity = np.asarray(sc.gravity, dtype=np.float64)
+    shock, max_disp = sc.solver.shock_propagation, sc.solver.max_displacement
     dt = 1.0 / 120.0
     h_prev = pose([0, 0, 0])
     fused.reset(h_prev)
@@ -408,24 +416,24 @@ def test_ftl_collide_step_is_the_separate_kernels_in_one_block_loop(friction):
         rot_rel = np.empty((3, 3))
         integrate.head_motion(h_prev.rotation, h_prev.position, rot, pos, rot_rel)
         integrate.carry_rigid(st.x, rot_rel, h_prev.position, pos, x_ref)
-        motion = (rot, pos, rot_rel, h_prev.position, split._gravity,
-                  np.exp(-sc.damping * dt), dt, split._shock)
+        motion = (rot, pos, rot_rel, h_prev.position, gravity, np.exp(-sc.damping * dt), dt,
+                  shock)
         params = (guides.FTL_BEND_PASSES, guides.ftl_bend_stiffness(sc.solver.bend_stiffness, dt),
-                  float(sc.solver.ftl_damping), split._max_disp, False)
-        ftl.ftl_step(split._model, (st.x, st.v, split._x_old), motion, params, split._corr)
-        ref = x_ref if friction > 0 else split._x_old
+                  float(sc.solver.ftl_damping), max_disp, False)
+        ftl.ftl_step(split.model, (st.x, st.v, x_old), motion, params, corr)
+        ref = x_ref if friction > 0 else x_old
         pushed = c.project(st.x, ref, st.inv_mass, rot, pos)
         if pushed:
             ftl.ftl_restore(st.x, st.rest, st.rest_length, rot, pos, c.center, c.radii + c.margin,
-                            c.refine, split._corr)
-        clamped += integrate.finalize(st.x, st.v, split._x_old, st.inv_mass, split._corr, dt,
-                                      split._max_disp, float(sc.solver.ftl_damping))
+                            c.refine, corr)
+        clamped += integrate.finalize(st.x, st.v, x_old, st.inv_mass, corr, dt, max_disp,
+                                      float(sc.solver.ftl_damping))
         contacts += pushed
         h_prev = head
         assert fused.stats['contacts'] == pushed
         np.testing.assert_allclose(fused_st.x, split_st.x, rtol=0, atol=1e-12)
         np.testing.assert_allclose(fused_st.v, split_st.v, rtol=0, atol=1e-9)
-        np.testing.assert_allclose(fused._corr, split._corr, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(fused._corr, corr, rtol=0, atol=1e-12)
     assert contacts > 0 and fused.stats['contacts_total'] == contacts
     assert fused.stats['clamped_total'] == clamped
 
@@ -443,7 +451,7 @@ def turning_heads(count, start=0):
                  solver__max_displacement=0.004)),
     ('ftl', dict(collider__shape='none')),
     ('pbd', dict(collider__shape='ellipsoid'))])
-@pytest.mark.parametrize('strands', [40, 600])          # serial twin, parallel kernel
+@pytest.mark.parametrize('strands', [40, 600])          # serial variant, parallel kernel
 def test_advance_is_its_substeps_one_after_another(kind, changes, strands):
     """A run of substeps in one call (FTL: every block through all of them in turn) gives the
     state, counters and per-substep displacements of the same substeps taken one by one:
@@ -528,13 +536,22 @@ def test_advance_rejects_a_bad_pose_before_moving_anything():
     assert g.stats['substeps'] == 3
 
 
-def test_serial_twin_is_cached_apart_from_its_kernel():
-    """The twin is a separate numba function (own name, hence own cache index), not parallel."""
-    twin = ftl.ftl_step_serial
-    assert twin.py_func.__qualname__ == 'ftl_step_serial'
-    assert twin.py_func.__code__ is ftl.ftl_step.py_func.__code__
-    assert not twin.targetoptions.get('parallel') and ftl.ftl_step.targetoptions['parallel']
-    assert twin.targetoptions['fastmath'] == ftl.ftl_step.targetoptions['fastmath']
+@pytest.mark.parametrize('module, name', [
+    (integrate, 'finalize'), (integrate, 'carry_rigid'), (ftl, 'ftl_step'),
+    (ftl, 'ftl_collide_step'), (ftl, 'ftl_advance'), (pbd_constraints, 'pbd_step'),
+    (pbd_constraints, 'xpbd_step'), (collision, 'project_ellipsoid'),
+    (collision, 'penetration_ellipsoid')])
+def test_every_serial_variant_is_a_function_of_its_own_with_the_kernels_options(module, name):
+    """A serial variant is its own Python function (own name and code, hence its own numba
+    cache entry), compiled with the parallel kernel's options but ``parallel``, and takes the
+    same arguments."""
+    kernel, serial = getattr(module, name), getattr(module, name + '_serial')
+    assert serial.py_func.__qualname__ == name + '_serial'
+    assert serial.py_func.__code__ is not kernel.py_func.__code__
+    assert kernel.targetoptions['parallel'] and not serial.targetoptions.get('parallel')
+    options = {k: v for k, v in kernel.targetoptions.items() if k != 'parallel'}
+    assert {k: v for k, v in serial.targetoptions.items() if k != 'parallel'} == options
+    assert inspect.signature(serial.py_func) == inspect.signature(kernel.py_func)
 
 
 # ------------------------------------------------------------------------ API and errors

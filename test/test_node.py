@@ -5,7 +5,6 @@ uses 35-49), discovery limited to localhost (conftest.py), and every wait is bou
 """
 import itertools
 import os
-import signal
 import subprocess
 import sys
 import time
@@ -35,6 +34,8 @@ from hair_tracking.simulator import HairSimulator
 from msg_adapters.pointcloud import pointcloud2_to_strands
 from msg_adapters.pose import pose_stamped_msg, transform_stamped_msg
 from msg_adapters.stamps import time_msg, time_to_ns
+
+from node_process import until_ready_then_ctrl_c
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 _DOMAINS = itertools.cycle(range(20, 35))
@@ -408,7 +409,7 @@ def test_nan_poses_are_dropped_and_counted(harness):
     t0, t1, t2 = grid_times(h, 3)
     h.send(pub, pose_stamped_msg(t0, [0.0, 0.0, 0.0], yaw_quat(0.0), 'world'))
     head = h.node.sim.head.position.copy()
-    x = h.node.sim.ghosts.x.copy()
+    x = h.node.sim.frame().ghosts
     h.send(pub, pose_stamped_msg(t1, [np.nan, 0.0, 0.0], yaw_quat(0.0), 'world', check=False),
            expect_accepted=False)
     h.send(pub, pose_stamped_msg(t2, [0.0, 0.0, 0.0], [0.0, 0.0, 0.0, 0.0], 'world',
@@ -416,7 +417,7 @@ def test_nan_poses_are_dropped_and_counted(harness):
     assert h.node.rejected == 2
     assert h.node.sim.time_ns == t0 and h.node.sim.track.last_time == t0
     np.testing.assert_array_equal(h.node.sim.head.position, head)
-    np.testing.assert_array_equal(h.node.sim.ghosts.x, x)
+    np.testing.assert_array_equal(h.node.sim.frame().ghosts, x)
     status = h.node.diagnostics()
     values = {kv.key: kv.value for kv in status.values}
     assert values['poses_rejected'] == '2'
@@ -451,7 +452,7 @@ def test_stale_stream_holds_the_last_pose_and_the_hair_settles(harness):
     h.send(pub, pose_stamped_msg(t0, [0.0, 0.0, 0.0], yaw_quat(0.0), 'world'))
     h.send(pub, pose_stamped_msg(t1, [0.3, 0.0, 0.0], yaw_quat(0.0), 'world'))   # a fast move
     h.cloud_at(t1)
-    tips_then = h.node.sim.ghosts.x[:, -1].copy()
+    tips_then = h.node.sim.frame().ghosts[:, -1]
     h.spin_until(lambda: time_to_ns(h.clouds[-1].header.stamp) > t1 + 3 * 10**8,
                  what='clouds of the settling hair')
     stamps = [time_to_ns(c.header.stamp) for c in h.clouds]
@@ -460,7 +461,7 @@ def test_stale_stream_holds_the_last_pose_and_the_hair_settles(harness):
     pts, _ = pointcloud2_to_strands(h.clouds[-1])
     np.testing.assert_allclose(roots_in_head(pts, [0.3, 0.0, 0.0], yaw_quat(0.0)),
                                h.node.sim.ghosts.rest[:, 0], atol=2e-5)   # head held
-    assert np.abs(h.node.sim.ghosts.x[:, -1] - tips_then).max() > 1e-4   # the hair moved on
+    assert np.abs(h.node.sim.frame().ghosts[:, -1] - tips_then).max() > 1e-4   # the hair moved on
     status = h.node.diagnostics()
     assert status.level == DiagnosticStatus.WARN and 'stale' in status.message
 
@@ -517,7 +518,7 @@ def test_reset_service_puts_the_hair_back_at_rest_at_the_current_head(harness):
     final = [0.05 * ((len(times) - 1) % 2), 0.0, 0.0]
     fresh = HairSimulator(h.node.sim.scene)
     fresh.push_pose(times[-1], final, yaw_quat(0.0))  # rest shape, settled, carried there
-    assert np.abs(h.node.sim.ghosts.x - fresh.ghosts.x).max() > 1e-6
+    assert np.abs(h.node.sim.frame().ghosts - fresh.frame().ghosts).max() > 1e-6
     client = h.probe.create_client(Trigger, '/hair_sim/reset')
     h.spin_until(client.service_is_ready, what='the reset service')
     resets = h.node.sim.counters.resets
@@ -526,9 +527,9 @@ def test_reset_service_puts_the_hair_back_at_rest_at_the_current_head(harness):
     assert future.result().success
     assert h.node.sim.counters.resets == resets + 1
     # 1e-8: the blend tracker keeps its rest offsets in float32
-    np.testing.assert_allclose(h.node.sim.ghosts.x, fresh.ghosts.x, atol=1e-8)
+    np.testing.assert_allclose(h.node.sim.frame().ghosts, fresh.frame().ghosts, atol=1e-8)
     np.testing.assert_allclose(h.node.sim.guides.x, fresh.guides.x, atol=1e-9)
-    assert not h.node.sim.ghosts.v.any()
+    assert not h.node.sim.ghost_tracker.velocities().any()
 
 
 def test_tf_input_selects_the_head_by_name_or_prefix(harness):
@@ -688,40 +689,19 @@ def _run_node(args, domain_id, options=()):
                             stderr=subprocess.STDOUT, text=True)
 
 
-def _until_ready_then_ctrl_c(proc) -> str:
-    """Read the node's output until it says ready (at most 120 s), send Ctrl-C, wait for it to
-    exit; returns everything it printed."""
-    lines = []
-    try:
-        deadline = time.monotonic() + 120
-        while time.monotonic() < deadline:
-            line = proc.stdout.readline()
-            if not line:
-                break
-            lines.append(line)
-            if 'ready:' in line:
-                break
-        proc.send_signal(signal.SIGINT)
-        out, _ = proc.communicate(timeout=30)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.communicate()
-    return ''.join(lines) + out
-
-
 def test_executable_reads_the_params_file_and_overrides_and_exits_cleanly_on_ctrl_c():
     proc = _run_node(['--params-file', os.path.join(ROOT, 'config', 'hair_sim.yaml'),
                       '-p', 'groom.guides:=3', '-p', 'groom.ghosts_per_guide:=2',
                       '-p', 'solver.settle_time:=0.0', '-p', 'damping:=2'], 34)
-    text = _until_ready_then_ctrl_c(proc)
+    text = until_ready_then_ctrl_c(proc)
     assert any('ready: 3 guides' in ln and '6 ghosts' in ln for ln in text.splitlines()), text
     assert proc.returncode == 0, text
     assert 'Traceback' not in text
     # --omp-wait-policy (default passive) is applied before numba starts its threads
     wanted = os.environ.get('OMP_WAIT_POLICY')
     assert (f'OMP_WAIT_POLICY={wanted} from the environment kept' if wanted else
-            'OpenMP worker threads wait passive (OMP_WAIT_POLICY=PASSIVE)') in text, text
+            'OpenMP worker threads wait passive (numba threading layer omp, '
+            'OMP_WAIT_POLICY=PASSIVE)') in text, text
 
 
 def test_executable_takes_its_process_settings_from_its_own_options():
@@ -730,11 +710,12 @@ def test_executable_takes_its_process_settings_from_its_own_options():
                       '-p', 'solver.settle_time:=0.0'], 56,
                      options=['--omp-wait-policy', 'active', '--malloc-retain-mb', '0',
                               '--no-gc-freeze'])
-    text = _until_ready_then_ctrl_c(proc)
+    text = until_ready_then_ctrl_c(proc)
     assert proc.returncode == 0, text
     assert 'malloc retention 0: glibc malloc defaults kept' in text, text
     assert (f'OMP_WAIT_POLICY={env_policy} from the environment kept' if env_policy else
-            'OpenMP worker threads wait active (OMP_WAIT_POLICY=ACTIVE)') in text, text
+            'OpenMP worker threads wait active (numba threading layer omp, '
+            'OMP_WAIT_POLICY=ACTIVE)') in text, text
 
 
 def test_executable_rejects_a_bad_process_setting_before_starting():

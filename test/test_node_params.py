@@ -10,6 +10,7 @@ import numba
 import numpy as np
 import pytest
 from rcl_interfaces.msg import ParameterType
+import rclpy
 from rclpy.parameter import Parameter
 from rclpy.parameter_client import AsyncParameterClient
 import yaml
@@ -142,6 +143,34 @@ def test_out_of_range_is_refused_in_the_readme_form(rig, name, value, reason):
     assert not res[0].successful and res[0].reason == reason
 
 
+def test_integer_overrides_of_doubles_at_start_are_taken_as_doubles():
+    """`-p damping:=2` at start (rclpy refuses an integer for a double parameter): the node
+    declares the double it means, through rclpy's public API; a value that is not a number is
+    still refused, naming the parameter."""
+    h = Harness(overrides={'damping': 2, 'gravity': [0, 0, -3]}, domain_id=next(_DOMAINS))
+    try:
+        damping = h.node.get_parameter('damping')
+        assert damping.type_ == Parameter.Type.DOUBLE and damping.value == 2.0
+        gravity = h.node.get_parameter('gravity')
+        assert gravity.type_ == Parameter.Type.DOUBLE_ARRAY
+        assert list(gravity.value) == [0.0, 0.0, -3.0]
+        assert h.node._settings.scene.damping == 2.0
+        assert h.node._settings.scene.gravity == (0.0, 0.0, -3.0)
+        assert h.node.describe_parameter('damping').additional_constraints == '[0.0, 1000.0]'
+    finally:
+        h.close()
+    from rclpy.context import Context
+    from rclpy.exceptions import InvalidParameterTypeException
+    from hair_tracking.ros.node import HairSimNode
+    ctx = Context()
+    rclpy.init(context=ctx, domain_id=next(_DOMAINS))
+    try:
+        with pytest.raises(InvalidParameterTypeException, match='damping'):
+            HairSimNode(context=ctx, parameter_overrides=[Parameter('damping', value='soft')])
+    finally:
+        rclpy.try_shutdown(context=ctx)
+
+
 @pytest.mark.parametrize('name, value, words', [
     ('solver.type', 'rk4', ['solver.type', 'ftl, pbd, xpbd']),
     ('solver.stiffness', 0.0, ['solver.stiffness', '(0.0, 1.0]']),
@@ -217,3 +246,43 @@ def test_rates_and_threads_change_live(rig):
         assert numba.get_num_threads() == numba.config.NUMBA_NUM_THREADS
     finally:
         numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
+
+
+def test_groom_file_is_imported_live_and_a_bad_one_refused_keeping_the_hair(rig, tmp_path):
+    import groom_files as gf
+    good = tmp_path / 'styled.ply'
+    gf.write_ply(good, gf.to_file_frame(gf.synthetic_groom(30, 10, seed=2)))
+    rig.listen()
+    pose_loop(rig, [0])
+    assert set_(rig, groom__file=str(good))[0].successful
+    t = pose_loop(rig, [1])
+    assert rig.node.rebuilds == 1 and rig.node.sim.ghosts.count == 30
+    assert (rig.cloud_at(t).height, rig.cloud_at(t).width) == (30, 6)
+    data = good.read_bytes()
+    bad = tmp_path / 'cut.ply'
+    bad.write_bytes(data[:len(data) // 2])
+    res = set_(rig, groom__file=str(bad))[0]
+    assert not res.successful
+    assert res.reason.startswith('groom.file: ') and 'cut.ply: byte' in res.reason
+    assert '\n' not in res.reason
+    t = pose_loop(rig, [2])
+    assert rig.node.rebuilds == 1 and rig.node.sim.scene.groom.file == str(good)
+    assert rig.cloud_at(t).height == 30
+
+
+def test_a_node_started_with_a_bad_groom_file_names_it(tmp_path):
+    from test_node import SMALL
+    from hair_tracking.ros.node import HairSimNode
+    import rclpy
+    from rclpy.context import Context
+    bad = tmp_path / 'bad.data'
+    bad.write_bytes(np.int32(-1).tobytes())
+    ctx = Context()
+    rclpy.init(context=ctx, domain_id=next(_DOMAINS))
+    try:
+        with pytest.raises(P.ParamError, match=r'groom.file: .*bad.data: byte 0: expected'):
+            HairSimNode(context=ctx, parameter_overrides=[
+                Parameter(k, value=v) for k, v in dict(SMALL, **{
+                    'groom.file': str(bad)}).items()])
+    finally:
+        rclpy.shutdown(context=ctx)

@@ -15,6 +15,7 @@ ROSDEP_KEYS = {
     'builtin_interfaces': 'builtin_interfaces',
     'diagnostic_msgs': 'diagnostic_msgs',
     'geometry_msgs': 'geometry_msgs',
+    'hair_tracking_msgs': 'hair_tracking_msgs',
     'hri_msgs': 'hri_msgs',
     'launch': 'launch',
     'launch_ros': 'launch_ros',
@@ -26,6 +27,11 @@ ROSDEP_KEYS = {
     'rcl_interfaces': 'rcl_interfaces',
     'rclpy': 'rclpy',
     'rosbags': 'python3-rosbags-pip',
+    # the MCAP chunk codecs rosbags itself depends on (lz4, zstd: compression.zstd from
+    # Python 3.14, backports.zstd before)
+    'lz4': 'python3-rosbags-pip',
+    'backports': 'python3-rosbags-pip',
+    'compression': 'python3-rosbags-pip',
     'rosgraph_msgs': 'rosgraph_msgs',
     'sensor_msgs': 'sensor_msgs',
     'std_msgs': 'std_msgs',
@@ -38,6 +44,7 @@ ROSDEP_KEYS = {
 OPTIONAL = {
     'pypbd': 'the peer library of the evaluation and the benchmarks (make bench, make eval)',
     'viser': "hair_sim_view's browser viewer (pip install viser)",
+    'pxr': 'USD grooms (usd-core, the optional extra [usd])',
 }
 
 

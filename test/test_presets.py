@@ -36,6 +36,8 @@ from hair_tracking.motion.pose_table import load_bundled_walk
 from hair_tracking.ros.node import load_base_scene
 from hair_tracking.simulator import HairSimulator
 
+from recordings import write_walk_bag
+
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 PRESETS = sorted(glob.glob(os.path.join(ROOT, 'config', 'scene_*.yaml')))
 #: Ghosts per guide on the walk (see the module docstring).
@@ -84,9 +86,7 @@ def test_preset_passes_the_stability_criteria_on_the_walk(path):
 
 def test_the_default_preset_gives_the_same_hair_as_no_scene(tmp_path):
     assert load_base_scene('default') == load_base_scene('') == Scene()
-    src = tmp_path / 'walk.mcap'
-    hp = bag_io.read_head_poses(bag_io.bundled_bag(), duration_s=0.3)
-    bag_io.write_head_pose_bag(src, hp.t_ns, hp.position, hp.quaternion)
+    src = write_walk_bag(tmp_path / 'walk.mcap', 0.3)
     clouds = []
     for scene in ('default', None):           # hair_sim_bag run --scene default / no --scene
         out = tmp_path / f'{scene}.mcap'

@@ -1,4 +1,7 @@
-"""Serialized publish and take through rcl itself (msg_adapters.rcl_serialized), over DDS."""
+"""Serialized publish through rcl itself (msg_adapters.rcl_serialized), and the benchmarks'
+take through rcl (scripts/rcl_take.py), over DDS."""
+import os
+import sys
 import threading
 import time
 
@@ -13,6 +16,10 @@ from std_msgs.msg import String
 
 from msg_adapters import rcl_serialized as rs
 from msg_adapters.pointcloud import strands_to_pointcloud2, strands_to_pointcloud2_cdr
+
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
+                                'scripts'))
+from rcl_take import SerializedTaker, SerializedWaiter  # noqa: E402
 
 DOMAIN = 73
 QOS = QoSProfile(depth=20, reliability=ReliabilityPolicy.RELIABLE)
@@ -61,7 +68,7 @@ def test_another_rclpy_release_keeps_rclpys_publish_and_says_why(ros, monkeypatc
     spin_until(executor, lambda: got, 'the message')
     assert got[0].data == 'via rclpy'
     with pytest.raises(RuntimeError, match='verified against'):
-        rs.SerializedTaker(node.create_subscription(String, 'other', lambda m: None, QOS))
+        SerializedTaker(node.create_subscription(String, 'other', lambda m: None, QOS))
 
 
 def test_rclpys_publish_is_the_default(ros):
@@ -103,8 +110,8 @@ def test_taker_gets_each_message_once_in_order_and_grows_its_buffer(ros):
     deadline = time.monotonic() + 10.0
     while pub.get_subscription_count() == 0 and time.monotonic() < deadline:
         time.sleep(0.01)
-    taker = rs.SerializedTaker(sub, capacity=8)
-    waiter = rs.SerializedWaiter(ctx, [sub])
+    taker = SerializedTaker(sub, capacity=8)
+    waiter = SerializedWaiter(ctx, [sub])
     assert taker.take() is None
     assert waiter.wait(0.01) == []
     texts = ['short', 'x' * 5000, 'mid' * 50]
@@ -134,7 +141,7 @@ def test_a_reader_thread_gets_every_cloud_and_its_wait_lets_python_run(ros):
     deadline = time.monotonic() + 10.0
     while pub.get_subscription_count() == 0 and time.monotonic() < deadline:
         time.sleep(0.01)
-    taker, waiter = rs.SerializedTaker(sub), rs.SerializedWaiter(ctx, [sub])
+    taker, waiter = SerializedTaker(sub), SerializedWaiter(ctx, [sub])
     cloud = strands_to_pointcloud2_cdr(np.zeros((2000, 16, 3)), frame_id='w')
     sizes, stop, waiting = [], threading.Event(), threading.Event()
 

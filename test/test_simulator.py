@@ -79,7 +79,7 @@ def test_time_backwards_and_teleport_carry_the_hair_without_whip():
     assert sim.push_pose(t, p + [1.0, 0, 0], q) is PoseResult.RESET_BACKWARDS
     assert sim.counters.resets == 1
     f = sim.frame()
-    assert np.all(sim.ghosts.v == 0.0) and np.all(sim.guides.v == 0.0)
+    assert np.all(sim.ghost_tracker.velocities() == 0.0) and np.all(sim.guides.v == 0.0)
     # carried rigidly: distances between nodes are unchanged
     d0 = np.linalg.norm(before[:, 1:] - before[:, :-1], axis=2)
     d1 = np.linalg.norm(f.ghosts[:, 1:] - f.ghosts[:, :-1], axis=2)
@@ -100,7 +100,7 @@ def test_rejected_pose_changes_nothing():
 
 
 def _spy(monkeypatch, module, name):
-    """Calls of ``module.name`` and of its serial twin ``name_serial`` if there is one."""
+    """Calls of ``module.name`` and of its serial variant ``name_serial`` if there is one."""
     calls = []
     for variant in (name, name + '_serial'):
         if not hasattr(module, variant):
@@ -120,7 +120,7 @@ def test_stages_the_scene_does_not_need_are_not_built_or_run(monkeypatch):
     coll_ftl = []
     for variant in ('ftl_advance', 'ftl_advance_serial'):
         def spy(*a, real=getattr(ftl, variant)):
-            if a[5]:                                  # collide
+            if a[4]:                                  # collide
                 coll_ftl.append(1)
             return real(*a)
         monkeypatch.setattr(ftl, variant, spy)
@@ -186,10 +186,10 @@ def test_update_scene_rebuilds_only_for_groom_changes():
 @pytest.mark.parametrize('guides, per_guide', [(64, 2), (128, 78), (512, 2)])
 def test_warm_up_loads_exactly_the_kernel_variants_the_full_scene_runs(
         monkeypatch, guides, per_guide):
-    """Each stage runs its serial twin below PARALLEL_MIN_NODES nodes and the parallel kernel
-    above: warm-up (a tiny copy of the scene) goes through the variant each full-size stage
-    will call, so none is compiled or loaded from disk on the first real frame, and through no
-    other (compiling a variant nobody calls only makes the start slower)."""
+    """Each stage runs its serial variant below PARALLEL_MIN_NODES nodes and the parallel
+    kernel above: warm-up (a tiny copy of the scene) goes through the variant each full-size
+    stage will call, so none is compiled or loaded from disk on the first real frame, and
+    through no other (compiling a variant nobody calls only makes the start slower)."""
     from hair_tracking import simulator
     from hair_tracking.guides import integrate
     threshold = integrate.PARALLEL_MIN_NODES
@@ -197,7 +197,9 @@ def test_warm_up_loads_exactly_the_kernel_variants_the_full_scene_runs(
     for module, names in ((ftl, ('ftl_step', 'ftl_step_serial', 'ftl_collide_step',
                                  'ftl_collide_step_serial', 'ftl_advance',
                                  'ftl_advance_serial')),
-                          (ghosts_mod, ('track_groups', 'track_groups_serial'))):
+                          (ghosts_mod, ('track_groups', 'track_groups_serial')),
+                          (collision, ('penetration_ellipsoid',
+                                       'penetration_ellipsoid_serial'))):
         for name in names:
             real = getattr(module, name)
 
@@ -209,19 +211,33 @@ def test_warm_up_loads_exactly_the_kernel_variants_the_full_scene_runs(
                                  tracking__mode='paper')
     guides_parallel = integrate.runs_parallel(guides * 16)
     ghosts_parallel = integrate.runs_parallel(guides * per_guide * 16)
-    simulator.warm_up(scene)
+    tiny = simulator.warm_up(scene)
     assert scene.collider.shape != 'none'         # FTL's substeps with the head collider
+    pen = {True: 'penetration_ellipsoid', False: 'penetration_ellipsoid_serial'}
     assert calls == {'ftl_advance' if guides_parallel else 'ftl_advance_serial',
-                     'track_groups' if ghosts_parallel else 'track_groups_serial'}
-    assert integrate.PARALLEL_MIN_NODES == threshold        # restored after warm-up
+                     'track_groups' if ghosts_parallel else 'track_groups_serial',
+                     pen[guides_parallel], pen[ghosts_parallel]}
+    assert tiny.parallel == simulator.parallelism(scene) == (guides_parallel, ghosts_parallel)
+    assert integrate.PARALLEL_MIN_NODES == threshold        # no setting touched
 
 
-def test_warm_up_threshold_puts_every_tiny_stage_on_its_full_size_side():
-    from hair_tracking.simulator import _threshold_for
-    assert _threshold_for([(32, False), (64, True)]) == 33
-    assert _threshold_for([(32, True), (64, True)]) == 0
-    assert _threshold_for([(32, False), (64, False)]) > 64
-    assert _threshold_for([(32, True), (64, False)]) is None     # then two passes are made
+@pytest.mark.parametrize('mode', ['paper', 'blend'])
+def test_parallelism_is_decided_from_the_scene_and_handed_to_every_stage(mode):
+    from hair_tracking.simulator import Parallelism, parallelism
+    from hair_tracking.guides import integrate
+    big = Scene().with_changes(groom__guides=300, groom__ghosts_per_guide=1, tracking__mode=mode)
+    nodes = 300 * (big.groom.ghost_nodes if mode == 'blend' else big.groom.guide_nodes)
+    assert parallelism(big) == (integrate.runs_parallel(nodes),
+                                integrate.runs_parallel(300 * big.groom.ghost_nodes))
+    small = scene(tracking__mode=mode)
+    sim = HairSimulator(small, parallel=Parallelism(True, True))
+    assert sim.parallel == (True, True) and sim.guide_solver.parallel
+    assert sim.ghost_tracker.stats['parallel'] == 1
+    own = HairSimulator(small)
+    assert own.parallel == parallelism(small)
+    assert own.guide_solver.parallel == own.parallel.guides
+    if mode == 'paper':
+        assert own.ghost_tracker.stats['parallel'] == int(own.parallel.ghosts)
 
 
 def test_max_step_sq_is_the_largest_squared_displacement():
@@ -303,8 +319,35 @@ def test_audit_parts_cover_every_ghost_once_and_agree_with_the_whole_hair(mode):
 def test_a_nan_ghost_is_reported_as_nan_stretch_by_both_checks():
     sim = HairSimulator(scene(tracking__mode='paper'))
     drive(sim, 3)
-    x = sim.ghosts.x
+    x = np.array(sim.ghost_tracker.positions())
     x[1, 4] = np.nan
-    sim.ghosts.x = x
+    sim.ghost_tracker.set_state(x, sim.ghost_tracker.velocities())
     assert np.isnan(sim.max_stretch())
     assert np.isnan(sim.audit(0, 2)[0])
+
+
+@pytest.mark.parametrize('mode', ['paper', 'blend'])
+def test_settle_speed_settles_until_the_hair_is_still(mode):
+    """solver.settle_speed: after settle_time, settling goes on a tenth of a second at a time
+    until no node moved faster than that; the hair then starts near its settled shape (after
+    the fixed settle alone it keeps falling for seconds).  What is left is FTL's: its stored
+    velocities do not vanish at rest, and the first pose zeroes them."""
+    def drift(sim):
+        before = [sim.guides.x.copy(), sim.frame().ghosts]
+        sim.push_pose(10**9, [0.0, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0])
+        worst = 0.0
+        for k in range(1, 6):
+            sim.advance_to(10**9 + k * 100 * MS)
+            worst = max(worst, np.abs(sim.guides.x - before[0]).max(),
+                        np.abs(sim.frame().ghosts - before[1]).max())
+        return worst
+    fixed = HairSimulator(scene(tracking__mode=mode, solver__settle_time=0.2))
+    assert fixed.settled_s == pytest.approx(0.2)
+    still = HairSimulator(scene(tracking__mode=mode, solver__settle_time=0.2,
+                                solver__settle_speed=0.002))
+    assert 0.3 <= still.settled_s <= 30.0
+    assert drift(still) < min(0.01, 0.25 * drift(fixed))
+    again = HairSimulator(scene(tracking__mode=mode, solver__settle_time=0.2,
+                                solver__settle_speed=0.002))
+    again.reset()                                   # a reset settles the same way
+    assert again.settled_s == pytest.approx(still.settled_s)

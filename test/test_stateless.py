@@ -8,6 +8,7 @@ from hair_tracking.core.model import HeadPose
 from hair_tracking.core.scene import Scene
 from hair_tracking.core.transforms import quat_from_axis_angle, quat_to_matrix
 from hair_tracking.ghosts import blend, turn
+from hair_tracking.ghosts.interface import TrackStep
 from hair_tracking.simulator import HairSimulator
 
 #: Both trackers place the ghosts in float32: near 1.6 m from the origin half an ulp is 6e-8 m.
@@ -38,9 +39,9 @@ def test_guides_carried_rigidly_carry_every_ghost_rigidly(mode):
     assert isinstance(sim.ghost_tracker, TRACKERS[mode][0])
     h = head(angle=1.1)
     sim.guides.x[...] = h.to_world(sim.guides.rest)
-    sim.ghost_tracker.step(1 / 60, None, h)
-    np.testing.assert_allclose(sim.ghosts.x, h.to_world(sim.ghosts.rest), rtol=0,
-                               atol=TRACKERS[mode][2])
+    sim.ghost_tracker.step(TrackStep(1 / 60, 1, sim.guides.x, sim.guides.x, h))
+    np.testing.assert_allclose(sim.ghost_tracker.positions(), h.to_world(sim.ghosts.rest),
+                               rtol=0, atol=TRACKERS[mode][2])
 
 
 @pytest.mark.parametrize('mode', sorted(TRACKERS))
@@ -118,12 +119,14 @@ def test_a_cloud_written_before_any_read_is_the_one_written_from_the_positions(m
     those written from the placed positions (in the world frame bit for bit), and the positions
     are placed from the same step when read afterwards."""
     fused, after = _moved(mode), _moved(mode)
-    assert fused.ghost_tracker._pending
+    placed = fused.ghost_tracker.stats['evaluations']
+    assert after.ghost_tracker.stats['evaluations'] == placed
     words, dense = _records(fused, head_frame)
-    assert dense and fused.ghost_tracker._pending         # written without placing _x32
+    assert dense and fused.ghost_tracker.stats['evaluations'] == placed + 1   # the records
     after.ghost_tracker.positions()
-    assert not after.ghost_tracker._pending
+    assert after.ghost_tracker.stats['evaluations'] == placed + 1             # the positions
     want, want_dense = _records(after, head_frame)
+    assert after.ghost_tracker.stats['evaluations'] == placed + 1   # from the positions
     assert want_dense
     if head_frame:      # carried to the head frame before its one rounding to float32
         np.testing.assert_allclose(words[:, :3], want[:, :3], rtol=0, atol=F32)
@@ -132,6 +135,8 @@ def test_a_cloud_written_before_any_read_is_the_one_written_from_the_positions(m
     assert (words[:, 3:] == 7.0).all()                   # the other words untouched
     np.testing.assert_array_equal(fused.ghost_tracker.positions(),
                                   after.ghost_tracker.positions())
+    # the records were written without placing the positions: the read placed them
+    assert fused.ghost_tracker.stats['evaluations'] == placed + 2
     assert fused.ghost_tracker.stats['contacts'] == after.ghost_tracker.stats['contacts'] > 0
 
 
@@ -139,7 +144,7 @@ def test_a_cloud_written_before_any_read_is_the_one_written_from_the_positions(m
 def test_a_cloud_written_from_guides_that_are_not_finite_is_not_dense(mode):
     sim = _moved(mode, tracking__collide=False)
     sim.guides.x[3, 5:] = np.nan
-    sim.ghost_tracker.step(1 / 60, None, sim.head)
+    sim.ghost_tracker.step(TrackStep(1 / 60, 1, sim.guides.x, sim.guides.x, sim.head))
     words, dense = _records(sim, False)
     assert not dense and np.isnan(words[:, :3]).any()
     assert np.isfinite(words[:, :3]).any()

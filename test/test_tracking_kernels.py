@@ -5,7 +5,8 @@ import pytest
 from hair_tracking.core.model import HeadPose, StrandSet
 from hair_tracking.core.scene import Scene
 from hair_tracking.core.transforms import quat_normalize, quat_to_matrix, rotation_between
-from hair_tracking.ghosts.kernels import guide_frames
+from hair_tracking.ghosts.interface import TrackStep
+from hair_tracking.ghosts.kernels import GhostModel, guide_frames
 from hair_tracking.ghosts.reference import ghost_step
 from hair_tracking.ghosts.tracker import GhostTracker
 from hair_tracking.ghosts.weights import (arc_fractions, clamp_weight, com_weight, ELASTIC_CHANGED,
@@ -63,7 +64,7 @@ def test_kernel_matches_numpy_reference(options, regroup, even):
     scene = scene_with(**options)
     tracker = GhostTracker(ghosts, guides, scene, regroup=regroup)
     # both paths of the kernel: groups sharing one arc-length layout, and mixed groups
-    shared = tracker._group_row >= 0
+    shared = GhostModel(*tracker.model).group_row >= 0
     assert shared.all() if even else not shared.all()
     dt = 1.0 / 240.0
     head = head_pose(rng)
@@ -71,16 +72,18 @@ def test_kernel_matches_numpy_reference(options, regroup, even):
     ghosts.place_at(head)
     ghosts.v[...] = rng.normal(scale=0.2, size=ghosts.v.shape)
     ghosts.x[...] += rng.normal(scale=0.003, size=ghosts.x.shape)
+    tracker.set_state(ghosts.x, ghosts.v)
     for _ in range(4):
         old = guides.x.copy()
         head = head_pose(rng)
         guides.x[...] = head.to_world(guides.rest) + rng.normal(scale=0.004, size=old.shape)
         want_x, want_v = ghost_step(
-            ghosts.x, ghosts.v, ghosts.rest, ghosts.rest_length, tracker.guide_of,
-            tracker.seg, tracker.t, guides.rest, guides.x, old, head, dt, scene.tracking)
-        tracker.step(dt, old, head)
-        np.testing.assert_allclose(ghosts.x, want_x, rtol=0, atol=1e-11)
-        np.testing.assert_allclose(ghosts.v, want_v, rtol=1e-9, atol=1e-8)
+            tracker.positions(), tracker.velocities(), ghosts.rest, ghosts.rest_length,
+            tracker.guide_of, tracker.seg, tracker.t, guides.rest, guides.x, old, head, dt,
+            scene.tracking)
+        tracker.step(TrackStep(dt, 1, old, guides.x, head))
+        np.testing.assert_allclose(tracker.positions(), want_x, rtol=0, atol=1e-11)
+        np.testing.assert_allclose(tracker.velocities(), want_v, rtol=1e-9, atol=1e-8)
     assert tracker.stats['steps'] == 4
 
 
@@ -90,20 +93,20 @@ def _steps_match_reference(rng, tracker, guides, ghosts, scene, collider, steps)
     dt = 1.0 / 240.0
     head = head_pose(rng, angle_scale=0.05, shift=0.005)
     guides.place_at(head)
-    ghosts.place_at(head)
+    tracker.reset(head)
     contacts = 0
     for _ in range(steps):
         old = guides.x.copy()
         head = head_pose(rng, angle_scale=0.05, shift=0.005)
         guides.x[...] = head.to_world(guides.rest) + rng.normal(scale=0.004, size=old.shape)
         want_x, want_v = ghost_step(
-            ghosts.x, ghosts.v, ghosts.rest, ghosts.rest_length, tracker.guide_of,
-            tracker.seg, tracker.t, guides.rest, guides.x, old, head, dt, scene.tracking,
-            collider)
-        tracker.step(dt, old, head)
+            tracker.positions(), tracker.velocities(), ghosts.rest, ghosts.rest_length,
+            tracker.guide_of, tracker.seg, tracker.t, guides.rest, guides.x, old, head, dt,
+            scene.tracking, collider)
+        tracker.step(TrackStep(dt, 1, old, guides.x, head))
         contacts += tracker.stats['contacts']
-        np.testing.assert_allclose(ghosts.x, want_x, rtol=0, atol=1e-10)
-        np.testing.assert_allclose(ghosts.v, want_v, rtol=1e-8, atol=1e-7)
+        np.testing.assert_allclose(tracker.positions(), want_x, rtol=0, atol=1e-10)
+        np.testing.assert_allclose(tracker.velocities(), want_v, rtol=1e-8, atol=1e-7)
     return contacts
 
 
@@ -197,25 +200,25 @@ def test_tip_weights_follow_arc_length():
         arc_fractions(np.zeros(3))
 
 
-def test_parallel_and_serial_kernels_agree_bit_for_bit(monkeypatch):
-    """Below PARALLEL_MIN_NODES the tracker calls the serial kernel; forcing the parallel one (any
-    thread count) gives the same bits, with the fused collider on."""
+def test_parallel_and_serial_kernels_agree_bit_for_bit():
+    """Below PARALLEL_MIN_NODES the tracker calls the serial kernel; asking for the parallel one
+    (any thread count) gives the same bits, with the fused collider on."""
     from hair_tracking.guides.collision import make_collider
-    import hair_tracking.guides.integrate as integrate_module
     scene = scene_with(spread=0.5, spread_target=1.5)
     collider = make_collider(scene.collider)
     runs = []
-    for threshold in (1 << 40, 0):
-        monkeypatch.setattr(integrate_module, 'PARALLEL_MIN_NODES', threshold)
+    for parallel in (None, True):
         rng = np.random.default_rng(5)
         guides = StrandSet.from_rest(random_strands(rng, 6, 8) + [0.0, 0.0, 0.12])
         ghosts = StrandSet.from_rest(random_strands(rng, 70, 8, seg=0.015) + [0.0, 0.0, 0.12])
-        tracker = GhostTracker(ghosts, guides, scene, collider)
+        tracker = GhostTracker(ghosts, guides, scene, collider, parallel=parallel)
+        assert tracker.stats['parallel'] == (parallel is True)
         for _ in range(5):
             old = guides.x.copy()
             guides.x[:, 2:] += rng.normal(scale=0.01, size=guides.x[:, 2:].shape)
-            tracker.step(1.0 / 240.0, old, head_pose(rng))
-        runs.append((ghosts.x.copy(), ghosts.v.copy(), tracker.stats['contacts']))
+            tracker.step(TrackStep(1.0 / 240.0, 1, old, guides.x, head_pose(rng)))
+        runs.append((tracker.positions().copy(), tracker.velocities().copy(),
+                     tracker.stats['contacts']))
     assert runs[0][2] == runs[1][2] and runs[0][2] > 0
     np.testing.assert_array_equal(runs[0][0], runs[1][0])
     np.testing.assert_array_equal(runs[0][1], runs[1][1])
@@ -245,26 +248,3 @@ def test_blocks_of_groups_large_small_and_single():
     assert lanes.max() == BLOCK_LANES + 37 and blocks.size - 1 == 2
     assert np.array_equal(block_groups(np.array([0])), [0, 0])            # no ghosts
     assert _steps_match_reference(rng, tracker, guides, ghosts, scene, collider, 3) > 20
-
-
-def test_kernel_bodies_compile_without_reference_counting():
-    """The per-block kernel bodies are built without numba's NRT reference counting
-    (``integrate.NO_REFCOUNT``): its atomic counts of array views were a quarter of the ghost
-    kernel's time.  A numba without the option is reported as a skip (the kernels then run,
-    slower, with reference counting)."""
-    from hair_tracking.ghosts import kernels as tk
-    from hair_tracking.guides import collision
-    from hair_tracking.guides import ftl
-    from hair_tracking.guides import integrate
-    from hair_tracking.guides import pbd_constraints
-    if not integrate.NO_REFCOUNT:
-        pytest.skip('this numba has no _nrt option: kernels keep reference counting')
-    assert integrate.NO_REFCOUNT == {'_nrt': False}
-    bodies = (tk._track_chunk, tk.copy_blocks, integrate.head_motion, integrate.predict_block,
-              integrate.finalize_block, integrate.carry_rigid_block, collision.project_block,
-              ftl.ftl_block, ftl.ftl_pass_block, ftl.ftl_restore_block,
-              pbd_constraints.pbd_sweep_block, pbd_constraints.pbd_sweep_lanes,
-              pbd_constraints.xpbd_sweep_lanes, pbd_constraints._pbd_block,
-              pbd_constraints._xpbd_block, pbd_constraints.lanes_in, pbd_constraints.lanes_out)
-    for body in bodies:
-        assert body.targetoptions.get('_nrt') is False, body.__name__

@@ -68,9 +68,9 @@ def _kernel(tr, h, gx, collide=True):
     turns = np.empty((gx.shape[0], 9, tr.seg.shape[0] - 1))
     out = np.full(tr.ghosts.rest.shape, np.nan)  # float64 records of stride 3: x as computed
     contacts, finite = turn.turn_strands(
-        out, np.eye(3), np.zeros(3), False, True, tr._seg, tr._roots, tr._kind,
-        tr.block_guide, tr.block_strand, gcol, tr._u0, turns, rot, pos, collide, tr._center,
-        tr._axes)
+        tuple(stateless.Placement(out, np.eye(3), np.zeros(3), False, True)), tr.model,
+        tuple(stateless.GuidePose(gcol, rot, pos)),
+        tuple(turn.TurnParams(collide, tr.center, tr.axes)), turns)
     assert finite == bool(np.isfinite(out).all())
     return out, contacts
 
@@ -81,7 +81,7 @@ def test_kernel_matches_the_numpy_reference_with_exact_lengths(collide):
     assert isinstance(tr, turn.TurnTracker) and (tr.block_strand < 0).any()   # idle lanes
     out, contacts = _kernel(tr, h, gx, collide)
     ref = turn.reference_turn(gx, sim.guides.rest, sim.ghosts.rest, tr.guide_of, h,
-                              tr._axes if collide else None, tr._center, tr.guide_index)
+                              tr.axes if collide else None, tr.center, tr.guide_index)
     assert np.isfinite(out).all()                       # every strand of every block written
     # the kernel keeps the rest segments in float32 (about 1e-9 m)
     np.testing.assert_allclose(out, ref, atol=1e-8)
@@ -94,17 +94,17 @@ def test_kernel_matches_the_numpy_reference_with_exact_lengths(collide):
 
 def test_nodes_turned_into_the_head_slide_along_it():
     sim, tr, h, gx = _random_case(6)
-    center = h.to_world(tr._center[None])[0]
+    center = h.to_world(tr.center[None])[0]
     gx = center + 0.3 * (gx - center)                   # every guide pulled through the head
     gx[:, :2] = h.to_world(sim.guides.rest[:, :2])
     out, contacts = _kernel(tr, h, gx)
     ref = turn.reference_turn(gx, sim.guides.rest, sim.ghosts.rest, tr.guide_of, h,
-                              tr._axes, tr._center, tr.guide_index)
+                              tr.axes, tr.center, tr.guide_index)
     assert contacts > 0
     np.testing.assert_allclose(out, ref, atol=1e-7)
     free = np.ones(len(out), bool)
     free[tr.guide_index] = False
-    inside = ((h.to_head(out[free][:, 2:]) - tr._center) / tr._axes) ** 2
+    inside = ((h.to_head(out[free][:, 2:]) - tr.center) / tr.axes) ** 2
     assert inside.sum(axis=-1).min() >= 1.0 - 1e-9
 
 

@@ -17,9 +17,11 @@ the parser; ``play`` and ``record`` join a ROS graph and live in :mod:`hair_trac
 and :mod:`hair_tracking.ros.bag_record`, which the executable (:mod:`hair_tracking.ros.bag_cli`)
 adds.
 
-Exit codes: 0 success, 1 the run failed, 2 bad command line, 3 input missing/not a bag/corrupt,
-4 the bag lacks what was asked for (no head-pose topic, unknown frame), 5 output exists or cannot
-be written, 130 interrupted.  Errors are one line on stderr, never a traceback.
+Exit codes: 0 success, or stopped by SIGINT (Ctrl-C) or SIGTERM (run and record close their
+output bag as it is, a complete bag; import, recover and render leave nothing); 1 the run
+failed, 2 bad command line, 3 input missing/not a bag/corrupt, 4 the bag lacks what was asked
+for (no head-pose topic, unknown frame), 5 output exists or cannot be written.  Errors are one
+line on stderr, never a traceback.
 """
 import argparse
 import math
@@ -29,11 +31,12 @@ from typing import Callable, List, Optional, Sequence
 
 import numpy as np
 
-from hair_tracking import process_tuning
+from hair_tracking import executable
 from hair_tracking.bags import recording
-from hair_tracking.bags.io import (BagError, EXIT_CONTENT, EXIT_FAILURE, EXIT_INTERRUPTED,
-                                   EXIT_OK, EXIT_OUTPUT, EXIT_USAGE, POSE_KIND_TOPICS,
-                                   POSE_KINDS, STORAGES)
+from hair_tracking.bags.io import (BagError, EXIT_CONTENT, EXIT_FAILURE, EXIT_INPUT, EXIT_OK,
+                                   EXIT_OUTPUT, EXIT_USAGE, POSE_KIND_TOPICS, POSE_KINDS,
+                                   STORAGES)
+from hair_tracking.grooms.polylines import GroomFileError
 
 #: seconds since the epoch given to the first sample of an import (reproducible, non-zero:
 #: a stamp of 0 means "now" to the node); 1e9 s is 2001-09-09T01:46:40Z.
@@ -147,9 +150,17 @@ def cmd_run(args) -> int:
                       diagnostics=not args.no_diagnostics, head_pose=not args.no_head_pose,
                       every_pose=args.every_pose)
     progress, close = progress_bar('run', args.quiet)
+
+    def set_up():
+        if not args.quiet:
+            print(f'running {src} -> {args.output} (Ctrl-C to stop; the bag is closed as it '
+                  f'is)', file=sys.stderr, flush=True)
+        if args.gc_freeze:
+            executable.freeze_heap()
+
     try:
-        summary = run_bag(src, args.output, settings, opts, progress,
-                          after_setup=process_tuning.freeze_heap if args.gc_freeze else None)
+        summary = run_bag(src, args.output, settings, opts, progress, after_setup=set_up,
+                          should_stop=lambda: args.stop.requested)
     finally:
         close()
     print(summary.text())
@@ -181,11 +192,12 @@ def cmd_render(args) -> int:
 
 # ================================================================ parser
 def finish_parser(p, func: Callable[[argparse.Namespace], int], quiet_help: str,
-                  omp_wait_policy: str = 'passive') -> None:
+                  omp_wait_policy: Optional[str] = None, gc_freeze: bool = False) -> None:
     """The end of a sub-command that runs a while: ``-q`` (``quiet_help``), the process-wide
-    settings (:func:`hair_tracking.process_tuning.add_arguments`) and ``func`` to run it."""
+    settings (:func:`hair_tracking.executable.add_arguments`: ``omp_wait_policy`` and
+    ``gc_freeze`` for one that runs the numba kernels) and ``func`` to run it."""
     p.add_argument('-q', '--quiet', action='store_true', help=quiet_help)
-    process_tuning.add_arguments(p, omp_wait_policy=omp_wait_policy)
+    executable.add_arguments(p, omp_wait_policy=omp_wait_policy, gc_freeze=gc_freeze)
     p.set_defaults(func=func)
 
 
@@ -193,9 +205,9 @@ def build_parser(live: Sequence[Callable] = ()) -> argparse.ArgumentParser:
     """The ``hair_sim_bag`` parser; each of ``live`` adds a sub-command to the sub-parsers it is
     given (``play``, ``record``: :mod:`hair_tracking.ros.bag_cli`)."""
     ap = _Parser(prog='hair_sim_bag', description=__doc__.split('\n')[0],
-                 epilog='Exit codes: 0 ok, 1 run failed, 2 usage, 3 bad input bag/file, '
-                        '4 missing topic/frame, 5 output exists/unwritable, 130 interrupted. '
-                        'Guide: docs/bags.md')
+                 epilog='Exit codes: 0 ok (also when stopped by Ctrl-C / SIGTERM), 1 run '
+                        'failed, 2 usage, 3 bad input bag/file, 4 missing topic/frame, 5 output '
+                        'exists/unwritable. Guide: docs/bags.md')
     sub = ap.add_subparsers(dest='command', metavar='COMMAND', parser_class=_Parser)
     sub.required = True
 
@@ -271,7 +283,7 @@ def build_parser(live: Sequence[Callable] = ()) -> argparse.ArgumentParser:
         p.add_argument(f'--no-{name}', action='store_true', help=f'do not write {topic}')
     p.add_argument('--no-head-pose', action='store_true', help='do not copy /head_pose')
     p.add_argument('--overwrite', action='store_true', help='replace an existing output')
-    finish_parser(p, cmd_run, 'no progress bar', omp_wait_policy='active')
+    finish_parser(p, cmd_run, 'no progress bar', omp_wait_policy='passive', gc_freeze=True)
 
     # ---- recover
     p = sub.add_parser('recover', help='a clean copy of a bag, an MCAP cut short read to its '
@@ -312,35 +324,59 @@ def build_parser(live: Sequence[Callable] = ()) -> argparse.ArgumentParser:
     return ap
 
 
-def main(argv: Optional[List[str]] = None, live: Sequence[Callable] = ()) -> int:
-    """``hair_sim_bag`` with the sub-commands ``live`` adds (see :func:`build_parser`); returns
-    the exit code (see module doc).  The executable is :mod:`hair_tracking.ros.bag_cli`."""
-    parser = build_parser(live)
-    args = parser.parse_args(argv)
+#: Commands that run plain Python and numba, writing their output under a temporary name: a
+#: stop request interrupts them anywhere (the others check it between messages or poses)
+INTERRUPTIBLE = ('info', 'import', 'recover', 'render')
+
+
+def run_command(prog: str, args, interruptible: bool) -> int:
+    """``args.func(args)``, the sub-command ``args.command`` of ``prog``, and its exit code (see
+    module doc): an error is one line on stderr, never a traceback; inside ``interruptible``
+    work a stop request (``args.stop``) interrupts it anywhere, exit code 0, nothing written.
+    ``hair_sim_bag`` and ``hair_sim_groom`` run their commands so."""
+    stop = args.stop
     try:
-        if hasattr(args, 'malloc_retain_mb'):       # run, play, record: process-wide settings
-            try:
-                process_tuning.apply(args)
-            except ValueError as e:
-                raise BagError(str(e), EXIT_USAGE) from None
+        if interruptible:
+            with stop.interruptible():
+                return int(args.func(args) or 0)
         return int(args.func(args) or 0)
     except BagError as exc:
-        print(f'hair_sim_bag {args.command}: error: {exc}', file=sys.stderr)
+        print(f'{prog} {args.command}: error: {exc}', file=sys.stderr)
         return exc.code
-    except KeyboardInterrupt:
-        print(f'hair_sim_bag {args.command}: interrupted', file=sys.stderr)
-        return EXIT_INTERRUPTED
+    except GroomFileError as exc:
+        print(f'{prog} {args.command}: error: {exc}', file=sys.stderr)
+        return EXIT_INPUT
+    except KeyboardInterrupt:                       # a stop inside an interruptible command
+        print(f'{prog} {args.command}: stopped ({stop.signal_name}), nothing written',
+              file=sys.stderr)
+        return EXIT_OK
     except BrokenPipeError:
         return EXIT_OK
     except OSError as exc:
         where = f' ({exc.filename})' if getattr(exc, 'filename', None) else ''
-        print(f'hair_sim_bag {args.command}: error: {exc.strerror or exc}{where}',
-              file=sys.stderr)
+        print(f'{prog} {args.command}: error: {exc.strerror or exc}{where}', file=sys.stderr)
         return EXIT_OUTPUT if isinstance(exc, (PermissionError, IsADirectoryError)) \
             or getattr(exc, 'errno', None) == 28 else EXIT_FAILURE
     except Exception as exc:       # noqa: B902 - a user sees one line, never a traceback
         if os.environ.get('HAIR_SIM_BAG_DEBUG'):
             raise
-        print(f'hair_sim_bag {args.command}: error: {type(exc).__name__}: {exc} '
+        print(f'{prog} {args.command}: error: {type(exc).__name__}: {exc} '
               f'(set HAIR_SIM_BAG_DEBUG=1 for the traceback)', file=sys.stderr)
         return EXIT_FAILURE
+
+
+def main(argv: Optional[List[str]] = None, live: Sequence[Callable] = ()) -> int:
+    """``hair_sim_bag`` with the sub-commands ``live`` adds (see :func:`build_parser`); returns
+    the exit code (see module doc).  The executable is :mod:`hair_tracking.ros.bag_cli`; each
+    command finds the process's stop request in ``args.stop``."""
+    parser = build_parser(live)
+    args = parser.parse_args(argv)
+    with executable.started() as stop:
+        args.stop = stop
+        if hasattr(args, 'malloc_retain_mb'):       # run, play, record: process settings
+            try:
+                executable.apply(args)
+            except ValueError as e:
+                print(f'hair_sim_bag {args.command}: error: {e}', file=sys.stderr)
+                return EXIT_USAGE
+        return run_command('hair_sim_bag', args, args.command in INTERRUPTIBLE)

@@ -54,7 +54,6 @@ EXIT_USAGE = 2          # bad command line (argparse's own code)
 EXIT_INPUT = 3          # input missing, not a bag, corrupt or unreadable
 EXIT_CONTENT = 4        # the bag lacks what was asked for: no head-pose topic, unknown frame
 EXIT_OUTPUT = 5         # output path exists or cannot be written
-EXIT_INTERRUPTED = 130  # Ctrl-C
 
 POSE_MSGTYPES = ('geometry_msgs/msg/PoseStamped', 'geometry_msgs/msg/TransformStamped',
                  'geometry_msgs/msg/PoseWithCovarianceStamped', 'nav_msgs/msg/Odometry')

@@ -29,11 +29,11 @@ import numpy as np
 import yaml
 
 from hair_tracking.bags import io as bag_io
-from hair_tracking.bags.io import BagError, EXIT_CONTENT, EXIT_FAILURE, EXIT_USAGE
+from hair_tracking.bags.io import BagError, EXIT_CONTENT, EXIT_FAILURE, EXIT_INPUT, EXIT_USAGE
 from hair_tracking.core.params import ParamError
 from hair_tracking.core.scene import Scene, SceneError
 from hair_tracking.output.params_check import load_params_file, node_parameters, ParamsFileError
-from hair_tracking.output.settings import make_settings, NODE_NAME, Settings
+from hair_tracking.output.settings import check_groom_file, make_settings, NODE_NAME, Settings
 from hair_tracking.output.strand_colors import StrandColorCache
 
 POINTS_TOPIC = '/hair/points'
@@ -79,7 +79,8 @@ def parse_overrides(items: Sequence[str]) -> Dict[str, object]:
 def load_settings(scene: Optional[str] = None, params_file: Optional[str] = None,
                   overrides: Optional[Dict[str, object]] = None) -> Settings:
     """Validated node settings: ``scene`` (YAML path or preset) as the base scene, then the
-    params file's values, then ``overrides``; BagError (EXIT_USAGE) naming the bad entry."""
+    params file's values, then ``overrides``; BagError (EXIT_USAGE) naming the bad entry, or
+    (EXIT_INPUT) saying why a groom file (``groom.file``) cannot be imported."""
     from hair_tracking.resources import config_path
 
     values: Dict[str, object] = {}
@@ -95,9 +96,14 @@ def load_settings(scene: Optional[str] = None, params_file: Optional[str] = None
             except FileNotFoundError as exc:
                 raise BagError(str(exc), EXIT_USAGE) from None
             base = Scene.from_yaml(path)
-        return make_settings(values, base)
+        settings = make_settings(values, base)
     except (SceneError, ParamError) as exc:
         raise BagError(f'bad settings: {exc}', EXIT_USAGE) from None
+    try:
+        check_groom_file(settings.scene)
+    except ParamError as exc:
+        raise BagError(str(exc), EXIT_INPUT) from None
+    return settings
 
 
 # ================================================================ encoding
@@ -253,6 +259,8 @@ class RunSummary:
     strands: int = 0
     nodes: int = 0
     finite: bool = True
+    groom: str = ''              # an imported groom's report line ('' for the procedural one)
+    stopped_after: Optional[int] = None   # poses run when a stop was asked for (else None)
 
     @property
     def ms_per_pose(self) -> float:
@@ -269,6 +277,7 @@ class RunSummary:
             f'{self.bag_duration_s:.2f} s)',
             f'output: {self.output}',
             '  ' + ', '.join(f'{t}: {n}' for t, n in self.topics.items()),
+        ] + ([self.groom] if self.groom else []) + [
             f'hair: {self.strands} strands x {self.nodes} points; frames written: {self.frames}'
             + (f' ({self.loop_s * 1e3 / self.frames:.2f} ms of the loop per frame)'
                if self.frames else ''),
@@ -282,6 +291,9 @@ class RunSummary:
             f'poses rejected: {self.rejected}; resets: {self.resets}; substeps: {self.substeps} '
             f'run, {self.substeps_dropped} dropped',
         ]
+        if self.stopped_after is not None:
+            lines.append(f'stopped after {self.stopped_after} of {self.poses} poses; the output '
+                         f'holds what was written until then')
         if not self.finite:
             lines.append('ERROR: the hair became non-finite')
         return '\n'.join(lines)
@@ -343,13 +355,16 @@ def progress_bar(label: str, quiet: bool = False):
 def run_bag(input_path: str, output_path: str, settings: Settings,
             options: Optional[RunOptions] = None,
             progress: Optional[Callable[[int, int], None]] = None,
-            after_setup: Optional[Callable[[], None]] = None) -> RunSummary:
+            after_setup: Optional[Callable[[], None]] = None,
+            should_stop: Optional[Callable[[], bool]] = None) -> RunSummary:
     """Simulate the hair on the head poses of ``input_path`` and write ``output_path``.
 
     Returns the summary; raises BagError for unusable input or output (nothing is left at the
     output path then).  ``progress(done, total)`` is called as poses are processed,
     ``after_setup()`` once the hair is built and the kernels are loaded, before the loop (the
-    ``hair_sim_bag run`` executable freezes its start-up objects there).
+    ``hair_sim_bag run`` executable freezes its start-up objects there); ``should_stop()``
+    before each pose: when it says so the run ends there and the output is closed as it is (a
+    complete bag of the poses run, ``summary.stopped_after``).
     """
     from hair_tracking.core.head_track import PoseResult
     from hair_tracking.simulator import HairSimulator, warm_up
@@ -383,6 +398,7 @@ def run_bag(input_path: str, output_path: str, settings: Settings,
         for guides, ns in ((False, 'hair'), (True, 'guides')):
             warm.cloud(*tiny.record_writer(guides, head_out), 'warmup', 1, ns)
     sim = HairSimulator(scene)
+    summary.groom = sim.groom_note
     enc = FrameEncoder(settings)
     if after_setup is not None:
         after_setup()
@@ -417,6 +433,9 @@ def run_bag(input_path: str, output_path: str, settings: Settings,
         worst_stretch = worst_depth = 0.0
         t_loop = time.perf_counter()
         for i in range(total):
+            if should_stop is not None and should_stop():
+                summary.stopped_after = i
+                break
             t = int(poses.t_ns[i])
             log_t = int(poses.log_ns[i])
             p, q = poses.position[i], poses.quaternion[i]

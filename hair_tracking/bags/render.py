@@ -271,11 +271,35 @@ class _Canvas:
         self.plt.close(self.fig)
 
 
+def head_limits(points: np.ndarray, head_radii) -> Dict[str, tuple]:
+    """Axis limits of every view for hair ``points`` (P, 3) in the head frame: the head and
+    the hair (0.1-99.9 percentiles) with 3 cm around."""
+    lo = np.minimum(np.percentile(points, 0.1, axis=0), -np.asarray(head_radii)) - 0.03
+    hi = np.maximum(np.percentile(points, 99.9, axis=0), np.asarray(head_radii)) + 0.03
+    return {v: ((lo[VIEWS[v][0]], hi[VIEWS[v][0]]), (lo[VIEWS[v][1]], hi[VIEWS[v][1]]))
+            for v in VIEWS}
+
+
+def picture(strands: np.ndarray, path, title: str, head_radii=DEFAULT_HEAD_RADII,
+            max_strands: int = 600, views=('front', 'side')) -> None:
+    """A PNG of ``strands`` (S, N, 3, head frame [m]) seen from ``views`` with the head
+    outline, drawn as :func:`render` draws a frame (at most ``max_strands`` strands, evenly
+    picked)."""
+    from PIL import Image
+
+    segs = _subsample(None, strands, max_strands)
+    canvas = _Canvas(list(views), head_limits(strands.reshape(-1, 3), head_radii), head_radii)
+    try:
+        Image.fromarray(canvas.draw(segs, title)).save(path)
+    finally:
+        canvas.close()
+
+
 def _subsample(segs, strands, max_strands, rng_seed=0):
     if strands is not None:
         s = strands.shape[0]
-        if s > max_strands:
-            pick = np.linspace(0, s - 1, max_strands).round().astype(int)
+        if s > max_strands or segs is None:
+            pick = np.linspace(0, s - 1, min(s, max_strands)).round().astype(int)
             sub = strands[pick]
             return np.stack([sub[:, :-1], sub[:, 1:]], axis=2).reshape(-1, 2, 3)
         return segs
@@ -338,11 +362,7 @@ def render(path, output, *, gif: bool = True, png: bool = False, fps: float = 10
     limits = None
     half = None
     if in_head:
-        pts = np.concatenate([d[2].reshape(-1, 3) for d in drawn])
-        lo = np.minimum(np.percentile(pts, 0.1, axis=0), -np.asarray(head_radii)) - 0.03
-        hi = np.maximum(np.percentile(pts, 99.9, axis=0), np.asarray(head_radii)) + 0.03
-        limits = {v: ((lo[VIEWS[v][0]], hi[VIEWS[v][0]]), (lo[VIEWS[v][1]], hi[VIEWS[v][1]]))
-                  for v in VIEWS}
+        limits = head_limits(np.concatenate([d[2].reshape(-1, 3) for d in drawn]), head_radii)
     else:
         ext = max(float(np.max(np.abs(d[2].reshape(-1, 3) - d[2].reshape(-1, 3).mean(0))))
                   for d in drawn if len(d[2]))

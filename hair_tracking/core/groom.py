@@ -17,16 +17,28 @@ front_max_polar) * max(0, cos phi)`` with ``phi`` the azimuth from +x (forward, 
   are pushed out radially.  Lengths vary uniformly by ``length_variation``.
 """
 from dataclasses import dataclass
+from typing import Optional
 
 import numpy as np
 
 from hair_tracking.core.scene import GroomSpec, ScalpSpec
 
+#: Free nodes of a rest shape stay outside the scalp ellipsoid scaled by this factor (about 5 mm
+#: out on the default head, more than the collider's margin, so the solver keeps its margin).
+REST_CLEARANCE = 1.05
+
 
 @dataclass
 class Groom:
+    """The rest shapes of a groom.  ``guide_index``, when given, names the ghost strands that
+    are the guides of a tracker that takes its guides among the strands (an imported groom
+    chooses them by their shapes, :mod:`hair_tracking.grooms.guides`); ``note`` says where the
+    strands came from (an imported groom's report line)."""
+
     guide_rest: np.ndarray    # (G, Ng, 3) head frame [m]
     ghost_rest: np.ndarray    # (S, Ns, 3) head frame [m]
+    guide_index: Optional[np.ndarray] = None
+    note: str = ''
 
 
 def make_groom(spec: GroomSpec) -> Groom:
@@ -129,9 +141,9 @@ def strand_shapes(dirs: np.ndarray, lengths: np.ndarray, nodes: int,
         # segment is rescaled to its length so rest lengths stay exact)
         rel = (p - center) / radii
         r = np.linalg.norm(rel, axis=1)
-        inside = r < 1.05
+        inside = r < REST_CLEARANCE
         if np.any(inside):
-            p[inside] = center + rel[inside] / r[inside, None] * 1.05 * radii
+            p[inside] = center + rel[inside] / r[inside, None] * REST_CLEARANCE * radii
             step = p - shape[:, k - 1]
             step /= np.maximum(np.linalg.norm(step, axis=1, keepdims=True), 1e-12)
             p = shape[:, k - 1] + step * seg

@@ -45,11 +45,6 @@ def _max_stretch(x, rest_length):
     return worst
 
 
-def kinetic_energy(v: np.ndarray) -> float:
-    """Sum of 0.5 |v|^2 per node (unit node mass) [J per kg of node mass]."""
-    return 0.5 * float(np.einsum('snk,snk->', v, v))
-
-
 def position_error(x: np.ndarray, ref: np.ndarray, strand_length: np.ndarray):
     """(rms, max) node distance to the reference divided by each strand's length."""
     d = np.linalg.norm(x - ref, axis=2) / strand_length[:, None]

@@ -24,22 +24,11 @@ class HeadPose:
         return (points_world - self.position) @ self.rotation
 
 
-class _HeldArray:
-    """A state array of :class:`StrandSet` (``x`` or ``v``): reading or assigning it first lets
-    the registered holder write its state back (see :meth:`StrandSet.hold`)."""
-
-    def __set_name__(self, owner, name):
-        self.attr = '_' + name
-
-    def __get__(self, obj, objtype=None):
-        if obj is None:
-            return self
-        obj._release()
-        return getattr(obj, self.attr)
-
-    def __set__(self, obj, value):
-        obj._release()
-        setattr(obj, self.attr, value)
+def carry_rigidly(points: np.ndarray, old: HeadPose, new: HeadPose) -> np.ndarray:
+    """``points`` (..., 3), world frame, moved rigidly with the head from pose ``old`` to pose
+    ``new``: ``R_new R_old^T (p - p_old) + p_new``."""
+    rot = new.rotation @ old.rotation.T
+    return (points - old.position) @ rot.T + new.position
 
 
 def part_rows(count: int, part: int, parts: int) -> slice:
@@ -59,43 +48,25 @@ def strand_part(count: int, part: int, parts: int) -> np.ndarray:
 
 
 class StrandSet:
-    """Topology and rest shape of a set of strands, plus their dynamic state.
+    """Topology and rest shape of a set of strands, plus a state: plain data.
 
     ``rest`` (S, N, 3) rest node positions, head frame [m]; ``rest_length`` (S, N-1) rest
     segment lengths [m]; ``inv_mass`` (S, N) inverse masses, 0 for the two attached root nodes;
     ``x`` (S, N, 3) positions, world frame [m]; ``v`` (S, N, 3) velocities [m/s].
 
-    ``x`` and ``v`` are properties because a solver may keep the state in a layout of its own
-    between its steps (the ghost tracker does, see
-    :class:`hair_tracking.ghosts.tracker.GhostTracker`): it registers itself with :meth:`hold`, and
-    reading or assigning ``x`` or ``v`` first calls
-    its ``release()``, which writes the current state into these arrays and makes them the
-    truth again (the holder reads them back on its next step).  So read ``x`` after stepping
-    rather than keeping an old reference to it.
+    The guide solver advances ``x`` and ``v`` of the guides in place.  A ghost tracker takes
+    the ghosts' ``x`` and ``v`` as its start state when it is built and keeps the state in a
+    layout of its own from then on: read the ghosts from the tracker
+    (:class:`~hair_tracking.ghosts.interface.GhostTracking`), not from these arrays.
     """
-
-    x = _HeldArray()
-    v = _HeldArray()
 
     def __init__(self, rest: np.ndarray, rest_length: np.ndarray, inv_mass: np.ndarray,
                  x: np.ndarray, v: np.ndarray):
         self.rest = rest
         self.rest_length = rest_length
         self.inv_mass = inv_mass
-        self._x = x
-        self._v = v
-        self._holder = None
-
-    def hold(self, holder) -> None:
-        """Register ``holder`` (an object with ``release()``) as the keeper of the state; a
-        previous holder releases first."""
-        if self._holder is not None and self._holder is not holder:
-            self._holder.release()
-        self._holder = holder
-
-    def _release(self) -> None:
-        if self._holder is not None:
-            self._holder.release()
+        self.x = x
+        self.v = v
 
     @staticmethod
     def from_rest(rest: np.ndarray) -> 'StrandSet':

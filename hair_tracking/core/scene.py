@@ -33,116 +33,134 @@ class SceneError(ValueError):
         self.field = field_name
 
 
-def _default(path: str) -> Any:
-    """The default of the scene field ``path``: its row's."""
-    return SCENE_ROWS[path].default
+def _section(prefix: str):
+    """Class decorator: a frozen dataclass whose fields are the annotated names, each defaulting
+    to its row's default (``prefix.name`` in the scene's table), or to a fresh instance where
+    the annotation is a section itself."""
+    def make(cls):
+        for name, kind in cls.__annotations__.items():
+            if is_dataclass(kind):
+                setattr(cls, name, field(default_factory=kind))
+            else:
+                setattr(cls, name, SCENE_ROWS[prefix + name].default)
+        return dataclass(frozen=True)(cls)
+    return make
 
 
-@dataclass(frozen=True)
+@_section('groom.scalp.')
 class ScalpSpec:
     """Where roots grow: a cap of an ellipsoid around the head centre (head frame)."""
 
-    center: Tuple[float, float, float] = _default('groom.scalp.center')
-    radii: Tuple[float, float, float] = _default('groom.scalp.radii')
-    max_polar_deg: float = _default('groom.scalp.max_polar_deg')
-    front_max_polar_deg: float = _default('groom.scalp.front_max_polar_deg')
+    center: Tuple[float, float, float]
+    radii: Tuple[float, float, float]
+    max_polar_deg: float
+    front_max_polar_deg: float
 
 
-@dataclass(frozen=True)
+@_section('groom.')
 class GroomSpec:
-    """The strands: how many, how long, their rest shape and where their roots grow."""
+    """The strands: how many, how long, their rest shape and where their roots grow; or a groom
+    file to import (``file``) and how to put it on the head."""
 
-    guides: int = _default('groom.guides')
-    ghosts_per_guide: int = _default('groom.ghosts_per_guide')
-    guide_nodes: int = _default('groom.guide_nodes')
-    ghost_nodes: int = _default('groom.ghost_nodes')
-    length: float = _default('groom.length')
-    length_variation: float = _default('groom.length_variation')
-    droop: float = _default('groom.droop')
-    seed: int = _default('groom.seed')
-    scalp: ScalpSpec = field(default_factory=ScalpSpec)
+    guides: int
+    ghosts_per_guide: int
+    guide_nodes: int
+    ghost_nodes: int
+    length: float
+    length_variation: float
+    droop: float
+    seed: int
+    file: str
+    max_strands: int
+    units: str
+    up_axis: str
+    fit: str
+    file_rotation_deg: Tuple[float, float, float]
+    file_offset: Tuple[float, float, float]
+    scalp: ScalpSpec
 
 
-@dataclass(frozen=True)
+@_section('collider.')
 class ColliderSpec:
     """The head collider (head frame)."""
 
-    shape: str = _default('collider.shape')
-    center: Tuple[float, float, float] = _default('collider.center')
-    radius: float = _default('collider.radius')
-    radii: Tuple[float, float, float] = _default('collider.radii')
-    margin: float = _default('collider.margin')
-    friction: float = _default('collider.friction')
+    shape: str
+    center: Tuple[float, float, float]
+    radius: float
+    radii: Tuple[float, float, float]
+    margin: float
+    friction: float
 
 
-@dataclass(frozen=True)
+@_section('solver.')
 class SolverSpec:
     """The guide solver and its time step."""
 
-    type: str = _default('solver.type')
-    dt: float = _default('solver.dt')
-    iterations: int = _default('solver.iterations')
-    stiffness: float = _default('solver.stiffness')
-    compliance: float = _default('solver.compliance')
-    bend_stiffness: float = _default('solver.bend_stiffness')
-    bend_compliance: float = _default('solver.bend_compliance')
-    ftl_damping: float = _default('solver.ftl_damping')
-    max_substeps: int = _default('solver.max_substeps')
-    shock_propagation: float = _default('solver.shock_propagation')
-    max_displacement: float = _default('solver.max_displacement')
-    settle_time: float = _default('solver.settle_time')
+    type: str
+    dt: float
+    iterations: int
+    stiffness: float
+    compliance: float
+    bend_stiffness: float
+    bend_compliance: float
+    ftl_damping: float
+    max_substeps: int
+    shock_propagation: float
+    max_displacement: float
+    settle_time: float
+    settle_speed: float
 
 
-@dataclass(frozen=True)
+@_section('tracking.')
 class TrackingSpec:
     """How the ghosts follow the guides."""
 
-    mode: str = _default('tracking.mode')
-    blend_guides: int = _default('tracking.blend_guides')
-    candidates: int = _default('tracking.candidates')
-    com_strength: float = _default('tracking.com_strength')
-    offset_strength: float = _default('tracking.offset_strength')
-    elastic_weight: bool = _default('tracking.elastic_weight')
-    elastic_mode: str = _default('tracking.elastic_mode')
-    tip_weight: float = _default('tracking.tip_weight')
-    com_weight: float = _default('tracking.com_weight')
-    max_weight: float = _default('tracking.max_weight')
-    length_restore: bool = _default('tracking.length_restore')
-    collide: bool = _default('tracking.collide')
-    spread: float = _default('tracking.spread')
-    spread_target: float = _default('tracking.spread_target')
-    every_substep: bool = _default('tracking.every_substep')
+    mode: str
+    blend_guides: int
+    candidates: int
+    com_strength: float
+    offset_strength: float
+    elastic_weight: bool
+    elastic_mode: str
+    tip_weight: float
+    com_weight: float
+    max_weight: float
+    length_restore: bool
+    collide: bool
+    spread: float
+    spread_target: float
+    every_substep: bool
 
 
-@dataclass(frozen=True)
+@_section('head_track.')
 class HeadTrackSpec:
     """When the head pose stream counts as a jump that resets the hair."""
 
-    teleport_distance: float = _default('head_track.teleport_distance')
-    teleport_angle_deg: float = _default('head_track.teleport_angle_deg')
-    max_gap: float = _default('head_track.max_gap')
+    teleport_distance: float
+    teleport_angle_deg: float
+    max_gap: float
 
 
-@dataclass(frozen=True)
+@_section('output.')
 class OutputSpec:
     """The published strands."""
 
-    curve: str = _default('output.curve')
-    points_per_strand: int = _default('output.points_per_strand')
+    curve: str
+    points_per_strand: int
 
 
-@dataclass(frozen=True)
+@_section('')
 class Scene:
     """What is simulated: the sections above, gravity (world frame) and damping."""
 
-    groom: GroomSpec = field(default_factory=GroomSpec)
-    collider: ColliderSpec = field(default_factory=ColliderSpec)
-    solver: SolverSpec = field(default_factory=SolverSpec)
-    tracking: TrackingSpec = field(default_factory=TrackingSpec)
-    head_track: HeadTrackSpec = field(default_factory=HeadTrackSpec)
-    output: OutputSpec = field(default_factory=OutputSpec)
-    gravity: Tuple[float, float, float] = _default('gravity')
-    damping: float = _default('damping')
+    groom: GroomSpec
+    collider: ColliderSpec
+    solver: SolverSpec
+    tracking: TrackingSpec
+    head_track: HeadTrackSpec
+    output: OutputSpec
+    gravity: Tuple[float, float, float]
+    damping: float
 
     # ----------------------------------------------------------------- building
     @staticmethod

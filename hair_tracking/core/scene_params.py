@@ -25,6 +25,16 @@ COLLIDERS = ('none', 'sphere', 'ellipsoid')
 ELASTIC_MODES = ('kept', 'changed')
 CURVES = ('none', 'bezier', 'catmull_rom')
 TRACKING_MODES = ('paper', 'blend', 'turn')
+#: Length units of a groom file: metres per unit (``tenth_in``: tenths of an inch, Cem Yuksel's
+#: models); ``auto`` guesses from the span of the roots (docs/grooms.md).
+GROOM_UNITS = {'m': 1.0, 'cm': 0.01, 'mm': 0.001, 'in': 0.0254, 'tenth_in': 0.00254}
+#: Up axis of a groom file: ``y`` (y up, the face toward +z) or ``z`` (z up, the face toward +x:
+#: the head frame's axes); ``auto`` guesses it (docs/grooms.md).
+GROOM_UP_AXES = ('auto', 'y', 'z')
+#: How an imported groom is put on the head: ``translate`` (roots fitted onto the scalp
+#: ellipsoid by a translation), ``scale`` (a translation and a uniform scale), ``none`` (the
+#: file's coordinates, in metres and REP-103 axes, are the head frame).
+GROOM_FITS = ('translate', 'scale', 'none')
 
 
 def _row(name: str, kind: str, default: Any, description: str, **kw: Any) -> Param:
@@ -33,9 +43,11 @@ def _row(name: str, kind: str, default: Any, description: str, **kw: Any) -> Par
 
 SCENE_PARAMS: Tuple[Param, ...] = (
     _row('groom.guides', 'int', 64,
-         'number of guide strands simulated with PBD/FTL', lo=1, hi=100_000, rebuild=True),
+         'number of guide strands simulated with PBD/FTL (an imported groom: chosen among its '
+         'strands, at most all of them)', lo=1, hi=100_000, rebuild=True),
     _row('groom.ghosts_per_guide', 'int', 8,
-         'ghost strands created per guide (total = guides * this); 0 shows the guides themselves',
+         'ghost strands created per guide (total = guides * this); 0 shows the guides themselves '
+         '(an imported groom: every strand of the file is a ghost, 0 shows the guides alone)',
          lo=0, hi=10_000, rebuild=True),
     _row('groom.guide_nodes', 'int', 16,
          'nodes per guide strand, root included', lo=3, hi=256, rebuild=True),
@@ -51,6 +63,33 @@ SCENE_PARAMS: Tuple[Param, ...] = (
          lo=0.0, hi=1.0, rebuild=True),
     _row('groom.seed', 'int', 1,
          'random seed of the groom', lo=0, hi=2**31 - 1, rebuild=True),
+    _row('groom.file', 'string', '',
+         'a groom file to import instead of the procedural groom: .hair (Cem Yuksel), .data '
+         '(USC-HairSalon), .bin (CT2Hair), .ply (polylines), .npz, .usd/.usda/.usdc/.usdz '
+         '(BasisCurves; needs usd-core); a path, relative to the working directory; empty: the '
+         'procedural groom. Its strands are the hair (groom.length, length_variation, droop '
+         'and seed then do not apply); see docs/grooms.md', rebuild=True),
+    _row('groom.max_strands', 'int', 0,
+         'imported groom: keep at most this many strands, evenly spread over the scalp; 0 keeps '
+         'them all', lo=0, hi=2_000_000, rebuild=True),
+    _row('groom.units', 'string', 'auto',
+         'imported groom: length unit of the file (tenth_in: tenths of an inch); auto: the one '
+         'the file states, else guessed from the span of the roots',
+         choices=('auto',) + tuple(GROOM_UNITS), rebuild=True),
+    _row('groom.up_axis', 'string', 'auto',
+         'imported groom: y (y up, face toward +z) or z (z up, face toward +x, the head '
+         'frame\'s axes); auto: the one the file states, else the axis along which the tips '
+         'hang below the roots', choices=GROOM_UP_AXES, rebuild=True),
+    _row('groom.fit', 'string', 'translate',
+         'imported groom: translate (roots fitted onto the scalp ellipsoid), scale (and a '
+         'uniform scale) or none (the file, in metres, is already in the head frame); the roots '
+         'are then put on the scalp', choices=GROOM_FITS, rebuild=True),
+    _row('groom.file_rotation_deg', 'double_array', (0.0, 0.0, 0.0),
+         'imported groom: rotation about the head frame\'s x, y, z axes (in that order) before '
+         'fitting', unit='deg', lo=-360.0, hi=360.0, length=3, rebuild=True),
+    _row('groom.file_offset', 'double_array', (0.0, 0.0, 0.0),
+         'imported groom: shift after fitting, head frame (the roots then slide onto the '
+         'scalp)', unit='m', lo=-1.0, hi=1.0, length=3, rebuild=True),
     _row('groom.scalp.center', 'double_array', (0.0, 0.0, 0.0),
          'centre of the scalp ellipsoid, head frame',
          unit='m', lo=-1.0, hi=1.0, length=3, rebuild=True),
@@ -99,6 +138,10 @@ SCENE_PARAMS: Tuple[Param, ...] = (
          'per-substep displacement clamp; 0 disables', unit='m', lo=0.0, hi=10.0),
     _row('solver.settle_time', 'double', 0.5,
          'time simulated with a still head after a (re)build or reset', unit='s', lo=0.0, hi=60.0),
+    _row('solver.settle_speed', 'double', 0.0,
+         'after solver.settle_time, keep settling (0.1 s at a time, at most 30 s in all) until '
+         'no hair node moved faster than this over the last 0.1 s, so the hair starts near its '
+         'settled shape; 0 settles exactly solver.settle_time', unit='m/s', lo=0.0, hi=10.0),
     _row('tracking.mode', 'string', 'blend',
          'ghost tracker: paper (Park & Kim: velocity transfer, weights (4)-(5), centre-of-mass '
          'tracking, every substep) or blend (each ghost the blended points of its '

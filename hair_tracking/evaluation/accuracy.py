@@ -223,9 +223,7 @@ def settle(method: Method, head: HeadPose, seconds: float) -> None:
     method.reset(head)
     method.advance(method.dt, head, [head] * int(round(seconds / method.dt)))
     method.output(head)             # methods that work per frame catch up here
-    v = method.velocities()
-    if v is not None:
-        v[...] = 0.0
+    method.zero_velocities()
 
 
 def run_frames(method: Method, schedule: HeadSchedule, frames: int,

@@ -35,10 +35,11 @@ The interface: ``reset(head)`` puts the hair in its rest shape at ``head``, at r
 ``heads`` (a frame's substeps; the guide solver's one compiled call,
 :meth:`~hair_tracking.guides.solver.GuideSolver.advance`, where the method allows it: the
 same engineering for every method); ``output(head)`` returns the ghost positions (S, N, 3),
-world frame [m], at the end of the frame (a view that stays valid until the next ``step``).
+world frame [m], at the end of the frame (a view that stays valid until the next ``step``);
+``zero_velocities()`` puts the hair at rest where it is.
 """
 from dataclasses import dataclass, field, replace
-from typing import Dict, Optional
+from typing import Dict
 
 import numpy as np
 
@@ -49,6 +50,7 @@ from hair_tracking.ghosts.blend import BlendTracker
 from hair_tracking.ghosts.stateless import choose_guides
 from hair_tracking.ghosts.turn import TurnTracker
 from hair_tracking.ghosts.correspondence import assign_guides, node_correspondence
+from hair_tracking.ghosts.interface import TrackStep
 from hair_tracking.ghosts.tracker import GhostTracker
 from hair_tracking.guides.collision import make_collider
 from hair_tracking.guides.solver import GuideSolver
@@ -137,9 +139,9 @@ class Method:
     def output(self, head: HeadPose) -> np.ndarray:
         raise NotImplementedError
 
-    def velocities(self) -> Optional[np.ndarray]:
-        """Velocities of the output nodes [m/s] where the method keeps them (else None)."""
-        return None
+    def zero_velocities(self) -> None:
+        """The hair at rest where it is (a method that keeps no velocities has nothing to
+        do)."""
 
     def close(self) -> None:
         """Release external resources (pypbd)."""
@@ -167,8 +169,8 @@ class FullSim(Method):
     def output(self, head):
         return self.strands.x
 
-    def velocities(self):
-        return self.strands.v
+    def zero_velocities(self):
+        self.strands.v[...] = 0.0
 
 
 class _GuidedMethod(Method):
@@ -212,7 +214,7 @@ class GhostTracking(_GuidedMethod):
         if self.every_substep:
             np.copyto(self._x_old, self.guides.x)
             self.solver.step(dt, head_prev, head)
-            self.tracker.step(dt, self._x_old, head)
+            self.tracker.step(TrackStep(dt, 1, self._x_old, self.guides.x, head))
         else:           # tracked once per output frame, over all its substeps (simulator's way)
             self.solver.step(dt, head_prev, head)
             self._pending += 1
@@ -226,17 +228,17 @@ class GhostTracking(_GuidedMethod):
 
     def output(self, head):
         if self._pending:
-            self.tracker.step(self._pending * self.dt, self._x_old, head,
-                              substeps=self._pending)
+            self.tracker.step(TrackStep(self._pending * self.dt, self._pending, self._x_old,
+                                        self.guides.x, head))
             self._pending = 0
             np.copyto(self._x_old, self.guides.x)
         if self._perm is None:
-            return self.ghosts.x
-        self._out[self._perm] = self.ghosts.x
+            return self.tracker.positions()
+        self._out[self._perm] = self.tracker.positions()
         return self._out
 
-    def velocities(self):
-        return self.ghosts.v
+    def zero_velocities(self):
+        self.tracker.zero_velocities()
 
 
 class BlendTracking(Method):
@@ -274,7 +276,8 @@ class BlendTracking(Method):
         self.solver.advance(dt, head_prev, heads)
 
     def output(self, head):
-        self.tracker.step(self.dt, None, head)
+        # the blend and turn trackers place the strands from the guides now and the head
+        self.tracker.step(TrackStep(self.dt, 1, None, self.guides.x, head))
         return self.tracker.positions()
 
 

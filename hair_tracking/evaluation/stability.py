@@ -100,20 +100,25 @@ class CaseResult:
     sim_s: float
 
 
-def energy_bound(motion: HeadMotion, scene: Scene) -> float:
+def energy_bound(motion: HeadMotion, scene: Scene, length: Optional[float] = None) -> float:
     """Largest kinetic energy per node [J/kg] a stable simulation of ``motion`` may reach (see
-    the module docstring): ``4 (0.5 (v_head + w_head (r_head + L))^2 + |g| L) + 0.5``."""
+    the module docstring): ``4 (0.5 (v_head + w_head (r_head + L))^2 + |g| L) + 0.5``, with
+    ``L`` the longest strand: ``length`` [m] when given (an imported groom's), else the
+    procedural groom's longest."""
     v = float(linear_speed(motion).max()) if len(motion) > 1 else 0.0
     w = float(angular_speed(motion).max()) if len(motion) > 1 else 0.0
     r = float(max(scene.collider.radii + (scene.collider.radius,)))
-    length = scene.groom.length * (1.0 + scene.groom.length_variation)
+    if length is None:
+        length = scene.groom.length * (1.0 + scene.groom.length_variation)
     g = float(np.linalg.norm(scene.gravity))
     return 4.0 * (0.5 * (v + w * (r + length)) ** 2 + g * length) + 0.5
 
 
-def _roots_error(strands, head, slack: float = 0.0) -> float:
+def _roots_error(strands, x, head, slack: float = 0.0) -> float:
+    """How far [m] the roots of ``x`` (the positions of ``strands``) are from where the head
+    carries them, less ``slack``."""
     want = head.to_world(strands.rest[:, :2])
-    return max(0.0, float(np.max(np.abs(strands.x[:, :2] - want))) - slack)
+    return max(0.0, float(np.max(np.abs(x[:, :2] - want))) - slack)
 
 
 def float32_slack(x: np.ndarray) -> float:
@@ -122,8 +127,13 @@ def float32_slack(x: np.ndarray) -> float:
     return 0.5 * math.sqrt(3.0) * float(np.finfo(np.float32).eps) * float(np.abs(x).max())
 
 
-def _positions(sets) -> np.ndarray:
-    return np.concatenate([s.x.reshape(-1, 3) for s in sets])
+def _states(sim):
+    """``(strands, positions, velocities)`` of the guides and, with ghosts, of the ghosts (from
+    their tracker)."""
+    out = [(sim.guides, sim.guides.x, sim.guides.v)]
+    if sim.ghost_tracker is not None:
+        out.append((sim.ghosts, sim.ghost_tracker.positions(), sim.ghost_tracker.velocities()))
+    return out
 
 
 def _motion_energy(x, x_prev, seconds):
@@ -158,9 +168,10 @@ def run_case(case: Case) -> CaseResult:
         pos = np.concatenate([pos, np.repeat(pos[last:last + 1], len(extra), 0)])
         quat = np.concatenate([quat, np.repeat(quat[last:last + 1], len(extra), 0)])
     tail_start = int(t_ns[-1] - round(case.tail_s * 1e9))
-    ke_max = energy_bound(motion_for_bound, scene)
     sim = HairSimulator(scene)
-    sets = [s for s in (sim.guides, sim.ghosts) if s is not None]
+    ke_max = energy_bound(motion_for_bound, scene, length=max(
+        float(s.strand_length.max()) for s in (sim.guides, sim.ghosts)
+        if s is not None) if scene.groom.file else None)
     f32_ghosts = sim.ghost_tracker is not None and \
         sim.ghost_tracker.positions().dtype == np.float32
     if sim.ghosts is not None:         # the shortest ghost segment, for float32 rounding
@@ -187,7 +198,8 @@ def run_case(case: Case) -> CaseResult:
         sim.advance_to(t)
         if i % case.check_every and i != n - 1 and t < last_check_t:
             continue
-        if not all(np.all(np.isfinite(s.x)) and np.all(np.isfinite(s.v)) for s in sets):
+        states = _states(sim)
+        if not all(np.all(np.isfinite(x)) and np.all(np.isfinite(v)) for _, x, v in states):
             failures.append(f'non-finite state at t = {(t - t_ns[0]) * 1e-9:.3f} s')
             finite = False
             break
@@ -195,22 +207,23 @@ def run_case(case: Case) -> CaseResult:
         worst['stretch_guides'] = max(worst['stretch_guides'],
                                       max_stretch(sim.guides.x, sim.guides.rest_length))
         slack = 0.0
-        if sim.ghosts is not None:
+        if sim.ghost_tracker is not None:
+            ghost_x = states[1][1]
             if f32_ghosts:
-                slack = float32_slack(sim.ghosts.x)
+                slack = float32_slack(ghost_x)
             worst['stretch_ghosts'] = max(worst['stretch_ghosts'], max_stretch(
-                sim.ghosts.x, sim.ghosts.rest_length) - 2.0 * slack / shortest)
+                ghost_x, sim.ghosts.rest_length) - 2.0 * slack / shortest)
         worst['root_err_m'] = max(worst['root_err_m'],
-                                  *(_roots_error(s, head, slack if s is sim.ghosts else 0.0)
-                                    for s in sets))
+                                  *(_roots_error(s, x, head, slack if s is sim.ghosts else 0.0)
+                                    for s, x, _ in states))
         if sim.collider is not None:
             worst['pen_guides_mm'] = max(worst['pen_guides_mm'], 1e3 * sim.collider.penetration(
                 sim.guides.x, head, sim.guides.inv_mass))
-            if sim.ghosts is not None:
+            if sim.ghost_tracker is not None:
                 worst['pen_ghosts_mm'] = max(worst['pen_ghosts_mm'], 1e3 *
-                                             sim.collider.penetration(sim.ghosts.x, head,
+                                             sim.collider.penetration(states[1][1], head,
                                                                       sim.ghosts.inv_mass))
-        x_now = _positions(sets)
+        x_now = np.concatenate([x.reshape(-1, 3) for _, x, _ in states])
         t_sim = sim.time_ns
         moved = x_prev is not None and t_sim > t_prev and sim.counters.resets == resets_prev
         last = (x_prev, t_prev)

@@ -43,6 +43,7 @@ strand; the rare node inside the head is then fixed on its own.
 :func:`reference_blend` is the plain-numpy statement of steps 1-3; the tests hold the compiled
 kernel (:func:`blend_strands`) to it.
 """
+from collections import namedtuple
 import math
 from typing import Tuple
 
@@ -72,6 +73,20 @@ CHUNKS = 64
 #: Guides blended in one pass along a strand (the kernels' guide lists of two or more guides are
 #: padded to a multiple of it with zero weights; one guide runs a pass of its own).
 GUIDE_GROUP = 3
+
+#: The blend kernel's static data (:attr:`BlendTracker.model`), a plain tuple in these fields'
+#: order (numba types a named tuple by encoding its class and field names on every call):
+#: ``offset`` (S, 3, N) float32 the rest offsets ``o`` (head frame), component-major;
+#: ``roots`` (S, 2, 3) the first two rest nodes in float64 (pinned exactly); ``rest_length``
+#: (S, N-1) float32; ``guide`` (S, K) int32 and ``weight`` (S, K) float32 from
+#: :func:`blend_weights`, padded by :func:`pad_guides`; ``is_guide`` (S,) the guide each strand
+#: is, -1 for the others; ``guide_length`` (G, N-1) float64 the guides' rest lengths.
+BlendModel = namedtuple('BlendModel', ['offset', 'roots', 'rest_length', 'guide', 'weight',
+                                       'is_guide', 'guide_length'])
+#: The blend's parameters (:attr:`BlendTracker.params`, a plain tuple): ``restore`` the FTL
+#: length pass; ``collide``: keep nodes out of the ellipsoid ``axes`` (radii + margin) around
+#: ``center`` (head frame).
+BlendParams = namedtuple('BlendParams', ['restore', 'collide', 'center', 'axes'])
 
 
 # ----------------------------------------------------------------------------- set-up
@@ -217,12 +232,18 @@ def _deform(blk, lane, offset, rot, guide, weight, gcol, s):
 
 
 @njit(cache=True, error_model='numpy', fastmath=FASTMATH)
-def _blend_blocks(out, out_rot, out_origin, moved, check, offset, roots, rest_length, guide,
-                  weight, gcol, rot, pos, restore, collide, cw, quad, is_guide, guide_length,
-                  b0, b1):
-    """Steps 2-3 for the blocks ``b0 .. b1 - 1`` of :data:`STRAND_BLOCK` strands; returns the
-    number of nodes that were inside the collider and the number of points written that are
-    not finite (counted with ``check`` only)."""
+def _blend_blocks(target, model, pose, restore, collide, geo, blocks):
+    """Steps 2-3 for the blocks ``blocks = (b0, b1)``, ``b0 .. b1 - 1``, of
+    :data:`STRAND_BLOCK` strands (``target``, ``model``, ``pose`` as :func:`blend_strands`
+    takes them, ``geo`` the collider in the world: its centre, then the entries of ``Q``,
+    :func:`~hair_tracking.ghosts.stateless.world_collider`); returns the number of nodes that
+    were inside the collider and the number of points written that are not finite (counted
+    with ``check`` only)."""
+    out, out_rot, out_origin, moved, check = target                     # Placement
+    offset, roots, rest_length, guide, weight, is_guide, guide_length = model   # BlendModel
+    gcol, rot, pos = pose                                               # GuidePose
+    cw, quad = geo[:3], geo[3:]
+    b0, b1 = blocks
     n_strands, n_nodes = offset.shape[0], offset.shape[2]
     contacts = 0
     bad = 0
@@ -327,38 +348,30 @@ def _blend_blocks(out, out_rot, out_origin, moved, check, offset, roots, rest_le
 
 
 @njit(cache=True, parallel=True, fastmath=FASTMATH)
-def blend_strands(out, out_rot, out_origin, moved, check, offset, roots, rest_length, guide,
-                  weight, gcol, rot, pos, restore, collide, center, axes, is_guide,
-                  guide_length):
-    """Kernel, steps 2-3: every strand's nodes written as x y z into ``out`` (S, N, >= 3),
-    world [m]; with ``check`` as records (:func:`~hair_tracking.core.point_records.put_record`:
-    ``out_rot (x - out_origin)`` when ``moved``, the points that are not finite counted;
-    arguments as :func:`~hair_tracking.core.point_records.record_target` makes them);
-    ``offset`` (S, 3, N)
-    float32 the rest offsets ``o`` (head frame), component-major; ``roots`` (S, 2, 3) the first
-    two rest nodes in float64 (pinned exactly); ``rest_length`` (S, N-1) float32; ``guide`` (S,
-    K) int32 and ``weight`` (S, K) float32 from :func:`blend_weights`, padded by
-    :func:`pad_guides`; ``gcol`` (G, 3, N) the guides at the ghosts' node fractions, component-
-    major (step 1, :func:`~hair_tracking.ghosts.stateless.guide_columns`); ``restore``: the FTL
-    length pass; ``collide``: keep nodes out of the ellipsoid ``axes`` (radii + margin) around
-    ``center`` (head frame). A strand that is guide ``is_guide[s] >= 0`` enters step 3 as that
-    guide's ``gcol``, its segments held to ``guide_length`` (G, N-1) float64 within
+def blend_strands(target, model, pose, params):
+    """Kernel, steps 2-3: every strand's nodes written into ``target`` (the fields of
+    :data:`~hair_tracking.ghosts.stateless.Placement`: x y z into ``out`` (S, N, >= 3), world
+    [m]; with ``check`` as point records, :func:`~hair_tracking.core.point_records.put_record`);
+    ``model`` the fields of :data:`BlendModel`; ``pose`` the fields of
+    :data:`~hair_tracking.ghosts.stateless.GuidePose` (step 1,
+    :func:`~hair_tracking.ghosts.stateless.guide_columns`, and the head pose); ``params`` the
+    fields of :data:`BlendParams`. A strand that is guide ``is_guide[s] >= 0`` enters step 3 as
+    that guide's ``gcol``, its segments held to ``guide_length`` within
     :data:`GUIDE_LENGTH_TOLERANCE` and left to the guide solver's contacts until the length
     pass moves it. Returns the number of nodes that were inside the collider and whether every
     coordinate written is finite (always true without ``check``)."""
-    n_strands = offset.shape[0]
+    restore, collide, center, axes = params
+    n_strands = model[0].shape[0]
     geo = np.empty(9)                    # the collider in the world: centre, then Q
-    world_collider(rot, pos, center, axes, geo)
-    cw, quad = geo[:3], geo[3:]
+    world_collider(pose[1], pose[2], center, axes, geo)
     n_blocks = (n_strands + STRAND_BLOCK - 1) // STRAND_BLOCK
     n_chunks = min(n_blocks, CHUNKS)
     contacts = 0
     bad = 0
     for c in prange(n_chunks):
         inside, not_finite = _blend_blocks(
-            out, out_rot, out_origin, moved, check, offset, roots, rest_length, guide,
-            weight, gcol, rot, pos, restore, collide, cw, quad, is_guide, guide_length,
-            c * n_blocks // n_chunks, (c + 1) * n_blocks // n_chunks)
+            target, model, pose, restore, collide, geo,
+            (c * n_blocks // n_chunks, (c + 1) * n_blocks // n_chunks))
         contacts += inside
         bad += not_finite
     return contacts, bad == 0
@@ -430,33 +443,33 @@ class BlendTracker(StatelessTracker):
     def __init__(self, ghosts: StrandSet, guides: StrandSet, guide_index, scene, collider=None,
                  k: int = DEFAULT_GUIDES_PER_GHOST):
         super().__init__(ghosts, guides, guide_index, scene, collider)
-        self.restore = bool(scene.tracking.length_restore)
         self.guide_of, self.weight = blend_weights(ghosts.rest[:, 0], guides.rest[:, 0], k)
-        self._guide_pad, self._weight_pad = pad_guides(self.guide_of, self.weight)
+        guide_pad, weight_pad = pad_guides(self.guide_of, self.weight)
         #: the guide each strand is, -1 for the others (those copy their guide)
         self.is_guide = np.full(ghosts.count, -1, dtype=np.int64)
         self.is_guide[self.guide_index] = np.arange(guides.count)
-        self._offset32 = np.ascontiguousarray(rest_offsets(
+        offset32 = np.ascontiguousarray(rest_offsets(
             ghosts.rest, at_fractions(guides.rest, self.seg, self.t), self.guide_of,
             self.weight).transpose(0, 2, 1), dtype=np.float32)
-        self._roots = np.ascontiguousarray(ghosts.rest[:, :2], dtype=np.float64)
-        self._len32 = np.ascontiguousarray(ghosts.rest_length, dtype=np.float32)
-        self._guide_len = np.ascontiguousarray(guides.rest_length, dtype=np.float64)
+        #: the kernel's static data: the fields of :data:`BlendModel` (a plain tuple)
+        self.model = (offset32, np.ascontiguousarray(ghosts.rest[:, :2], dtype=np.float64),
+                      np.ascontiguousarray(ghosts.rest_length, dtype=np.float32), guide_pad,
+                      weight_pad, self.is_guide,
+                      np.ascontiguousarray(guides.rest_length, dtype=np.float64))
+        #: the kernel's parameters: the fields of :data:`BlendParams` (a plain tuple)
+        self.params = (bool(scene.tracking.length_restore), self.collide, self.center,
+                       self.axes)
 
-    def _place(self, out, rot, origin, moved, check) -> Tuple[int, bool]:
+    def _place(self, target) -> Tuple[int, bool]:
         """Steps 2-3 of the module docstring."""
-        return self._place_strands(slice(None), out, rot, origin, moved, check)
+        return blend_strands(target, self.model, self._pose, self.params)
 
     def _place_part(self, part: int, parts: int) -> np.ndarray:
-        """The strands of the part (:func:`~hair_tracking.core.model.part_rows`): every input
-        sliced to them, so the kernel places them alone."""
+        """The strands of the part (:func:`~hair_tracking.core.model.part_rows`): the output
+        and every per-strand input sliced to them, so the kernel places them alone."""
         rows = part_rows(self.ghosts.count, part, parts)
-        self._place_strands(rows, *self._x32_out)
+        m = self.model
+        model = tuple(a[rows] for a in m[:6]) + (m[6],)
+        target = (self._x32[rows],) + self._x32_target[1:]
+        blend_strands(target, model, self._pose, self.params)
         return np.arange(rows.start, rows.stop)
-
-    def _place_strands(self, rows: slice, out, rot, origin, moved, check) -> Tuple[int, bool]:
-        return blend_strands(
-            out[rows], rot, origin, moved, check, self._offset32[rows], self._roots[rows],
-            self._len32[rows], self._guide_pad[rows], self._weight_pad[rows], self._gcol,
-            self._rot, self._pos, self.restore, self.collide, self._center, self._axes,
-            self.is_guide[rows], self._guide_len)

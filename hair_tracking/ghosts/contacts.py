@@ -29,8 +29,9 @@ import math
 
 from numba import njit
 
-from hair_tracking.guides.collision import apply_friction, push_out, surface_point, to_head
-from hair_tracking.guides.ftl import FTL_TINY_SQ, restore_f_ok, restore_node
+from hair_tracking.guides.collision import (apply_friction, entries_to_head, entries_to_world,
+                                            push_out, surface_point)
+from hair_tracking.guides.ftl import ellipsoid_of, FTL_TINY_SQ, restore_f_ok, restore_node
 
 #: Normal-line refinements the vectorised pass unrolls (the ellipsoid default is 2).
 MAX_VECTOR_REFINE = 2
@@ -54,19 +55,24 @@ def _refine_once(qx, qy, qz, yx, yy, yz, c, ix, iy, iz):
 
 
 @njit(cache=True, inline='always', error_model='numpy')
-def collide_lanes(X0, B, P, W, n, k0, order, seg_len, rest, R, j, ftl, cx, cy, cz,
-                  ax, ay, az, friction, refine):
-    """(h) at node ``j`` of a block's ``n`` lanes: ``P`` (3, n) the new positions (changed in
-    place), ``X0`` (3, n) the start-of-substep positions (friction reference), ``B`` (3, n) the
-    final positions of node ``j - 1``, ``seg_len`` (n,) the rest lengths of segment ``j - 1``,
-    ``rest``/``order``/``k0`` the rest shapes and the rows of the lanes; ellipsoid semi-axes
-    ``a`` (margin included) around the world point ``c``, head rotation ``R``.  ``W`` is work
-    space of at least (:data:`CONTACT_ROWS`, n).  Returns the number of pushed nodes."""
+def collide_lanes(X0, P, W, j, lanes, strands, ftl, contact, rot):
+    """(h) at node ``j`` of a block's lanes: ``P`` (N, 3, n) the new positions (node ``j``
+    changed in place, node ``j - 1`` final), ``X0`` (N, 3, n) the start-of-substep positions
+    (friction reference); ``lanes`` = ``(n, k0)`` the lanes and the group-order row of the
+    first; ``strands`` = ``(order, seg_len, rest)``: the ghost of each group-order row, the
+    block's rest lengths (N-1, n) and the rest shapes; ``contact`` the head
+    collider placed by the head pose (:data:`~hair_tracking.guides.collision.Contact`: the
+    ellipsoid's semi-axes ``a``, margin included, around the world point ``c``) and ``rot``
+    (3, 3) the head rotation (for :func:`~hair_tracking.guides.ftl.restore_node`).  ``W`` is
+    work space of at least (:data:`CONTACT_ROWS`, n).  Returns the number of pushed nodes."""
+    n, k0 = lanes
+    order, seg_len, rest = strands
+    r, cx, cy, cz, ax, ay, az, friction, refine = contact
     ix, iy, iz = 1.0 / (ax * ax), 1.0 / (ay * ay), 1.0 / (az * az)
     # 1. inside test of every lane (vectorises), then the pushed lanes' indices compacted
     n_in = 0
     for kk in range(n):
-        q0, q1, q2 = to_head(P[0, kk], P[1, kk], P[2, kk], R, cx, cy, cz)
+        q0, q1, q2 = entries_to_head(P[j, 0, kk], P[j, 1, kk], P[j, 2, kk], r, cx, cy, cz)
         inside = q0 * q0 * ix + q1 * q1 * iy + q2 * q2 * iz < 1.0
         W[_FLAG, kk] = 1.0 if inside else 0.0
         n_in += 1 if inside else 0
@@ -77,26 +83,25 @@ def collide_lanes(X0, B, P, W, n, k0, order, seg_len, rest, R, j, ftl, cx, cy, c
         W[_IDX, m] = kk
         m += 1 if W[_FLAG, kk] != 0.0 else 0
     if refine > MAX_VECTOR_REFINE:
-        return _collide_scalar(X0, B, P, W, m, k0, order, seg_len, rest, R, j, ftl, cx, cy, cz,
-                               ax, ay, az, friction, refine)
+        return _collide_scalar(X0, P, W, j, (m, k0), strands, ftl, contact, rot)
     # 2. gather
     for c in range(m):
         kk = int(W[_IDX, c])
-        W[_PX, c] = P[0, kk]
-        W[_PY, c] = P[1, kk]
-        W[_PZ, c] = P[2, kk]
-        W[_SX, c] = X0[0, kk]
-        W[_SY, c] = X0[1, kk]
-        W[_SZ, c] = X0[2, kk]
+        W[_PX, c] = P[j, 0, kk]
+        W[_PY, c] = P[j, 1, kk]
+        W[_PZ, c] = P[j, 2, kk]
+        W[_SX, c] = X0[j, 0, kk]
+        W[_SY, c] = X0[j, 1, kk]
+        W[_SZ, c] = X0[j, 2, kk]
         if ftl:
             s = order[k0 + kk]
-            W[_BX, c] = B[0, kk]
-            W[_BY, c] = B[1, kk]
-            W[_BZ, c] = B[2, kk]
+            W[_BX, c] = P[j - 1, 0, kk]
+            W[_BY, c] = P[j - 1, 1, kk]
+            W[_BZ, c] = P[j - 1, 2, kk]
             W[_EX, c] = rest[s, j, 0] - rest[s, j - 1, 0]
             W[_EY, c] = rest[s, j, 1] - rest[s, j - 1, 1]
             W[_EZ, c] = rest[s, j, 2] - rest[s, j - 1, 2]
-            W[_LEN, c] = seg_len[kk]
+            W[_LEN, c] = seg_len[j - 1, kk]
     # 3. the arithmetic of every pushed node, without branches
     # the degenerate centre point goes out along the shortest semi-axis (as surface_point)
     dx0 = ax if ax <= ay and ax <= az else 0.0
@@ -104,7 +109,7 @@ def collide_lanes(X0, B, P, W, n, k0, order, seg_len, rest, R, j, ftl, cx, cy, c
     dz0 = az if dx0 == 0.0 and dy0 == 0.0 else 0.0
     f_ok = restore_f_ok(ax, ay, az)
     for c in range(m):
-        qx, qy, qz = to_head(W[_PX, c], W[_PY, c], W[_PZ, c], R, cx, cy, cz)
+        qx, qy, qz = entries_to_head(W[_PX, c], W[_PY, c], W[_PZ, c], r, cx, cy, cz)
         f = qx * qx * ix + qy * qy * iy + qz * qz * iz
         deg = f < 1e-24
         sc = 1.0 / math.sqrt(f if not deg else 1.0)
@@ -118,11 +123,9 @@ def collide_lanes(X0, B, P, W, n, k0, order, seg_len, rest, R, j, ftl, cx, cy, c
         yy = dy0 if deg else yy
         yz = dz0 if deg else yz
         if friction > 0.0:
-            px, py, pz = to_head(W[_SX, c], W[_SY, c], W[_SZ, c], R, cx, cy, cz)
+            px, py, pz = entries_to_head(W[_SX, c], W[_SY, c], W[_SZ, c], r, cx, cy, cz)
             yx, yy, yz = apply_friction(yx, yy, yz, px, py, pz, ix, iy, iz, friction)
-        wx = R[0, 0] * yx + R[0, 1] * yy + R[0, 2] * yz + cx
-        wy = R[1, 0] * yx + R[1, 1] * yy + R[1, 2] * yz + cy
-        wz = R[2, 0] * yx + R[2, 1] * yy + R[2, 2] * yz + cz
+        wx, wy, wz = entries_to_world(yx, yy, yz, r, cx, cy, cz)
         more = 0.0
         if ftl:     # the first placement of restore_node, its test as a flag
             bx, by, bz = W[_BX, c], W[_BY, c], W[_BZ, c]
@@ -130,17 +133,16 @@ def collide_lanes(X0, B, P, W, n, k0, order, seg_len, rest, R, j, ftl, cx, cy, c
             l2 = ux * ux + uy * uy + uz * uz
             ex, ey, ez = W[_EX, c], W[_EY, c], W[_EZ, c]
             le2 = ex * ex + ey * ey + ez * ez
-            r = W[_LEN, c]
+            rl = W[_LEN, c]
             use_d = l2 > FTL_TINY_SQ
             use_e = le2 > FTL_TINY_SQ
             # ftl_direction: the current segment, else the head-carried rest segment, else -z
-            vx = ux if use_d else (R[0, 0] * ex + R[0, 1] * ey + R[0, 2] * ez if use_e else 0.0)
-            vy = uy if use_d else (R[1, 0] * ex + R[1, 1] * ey + R[1, 2] * ez if use_e else 0.0)
-            vz = uz if use_d else (R[2, 0] * ex + R[2, 1] * ey + R[2, 2] * ez if use_e
-                                   else -1.0)
-            g = r / math.sqrt(l2 if use_d else (le2 if use_e else 1.0))
+            vx = ux if use_d else (r[0] * ex + r[1] * ey + r[2] * ez if use_e else 0.0)
+            vy = uy if use_d else (r[3] * ex + r[4] * ey + r[5] * ez if use_e else 0.0)
+            vz = uz if use_d else (r[6] * ex + r[7] * ey + r[8] * ez if use_e else -1.0)
+            g = rl / math.sqrt(l2 if use_d else (le2 if use_e else 1.0))
             wx, wy, wz = bx + g * vx, by + g * vy, bz + g * vz
-            hx, hy, hz = to_head(wx, wy, wz, R, cx, cy, cz)
+            hx, hy, hz = entries_to_head(wx, wy, wz, r, cx, cy, cz)
             more = 0.0 if hx * hx * ix + hy * hy * iy + hz * hz * iz >= f_ok else 1.0
         W[_PX, c] = wx
         W[_PY, c] = wy
@@ -151,37 +153,35 @@ def collide_lanes(X0, B, P, W, n, k0, order, seg_len, rest, R, j, ftl, cx, cy, c
         kk = int(W[_IDX, c])
         wx, wy, wz = W[_PX, c], W[_PY, c], W[_PZ, c]
         if ftl and W[_MORE, c] != 0.0:
-            hx, hy, hz = to_head(wx, wy, wz, R, cx, cy, cz)
+            hx, hy, hz = entries_to_head(wx, wy, wz, r, cx, cy, cz)
             yx, yy, yz = surface_point(hx, hy, hz, ax, ay, az, refine)
             wx, wy, wz = restore_node(
-                R[0, 0] * yx + R[0, 1] * yy + R[0, 2] * yz + cx,
-                R[1, 0] * yx + R[1, 1] * yy + R[1, 2] * yz + cy,
-                R[2, 0] * yx + R[2, 1] * yy + R[2, 2] * yz + cz,
-                W[_BX, c], W[_BY, c], W[_BZ, c], W[_LEN, c], W[_EX, c], W[_EY, c], W[_EZ, c],
-                R, cx, cy, cz, ax, ay, az, refine, 1)
-        P[0, kk] = wx
-        P[1, kk] = wy
-        P[2, kk] = wz
+                entries_to_world(yx, yy, yz, r, cx, cy, cz), (W[_BX, c], W[_BY, c], W[_BZ, c]),
+                W[_LEN, c], (W[_EX, c], W[_EY, c], W[_EZ, c]), rot, ellipsoid_of(contact), 1)
+        P[j, 0, kk] = wx
+        P[j, 1, kk] = wy
+        P[j, 2, kk] = wz
     return m
 
 
 @njit(cache=True, inline='always', error_model='numpy')
-def _collide_scalar(X0, B, P, W, m, k0, order, seg_len, rest, R, j, ftl, cx, cy, cz,
-                    ax, ay, az, friction, refine):
+def _collide_scalar(X0, P, W, j, pushed, strands, ftl, contact, rot):
     """:func:`collide_lanes` node by node for the ``m`` pushed lanes listed in ``W[_IDX]``
-    (more refinements than the vectorised pass unrolls)."""
+    (more refinements than the vectorised pass unrolls; ``pushed`` = ``(m, k0)``)."""
+    m, k0 = pushed
+    order, seg_len, rest = strands
     for c in range(m):
         kk = int(W[_IDX, c])
-        moved, y0, y1, y2 = push_out(P[0, kk], P[1, kk], P[2, kk],
-                                     X0[0, kk], X0[1, kk], X0[2, kk],
-                                     R, cx, cy, cz, ax, ay, az, friction, refine)
+        moved, y0, y1, y2 = push_out(P[j, 0, kk], P[j, 1, kk], P[j, 2, kk],
+                                     X0[j, 0, kk], X0[j, 1, kk], X0[j, 2, kk], contact)
         if moved and ftl:
             s = order[k0 + kk]
             y0, y1, y2 = restore_node(
-                y0, y1, y2, B[0, kk], B[1, kk], B[2, kk], seg_len[kk],
-                rest[s, j, 0] - rest[s, j - 1, 0], rest[s, j, 1] - rest[s, j - 1, 1],
-                rest[s, j, 2] - rest[s, j - 1, 2], R, cx, cy, cz, ax, ay, az, refine, 0)
-        P[0, kk] = y0
-        P[1, kk] = y1
-        P[2, kk] = y2
+                (y0, y1, y2), (P[j - 1, 0, kk], P[j - 1, 1, kk], P[j - 1, 2, kk]),
+                seg_len[j - 1, kk],
+                (rest[s, j, 0] - rest[s, j - 1, 0], rest[s, j, 1] - rest[s, j - 1, 1],
+                 rest[s, j, 2] - rest[s, j - 1, 2]), rot, ellipsoid_of(contact), 0)
+        P[j, 0, kk] = y0
+        P[j, 1, kk] = y1
+        P[j, 2, kk] = y2
     return m

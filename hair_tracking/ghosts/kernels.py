@@ -40,8 +40,7 @@ import numpy as np
 from hair_tracking.ghosts.contacts import collide_lanes, CONTACT_ROWS
 from hair_tracking.ghosts.spread import group_variance, spread_factor
 from hair_tracking.ghosts.weights import com_weight, elastic_weight, ELASTIC_OFF, weighted_position
-from hair_tracking.guides.collision import world_center
-from hair_tracking.guides.integrate import NO_REFCOUNT
+from hair_tracking.guides.collision import rotation_entries, world_center
 
 
 @njit(cache=True, inline='always')
@@ -137,16 +136,16 @@ _KERNEL_ROWS = 12
 TMP_ROWS = _KERNEL_ROWS + CONTACT_ROWS
 
 #: Lanes (ghosts) a block of consecutive groups holds at most (a larger group is a block of its
-#: own).  Every loop has a fixed cost (set-up, runtime alias checks, remainder), which groups of
-#: 4-16 ghosts felt: on one thread 10 k ghosts took 19 / 16 / 7.5 / 5.2 / 5.4 ms a substep with
-#: 4 / 8 / 16 / 32 / 128 ghosts per group when every loop ran over one group.
+#: own).  Every loop has a fixed cost (set-up, runtime alias checks, remainder), which loops
+#: over single groups of 4-16 ghosts would pay again and again: packing groups into blocks of
+#: a few dozen ghosts spreads it.
 BLOCK_LANES = 64
 
 
 #: The arguments of :func:`track_groups`, grouped as NVIDIA Warp / Newton separate a solver's
 #: inputs; the fields are described in :func:`track_groups`.  The kernel takes them as plain
 #: tuples in these fields' order (``tuple(GhostModel(...))``): numba types a named tuple by
-#: encoding its class and field names on every call, a few microseconds a call.
+#: encoding its class and field names on every call.
 #: Static data of the ghosts and guides, built once
 # (:class:`~hair_tracking.ghosts.tracker.GhostTracker`).
 GhostModel = namedtuple('GhostModel', [
@@ -221,9 +220,8 @@ def track_groups(model, state, motion, params, work):
       R (3, 3), pos (3,)      head pose
       inv_dt                  1 / dt [1/s], the substep's inverse, computed by the caller:
                               computed in here, LLVM's reassociation (``TRACK_FASTMATH``)
-                              turned every ``(x_new - x_old) * (1 / dt)`` back into a division,
-                              three vector divisions a node (11 % of the kernel's perf samples
-                              at 100 k ghosts)
+                              would turn every ``(x_new - x_old) * (1 / dt)`` back into a
+                              division, three vector divisions a node
     params
       elastic_mode            weights.ELASTIC_OFF / KEPT / CHANGED
       use_tip, com_w, max_weight, k_off, k_com, spread, ftl   switches and strengths
@@ -251,7 +249,7 @@ def track_groups(model, state, motion, params, work):
     """
     n_chunks = work[1].shape[0]
     for c in prange(n_chunks):
-        # the parallel loop's index is unsigned: as int64 the serial twin's loop shares this
+        # the parallel loop's index is unsigned: as int64 the serial variant's loop shares this
         # compiled body instead of compiling its own
         _track_chunk(np.int64(c), n_chunks, model, state, motion, params, work)
 
@@ -259,18 +257,19 @@ def track_groups(model, state, motion, params, work):
 @njit(cache=True, nogil=True, fastmath=TRACK_FASTMATH, error_model='numpy')
 def track_groups_serial(model, state, motion, params, work):
     """:func:`track_groups` on the calling thread, for small problems: no parallel region to
-    launch (which costs a few hundred microseconds a call on this shared machine, more than a
-    1 k-ghost substep's arithmetic).  Same results."""
+    launch (which costs more than a small substep's arithmetic).  Same results."""
     n_chunks = work[1].shape[0]
     for c in range(n_chunks):
         _track_chunk(c, n_chunks, model, state, motion, params, work)
 
 
-@njit(cache=True, fastmath=TRACK_FASTMATH, error_model='numpy', **NO_REFCOUNT)
+@njit(cache=True, fastmath=TRACK_FASTMATH, error_model='numpy')
 def _track_chunk(c, n_chunks, model, state, motion, params, work):
     """Chunk ``c`` of :func:`track_groups` (its blocks ``c B / C .. (c+1) B / C - 1``).  A
     function of its own so that the parallel loop's body stays small (numba's parfor lowering
-    copies the body's IR, which took most of the compile time when everything was inlined)."""
+    copies the body's IR: the smaller the body, the shorter the compilation).  A block's arrays
+    are viewed once, as (N, 3, n) [node][axis][ghost] (the per-node stages index them with the
+    node ``j``, so the node loop creates no array)."""
     (rest, seg_len, order, group_start, block_group, group_guide, group_row, node_table,
      node_row, rest_off, root_rest, inv_len, var_target, tan_rest) = model      # GhostModel
     xb, vb = state                                                              # GhostState
@@ -283,11 +282,13 @@ def _track_chunk(c, n_chunks, model, state, motion, params, work):
     n_blocks = block_group.shape[0] - 1
     need_target = k_off > 0.0 or k_com > 0.0
     group_level = k_com > 0.0 or spread > 0.0
-    ax, ay, az = axes[0], axes[1], axes[2]
     cx, cy, cz = world_center(R, pos, center)
+    contact = (rotation_entries(R), cx, cy, cz, axes[0], axes[1], axes[2], friction, refine)
     W = buf[c]
     Tc = tmp[c]
     Qc = q_buf[c]
+    guide = (node_table, guide_x, guide_x_old, Qc, m_last)
+    weights = (need_target, com_w, elastic_mode, use_tip, max_weight, k_off)
     n_contacts = 0
     for b in range(c * n_blocks // n_chunks, (c + 1) * n_blocks // n_chunks):
         g0 = block_group[b]
@@ -306,7 +307,6 @@ def _track_chunk(c, n_chunks, model, state, motion, params, work):
         b0 = r0 * n_nodes * 3
         b1 = (r0 + n) * n_nodes * 3
         X0 = xb[b0:b1].reshape((n_nodes, 3, n))
-        V0 = vb[b0:b1].reshape((n_nodes, 3, n))
         XN = W[:3 * n_nodes * n].reshape((n_nodes, 3, n))
         T = Tc[:TMP_ROWS * n].reshape((TMP_ROWS, n))
         n_roots = min(2, n_nodes)
@@ -318,52 +318,44 @@ def _track_chunk(c, n_chunks, model, state, motion, params, work):
                     XN[j, a, kk] = pa + ra0 * RB[j, 0, kk] + ra1 * RB[j, 1, kk] + \
                         ra2 * RB[j, 2, kk]
         n_clamped = 0
-        # the block's rest offsets (N, 3, n) and segment lengths (N-1, n)
-        off_b = rest_off[b0:b1].reshape((n_nodes, 3, n))
+        # the block's old state, new positions, rest offsets (N, 3, n) and 1 / lengths (n,)
+        block = (X0, vb[b0:b1].reshape((n_nodes, 3, n)), XN,
+                 rest_off[b0:b1].reshape((n_nodes, 3, n)), inv_len[r0:r0 + n])
+        # segment lengths (N-1, n), and what the contact stage reads of the strands
         len_b = seg_len[r0 * (n_nodes - 1):(r0 + n) * (n_nodes - 1)].reshape((n_nodes - 1, n))
-        ilen_b = inv_len[r0:r0 + n]
+        strands = (order, len_b, rest)
+        WC = T[_KERNEL_ROWS:]
         for j in range(2, n_nodes):
-            X0j = X0[j]
-            Pj = XN[j]
             for gg in range(g1 - g0):       # per group: (a)-(c), then (d)-(e)
                 g = g0 + gg
-                l0 = group_start[g] - r0
-                l1 = group_start[g + 1] - r0
+                lanes = (group_start[g] - r0, group_start[g + 1] - r0)
                 row = group_row[g]
                 if row >= 0:
                     # the usual case, one arc-length layout in the group: its guide point,
                     # displacement, frame and centre of mass are scalars of one loop
-                    nc, xs0, xs1, xs2, qs0, qs1, qs2 = _predict_group(
-                        X0j, V0[j], Pj, off_b[j], ilen_b, l0, l1, group_guide[g], j, row,
-                        node_table, guide_x, guide_x_old, Qc, gg, m_last, need_target, com_w,
-                        elastic_mode, use_tip, max_weight, k_off)
+                    nc, sums = _predict_group(block, j, lanes, (group_guide[g], row, gg), guide,
+                                              weights)
                 else:
-                    _targets(T, l0, l1, group_start[g], group_guide[g], j, node_table,
-                             node_row, off_b[j], guide_x, guide_x_old, Qc, gg, m_last,
-                             need_target)
-                    _com_lanes(X0j, T, l0, l1, com_w)
-                    nc = _predict(X0j, V0[j], Pj, T, l0, l1, ilen_b, elastic_mode, use_tip,
-                                  max_weight, k_off)
-                    xs0, xs1, xs2, qs0, qs1, qs2 = _group_sums(Pj, T, l0, l1)
+                    _targets(T, block, j, lanes, group_start[g], (group_guide[g], gg),
+                             node_row, guide, need_target)
+                    _com_lanes(X0, T, j, lanes, com_w)
+                    nc = _predict(block, T, j, lanes, weights)
+                    sums = _group_sums(XN, T, j, lanes)
                 n_clamped += nc
                 if group_level:
-                    _group_stage(Pj, l0, l1, k_com, spread, var_target[g, j], need_target,
-                                 xs0, xs1, xs2, qs0, qs1, qs2)
+                    _group_stage(XN, j, lanes, (k_com, spread, var_target[g, j], need_target),
+                                 sums)
             if ftl:
-                _follow(XN[j - 1], XN[j], T, n, r0, order, len_b[j - 1], rest, R, j)
+                _follow(XN, T, j, (n, r0), strands, R)
             if collide:
-                n_contacts += collide_lanes(X0j, XN[j - 1], XN[j], T[_KERNEL_ROWS:], n, r0,
-                                            order, len_b[j - 1], rest, R, j, ftl, cx, cy, cz,
-                                            ax, ay, az, friction, refine)
+                n_contacts += collide_lanes(X0, XN, WC, j, (n, r0), strands, ftl, contact, R)
         clamped[b] = n_clamped
         # the new state: v = (x_new - x_old) / dt, then x = x_new (one contiguous loop)
-        xg = xb[b0:b1]
-        vg = vb[b0:b1]
-        xw = W[:b1 - b0]
-        for i in range(b1 - b0):
-            xn = xw[i]
-            vg[i] = (xn - xg[i]) * inv_dt
-            xg[i] = xn
+        u0 = uint64(b0)
+        for i in range(uint64(b1 - b0)):
+            xn = W[i]
+            vb[u0 + i] = (xn - xb[u0 + i]) * inv_dt
+            xb[u0 + i] = xn
     contacts[c] = n_contacts
 
 
@@ -384,10 +376,13 @@ def _guide_point(gi, gp, guide_x, guide_x_old, m_last):
 
 
 @njit(cache=True, inline='always', fastmath=TRACK_FASTMATH, error_model='numpy')
-def _group_point(gi, j, row, node_table, guide_x, guide_x_old, frames, fg, m_last, need_target):
-    """The guide point ``P`` of node ``j`` for a group sharing node_table row ``row``, its
-    displacement ``u dt`` over the substep, w_tip and the segment frame ``Q`` (zero unless
-    ``need_target``): (px, py, pz, dx, dy, dz, tw, q00 .. q22)."""
+def _group_point(group, j, guide, need_target):
+    """The guide point ``P`` of node ``j`` for a group (``group`` = ``(guide, node_table row,
+    its frames' row)``) sharing one node_table row, its displacement ``u dt`` over the substep,
+    w_tip and the segment frame ``Q`` (zero unless ``need_target``): (px, py, pz, dx, dy, dz,
+    tw, q00 .. q22).  ``guide`` = ``(node_table, guide_x, guide_x_old, frames, m_last)``."""
+    gi, row, fg = group
+    node_table, guide_x, guide_x_old, frames, m_last = guide
     tw = node_table[row, j, 1]
     sg, px, py, pz, dx, dy, dz = _guide_point(gi, node_table[row, j, 0], guide_x, guide_x_old,
                                               m_last)
@@ -400,9 +395,12 @@ def _group_point(gi, j, row, node_table, guide_x, guide_x_old, frames, fg, m_las
 
 
 @njit(cache=True, inline='always', fastmath=TRACK_FASTMATH, error_model='numpy')
-def _group_centre(X0, l0, l1, com_w):
-    """w_com's inputs of one group (lanes ``l0 .. l1-1``): its centre of mass at the start of
-    the substep and the weight per length (0 for a group of one ghost or with ``com_w`` off)."""
+def _group_centre(X0, j, lanes, com_w):
+    """w_com's inputs of one group (``lanes`` = ``(l0, l1)``: lanes ``l0 .. l1-1`` of the
+    block's start positions ``X0`` (N, 3, n) at node ``j``): its centre of mass at the start of
+    the substep and the weight per length (0 for a group of one ghost or with ``com_w``
+    off)."""
+    l0, l1 = lanes
     n = l1 - l0
     cw = com_w if com_w > 0.0 and n > 1 else 0.0
     u0 = uint64(l0)
@@ -410,9 +408,9 @@ def _group_centre(X0, l0, l1, com_w):
     if cw > 0.0:
         for kk in range(uint64(n)):
             i = u0 + kk
-            c0 += X0[0, i]
-            c1 += X0[1, i]
-            c2 += X0[2, i]
+            c0 += X0[j, 0, i]
+            c1 += X0[j, 1, i]
+            c2 += X0[j, 2, i]
         c0 /= n
         c1 /= n
         c2 /= n
@@ -420,72 +418,74 @@ def _group_centre(X0, l0, l1, com_w):
 
 
 @njit(cache=True, inline='always', fastmath=TRACK_FASTMATH, error_model='numpy')
-def _predict_group(X0, V0, P, off, inv_len, l0, l1, gi, j, row, node_table, guide_x,
-                   guide_x_old, frames, fg, m_last, need_target, com_w, elastic_mode, use_tip,
-                   max_weight, k_off):
-    """(a)-(c) at node ``j`` for the lanes ``l0 .. l1-1`` of one group whose ghosts share the
-    node_table row ``row`` (the usual case): the guide point, its displacement, w_tip, the
-    segment frame and the group's centre of mass are scalars, and one loop over the group's
-    ghosts writes the new positions ``P`` (3, lanes).  Returns the clamped count and the sums
-    over the group of the new positions and of the targets ``q = P + Q o`` (for (d)).
+def _predict_group(block, j, lanes, group, guide, weights):
+    """(a)-(c) at node ``j`` for the lanes ``lanes = (l0, l1)`` of one group whose ghosts share
+    one node_table row (the usual case; ``group``, ``guide`` as :func:`_group_point` takes them):
+    the guide point, its displacement, w_tip, the segment frame and the group's centre of mass
+    are scalars, and one loop over the group's ghosts writes the new positions.  ``block`` =
+    ``(X0, V0, P, off, inv_len)``: the block's start positions, velocities, new positions and
+    rest offsets (N, 3, n) and 1 / strand length (n,); ``weights`` = ``(need_target, com_w,
+    elastic_mode, use_tip, max_weight, k_off)``.  Returns the clamped count and the sums over
+    the group of the new positions and of the targets ``q = P + Q o`` (for (d)).
 
     Per lane the same arithmetic as :func:`_targets` + :func:`_com_lanes` + :func:`_predict`
     (which the rare groups with mixed layouts still take), without writing the per-group values
     out into a row per lane and reading them back, and with the sums of (d) taken in the same
-    loop: two loops fewer per group and node index.  Old and new kernels in alternating
-    processes (two threads): 10 k ghosts 3.45-3.59 -> 3.17-3.40 ms, 100 k 33.3-35.3 ->
-    30.8-31.1 ms (skipping the broadcast altogether, as an upper bound: 2.9 / 24-30 ms)."""
+    loop: two loops fewer per group and node index."""
+    X0, V0, P, off, inv_len = block
+    need_target, com_w, elastic_mode, use_tip, max_weight, k_off = weights
     (px, py, pz, dx, dy, dz, tw, q00, q01, q02, q10, q11, q12, q20, q21,
-     q22) = _group_point(gi, j, row, node_table, guide_x, guide_x_old, frames, fg, m_last,
-                         need_target)
-    c0, c1, c2, cw = _group_centre(X0, l0, l1, com_w)
+     q22) = _group_point(group, j, guide, need_target)
+    c0, c1, c2, cw = _group_centre(X0, j, lanes, com_w)
     tip = (1.0 if use_tip else 0.0) * tw
-    u0 = uint64(l0)
-    n = uint64(l1 - l0)
+    u0 = uint64(lanes[0])
+    n = uint64(lanes[1] - lanes[0])
     n_clamped = 0
     xs0 = xs1 = xs2 = qs0 = qs1 = qs2 = 0.0
     for kk in range(n):             # (the invariant branch is unswitched by LLVM)
         i = u0 + kk
-        w = elastic_weight(dx, dy, dz, V0[0, i], V0[1, i], V0[2, i], elastic_mode)
-        o0 = off[0, i]
-        o1 = off[1, i]
-        o2 = off[2, i]
+        w = elastic_weight(dx, dy, dz, V0[j, 0, i], V0[j, 1, i], V0[j, 2, i], elastic_mode)
+        o0 = off[j, 0, i]
+        o1 = off[j, 1, i]
+        o2 = off[j, 2, i]
         t0 = px + q00 * o0 + q01 * o1 + q02 * o2
         t1 = py + q10 * o0 + q11 * o1 + q12 * o2
         t2 = pz + q20 * o0 + q21 * o1 + q22 * o2
-        y0, y1, y2, clamped = _moved(X0[0, i], X0[1, i], X0[2, i], w, tip, c0, c1, c2, cw,
-                                     inv_len[i], dx, dy, dz, t0, t1, t2, max_weight, k_off)
+        y0, y1, y2, clamped = _moved((X0[j, 0, i], X0[j, 1, i], X0[j, 2, i]), w, tip,
+                                     (c0, c1, c2, cw), inv_len[i], (dx, dy, dz), (t0, t1, t2),
+                                     (max_weight, k_off))
         n_clamped += clamped
-        P[0, i] = y0
-        P[1, i] = y1
-        P[2, i] = y2
+        P[j, 0, i] = y0
+        P[j, 1, i] = y1
+        P[j, 2, i] = y2
         xs0 += y0
         xs1 += y1
         xs2 += y2
         qs0 += t0
         qs1 += t1
         qs2 += t2
-    return n_clamped, xs0, xs1, xs2, qs0, qs1, qs2
+    return n_clamped, (xs0, xs1, xs2, qs0, qs1, qs2)
 
 
 @njit(cache=True, inline='always', fastmath=TRACK_FASTMATH, error_model='numpy')
-def _targets(T, l0, l1, k0, gi, j, node_table, node_row, off, guide_x, guide_x_old, frames, fg,
-             m_last, need_target):
-    """Lanes ``l0 .. l1-1`` of a block, the ghosts of one group following guide ``gi`` (group
-    order rows from ``k0``) whose arc-length layouts differ (each its own node_table row): at
-    node ``j`` the displacement ``u dt`` of each ghost's guide point (a) into T[_DX.._DZ], the
-    target ``q = P + Q o`` (c) into T[_QX.._QZ] (if ``need_target``) and w_tip into T[_TW].
-    ``off`` (3, lanes): the block's rest offsets at node ``j``; ``frames[fg]`` (M-1, 3, 3):
-    the guide's segment frames ``Q``.  (Groups sharing one layout take
+def _targets(T, block, j, lanes, k0, group, node_row, guide, need_target):
+    """Lanes ``lanes = (l0, l1)`` of a block, the ghosts of one group (``group`` = ``(guide,
+    its frames' row)``; group order rows from ``k0``) whose arc-length layouts differ (each its
+    own node_table row, ``node_row``): at node ``j`` the displacement ``u dt`` of each ghost's
+    guide point (a) into T[_DX.._DZ], the target ``q = P + Q o`` (c) into T[_QX.._QZ] (if
+    ``need_target``) and w_tip into T[_TW].  ``block`` and ``guide`` as
+    :func:`_predict_group` takes them.  (Groups sharing one layout take
     :func:`_predict_group`.)
 
     The lanes of a group are indexed with unsigned integers (``uint64``): numba wraps negative
     signed indices around, and that select turns the loop's loads into gathers LLVM does not
-    vectorise; views of the lanes (indices from 0) vectorise too but cost about 20 ns each to
-    create, which small groups felt (8 ghosts a group: 7 of a 16 ms substep of 10 k ghosts
-    went to this function with views, 3 with unsigned indices)."""
-    u0 = uint64(l0)
-    n = uint64(l1 - l0)
+    vectorise; views of the lanes (indices from 0) vectorise too but cost an allocation each,
+    which small groups would pay once per group and node."""
+    off = block[3]
+    gi, fg = group
+    node_table, guide_x, guide_x_old, frames, m_last = guide
+    u0 = uint64(lanes[0])
+    n = uint64(lanes[1] - lanes[0])
     for kk in range(n):
         i = u0 + kk
         r = node_row[uint64(k0) + kk]
@@ -496,9 +496,9 @@ def _targets(T, l0, l1, k0, gi, j, node_table, node_row, off, guide_x, guide_x_o
         T[_DY, i] = dy
         T[_DZ, i] = dz
         if need_target:
-            o0 = off[0, i]
-            o1 = off[1, i]
-            o2 = off[2, i]
+            o0 = off[j, 0, i]
+            o1 = off[j, 1, i]
+            o2 = off[j, 2, i]
             px += (frames[fg, sg, 0, 0] * o0 + frames[fg, sg, 0, 1] * o1 +
                    frames[fg, sg, 0, 2] * o2)
             py += (frames[fg, sg, 1, 0] * o0 + frames[fg, sg, 1, 1] * o1 +
@@ -511,13 +511,13 @@ def _targets(T, l0, l1, k0, gi, j, node_table, node_row, off, guide_x, guide_x_o
 
 
 @njit(cache=True, inline='always', fastmath=TRACK_FASTMATH, error_model='numpy')
-def _com_lanes(X0, T, l0, l1, com_w):
-    """w_com's inputs for lanes ``l0 .. l1-1`` (one group, mixed layouts): the group's centre
+def _com_lanes(X0, T, j, lanes, com_w):
+    """w_com's inputs for the lanes ``lanes`` (one group, mixed layouts): the group's centre
     of mass at the start of the substep into T[_C0.._C2] and the weight per length into T[_CW]
     (see :func:`_group_centre`)."""
-    c0, c1, c2, cw = _group_centre(X0, l0, l1, com_w)
-    u0 = uint64(l0)
-    for kk in range(uint64(l1 - l0)):
+    c0, c1, c2, cw = _group_centre(X0, j, lanes, com_w)
+    u0 = uint64(lanes[0])
+    for kk in range(uint64(lanes[1] - lanes[0])):
         i = u0 + kk
         T[_C0, i] = c0
         T[_C1, i] = c1
@@ -526,69 +526,78 @@ def _com_lanes(X0, T, l0, l1, com_w):
 
 
 @njit(cache=True, inline='always', fastmath=TRACK_FASTMATH, error_model='numpy')
-def _predict(X0, V0, P, T, l0, l1, inv_len, elastic_mode, use_tip, max_weight, k_off):
-    """(a)-(c) at one node index for lanes ``l0 .. l1-1`` (a group with mixed layouts) from the
-    per-lane rows of ``T``: the new position ``P`` (3, lanes) = old position ``X0`` + ``u dt``
-    (1 + W), pulled by ``k_off`` toward the target; ``V0`` the old velocity.  Returns the
-    number of clamped weight sums.  Branch-free loops (switched-off terms enter with a factor
-    0), so that they vectorise."""
+def _predict(block, T, j, lanes, weights):
+    """(a)-(c) at node ``j`` for the lanes ``lanes`` (a group with mixed layouts) from the
+    per-lane rows of ``T``: the new position = old position + ``u dt`` (1 + W), pulled by
+    ``k_off`` toward the target; ``block``, ``weights`` as :func:`_predict_group` takes them.
+    Returns the number of clamped weight sums.  Branch-free loops (switched-off terms enter
+    with a factor 0), so that they vectorise."""
+    V0 = block[1]
+    elastic_mode, use_tip = weights[2], weights[3]
     tip_f = 1.0 if use_tip else 0.0
     n_clamped = 0
-    u0 = uint64(l0)
-    n = uint64(l1 - l0)
+    u0 = uint64(lanes[0])
+    n = uint64(lanes[1] - lanes[0])
     if elastic_mode != ELASTIC_OFF:
         for kk in range(n):
             i = u0 + kk
-            w = elastic_weight(T[_DX, i], T[_DY, i], T[_DZ, i], V0[0, i], V0[1, i], V0[2, i],
-                               elastic_mode)
-            n_clamped += _advance(X0, P, T, i, w, tip_f, inv_len, max_weight, k_off)
+            w = elastic_weight(T[_DX, i], T[_DY, i], T[_DZ, i], V0[j, 0, i], V0[j, 1, i],
+                               V0[j, 2, i], elastic_mode)
+            n_clamped += _advance(block, T, j, i, w, tip_f, weights)
     else:
         for kk in range(n):
-            n_clamped += _advance(X0, P, T, u0 + kk, 0.0, tip_f, inv_len, max_weight, k_off)
+            n_clamped += _advance(block, T, j, u0 + kk, 0.0, tip_f, weights)
     return n_clamped
 
 
 @njit(cache=True, inline='always', fastmath=TRACK_FASTMATH, error_model='numpy')
-def _moved(xo0, xo1, xo2, w, tip, c0, c1, c2, cw, ilen, dx, dy, dz, t0, t1, t2, max_weight,
-           k_off):
-    """(a)-(c) for one node at ``xo`` given its elastic weight ``w`` (equation (4)): w_com
-    (group centre ``c``, weight per length ``cw``, 1 / strand length ``ilen``), then equation
-    (5) with w_tip ``tip`` (:func:`~hair_tracking.ghosts.weights.weighted_position`: the move by
-    the
-    guide displacement ``d`` times (1 + W), W clamped) and the pull toward the target ``t``
-    (c).  Returns the new position and 1 if the weight sum was clamped.  The one per-node
-    formula of both paths (:func:`_predict_group`, :func:`_advance`)."""
+def _moved(xo, w, tip, centre, ilen, d, t, limits):
+    """(a)-(c) for one node at ``xo`` (x, y, z) given its elastic weight ``w`` (equation (4)):
+    w_com (``centre`` = ``(c0, c1, c2, cw)``: the group centre and weight per length; ``ilen``
+    1 / strand length), then equation (5) with w_tip ``tip``
+    (:func:`~hair_tracking.ghosts.weights.weighted_position`: the move by the guide
+    displacement ``d`` times (1 + W), W clamped to ``limits[0]``) and the pull by ``limits[1]``
+    toward the target ``t``.  Returns the new position and 1 if the weight sum was clamped.
+    The one per-node formula of both paths (:func:`_predict_group`, :func:`_advance`)."""
+    xo0, xo1, xo2 = xo
+    c0, c1, c2, cw = centre
+    t0, t1, t2 = t
+    max_weight, k_off = limits
     e0 = xo0 - c0
     e1 = xo1 - c1
     e2 = xo2 - c2
     w_com = com_weight(math.sqrt(e0 * e0 + e1 * e1 + e2 * e2), ilen, cw)
-    x0, x1, x2, clamped = weighted_position(xo0, xo1, xo2, dx, dy, dz, w, tip, w_com,
+    x0, x1, x2, clamped = weighted_position(xo0, xo1, xo2, d[0], d[1], d[2], w, tip, w_com,
                                             max_weight)
     return (x0 + k_off * (t0 - x0), x1 + k_off * (t1 - x1), x2 + k_off * (t2 - x2), clamped)
 
 
 @njit(cache=True, inline='always', fastmath=TRACK_FASTMATH, error_model='numpy')
-def _advance(X0, P, T, kk, w, tip_f, inv_len, max_weight, k_off):
+def _advance(block, T, j, kk, w, tip_f, weights):
     """Lane ``kk`` of :func:`_predict`: :func:`_moved` with the per-lane values of ``T``
-    (w_tip, centre, weight per length, displacement, target) into ``P``; 1 if clamped."""
-    P[0, kk], P[1, kk], P[2, kk], clamped = _moved(
-        X0[0, kk], X0[1, kk], X0[2, kk], w, tip_f * T[_TW, kk], T[_C0, kk], T[_C1, kk],
-        T[_C2, kk], T[_CW, kk], inv_len[kk], T[_DX, kk], T[_DY, kk], T[_DZ, kk], T[_QX, kk],
-        T[_QY, kk], T[_QZ, kk], max_weight, k_off)
+    (w_tip, centre, weight per length, displacement, target) into the new positions; 1 if
+    clamped."""
+    X0, _, P, _, inv_len = block
+    P[j, 0, kk], P[j, 1, kk], P[j, 2, kk], clamped = _moved(
+        (X0[j, 0, kk], X0[j, 1, kk], X0[j, 2, kk]), w, tip_f * T[_TW, kk],
+        (T[_C0, kk], T[_C1, kk], T[_C2, kk], T[_CW, kk]), inv_len[kk],
+        (T[_DX, kk], T[_DY, kk], T[_DZ, kk]), (T[_QX, kk], T[_QY, kk], T[_QZ, kk]),
+        (weights[4], weights[5]))
     return clamped
 
 
 @njit(cache=True, inline='always', fastmath=TRACK_FASTMATH, error_model='numpy')
-def _group_sums(P, T, l0, l1):
-    """Sums over lanes ``l0 .. l1-1`` of the predicted positions ``P`` and of the targets
-    ``T[_QX.._QZ]`` (groups with mixed layouts; :func:`_predict_group` sums as it goes)."""
-    u0 = uint64(l0)
+def _group_sums(P, T, j, lanes):
+    """Sums over the lanes ``lanes`` of the predicted positions ``P`` (N, 3, n) at node ``j``
+    and of the targets ``T[_QX.._QZ]`` (groups with mixed layouts; :func:`_predict_group` sums
+    as it goes)."""
+    u0 = uint64(lanes[0])
     xs0 = xs1 = xs2 = qs0 = qs1 = qs2 = 0.0
-    for kk in range(uint64(l1 - l0)):     # one loop for all six sums
+    for kk in range(uint64(lanes[1] - lanes[0])):     # one loop for all six sums
         i = u0 + kk
-        xs0 += P[0, i]
-        xs1 += P[1, i]
-        xs2 += P[2, i]
+        xs0 += P[j, 0, i]
+        xs1 += P[j, 1, i]
+        xs2 += P[j, 2, i]
         qs0 += T[_QX, i]
         qs1 += T[_QY, i]
         qs2 += T[_QZ, i]
@@ -596,14 +605,16 @@ def _group_sums(P, T, l0, l1):
 
 
 @njit(cache=True, inline='always', fastmath=TRACK_FASTMATH, error_model='numpy')
-def _group_stage(P, l0, l1, k_com, spread, var_target, have_target, xs0, xs1, xs2, qs0, qs1,
-                 qs2):
-    """(d) centre-of-mass tracking and (e) spread control of one node index of one group (lanes
-    ``l0 .. l1-1`` of the block), on the predicted positions ``P`` in place, given the sums of
-    the group's predicted positions ``xs*`` and of its targets ``qs*``."""
-    n = l1 - l0
-    u0 = uint64(l0)
-    lanes = uint64(n)
+def _group_stage(P, j, lanes, stage, sums):
+    """(d) centre-of-mass tracking and (e) spread control of node ``j`` of one group (the
+    lanes ``lanes`` of the block), on the predicted positions ``P`` (N, 3, n) in place;
+    ``stage`` = ``(k_com, spread, var_target, have_target)``, ``sums`` the sums of the group's
+    predicted positions ``xs*`` and of its targets ``qs*``."""
+    k_com, spread, var_target, have_target = stage
+    xs0, xs1, xs2, qs0, qs1, qs2 = sums
+    n = lanes[1] - lanes[0]
+    u0 = uint64(lanes[0])
+    count = uint64(n)
     m0 = xs0 / n
     m1 = xs1 / n
     m2 = xs2 / n
@@ -616,33 +627,38 @@ def _group_stage(P, l0, l1, k_com, spread, var_target, have_target, xs0, xs1, xs
     # (e) scale about the shifted centre toward the target variance
     f = 1.0
     if spread > 0.0 and n > 1:
-        f = spread_factor(group_variance(P, u0, lanes, m0, m1, m2), var_target, spread)
+        f = spread_factor(group_variance(P, j, u0, count, (m0, m1, m2)), var_target, spread)
     # x -> c + f (x + d - c) with c = m + d, i.e. x -> m + d + f (x - m)
-    for kk in range(lanes):
+    for kk in range(count):
         i = u0 + kk
-        P[0, i] = m0 + d0 + f * (P[0, i] - m0)
-        P[1, i] = m1 + d1 + f * (P[1, i] - m1)
-        P[2, i] = m2 + d2 + f * (P[2, i] - m2)
+        P[j, 0, i] = m0 + d0 + f * (P[j, 0, i] - m0)
+        P[j, 1, i] = m1 + d1 + f * (P[j, 1, i] - m1)
+        P[j, 2, i] = m2 + d2 + f * (P[j, 2, i] - m2)
 
 
 @njit(cache=True, inline='always', fastmath=TRACK_FASTMATH, error_model='numpy')
-def _follow(B, P, T, n, k0, order, seg_len, rest, R, j):
-    """(f) Follow-The-Leader: node ``j`` of the block's lanes (``P`` (3, n)) put at its rest
-    length ``seg_len`` from node ``j - 1`` (``B`` (3, n), final), along the current direction; a
-    node without a direction continues along its head-carried rest segment."""
+def _follow(P, T, j, lanes, strands, R):
+    """(f) Follow-The-Leader: node ``j`` of the block's lanes (``P`` (N, 3, n) the new
+    positions, ``lanes`` = ``(n, k0)``: the lanes and the group-order row of the first) put at
+    its rest length from node ``j - 1`` (final), along the current direction; a node without a
+    direction continues along its head-carried rest segment (``strands`` = ``(order, seg_len,
+    rest)``: the ghost of each group-order row, the block's rest lengths (N-1, n), the rest
+    shapes; ``R`` the head rotation)."""
+    n, k0 = lanes
+    order, seg_len, rest = strands
     n_bad = 0
     for kk in range(n):
-        d0 = P[0, kk] - B[0, kk]
-        d1 = P[1, kk] - B[1, kk]
-        d2 = P[2, kk] - B[2, kk]
+        d0 = P[j, 0, kk] - P[j - 1, 0, kk]
+        d1 = P[j, 1, kk] - P[j - 1, 1, kk]
+        d2 = P[j, 2, kk] - P[j - 1, 2, kk]
         nd = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
         ok = nd > 1e-300 and nd < 1e300
-        sc = seg_len[kk] / nd if ok else 0.0
+        sc = seg_len[j - 1, kk] / nd if ok else 0.0
         T[_FLAG, kk] = 0.0 if ok else 1.0
         n_bad += 0 if ok else 1
-        P[0, kk] = B[0, kk] + d0 * sc
-        P[1, kk] = B[1, kk] + d1 * sc
-        P[2, kk] = B[2, kk] + d2 * sc
+        P[j, 0, kk] = P[j - 1, 0, kk] + d0 * sc
+        P[j, 1, kk] = P[j - 1, 1, kk] + d1 * sc
+        P[j, 2, kk] = P[j - 1, 2, kk] + d2 * sc
     if n_bad == 0:
         return
     for kk in range(n):
@@ -652,12 +668,12 @@ def _follow(B, P, T, n, k0, order, seg_len, rest, R, j):
         r0 = rest[s, j, 0] - rest[s, j - 1, 0]
         r1 = rest[s, j, 1] - rest[s, j - 1, 1]
         r2 = rest[s, j, 2] - rest[s, j - 1, 2]
-        P[0, kk] = B[0, kk] + R[0, 0] * r0 + R[0, 1] * r1 + R[0, 2] * r2
-        P[1, kk] = B[1, kk] + R[1, 0] * r0 + R[1, 1] * r1 + R[1, 2] * r2
-        P[2, kk] = B[2, kk] + R[2, 0] * r0 + R[2, 1] * r1 + R[2, 2] * r2
+        P[j, 0, kk] = P[j - 1, 0, kk] + R[0, 0] * r0 + R[0, 1] * r1 + R[0, 2] * r2
+        P[j, 1, kk] = P[j - 1, 1, kk] + R[1, 0] * r0 + R[1, 1] * r1 + R[1, 2] * r2
+        P[j, 2, kk] = P[j - 1, 2, kk] + R[2, 0] * r0 + R[2, 1] * r1 + R[2, 2] * r2
 
 
-@njit(cache=True, nogil=True, **NO_REFCOUNT)
+@njit(cache=True, nogil=True)
 def copy_blocks(x, v, order, block_rows, xb, vb, into_blocks, with_v):
     """Ghost state between the user's ``x``, ``v`` (S, N, 3) and the kernel's ``xb``, ``vb``
     (S * N * 3,) (block by block, [node][axis][ghost]; see :func:`group_blocks`): into the

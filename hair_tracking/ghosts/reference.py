@@ -106,7 +106,7 @@ def ghost_step(x, v, ghost_rest, ghost_len, guide_of, seg, t, guide_rest, gx, gx
                 delta = tr.com_strength * (q.mean(axis=0) - mean)
                 f = 1.0
                 if tr.spread > 0 and n > 1:
-                    var = group_variance(np.ascontiguousarray(xp.T), 0, n, *mean)
+                    var = group_variance(np.ascontiguousarray(xp.T)[None], 0, 0, n, tuple(mean))
                     f = spread_factor(var, var_target[g][j], tr.spread)
                 c = mean + delta
                 xp = c + f * (xp + delta - c)
@@ -136,10 +136,10 @@ def _collide_nodes(p, start, prev, seg_len, rest_seg, head, collider, restore):
     a = collider.radii + collider.margin
     out = p.copy()
     for k in range(p.shape[0]):
-        moved, y0, y1, y2 = push_out(*p[k], *start[k], R, *c, *a, collider.friction,
-                                     collider.refine)
+        contact = (tuple(R.reshape(-1)), *c, *a, collider.friction, collider.refine)
+        moved, y0, y1, y2 = push_out(*p[k], *start[k], contact)
         if moved and restore:
-            y0, y1, y2 = restore_node(y0, y1, y2, *prev[k], seg_len[k], *rest_seg[k], R, *c,
-                                      *a, collider.refine, 0)
+            y0, y1, y2 = restore_node((y0, y1, y2), tuple(prev[k]), seg_len[k],
+                                      tuple(rest_seg[k]), R, (*c, *a, collider.refine), 0)
         out[k] = (y0, y1, y2)
     return out

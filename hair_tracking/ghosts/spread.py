@@ -27,16 +27,18 @@ from numba import njit
 
 
 @njit(cache=True, inline='always')
-def group_variance(P, l0, lanes, m0, m1, m2):
-    """Equation (3): ``sum_i || P[:, i] - m ||^2`` over the lanes ``l0 .. l0 + lanes - 1`` of
-    ``P`` (3, L) (one group's nodes at one node index, [m]) about the centre ``m`` [m^2].
-    ``l0`` and ``lanes`` unsigned (``uint64``) in the kernel, so that the loop vectorises."""
+def group_variance(P, j, l0, lanes, m):
+    """Equation (3): ``sum_i || P[j, :, i] - m ||^2`` over the lanes ``l0 .. l0 + lanes - 1``
+    of ``P`` (N, 3, L) (one group's nodes at node index ``j``, [m]) about the centre ``m`` (a
+    tuple) [m^2].  ``l0`` and ``lanes`` unsigned (``uint64``) in the kernel, so that the loop
+    vectorises."""
+    m0, m1, m2 = m
     var = 0.0
     for kk in range(lanes):
         i = l0 + kk
-        e0 = P[0, i] - m0
-        e1 = P[1, i] - m1
-        e2 = P[2, i] - m2
+        e0 = P[j, 0, i] - m0
+        e1 = P[j, 1, i] - m1
+        e2 = P[j, 2, i] - m2
         var += e0 * e0 + e1 * e1 + e2 * e2
     return var
 

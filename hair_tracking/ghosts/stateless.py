@@ -7,34 +7,37 @@ margin rule (:func:`collider_axes`), and every strand is placed from the guides 
 of the last step when the hair is next read (:class:`StatelessTracker`), once per output frame
 however many head poses came in between.
 """
-from typing import Dict, Optional, Tuple
+from collections import namedtuple
+from typing import Dict, Tuple
 
 import numpy as np
 from numba import njit
 
-from hair_tracking.core.model import HeadPose, StrandSet, strand_part
+from hair_tracking.core.model import carry_rigidly, HeadPose, StrandSet, strand_part
 from hair_tracking.core.point_records import points_to_records, record_target
+from hair_tracking.ghosts.interface import TrackStep
+from hair_tracking.grooms.guides import farthest_points
 from hair_tracking.guides.collision import outside_distance, world_center
+
+
+#: Where a placement kernel writes, a plain tuple in these fields' order (numba types a named
+#: tuple by encoding its class and field names on every call): ``out`` (S, N, >= 3) the
+#: positions as x y z, or with ``check`` point records (the points that are not finite counted),
+#: carried to ``rot (x - origin)`` when ``moved``
+#: (:func:`~hair_tracking.core.point_records.record_target`,
+#: :func:`~hair_tracking.core.point_records.put_record`).
+Placement = namedtuple('Placement', ['out', 'rot', 'origin', 'moved', 'check'])
+#: What a placement kernel places the ghosts from (a plain tuple in these fields' order): the
+#: guides at the ghosts' node fractions ``gcol`` (G, 3, N), component-major
+#: (:func:`guide_columns`), and the head pose ``rot`` (3, 3), ``pos`` (3,).
+GuidePose = namedtuple('GuidePose', ['gcol', 'rot', 'pos'])
 
 
 def choose_guides(roots: np.ndarray, count: int) -> np.ndarray:
     """Indices of ``count`` strands spread evenly over the scalp: farthest-point sampling of the
-    root positions (S, 3), starting from the root nearest their centroid; deterministic.
-    Sorted ascending."""
-    roots = np.asarray(roots, dtype=np.float64)
-    s = roots.shape[0]
-    if not 1 <= count <= s:
-        raise ValueError(f'guides: need 1..{s} guides among {s} strands, got {count}')
-    if count == s:
-        return np.arange(s)
-    first = int(np.argmin(np.sum((roots - roots.mean(axis=0)) ** 2, axis=1)))
-    chosen = [first]
-    dist = np.sum((roots - roots[first]) ** 2, axis=1)
-    for _ in range(count - 1):
-        nxt = int(np.argmax(dist))
-        chosen.append(nxt)
-        dist = np.minimum(dist, np.sum((roots - roots[nxt]) ** 2, axis=1))
-    return np.sort(np.asarray(chosen, dtype=np.int64))
+    root positions (S, 3) (:func:`~hair_tracking.grooms.guides.farthest_points`), starting from
+    the root nearest their centroid; deterministic.  Sorted ascending."""
+    return farthest_points(roots, count)
 
 
 def node_map(ghost_nodes: int, guide_nodes: int) -> Tuple[np.ndarray, np.ndarray]:
@@ -136,21 +139,25 @@ def guide_column(gx, seg, t, out, g):
 
 
 class StatelessTracker:
-    """Places ``ghosts`` from ``guides`` when they are read; a subclass supplies the placement
-    (:meth:`_place`).
+    """Places ``ghosts`` from the guides of its last step when the hair is read; a subclass
+    supplies the placement (:meth:`_place`).  Implements
+    :class:`~hair_tracking.ghosts.interface.GhostTracking`.
 
     ``guides`` must be some of the ghost strands: ``guide_index[i]`` is the ghost strand that
     guide ``i`` is (``ghosts.rest[guide_index] == guides.rest``).  ``collider``, when given and
     ``scene.tracking.collide`` is true, is the head collider (a
     :class:`~hair_tracking.guides.collision.Collider`).  Ghosts carry no velocity of their
-    own (``ghosts.v`` stays zero).
+    own (:meth:`velocities` is zero).
 
-    The ghost positions are placed in float32 (:meth:`positions`, world frame): the precision
-    of the point cloud they are published in, and half the bytes of float64.  ``ghosts.x``
-    (float64) receives them when it is read or assigned; what is assigned there is taken back on
-    the next read.  An output that is written before anything reads the positions
-    (:meth:`write_records`: a point cloud) receives the ghosts straight from the kernel, without
-    the float32 copy in between; a later read places them again from the same step.
+    :meth:`step` keeps the guides (read at the ghosts' node fractions) and the head pose; the
+    ghosts are placed from them when they are next read: :meth:`positions` (and
+    :meth:`part_positions` of all parts, or :meth:`carry`) places every strand once, in float32
+    (the precision of the point cloud they are published in, and half the bytes of float64);
+    :meth:`write_records` before any such read writes the point records straight from the
+    kernel, without the float32 array in between, and leaves the positions to be placed when
+    read; :meth:`part_positions` before any such read places the part's strands alone.  So a
+    step that nothing reads costs the copy of the guides only.  Positions set by
+    :meth:`reset` and :meth:`carry` are kept exactly (float64) until the next step.
     """
 
     def __init__(self, ghosts: StrandSet, guides: StrandSet, guide_index, scene, collider=None):
@@ -164,76 +171,84 @@ class StatelessTracker:
         self.seg, self.t = node_map(ghosts.rest.shape[1], guides.rest.shape[1])
         self._gcol = np.empty((guides.count, 3, ghosts.rest.shape[1]))
         self._rot, self._pos = np.empty((3, 3)), np.empty(3)
-        self._pending = False         # a step not yet placed into _x32 (see step and release)
+        self._pose = (self._gcol, self._rot, self._pos)       # GuidePose of the last step
+        self._pending = False         # a step not yet placed into _x32
         self._x32 = ghosts.x.astype(np.float32)
-        self._x32_out = (self._x32, np.eye(3), np.zeros(3), False, False)
-        self._in_x32 = True           # whether _x32 (else ghosts._x) holds the positions
-        ghosts.hold(self)             # so a write to ghosts.x before the first step is seen
+        self._x32_target = (self._x32, np.eye(3), np.zeros(3), False, False)      # Placement
+        self._x64 = None              # the positions set by reset or carry, until a step
+        self._v = np.zeros(ghosts.rest.shape)
+        self._v.flags.writeable = False
         self.collide = bool(scene.tracking.collide and collider is not None)
+        #: the ellipsoid the ghosts are kept out of, head frame (:func:`collider_axes`; a
+        #: stand-in without a collider)
         if self.collide:
-            self._center, self._axes = collider_axes(ghosts, collider)
+            self.center, self.axes = collider_axes(ghosts, collider)
         else:
-            self._center, self._axes = np.zeros(3), np.ones(3)
+            self.center, self.axes = np.zeros(3), np.ones(3)
         self.stats: Dict[str, int] = {'ghosts': int(ghosts.count), 'steps': 0, 'evaluations': 0,
                                       'contacts': 0, 'parallel': 1}
 
-    def step(self, dt: float, guide_x_old: Optional[np.ndarray], head: HeadPose,
-             substeps: int = 1) -> None:
-        """Take the guides now (read at the ghosts' node fractions) and the head pose ``head``;
-        every ghost is placed from them when its positions are next read (``ghosts.x``,
-        :meth:`positions`) or written (:meth:`write_records`), so a step that no read follows
-        costs this copy only.  Nothing is integrated (``dt``, ``guide_x_old`` and
-        ``substeps`` are accepted for the simulator's interface and not needed)."""
-        guide_columns(self.guides.x, self.seg, self.t, self._gcol)
-        np.copyto(self._rot, head.rotation)
-        np.copyto(self._pos, head.position)
+    def step(self, motion: TrackStep) -> None:
+        """Keep the guides ``motion.guide_x`` (read at the ghosts' node fractions) and the head
+        pose ``motion.head``: every ghost is placed from them when it is next read."""
+        guide_columns(motion.guide_x, self.seg, self.t, self._gcol)
+        np.copyto(self._rot, motion.head.rotation)
+        np.copyto(self._pos, motion.head.position)
         self._pending = True
-        self.ghosts.hold(self)
+        self._x64 = None
         self.stats['steps'] += 1
 
-    def release(self) -> None:
-        """Hand the positions to ``ghosts.x``, placing the ghosts from the last :meth:`step`
-        first if not done yet (called by :class:`~hair_tracking.core.model.StrandSet` when
-        ``ghosts.x`` or ``ghosts.v`` is read or assigned)."""
-        self._evaluate()
-        if self._in_x32:
-            np.copyto(self.ghosts._x, self._x32)
-            self._in_x32 = False
-
     def _evaluate(self) -> None:
+        """Place every ghost from the last step into ``_x32`` if not done yet."""
         if not self._pending:
             return
         self._pending = False
-        self._placed_into(*self._x32_out)
-        self._in_x32 = True
+        self._placed_into(self._x32_target)
 
-    def _placed_into(self, out, rot, origin, moved, check) -> bool:
-        contacts, finite = self._place(out, rot, origin, moved, check)
+    def _placed_into(self, target) -> bool:
+        contacts, finite = self._place(target)
         self.stats['contacts'] = int(contacts)
         self.stats['evaluations'] += 1
         return bool(finite)
 
-    def _place(self, out, rot, origin, moved, check) -> Tuple[int, bool]:
-        """Every ghost from ``_gcol``, ``_rot``, ``_pos`` as float32 x y z into ``out`` (S, N,
-        >= 3): ``_x32`` as it is, or with ``check`` records carried by ``rot``, ``origin`` when
-        ``moved`` (:func:`~hair_tracking.core.point_records.record_target`); returns the number
+    def _place(self, target) -> Tuple[int, bool]:
+        """Every ghost from the last step (``_pose``) as float32 x y z into ``target`` (the
+        fields of :data:`Placement`: ``_x32`` as it is, or point records); returns the number
         of head contacts and whether every coordinate written is finite (true without
         ``check``)."""
         raise NotImplementedError
 
+    def _set(self, x: np.ndarray) -> None:
+        """Positions ``x`` (S, N, 3) float64 from outside a step, kept exactly."""
+        self._pending = False
+        self._x64 = x
+        self._x32[...] = x
+
     def reset(self, head: HeadPose) -> None:
         """Rest shape carried by ``head``."""
-        self._pending = False
-        self.ghosts.place_at(head)
+        self._set(head.to_world(self.ghosts.rest))
+
+    def carry(self, old: HeadPose, new: HeadPose) -> None:
+        """The ghosts now (placed from the last step first if not done yet) carried rigidly
+        with the head from ``old`` to ``new``."""
+        self._evaluate()
+        x = self._x64 if self._x64 is not None else self._x32.astype(np.float64)
+        self._set(carry_rigidly(x, old, new))
+
+    def zero_velocities(self) -> None:
+        """Nothing to do: the ghosts carry no velocity of their own."""
 
     def positions(self) -> np.ndarray:
-        """The ghost positions (S, N, 3) float32, world frame [m] (the live array: read
-        only)."""
+        """The ghost positions (S, N, 3) float32, world frame [m], placed from the last step
+        first if not done yet (read only)."""
         self._evaluate()
-        if not self._in_x32:
-            np.copyto(self._x32, self.ghosts._x)
-            self._in_x32 = True
-        return self._x32
+        view = self._x32.view()
+        view.flags.writeable = False
+        return view
+
+    def velocities(self) -> np.ndarray:
+        """Zero (S, N, 3): the ghosts carry no velocity of their own."""
+        return self._v
 
     def part_positions(self, part: int, parts: int) -> Tuple[np.ndarray, np.ndarray]:
         """The strands of part ``part`` of ``parts`` (about ``S / parts`` strands; the parts
@@ -260,5 +275,5 @@ class StatelessTracker:
         when read."""
         if self._pending:
             s, n = self.ghosts.rest.shape[:2]
-            return self._placed_into(*record_target(words, stride, s, n, rot, origin), True)
+            return self._placed_into(record_target(words, stride, s, n, rot, origin) + (True,))
         return points_to_records(words, stride, self.positions(), rot, origin)

@@ -31,15 +31,16 @@ group through ``order`` (ghost indices sorted by guide, stable); group ``g`` is
 ``order[group_start[g]:group_start[g + 1]]`` and follows guide ``group_guide[g]``.
 """
 import math
-from typing import Dict, Tuple
+from typing import Dict, Optional, Tuple
 
 import numba
 import numpy as np
 
-from hair_tracking.core.model import HeadPose, StrandSet, strand_part
-from hair_tracking.core.point_records import blocks_to_records, points_to_records
+from hair_tracking.core.model import carry_rigidly, HeadPose, StrandSet, strand_part
+from hair_tracking.core.point_records import blocks_to_records
 from hair_tracking.core.scene import Scene
 from hair_tracking.ghosts.correspondence import assign_guides, node_correspondence
+from hair_tracking.ghosts.interface import TrackStep
 from hair_tracking.ghosts.kernels import (block_groups, chunk_count, copy_blocks, GhostModel,
                                           group_blocks, guide_frames, TMP_ROWS, track_groups,
                                           track_groups_serial, TrackWork)
@@ -49,40 +50,40 @@ from hair_tracking.guides.integrate import runs_parallel
 
 
 class GhostTracker:
-    """Moves ``ghosts`` (a :class:`StrandSet`) after ``guides`` each substep.
+    """Moves ``ghosts`` (a :class:`StrandSet`) after ``guides``; implements
+    :class:`~hair_tracking.ghosts.interface.GhostTracking`.
 
-    ``ghosts.x``/``ghosts.v`` (world frame [m], [m/s]) show the state whenever they are read:
-    between steps the tracker keeps it in its kernel's layout (block by block, [node][axis]
-    [ghost], see :mod:`hair_tracking.ghosts.kernels`) and writes it back into the arrays only when
-    they are read or assigned (:meth:`release`, called by the StrandSet's properties); a write into
-    them is taken by the next step.  So several substeps without a read cost no conversion;
-    :meth:`positions` reads without handing the state back.
+    The tracker takes ``ghosts.x`` and ``ghosts.v`` (world frame [m], [m/s]) as its start
+    state and keeps the state in its kernel's layout (block by block, [node][axis][ghost], see
+    :mod:`hair_tracking.ghosts.kernels`) from then on: :meth:`positions` and :meth:`velocities`
+    write it out into arrays of the ghosts' shape when they are read after a step (the
+    positions alone for :meth:`positions`), :meth:`write_records` reads it straight from the
+    blocks, and :meth:`set_state` puts a state in.  So several substeps without a read cost no
+    conversion.
 
     ``collider`` is used only when ``scene.tracking.collide`` is true and it is given; it must
     then expose ``apply(x, x_prev, inv_mass, head) -> int``.
 
     ``regroup`` (default true): the ghost StrandSet is reordered **once**, at construction, so
     that the ghosts of each guide are contiguous in memory (stable order within a group); its
-    arrays are replaced by reordered copies (read ``ghosts.x`` after stepping rather than
-    keeping a reference to it).  The kernel then streams through memory instead of jumping
-    between strands, several times faster for 10^5 ghosts.  ``permutation[i]`` is the index, before
-    construction, of the ghost now in row ``i`` (identity when the set was already grouped, e.g.
-    when a tracker is rebuilt on the same ghosts).  With ``regroup=False`` the rows are left
-    alone and visited through ``order``.
+    arrays are replaced by reordered copies.  The kernel then streams through memory instead of
+    jumping between strands.  ``permutation[i]`` is the index, before construction, of the ghost
+    now in row ``i`` (identity when the set was already grouped, e.g. when a tracker is rebuilt
+    on the same ghosts).  With ``regroup=False`` the rows are left alone and visited through
+    ``order``.
 
-    ``keep_state`` is accepted for the simulator's rebuilds: apart from the reordering, the
-    construction never changes the ghosts' state, so a tracker rebuilt with other tracking
-    options continues from the current positions (``reset`` restarts them).
+    ``parallel``: run the parallel kernel rather than its serial variant (default: by the ghost
+    node count, :func:`~hair_tracking.guides.integrate.runs_parallel`; the simulator decides
+    for the whole scene).
     """
 
     def __init__(self, ghosts: StrandSet, guides: StrandSet, scene: Scene, collider=None,
-                 keep_state: bool = False, regroup: bool = True):
+                 regroup: bool = True, parallel: Optional[bool] = None):
         tr = scene.tracking
         self.ghosts = ghosts
         self.guides = guides
         self.tracking = tr
         self.collider = collider
-        self.keep_state = bool(keep_state)
         _check_strandset('ghosts', ghosts)
         _check_strandset('guides', guides)
         if guides.count == 0:
@@ -92,6 +93,7 @@ class GhostTracker:
         if self.collide and not callable(getattr(collider, 'apply', None)):
             raise ValueError('collider must expose apply(x, x_prev, inv_mass, head)')
         s_count, n_nodes = ghosts.count, ghosts.nodes
+        self.parallel = bool(runs_parallel(s_count * n_nodes) if parallel is None else parallel)
 
         # -- correspondence (equation (1)) and node correspondence by arc length
         self.guide_of, self.cost = assign_guides(ghosts.rest, guides.rest, tr.candidates)
@@ -174,12 +176,14 @@ class GhostTracker:
         self._q_buf = np.empty((chunks, groups_per_block, guides.nodes - 1, 3, 3))
         lanes = int(np.diff(self._block_rows).max()) if n_blocks else 1
         self._buf = np.zeros((chunks, 3 * n_nodes * lanes))
-        # the state between substeps, in the kernel's layout (see StrandSet.hold / release)
+        # the state, in the kernel's layout, and the arrays positions() and velocities() show
+        # it in (written out when read after a step)
         self._xb = np.empty(s_count * n_nodes * 3)
         self._vb = np.empty(s_count * n_nodes * 3)
-        self._held = False
-        self._synced_x = False        # ghosts.x equals the kept positions (no step since)
-        self._synced_v = False        # ghosts.v equals the kept velocities
+        self._x = np.empty(ghosts.rest.shape)
+        self._v = np.empty(ghosts.rest.shape)
+        self._synced_x = False        # _x equals the kept positions (no step since)
+        self._synced_v = False        # _v equals the kept velocities
         self._tmp = np.zeros((chunks, TMP_ROWS * lanes))
         self._clamped = np.zeros(n_blocks, dtype=np.int64)
         self._contacts = np.zeros(chunks, dtype=np.int64)
@@ -194,55 +198,63 @@ class GhostTracker:
             self._axes, self._center = np.ones(3), np.zeros(3)
             self._friction, self._refine = 0.0, 0
         self._collide_after = self.collide and not self._fused_collider
-        self._x_prev = np.empty_like(ghosts.x) if self._collide_after else None
-        # the kernel's static arguments, plain tuples in the fields' order (see
-        # tracking_kernels.GhostModel)
-        self._model = tuple(GhostModel(
+        self._x_prev = np.empty(ghosts.rest.shape) if self._collide_after else None
+        #: the kernel's static data: the fields of
+        #: :data:`~hair_tracking.ghosts.kernels.GhostModel` (a plain tuple)
+        self.model = tuple(GhostModel(
             ghosts.rest, self._seg_len_blocks, self.order, self.group_start, self.block_group,
             self.group_guide, self._group_row, self._node_table, self._node_row,
             self._rest_off_blocks, self._root_blocks, self._inv_len, self._var_target,
             self._tan_rest))
-        self._work = tuple(TrackWork(self._q_buf, self._buf, self._tmp, self._clamped,
-                                     self._contacts))
+        #: the kernel's work space and counters: the fields of
+        #: :data:`~hair_tracking.ghosts.kernels.TrackWork` (a plain tuple)
+        self.work = tuple(TrackWork(self._q_buf, self._buf, self._tmp, self._clamped,
+                                    self._contacts))
         self.stats: Dict[str, int] = {
             'ghosts': int(s_count), 'groups': int(n_groups),
             'largest_group': int(group_size.max()) if n_groups else 0,
-            'steps': 0, 'clamped': 0, 'contacts': 0, 'parallel': 0,
+            'steps': 0, 'clamped': 0, 'contacts': 0, 'parallel': int(self.parallel),
         }
+        self.set_state(ghosts.x, ghosts.v)      # the start state
 
     # ------------------------------------------------------------------ API
-    def release(self) -> None:
-        """Write the state kept in the kernel's layout back into ``ghosts.x`` and ``ghosts.v``
-        (called by :class:`~hair_tracking.core.model.StrandSet` whenever they are read or
-        assigned); the next step reads them again."""
-        if self._held:
-            self._write_back()
-            self._held = False
+    def set_state(self, x: np.ndarray, v: np.ndarray) -> None:
+        """Put the ghosts at ``x`` with velocities ``v`` ((S, N, 3) in the ghosts' row order,
+        world frame [m], [m/s]); the next step starts from there."""
+        shape = self.ghosts.rest.shape
+        x, v = np.asarray(x), np.asarray(v)
+        if x.shape != shape or v.shape != shape:
+            raise ValueError(f'ghost positions and velocities must be shaped {shape}, got '
+                             f'{x.shape} and {v.shape}')
+        np.copyto(self._x, x)
+        np.copyto(self._v, v)
+        copy_blocks(self._x, self._v, self.order, self._block_rows, self._xb, self._vb, True,
+                    True)
+        self._synced_x = self._synced_v = True
 
     def _write_back(self, with_v: bool = True) -> None:
-        """The kept state into ``ghosts.x`` (and ``ghosts.v`` if ``with_v``), unless they hold
-        it already."""
+        """The kept state into ``_x`` (and ``_v`` if ``with_v``), unless they hold it
+        already."""
         need_v = with_v and not self._synced_v
         if need_v or not self._synced_x:
-            copy_blocks(self.ghosts._x, self.ghosts._v, self.order, self._block_rows, self._xb,
-                        self._vb, False, need_v)
+            copy_blocks(self._x, self._v, self.order, self._block_rows, self._xb, self._vb,
+                        False, need_v)
             self._synced_x = True
             self._synced_v = self._synced_v or need_v
 
     def positions(self) -> np.ndarray:
-        """The ghosts' positions (S, N, 3), world [m], as a read-only view of ``ghosts.x``:
-        written back from the kernel's layout if a step ran since, but *without* handing the
-        state back, so the next step continues from its own copy instead of reading the arrays
-        again (which a read of ``ghosts.x`` must make it do: the caller may write into them).
-        Only the positions are written back (the velocities wait for a read of
-        ``ghosts.v``): at 10 k ghosts x and v together took 2.4 ms here, x alone half."""
-        ghosts = self.ghosts
-        if ghosts._holder is self and self._held:
-            self._write_back(with_v=False)
-            x = ghosts._x
-        else:
-            x = ghosts.x
-        view = x.view()
+        """The ghosts' positions (S, N, 3), world [m], read only: written out of the kernel's
+        layout if a step ran since the last read (the positions alone: output needs no
+        velocities)."""
+        self._write_back(with_v=False)
+        view = self._x.view()
+        view.flags.writeable = False
+        return view
+
+    def velocities(self) -> np.ndarray:
+        """The ghosts' velocities (S, N, 3) [m/s], read only (see :meth:`positions`)."""
+        self._write_back(with_v=True)
+        view = self._v.view()
         view.flags.writeable = False
         return view
 
@@ -256,79 +268,71 @@ class GhostTracker:
         """The ghosts' positions as float32 x y z at the start of ``words``' records (S * N
         of ``stride`` words, ghost ``s``'s node ``j`` at record ``s * N + j``), transformed
         to ``rot (x - origin)`` if given; True when all are finite.  Read straight from the
-        kernel's layout while the tracker holds the state (no write-back into ``ghosts.x``:
-        at 10 k ghosts x 16 nodes that pass and the float32 encoding of its result took about
-        3 ms, this one 1.5), else from ``ghosts.x``."""
-        ghosts = self.ghosts
-        if ghosts._holder is self and self._held:
-            return blocks_to_records(words, stride, self._xb, self.order, self._block_rows,
-                                     ghosts.rest.shape[1], rot, origin)
-        return points_to_records(words, stride, ghosts.x, rot, origin)
-
-    def _take(self) -> None:
-        """Copy ``ghosts.x`` and ``ghosts.v`` into the kernel's layout and keep them there."""
-        ghosts = self.ghosts
-        if ghosts._holder is not self:
-            ghosts.hold(self)
-        if self._held:
-            return
-        x, v = ghosts._x, ghosts._v
-        if not (isinstance(x, np.ndarray) and isinstance(v, np.ndarray) and
-                x.dtype == np.float64 and v.dtype == np.float64 and
-                x.shape == ghosts.rest.shape and v.shape == x.shape and
-                x.flags.c_contiguous and v.flags.c_contiguous):
-            raise ValueError(f'ghosts.x and ghosts.v must be C-contiguous float64 arrays shaped '
-                             f'{ghosts.rest.shape}')
-        copy_blocks(x, v, self.order, self._block_rows, self._xb, self._vb, True, True)
-        self._held = True
-        self._synced_x = self._synced_v = True
+        kernel's layout, without writing the positions out first."""
+        return blocks_to_records(words, stride, self._xb, self.order, self._block_rows,
+                                 self.ghosts.rest.shape[1], rot, origin)
 
     def reset(self, head: HeadPose) -> None:
         """Ghosts in their rest shape carried by ``head``, at rest."""
-        self.ghosts.place_at(head)
+        self.set_state(head.to_world(self.ghosts.rest), np.zeros(self.ghosts.rest.shape))
 
-    def step(self, dt: float, guide_x_old: np.ndarray, head: HeadPose,
-             substeps: int = 1) -> None:
-        """Advance the ghosts by ``dt`` [s] after the guides moved from ``guide_x_old`` to
-        ``guides.x`` (both (G, M, 3), world [m]); ``head`` is the head pose at the end.
+    def carry(self, old: HeadPose, new: HeadPose) -> None:
+        """The ghosts carried rigidly with the head from ``old`` to ``new``, at rest."""
+        self._write_back(with_v=False)
+        self._x[...] = carry_rigidly(self._x, old, new)
+        self._v[...] = 0.0
+        copy_blocks(self._x, self._v, self.order, self._block_rows, self._xb, self._vb, True,
+                    True)
+        self._synced_v = True
 
-        ``substeps`` > 1 covers that many guide substeps in one tracking step: the per-step
-        feedback strengths ``k`` (offset, centre of mass, spread) become ``1 - (1 - k)^substeps``,
-        what ``substeps`` separate steps would have applied to a constant deviation, so the pull
-        per second does not depend on how often the ghosts are tracked."""
+    def zero_velocities(self) -> None:
+        """The ghosts at rest where they are."""
+        self._vb[...] = 0.0
+        self._v[...] = 0.0
+        self._synced_v = True
+
+    def step(self, motion: TrackStep) -> None:
+        """Advance the ghosts by ``motion.dt`` [s] after the guides moved from
+        ``motion.guide_x_old`` to ``motion.guide_x`` (both (G, M, 3), world [m]);
+        ``motion.head`` is the head pose at the end.
+
+        ``motion.substeps`` > 1 covers that many guide substeps in one tracking step: the
+        per-step feedback strengths ``k`` (offset, centre of mass, spread) become
+        ``1 - (1 - k)^substeps``, what ``substeps`` separate steps would have applied to a
+        constant deviation, so the pull per second does not depend on how often the ghosts are
+        tracked."""
+        dt, substeps, guide_x_old, gx, head = motion
         if not (dt > 0.0 and math.isfinite(dt)):
             raise ValueError(f'dt must be a finite number > 0 [s], got {dt!r}')
-        gx = self.guides.x
-        if guide_x_old.shape != gx.shape:
-            raise ValueError(f'guide_x_old must be shaped {gx.shape} like guides.x, got '
-                             f'{guide_x_old.shape}')
+        if guide_x_old is None or guide_x_old.shape != gx.shape or \
+                gx.shape != self.guides.rest.shape:
+            raise ValueError(f'guide_x_old must be shaped {self.guides.rest.shape} like the '
+                             f'guides, got {getattr(guide_x_old, "shape", None)}')
         tr = self.tracking
         if self._collide_after:
             np.copyto(self._x_prev, self.positions())
-        self._take()
-        nodes = self._xb.size // 3
         # plain tuples in the fields' order of GhostState, GuideMotion and TrackParams
-        motion = (_f64(gx), _f64(guide_x_old), _f64(head.rotation), _f64(head.position),
-                  1.0 / float(dt))
+        drive = (_f64(gx), _f64(guide_x_old), _f64(head.rotation), _f64(head.position),
+                 1.0 / float(dt))
         params = (self._elastic, tr.tip_weight > 0.0, tr.com_weight, tr.max_weight,
                   _per(tr.offset_strength, substeps), _per(tr.com_strength, substeps),
                   _per(tr.spread, substeps), tr.length_restore, self._fused_collider,
                   self._center, self._axes, self._friction, self._refine)
-        parallel = runs_parallel(nodes)
-        kernel = track_groups if parallel else track_groups_serial
-        kernel(self._model, (self._xb, self._vb), motion, params, self._work)
+        kernel = track_groups if self.parallel else track_groups_serial
+        kernel(self.model, (self._xb, self._vb), drive, params, self.work)
         self._synced_x = self._synced_v = False
         self.stats['steps'] += 1
-        self.stats['parallel'] = int(parallel)
         self.stats['clamped'] = int(self._clamped.sum())
         if self._fused_collider:
             self.stats['contacts'] = int(self._contacts.sum())
         elif self._collide_after:
-            x, v = self.ghosts.x, self.ghosts.v          # written back from the blocks
+            self._write_back()
+            x, v = self._x, self._v
             self.stats['contacts'] = int(
                 self.collider.apply(x, self._x_prev, self.ghosts.inv_mass, head))
             np.subtract(x, self._x_prev, out=v)
             v *= 1.0 / dt
+            self.set_state(x, v)
 
     def targets(self, head: HeadPose, guide_x: np.ndarray = None) -> np.ndarray:
         """(S, N, 3) where each ghost node is pulled by the offset feedback (c): its guide point

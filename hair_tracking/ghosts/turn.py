@@ -37,6 +37,7 @@ lanes at that node in one branch-free vector pass.
 :func:`reference_turn` is the plain-numpy statement of steps 1-3; the tests hold the compiled
 kernel (:func:`turn_strands`) to it.
 """
+from collections import namedtuple
 import math
 from typing import Tuple
 
@@ -48,7 +49,7 @@ from hair_tracking.core.point_records import put_record
 from hair_tracking.ghosts.blend import blend_weights
 from hair_tracking.ghosts.stateless import (StatelessTracker, at_fractions, ellipsoid_form,
                                             node_map, reference_contact, world_collider)
-from hair_tracking.guides.integrate import FASTMATH, NO_REFCOUNT
+from hair_tracking.guides.integrate import FASTMATH
 
 #: Strands of one guide advanced together (one block): two AVX2 or one AVX-512 register of
 #: float64 lanes.
@@ -65,6 +66,18 @@ IDLE_AT = 1e3
 IDLE, GHOST, GUIDE = 0, 1, 2
 #: [m], see :data:`GUIDE`.
 GUIDE_TOLERANCE = 1e-6
+
+#: The turn kernel's static data (:attr:`TurnTracker.model`), a plain tuple in these fields'
+#: order (numba types a named tuple by encoding its class and field names on every call):
+#: ``seg`` (B, N * 3 * lanes) float32 and ``roots`` (B, 2, 3, lanes) the blocks' rest shape
+#: (:func:`block_rest`); ``kind`` (B, lanes) int8 what each lane holds (:data:`GUIDE`);
+#: ``block_guide`` (B,) and ``block_strand`` (B, lanes) the blocks (:func:`group_blocks`);
+#: ``u0`` (G, 3, N - 1) the guides' unit rest directions (:func:`rest_directions`).
+TurnModel = namedtuple('TurnModel', ['seg', 'roots', 'kind', 'block_guide', 'block_strand',
+                                     'u0'])
+#: The turn's parameters (:attr:`TurnTracker.params`, a plain tuple): ``collide``: keep nodes
+#: out of the ellipsoid ``axes`` (radii + margin) around ``center`` (head frame).
+TurnParams = namedtuple('TurnParams', ['collide', 'center', 'axes'])
 
 
 # ----------------------------------------------------------------------------- set-up
@@ -155,9 +168,9 @@ def guide_turns(gcol, u0, rot, out, g):
         half += 1 if 1.0 + c <= HALF_TURN else 0
         vx, vy, vz = ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx
         h = 1.0 / max(1.0 + c, HALF_TURN)
-        _store_turn(out, g, j, rot, c + h * vx * vx, h * vx * vy - vz, h * vx * vz + vy,
-                    h * vx * vy + vz, c + h * vy * vy, h * vy * vz - vx,
-                    h * vx * vz - vy, h * vy * vz + vx, c + h * vz * vz)
+        _store_turn(out, g, j, rot, (c + h * vx * vx, h * vx * vy - vz, h * vx * vz + vy,
+                                     h * vx * vy + vz, c + h * vy * vy, h * vy * vz - vx,
+                                     h * vx * vz - vy, h * vy * vz + vx, c + h * vz * vz))
     if half == 0:
         return
     for j in range(n_seg):                   # the rare half turns, again one by one
@@ -177,14 +190,16 @@ def guide_turns(gcol, u0, rot, out, g):
             nx, ny, nz = -ay, ax, 0.0
         f = 1.0 / math.sqrt(nx * nx + ny * ny + nz * nz)
         nx, ny, nz = nx * f, ny * f, nz * f
-        _store_turn(out, g, j, rot, 2.0 * nx * nx - 1.0, 2.0 * nx * ny, 2.0 * nx * nz,
-                    2.0 * nx * ny, 2.0 * ny * ny - 1.0, 2.0 * ny * nz,
-                    2.0 * nx * nz, 2.0 * ny * nz, 2.0 * nz * nz - 1.0)
+        _store_turn(out, g, j, rot, (2.0 * nx * nx - 1.0, 2.0 * nx * ny, 2.0 * nx * nz,
+                                     2.0 * nx * ny, 2.0 * ny * ny - 1.0, 2.0 * ny * nz,
+                                     2.0 * nx * nz, 2.0 * ny * nz, 2.0 * nz * nz - 1.0))
 
 
 @njit(cache=True, inline='always')
-def _store_turn(out, g, j, rot, t00, t01, t02, t10, t11, t12, t20, t21, t22):
-    """``out[g, :, j]`` = the entries of ``T R`` (``T`` given by its entries)."""
+def _store_turn(out, g, j, rot, t):
+    """``out[g, :, j]`` = the entries of ``T R`` (``T`` given by its nine entries, row by
+    row)."""
+    t00, t01, t02, t10, t11, t12, t20, t21, t22 = t
     for k in range(3):
         c0, c1, c2 = rot[0, k], rot[1, k], rot[2, k]
         out[g, k, j] = t00 * c0 + t01 * c1 + t02 * c2
@@ -192,13 +207,19 @@ def _store_turn(out, g, j, rot, t00, t01, t02, t10, t11, t12, t20, t21, t22):
         out[g, 6 + k, j] = t20 * c0 + t21 * c1 + t22 * c2
 
 
-@njit(cache=True, fastmath=FASTMATH, error_model='numpy', **NO_REFCOUNT)
-def _turn_blocks(out, out_rot, out_origin, moved, check, seg, roots, kind, block_guide,
-                 block_strand, turns, gcol, rot, pos, collide, flat, geo, b0, b1):
-    """Steps 2-3 for the blocks ``b0 .. b1 - 1``, ``flat`` (2 * N * 3 * lanes) the scratch and
-    ``geo`` the collider's constants (:func:`_slide_push`; the guide's node is written here);
-    returns the number of nodes moved by the collider and the number of points written that
-    are not finite (counted with ``check`` only)."""
+@njit(cache=True, fastmath=FASTMATH, error_model='numpy')
+def _turn_blocks(target, model, pose, turns, collide, work, blocks):
+    """Steps 2-3 for the blocks ``blocks = (b0, b1)``, ``b0 .. b1 - 1`` (``target``,
+    ``model``, ``pose``, ``turns`` as :func:`turn_strands` takes them), ``work`` = ``(flat,
+    geo)``: ``flat`` (2 * N * 3 * lanes) the scratch and ``geo`` the collider's constants
+    (:func:`_slide_push`; the guide's node is written here); returns the number of nodes moved
+    by the collider and the number of points written that are not finite (counted with
+    ``check`` only)."""
+    out, out_rot, out_origin, moved, check = target                     # Placement
+    seg, roots, kind, block_guide, block_strand, _ = model              # TurnModel
+    gcol, rot, pos = pose                                               # GuidePose
+    flat, geo = work
+    b0, b1 = blocks
     n_nodes = out.shape[1]
     lanes = block_strand.shape[1]           # not a compile-time constant: LLVM vectorises
     slab = n_nodes * 3 * lanes
@@ -266,7 +287,7 @@ def _acts(kind, dx, dy, dz):
     return (kind == GHOST) | ((kind == GUIDE) & moved)         # no branches: vectorises
 
 
-@njit(cache=True, fastmath=FASTMATH, error_model='numpy', **NO_REFCOUNT)
+@njit(cache=True, fastmath=FASTMATH, error_model='numpy')
 def _slide_push(w, kind, b, j, geo):
     """Step 3 for node ``j + 1`` of every lane of the scratch ``w`` (block ``b``), one vector
     pass (selects, no branches; a function of its own, so LLVM vectorises its loop on its own
@@ -307,37 +328,35 @@ def _slide_push(w, kind, b, j, geo):
 
 
 @njit(cache=True, parallel=True, fastmath=FASTMATH)
-def turn_strands(out, out_rot, out_origin, moved, check, seg, roots, kind, block_guide,
-                 block_strand, gcol, u0, turns, rot, pos, collide, center, axes):
+def turn_strands(target, model, pose, params, turns):
     """Kernel, steps 1-3: every strand of a block (``block_strand``, :func:`group_blocks`)
-    written as x y z into ``out`` (S, N, >= 3), world [m]; with ``check`` as records
-    (:func:`~hair_tracking.core.point_records.put_record`: ``out_rot (x - out_origin)`` when
-    ``moved``, the points that are not finite counted; arguments as
-    :func:`~hair_tracking.core.point_records.record_target` makes them); ``seg`` and
-    ``roots`` the blocks' rest shape (:func:`block_rest`); ``kind`` (B, lanes) int8 what each
-    lane holds (:data:`GUIDE`); ``gcol`` (G, 3, N) the guides at the ghosts' node fractions
-    (:func:`~hair_tracking.ghosts.stateless.guide_columns`), ``u0`` their unit rest directions
-    (:func:`rest_directions`) and ``turns`` (G, 9, N - 1) receives their turns (step 1, a
-    parallel loop over the guides before the one over the blocks); ``rot``, ``pos`` the head
-    pose; ``collide``: keep nodes out of the ellipsoid ``axes`` (radii + margin) around
-    ``center`` (head frame).  Returns the number of nodes the collider moved and whether every
-    coordinate written is finite (always true without ``check``)."""
+    written into ``target`` (the fields of :data:`~hair_tracking.ghosts.stateless.Placement`:
+    x y z into ``out`` (S, N, >= 3), world [m]; with ``check`` as point records,
+    :func:`~hair_tracking.core.point_records.put_record`); ``model`` the fields of
+    :data:`TurnModel`; ``pose`` the fields of :data:`~hair_tracking.ghosts.stateless.GuidePose`
+    (the guides at the ghosts' node fractions,
+    :func:`~hair_tracking.ghosts.stateless.guide_columns`, and the head pose); ``params`` the
+    fields of :data:`TurnParams`; ``turns`` (G, 9, N - 1) receives the guides' turns (step 1, a
+    parallel loop over the guides before the one over the blocks).  Returns the number of nodes
+    the collider moved and whether every coordinate written is finite (always true without
+    ``check``)."""
+    gcol, rot, pos = pose
+    collide, center, axes = params
+    u0 = model[5]
     for g in prange(gcol.shape[0]):
         guide_turns(gcol, u0, rot, turns, g)
     geo = np.empty(12)       # the collider in the world (centre, Q), then the guide's node
     world_collider(rot, pos, center, axes, geo)
-    n_blocks = block_guide.shape[0]
+    n_blocks = model[3].shape[0]
     n_chunks = min(n_blocks, CHUNKS)
-    slab = 2 * out.shape[1] * 3 * block_strand.shape[1]
+    slab = 2 * target[0].shape[1] * 3 * model[4].shape[1]
     contacts = 0
     bad = 0
     for c in prange(n_chunks):
-        flat = np.empty(slab)                 # the work item's scratch and constants
-        mine = geo.copy()
+        work = (np.empty(slab), geo.copy())   # the work item's scratch and constants
         moved_nodes, not_finite = _turn_blocks(
-            out, out_rot, out_origin, moved, check, seg, roots, kind, block_guide,
-            block_strand, turns, gcol, rot, pos, collide, flat, mine, c * n_blocks // n_chunks,
-            (c + 1) * n_blocks // n_chunks)
+            target, model, pose, turns, collide, work,
+            (c * n_blocks // n_chunks, (c + 1) * n_blocks // n_chunks))
         contacts += moved_nodes
         bad += not_finite
     return contacts, bad == 0
@@ -390,28 +409,27 @@ class TurnTracker(StatelessTracker):
         self.guide_of = near[:, 0].astype(np.int64)
         self.guide_of[self.guide_index] = np.arange(guides.count)    # a guide follows itself
         self.block_guide, self.block_strand = group_blocks(self.guide_of, guides.count)
-        self._seg, self._roots = block_rest(ghosts.rest, self.block_strand)
-        #: what each lane holds (IDLE, GHOST, GUIDE)
-        self._kind = np.where(self.block_strand >= 0, GHOST, IDLE).astype(np.int8)
-        self._kind[np.isin(self.block_strand, self.guide_index)] = GUIDE
-        self._u0 = rest_directions(at_fractions(guides.rest, self.seg, self.t))
+        seg, roots = block_rest(ghosts.rest, self.block_strand)
+        kind = np.where(self.block_strand >= 0, GHOST, IDLE).astype(np.int8)
+        kind[np.isin(self.block_strand, self.guide_index)] = GUIDE
+        #: the kernel's static data: the fields of :data:`TurnModel` (a plain tuple)
+        self.model = (seg, roots, kind, self.block_guide, self.block_strand,
+                      rest_directions(at_fractions(guides.rest, self.seg, self.t)))
+        #: the kernel's parameters: the fields of :data:`TurnParams` (a plain tuple)
+        self.params = (self.collide, self.center, self.axes)
         self._turns = np.empty((guides.count, 9, ghosts.rest.shape[1] - 1))
 
-    def _place(self, out, rot, origin, moved, check) -> Tuple[int, bool]:
+    def _place(self, target) -> Tuple[int, bool]:
         """Steps 1-3 of the module docstring."""
-        return self._place_blocks(slice(None), out, rot, origin, moved, check)
+        return turn_strands(target, self.model, self._pose, self.params, self._turns)
 
     def _place_part(self, part: int, parts: int) -> np.ndarray:
         """The strands of the blocks of the part (blocks hold strands of one guide, so a part
         is a set of guides' strands; :func:`~hair_tracking.core.model.part_rows` of the
         blocks)."""
         rows = part_rows(self.block_guide.shape[0], part, parts)
-        self._place_blocks(rows, *self._x32_out)
+        m = self.model
+        model = tuple(a[rows] for a in m[:5]) + (m[5],)
+        turn_strands(self._x32_target, model, self._pose, self.params, self._turns)
         idx = self.block_strand[rows]
         return np.sort(idx[idx >= 0])
-
-    def _place_blocks(self, rows: slice, out, rot, origin, moved, check) -> Tuple[int, bool]:
-        return turn_strands(
-            out, rot, origin, moved, check, self._seg[rows], self._roots[rows],
-            self._kind[rows], self.block_guide[rows], self.block_strand[rows], self._gcol,
-            self._u0, self._turns, self._rot, self._pos, self.collide, self._center, self._axes)

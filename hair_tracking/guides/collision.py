@@ -31,18 +31,33 @@ kernels (``q = R^T (x - t) - center``); inputs and outputs are world-frame posit
 :func:`project_ellipsoid` and :func:`penetration_ellipsoid` are plain kernels usable on any
 ``(S, N, 3)`` arrays (the ghost tracker calls them through :class:`Collider` on its own arrays).
 """
+from collections import namedtuple
 import math
 from typing import Optional
 
 import numpy as np
 from numba import njit, prange
 
-from hair_tracking.guides.integrate import FASTMATH, NO_REFCOUNT, runs_parallel, serial_twin
+from hair_tracking.guides.integrate import FASTMATH, runs_parallel
 
 #: Normal-line refinements of the ellipsoid projection in :meth:`Collider.apply`.
 ELLIPSOID_REFINEMENTS = 2
 #: Refinements used by :meth:`Collider.penetration` (a measurement: a few more).
 PENETRATION_REFINEMENTS = 6
+
+#: The collider as the kernels take it, a plain tuple in these fields' order
+#: (:attr:`Collider.model`; numba types a named tuple by encoding its class and field names on
+#: every call): ``center`` (3,) and ``radii`` (3,) head frame [m], ``margin`` [m],
+#: ``friction`` 0..1, ``refine`` projection refinements.
+ColliderModel = namedtuple('ColliderModel', ['center', 'radii', 'margin', 'friction', 'refine'])
+#: The collider placed by the head pose of one substep, as the per-node functions take it
+#: (:func:`placed`): the head rotation's nine entries ``rot`` (:func:`rotation_entries`), the
+#: ellipsoid's centre in the world ``cx, cy, cz`` [m], its semi-axes ``ax, ay, az`` [m] (the
+#: margin included, head axes), ``friction`` and ``refine``.  Numbers only: numba counts the
+#: references of an array handed to an inlined function, and in a loop over nodes that also
+#: calls a compiled function (:func:`surface_point`) it keeps the count in the loop.
+Contact = namedtuple('Contact', ['rot', 'cx', 'cy', 'cz', 'ax', 'ay', 'az', 'friction',
+                                 'refine'])
 
 
 @njit(cache=True, fastmath=FASTMATH, error_model='numpy')
@@ -86,11 +101,40 @@ def world_center(rot, pos, center):
 
 @njit(cache=True, inline='always', fastmath=FASTMATH, error_model='numpy')
 def to_head(x0, x1, x2, rot, cx, cy, cz):
-    """``R^T (x - c)``: a world point [m] relative to the world point ``c``, in the head axes."""
+    """``R^T (x - c)``: a world point [m] relative to the world point ``c``, in the head axes
+    (``rot`` the rotation matrix ``R``; the collision-aware FTL pass,
+    :func:`~hair_tracking.guides.ftl.restore_node`)."""
     dx, dy, dz = x0 - cx, x1 - cy, x2 - cz
     return (rot[0, 0] * dx + rot[1, 0] * dy + rot[2, 0] * dz,
             rot[0, 1] * dx + rot[1, 1] * dy + rot[2, 1] * dz,
             rot[0, 2] * dx + rot[1, 2] * dy + rot[2, 2] * dz)
+
+
+@njit(cache=True, inline='always')
+def rotation_entries(rot):
+    """The entries of the rotation ``rot`` (3, 3) as nine numbers, row by row (``R_ij`` at
+    ``3 i + j``): the rotation of a :data:`Contact`."""
+    return (rot[0, 0], rot[0, 1], rot[0, 2], rot[1, 0], rot[1, 1], rot[1, 2], rot[2, 0],
+            rot[2, 1], rot[2, 2])
+
+
+@njit(cache=True, inline='always', fastmath=FASTMATH, error_model='numpy')
+def entries_to_head(x0, x1, x2, r, cx, cy, cz):
+    """:func:`to_head` with the rotation given by its entries ``r``
+    (:func:`rotation_entries`), as a :data:`Contact` holds it."""
+    dx, dy, dz = x0 - cx, x1 - cy, x2 - cz
+    return (r[0] * dx + r[3] * dy + r[6] * dz,
+            r[1] * dx + r[4] * dy + r[7] * dz,
+            r[2] * dx + r[5] * dy + r[8] * dz)
+
+
+@njit(cache=True, inline='always', fastmath=FASTMATH, error_model='numpy')
+def entries_to_world(y0, y1, y2, r, cx, cy, cz):
+    """``R y + c``: a point ``y`` in the head axes relative to the world point ``c`` [m], back
+    in the world (``r`` the entries of ``R``, :func:`rotation_entries`)."""
+    return (r[0] * y0 + r[1] * y1 + r[2] * y2 + cx,
+            r[3] * y0 + r[4] * y1 + r[5] * y2 + cy,
+            r[6] * y0 + r[7] * y1 + r[8] * y2 + cz)
 
 
 @njit(cache=True, inline='always', fastmath=FASTMATH, error_model='numpy')
@@ -110,48 +154,74 @@ def apply_friction(yx, yy, yz, px, py, pz, ix, iy, iz, friction):
 
 
 @njit(cache=True, inline='always', fastmath=FASTMATH, error_model='numpy')
-def push_out(x0, x1, x2, r0, r1, r2, rot, cx, cy, cz, ax, ay, az, friction, refine):
-    """One node ``x`` (world [m]) pushed out of the ellipsoid with semi-axes ``a`` around the
-    world point ``c`` (axes turned by the head rotation ``rot``), then the friction of the module
-    docstring relative to the reference position ``r``.  Returns ``(moved, y0, y1, y2)``; an
-    outside node comes back unchanged with ``moved`` false."""
-    qx, qy, qz = to_head(x0, x1, x2, rot, cx, cy, cz)
+def placed(collider, rot, pos):
+    """The :data:`Contact` of ``collider`` (the fields of :data:`ColliderModel`) for the head
+    pose ``rot``, ``pos``."""
+    return (rotation_entries(rot),) + placed_shape(collider, rot, pos)
+
+
+@njit(cache=True, inline='always', fastmath=FASTMATH, error_model='numpy')
+def placed_shape(collider, rot, pos):
+    """The fields of :func:`placed`'s :data:`Contact` after the rotation: ``(cx, cy, cz, ax,
+    ay, az, friction, refine)`` (a parallel loop takes numbers and arrays, not tuples: it
+    rebuilds the contact from these and the rotation)."""
+    center, radii, margin, friction, refine = collider
+    cx, cy, cz = world_center(rot, pos, center)
+    return cx, cy, cz, radii[0] + margin, radii[1] + margin, radii[2] + margin, friction, refine
+
+
+@njit(cache=True, inline='always', fastmath=FASTMATH, error_model='numpy')
+def push_out(x0, x1, x2, r0, r1, r2, contact):
+    """One node ``x`` (world [m]) pushed out of the ellipsoid of ``contact`` (the fields of
+    :data:`Contact`: semi-axes ``a`` around the world point ``c``, axes turned by the head
+    rotation ``rot``), then the friction of the module docstring relative to the reference
+    position ``r``.  Returns ``(moved, y0, y1, y2)``; an outside node comes back unchanged
+    with ``moved`` false."""
+    rot, cx, cy, cz, ax, ay, az, friction, refine = contact
+    qx, qy, qz = entries_to_head(x0, x1, x2, rot, cx, cy, cz)
     ix, iy, iz = 1.0 / (ax * ax), 1.0 / (ay * ay), 1.0 / (az * az)
     if qx * qx * ix + qy * qy * iy + qz * qz * iz >= 1.0:
         return False, x0, x1, x2
     yx, yy, yz = surface_point(qx, qy, qz, ax, ay, az, refine)
     if friction > 0.0:
-        px, py, pz = to_head(r0, r1, r2, rot, cx, cy, cz)
+        px, py, pz = entries_to_head(r0, r1, r2, rot, cx, cy, cz)
         yx, yy, yz = apply_friction(yx, yy, yz, px, py, pz, ix, iy, iz, friction)
-    return (True,
-            rot[0, 0] * yx + rot[0, 1] * yy + rot[0, 2] * yz + cx,
-            rot[1, 0] * yx + rot[1, 1] * yy + rot[1, 2] * yz + cy,
-            rot[2, 0] * yx + rot[2, 1] * yy + rot[2, 2] * yz + cz)
+    wx, wy, wz = entries_to_world(yx, yy, yz, rot, cx, cy, cz)
+    return True, wx, wy, wz
 
 
 @njit(cache=True, nogil=True, parallel=True, fastmath=FASTMATH, error_model='numpy')
-def project_ellipsoid(x, x_prev, inv_mass, rot, pos, center, radii, margin, friction, refine):
+def project_ellipsoid(x, x_prev, inv_mass, rot, pos, collider):
     """Kernel: push nodes with ``inv_mass > 0`` out of the ellipsoid ``radii + margin``; friction.
 
     ``x``, ``x_prev`` (S, N, 3) world frame [m] (``x`` changed in place; ``x_prev`` is the friction
-    reference); ``inv_mass`` (S, N); ``rot`` (3, 3), ``pos`` (3,) the head pose; ``center``,
-    ``radii`` (3,) head frame [m]. Returns the number of nodes projected.
+    reference); ``inv_mass`` (S, N); ``rot`` (3, 3), ``pos`` (3,) the head pose; ``collider``
+    the fields of :data:`ColliderModel`. Returns the number of nodes projected.
     """
-    ax, ay, az = radii[0] + margin, radii[1] + margin, radii[2] + margin
-    cx, cy, cz = world_center(rot, pos, center)
+    cx, cy, cz, ax, ay, az, fr, refine = placed_shape(collider, rot, pos)
     contacts = 0
     for s in prange(x.shape[0]):
-        i = np.int64(s)       # (the index as in the serial twin: one compiled block body)
-        contacts += project_block(x, x_prev, inv_mass, rot, cx, cy, cz, ax, ay, az, friction,
-                                  refine, i, i + 1)
+        i = np.int64(s)       # (the index as in the serial variant: one compiled block body)
+        contact = (rotation_entries(rot), cx, cy, cz, ax, ay, az, fr, refine)
+        contacts += project_block(x, x_prev, inv_mass, contact, i, i + 1)
     return contacts
 
 
-@njit(cache=True, fastmath=FASTMATH, error_model='numpy', **NO_REFCOUNT)
-def project_block(x, x_prev, inv_mass, rot, cx, cy, cz, ax, ay, az, friction, refine, s0, s1):
-    """:func:`project_ellipsoid` of the strands ``s0 <= s < s1`` (``c`` the world centre, ``a``
-    the semi-axes with the margin): its loop body, and the collision of a kernel that runs a
-    whole substep block by block (:func:`~hair_tracking.guides.ftl.ftl_collide_step`)."""
+@njit(cache=True, nogil=True, fastmath=FASTMATH, error_model='numpy')
+def project_ellipsoid_serial(x, x_prev, inv_mass, rot, pos, collider):
+    """:func:`project_ellipsoid` on the calling thread."""
+    contact = placed(collider, rot, pos)
+    contacts = 0
+    for s in range(x.shape[0]):
+        contacts += project_block(x, x_prev, inv_mass, contact, s, s + 1)
+    return contacts
+
+
+@njit(cache=True, fastmath=FASTMATH, error_model='numpy')
+def project_block(x, x_prev, inv_mass, contact, s0, s1):
+    """:func:`project_ellipsoid` of the strands ``s0 <= s < s1`` (``contact`` the fields of
+    :data:`Contact`): its loop body, and the collision of a kernel that runs a whole substep
+    block by block (:func:`~hair_tracking.guides.ftl.ftl_collide_step`)."""
     n = x.shape[1]
     contacts = 0
     for s in range(s0, s1):
@@ -159,8 +229,7 @@ def project_block(x, x_prev, inv_mass, rot, cx, cy, cz, ax, ay, az, friction, re
             if inv_mass[s, i] <= 0.0:
                 continue
             moved, y0, y1, y2 = push_out(x[s, i, 0], x[s, i, 1], x[s, i, 2], x_prev[s, i, 0],
-                                         x_prev[s, i, 1], x_prev[s, i, 2], rot, cx, cy, cz,
-                                         ax, ay, az, friction, refine)
+                                         x_prev[s, i, 1], x_prev[s, i, 2], contact)
             if moved:
                 x[s, i, 0] = y0
                 x[s, i, 1] = y1
@@ -176,23 +245,39 @@ def penetration_ellipsoid(x, inv_mass, use_mass, rot, pos, center, radii, refine
     The bare ellipsoid ``radii`` (no margin); only nodes with ``inv_mass > 0`` if ``use_mass``.
     Distance to the (approximate, see :func:`surface_point`) closest surface point; 0 if none.
     """
-    ax, ay, az = radii[0], radii[1], radii[2]
-    ix, iy, iz = 1.0 / (ax * ax), 1.0 / (ay * ay), 1.0 / (az * az)
-    cx, cy, cz = world_center(rot, pos, center)
-    n = x.shape[1]
+    cx, cy, cz, ax, ay, az, fr, n_ref = placed_shape((center, radii, 0.0, 0.0, refine), rot,
+                                                     pos)
     for s in prange(x.shape[0]):
-        deepest = 0.0
-        for i in range(n):
-            if use_mass and inv_mass[s, i] <= 0.0:
-                continue
-            qx, qy, qz = to_head(x[s, i, 0], x[s, i, 1], x[s, i, 2], rot, cx, cy, cz)
-            if qx * qx * ix + qy * qy * iy + qz * qz * iz >= 1.0:
-                continue
-            yx, yy, yz = surface_point(qx, qy, qz, ax, ay, az, refine)
-            depth = math.sqrt((yx - qx) ** 2 + (yy - qy) ** 2 + (yz - qz) ** 2)
-            if depth > deepest:
-                deepest = depth
-        out[s] = deepest
+        contact = (rotation_entries(rot), cx, cy, cz, ax, ay, az, fr, n_ref)
+        out[s] = strand_depth(x, inv_mass, use_mass, contact, np.int64(s))
+
+
+@njit(cache=True, nogil=True, fastmath=FASTMATH, error_model='numpy')
+def penetration_ellipsoid_serial(x, inv_mass, use_mass, rot, pos, center, radii, refine, out):
+    """:func:`penetration_ellipsoid` on the calling thread."""
+    contact = placed((center, radii, 0.0, 0.0, refine), rot, pos)
+    for s in range(x.shape[0]):
+        out[s] = strand_depth(x, inv_mass, use_mass, contact, s)
+
+
+@njit(cache=True, fastmath=FASTMATH, error_model='numpy')
+def strand_depth(x, inv_mass, use_mass, contact, s):
+    """The deepest distance [m] of strand ``s``'s nodes inside the ellipsoid of ``contact``
+    (:func:`penetration_ellipsoid`'s loop body)."""
+    rot, cx, cy, cz, ax, ay, az, _, refine = contact
+    ix, iy, iz = 1.0 / (ax * ax), 1.0 / (ay * ay), 1.0 / (az * az)
+    deepest = 0.0
+    for i in range(x.shape[1]):
+        if use_mass and inv_mass[s, i] <= 0.0:
+            continue
+        qx, qy, qz = entries_to_head(x[s, i, 0], x[s, i, 1], x[s, i, 2], rot, cx, cy, cz)
+        if qx * qx * ix + qy * qy * iy + qz * qz * iz >= 1.0:
+            continue
+        yx, yy, yz = surface_point(qx, qy, qz, ax, ay, az, refine)
+        depth = math.sqrt((yx - qx) ** 2 + (yy - qy) ** 2 + (yz - qz) ** 2)
+        if depth > deepest:
+            deepest = depth
+    return deepest
 
 
 def _points(name, arr, ndim=3, types=(np.float64,)):
@@ -241,6 +326,11 @@ class Collider:
         self.refine = 0 if spherical else ELLIPSOID_REFINEMENTS
         self._pen_refine = 0 if spherical else PENETRATION_REFINEMENTS
 
+    @property
+    def model(self) -> tuple:
+        """The fields of :data:`ColliderModel`, as the kernels take them (a plain tuple)."""
+        return (self.center, self.radii, self.margin, self.friction, self.refine)
+
     def apply(self, x: np.ndarray, x_prev: np.ndarray, inv_mass: np.ndarray, head) -> int:
         """Project the free nodes of ``x`` (S, N, 3) out of the surface + margin, in place.
 
@@ -248,7 +338,7 @@ class Collider:
         with the head, so friction acts on the slip relative to the head); ``inv_mass`` (S, N):
         only nodes with ``inv_mass > 0`` move; ``head`` a
         :class:`~hair_tracking.core.model.HeadPose`.  Returns the number of contacts (nodes
-        moved).  Small problems run the serial twin of the kernel
+        moved).  Small problems run the serial variant of the kernel
         (:func:`~hair_tracking.guides.integrate.runs_parallel`).
         """
         _points('x', x)
@@ -264,17 +354,18 @@ class Collider:
     def project(self, x, x_prev, inv_mass, rot, pos, parallel: bool = True) -> int:
         """:meth:`apply` without input checks, the head pose given as ``rot`` (3, 3) and ``pos``
         (3,) C-contiguous float64 arrays: for callers that validated their arrays once.
-        ``parallel`` false runs the serial twin of the kernel (small problems)."""
+        ``parallel`` false runs the serial variant of the kernel (small problems)."""
         kernel = project_ellipsoid if parallel else project_ellipsoid_serial
-        return int(kernel(x, x_prev, inv_mass, rot, pos, self.center, self.radii,
-                          self.margin, self.friction, self.refine))
+        return int(kernel(x, x_prev, inv_mass, rot, pos, self.model))
 
-    def penetration(self, x: np.ndarray, head, inv_mass: Optional[np.ndarray] = None) -> float:
+    def penetration(self, x: np.ndarray, head, inv_mass: Optional[np.ndarray] = None,
+                    parallel: Optional[bool] = None) -> float:
         """Deepest distance [m] of a point of ``x`` (S, N, 3) inside the bare surface; 0 if none.
 
         With ``inv_mass`` only the free nodes (``inv_mass > 0``) count (attached roots lie on the
         scalp, which may be inside the collider).  ``x`` may be float32 (the stateless trackers'
-        ghost positions).
+        ghost positions).  ``parallel``: the kernel variant (default: by the size of ``x``,
+        :func:`~hair_tracking.guides.integrate.runs_parallel`).
         """
         _points('x', x, types=(np.float64, np.float32))
         if inv_mass is None:
@@ -285,8 +376,9 @@ class Collider:
                 raise ValueError(f'inv_mass {mass.shape} must match x {x.shape}')
         rot, pos = _pose(head)
         out = np.zeros(x.shape[0])
-        kernel = penetration_ellipsoid if runs_parallel(x.shape[0] * x.shape[1]) else \
-            penetration_ellipsoid_serial
+        if parallel is None:
+            parallel = runs_parallel(x.shape[0] * x.shape[1])
+        kernel = penetration_ellipsoid if parallel else penetration_ellipsoid_serial
         if x.flags.writeable:
             # always a read-only view: one compiled kernel for the guides' arrays and the
             # ghost tracker's read-only positions
@@ -333,7 +425,3 @@ def make_collider(spec) -> Optional[Collider]:
     else:
         raise ValueError(f'collider.shape: {spec.shape!r} is not one of none, sphere, ellipsoid')
     return Collider(spec.shape, spec.center, radii, spec.margin, spec.friction)
-
-
-project_ellipsoid_serial = serial_twin(project_ellipsoid)
-penetration_ellipsoid_serial = serial_twin(penetration_ellipsoid)

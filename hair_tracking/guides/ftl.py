@@ -31,10 +31,11 @@ import math
 import numpy as np
 from numba import int64, njit, prange
 
-from hair_tracking.guides.collision import project_block, surface_point, to_head, world_center
+from hair_tracking.guides.collision import (placed, placed_shape, project_block,
+                                            rotation_entries, surface_point, to_head,
+                                            world_center)
 from hair_tracking.guides.integrate import (BLOCK, carry_rigid_block, FASTMATH, finalize_block,
-                                            max_step_sq, NO_REFCOUNT, predict_block, serial_twin,
-                                            split_due)
+                                            max_step_sq_block, predict_block, split_due)
 from hair_tracking.guides.pbd_constraints import pbd_sweep_block
 
 #: Static data of :func:`ftl_step`: ``rest`` (S, N, 3) head frame [m], ``inv_mass`` (S, N),
@@ -45,6 +46,17 @@ FtlModel = namedtuple('FtlModel', ['rest', 'inv_mass', 'rest_length', 'bend_rest
 #: correction ``s_damp`` 0..1, the displacement clamp [m] (0: off), whether to finalize.
 FtlParams = namedtuple('FtlParams', ['bend_passes', 'bend_stiffness', 's_damp', 'max_disp',
                                      'do_finalize'])
+#: Work space of the FTL kernels: ``corr`` (S, N, 3) the FTL corrections, ``x_ref`` (S, N, 3)
+#: the friction reference (the start-of-substep positions carried rigidly with the head;
+#: written when the collider has friction), and for :func:`ftl_advance` ``counts`` (B, K, 2)
+#: int64, ``steps`` (B, K) or (B, 0) and ``before`` (S, N, 3) (``B`` the block count, ``K``
+#: the substeps).
+FtlWork = namedtuple('FtlWork', ['corr', 'x_ref', 'counts', 'steps', 'before'])
+#: What drives a run of :func:`ftl_advance`: ``rots`` (K + 1, 3, 3), ``poss`` (K + 1, 3) the
+#: head poses at the start and at the end of every substep, ``rels`` (K, 3, 3) with
+#: ``rels[k] = rots[k + 1] rots[k]^T``, and the constant fields of
+#: :data:`~hair_tracking.guides.integrate.StepMotion`.
+RunDrive = namedtuple('RunDrive', ['rots', 'poss', 'rels', 'gravity', 'damp', 'dt', 'shock'])
 
 #: Work items of :func:`ftl_advance`'s parallel loop (each a run of blocks).
 CHUNKS = 64
@@ -52,7 +64,7 @@ CHUNKS = 64
 FTL_TINY_SQ = 1e-24
 
 
-@njit(cache=True, fastmath=FASTMATH, error_model='numpy', **NO_REFCOUNT)
+@njit(cache=True, fastmath=FASTMATH, error_model='numpy')
 def ftl_pass_block(x, rest, rest_length, rot, corr, s0, s1):
     """FTL pass over strands ``s0..s1-1`` in place; ``corr`` (S, N, 3) receives the ``d_i``.
 
@@ -128,17 +140,37 @@ def restore_f_ok(ax, ay, az):
     return f_ok * f_ok
 
 
+#: The ellipsoid of the collision-aware FTL pass, a plain tuple in these fields' order: its
+#: centre in the world ``cx, cy, cz`` [m], its semi-axes ``ax, ay, az`` [m] (the margin
+#: included, head axes) and the projection refinements ``refine``
+#: (:func:`ellipsoid_of`).
+Ellipsoid = namedtuple('Ellipsoid', ['cx', 'cy', 'cz', 'ax', 'ay', 'az', 'refine'])
+
+
+@njit(cache=True, inline='always')
+def ellipsoid_of(contact):
+    """The :data:`Ellipsoid` of a :data:`~hair_tracking.guides.collision.Contact`."""
+    return contact[1], contact[2], contact[3], contact[4], contact[5], contact[6], contact[8]
+
+
 @njit(cache=True, inline='always', fastmath=FASTMATH, error_model='numpy')
-def restore_node(px, py, pz, bx, by, bz, r, ex, ey, ez, rot, cx, cy, cz, ax, ay, az, refine,
-                 first):
+def restore_node(p, b, r, e, rot, ellipsoid, first):
     """One node of the collision-aware FTL pass (see :func:`ftl_restore`): ``p`` put at the rest
-    distance ``r`` from its predecessor ``b`` and out of the ellipsoid (semi-axes ``a``, world
-    centre ``c``, head rotation ``rot``), at most :data:`RESTORE_ITERATIONS` times: it stops as
-    soon as a placement lies outside or less than :data:`RESTORE_TOLERANCE` inside (``F(q) >=
-    (1 - tol / a_max)^2``, which bounds the depth by ``tol``).  ``e`` is the rest segment in the
-    head frame, the direction used when ``p`` and ``b`` coincide.  World [m].  ``first`` (0
+    distance ``r`` from its predecessor ``b`` and out of the ellipsoid (:data:`Ellipsoid`:
+    semi-axes ``a``, world centre ``c``, turned by the head rotation ``rot`` (3, 3)), at most
+    :data:`RESTORE_ITERATIONS` times: it stops as soon as a placement lies outside or less than
+    :data:`RESTORE_TOLERANCE` inside (``F(q) >= (1 - tol / a_max)^2``, which bounds the depth
+    by ``tol``).  ``e`` is the rest segment in the head frame, the direction used when ``p``
+    and ``b`` coincide.  World [m]; ``p``, ``b``, ``e`` are (x, y, z) tuples.  ``first`` (0
     normally): the placements already made, for a caller that made the first ones itself
-    (``p`` is then the surface point the next placement starts from)."""
+    (``p`` is then the surface point the next placement starts from).  Returns the node (x, y,
+    z).  The rotation is the matrix here, not a contact's entries
+    (:func:`~hair_tracking.guides.collision.entries_to_head`): the pass's placements follow its
+    arithmetic to the last bit."""
+    px, py, pz = p
+    bx, by, bz = b
+    ex, ey, ez = e
+    cx, cy, cz, ax, ay, az, refine = ellipsoid
     ix, iy, iz = 1.0 / (ax * ax), 1.0 / (ay * ay), 1.0 / (az * az)
     f_ok = restore_f_ok(ax, ay, az)
     for k in range(first, RESTORE_ITERATIONS + 1):
@@ -176,18 +208,19 @@ def ftl_restore(x, rest, rest_length, rot, pos, center, axes, refine, corr):
     friction here: the collider applied it.
     """
     cx, cy, cz = world_center(rot, pos, center)
+    ellipsoid = (cx, cy, cz, axes[0], axes[1], axes[2], refine)
     for s in prange(x.shape[0]):
-        i = int64(s)          # (the index as in the serial twin: one compiled block body)
-        ftl_restore_block(x, rest, rest_length, rot, cx, cy, cz, axes, refine, corr, i, i + 1)
+        i = int64(s)
+        ftl_restore_block(x, rest, rest_length, rot, ellipsoid, corr, i, i + 1)
 
 
-@njit(cache=True, fastmath=FASTMATH, error_model='numpy', **NO_REFCOUNT)
-def ftl_restore_block(x, rest, rest_length, rot, cx, cy, cz, axes, refine, corr, s0, s1):
-    """:func:`ftl_restore` on the strands ``s0 <= s < s1`` (``c`` the ellipsoid's world
-    centre).  A function of its own, so the kernel and its serial twin run the same compiled
-    code (inlined into each, LLVM contracted the arithmetic differently: results differed in
-    the last bits)."""
-    ax, ay, az = axes[0], axes[1], axes[2]
+@njit(cache=True, fastmath=FASTMATH, error_model='numpy')
+def ftl_restore_block(x, rest, rest_length, rot, ellipsoid, corr, s0, s1):
+    """:func:`ftl_restore` on the strands ``s0 <= s < s1`` (``rot`` the head rotation (3, 3),
+    ``ellipsoid`` the fields of :data:`Ellipsoid`).  A function of its own, so every kernel
+    that runs it runs the same compiled code (inlined into each, LLVM may contract the
+    arithmetic differently: the results would differ in the last bits)."""
+    cx, cy, cz, ax, ay, az, _ = ellipsoid
     ix, iy, iz = 1.0 / (ax * ax), 1.0 / (ay * ay), 1.0 / (az * az)
     f_ok = restore_f_ok(ax, ay, az)
     n = x.shape[1]
@@ -205,9 +238,10 @@ def ftl_restore_block(x, rest, rest_length, rot, cx, cy, cz, axes, refine, corr,
         for i in range(start, n):
             ox, oy, oz = x[s, i, 0], x[s, i, 1], x[s, i, 2]
             px, py, pz = restore_node(
-                ox, oy, oz, x[s, i - 1, 0], x[s, i - 1, 1], x[s, i - 1, 2], rest_length[s, i - 1],
-                rest[s, i, 0] - rest[s, i - 1, 0], rest[s, i, 1] - rest[s, i - 1, 1],
-                rest[s, i, 2] - rest[s, i - 1, 2], rot, cx, cy, cz, ax, ay, az, refine, 0)
+                (ox, oy, oz), (x[s, i - 1, 0], x[s, i - 1, 1], x[s, i - 1, 2]),
+                rest_length[s, i - 1],
+                (rest[s, i, 0] - rest[s, i - 1, 0], rest[s, i, 1] - rest[s, i - 1, 1],
+                 rest[s, i, 2] - rest[s, i - 1, 2]), rot, ellipsoid, 0)
             corr[s, i, 0] += px - ox
             corr[s, i, 1] += py - oy
             corr[s, i, 2] += pz - oz
@@ -227,93 +261,118 @@ def ftl_step(model, state, motion, params, corr):
     :func:`hair_tracking.guides.integrate.finalize` when a collider runs before finalizing).
     Returns the clamped node count (0 when not finalizing).
     """
-    x, v, x_old = state                                                 # GuideState
-    rest, inv_mass, rest_length, bend_rest, bend_w = model              # FtlModel
-    rot, pos, rot_rel, pos_prev, gravity, damp, dt, shock = motion      # StepMotion
-    bend_passes, bend_stiffness, s_damp, max_disp, do_finalize = params     # FtlParams
-    nblk = (x.shape[0] + BLOCK - 1) // BLOCK
+    nblk = (state[0].shape[0] + BLOCK - 1) // BLOCK
     clamped = 0
     for blk in prange(nblk):
-        s0 = blk * BLOCK
-        s1 = min(s0 + BLOCK, x.shape[0])
-        ftl_block(model, state, motion, bend_passes, bend_stiffness, corr, s0, s1)
-        if do_finalize:
-            clamped += finalize_block(x, v, x_old, inv_mass, corr, s0, s1, dt, max_disp, s_damp)
+        clamped += ftl_step_block(model, state, motion, params, corr, np.int64(blk))
     return clamped
 
 
-@njit(cache=True, fastmath=FASTMATH, error_model='numpy', **NO_REFCOUNT)
+@njit(cache=True, nogil=True, fastmath=FASTMATH, error_model='numpy')
+def ftl_step_serial(model, state, motion, params, corr):
+    """:func:`ftl_step` on the calling thread."""
+    nblk = (state[0].shape[0] + BLOCK - 1) // BLOCK
+    clamped = 0
+    for blk in range(nblk):
+        clamped += ftl_step_block(model, state, motion, params, corr, blk)
+    return clamped
+
+
+@njit(cache=True, fastmath=FASTMATH, error_model='numpy')
+def ftl_step_block(model, state, motion, params, corr, blk):
+    """Block ``blk`` of :func:`ftl_step`; returns its clamped node count."""
+    x, v, x_old = state                                                 # GuideState
+    bend_passes, bend_stiffness, s_damp, max_disp, do_finalize = params     # FtlParams
+    s0 = blk * BLOCK
+    s1 = min(s0 + BLOCK, x.shape[0])
+    ftl_block(model, state, motion, bend_passes, bend_stiffness, corr, s0, s1)
+    if do_finalize:
+        return finalize_block(x, v, x_old, model[1], corr, s0, s1, motion[6], max_disp, s_damp)
+    return 0
+
+
+@njit(cache=True, fastmath=FASTMATH, error_model='numpy')
 def ftl_block(model, state, motion, bend_passes, bend_stiffness, corr, s0, s1):
     """Predict, ``bend_passes`` bending sweeps and the FTL pass of the strands ``s0 <= s < s1``:
     a substep up to the collision and finalize (:func:`ftl_step`, :func:`ftl_collide_step`)."""
-    x, v, x_old = state                                                 # GuideState
+    x = state[0]
     rest, inv_mass, rest_length, bend_rest, bend_w = model              # FtlModel
-    rot, pos, rot_rel, pos_prev, gravity, damp, dt, shock = motion      # StepMotion
-    predict_block(x, v, x_old, rest, inv_mass, s0, s1, rot, pos, rot_rel, pos_prev,
-                  gravity, damp, dt, shock)
+    predict_block(state, rest, inv_mass, motion, s0, s1)
     if bend_stiffness > 0.0:
         for _ in range(bend_passes):
             pbd_sweep_block(x, bend_rest, bend_w, 2, bend_stiffness, s0, s1)
-    ftl_pass_block(x, rest, rest_length, rot, corr, s0, s1)
+    ftl_pass_block(x, rest, rest_length, motion[0], corr, s0, s1)
 
 
 @njit(cache=True, nogil=True, parallel=True, fastmath=FASTMATH, error_model='numpy')
-def ftl_collide_step(model, state, motion, params, corr, collider, x_ref):
+def ftl_collide_step(model, state, motion, params, work, collider):
     """Kernel: one FTL substep of all strands with the head collider, block by block (the
     block's strands stay in cache): :func:`ftl_step`'s predict, bending and FTL pass, the
     collider's projection with friction (:func:`~hair_tracking.guides.collision.project_block`),
     when it moved a node of the block the collision-aware pass (:func:`ftl_restore_block`),
     then finalize.  The same per-strand arithmetic as those kernels run one after another.
 
-    ``collider``: ``(center, radii, margin, friction, refine)`` of the
-    :class:`~hair_tracking.guides.collision.Collider`; ``x_ref`` (S, N, 3) receives the friction
-    reference (the start-of-substep positions carried rigidly with the head) when ``friction >
-    0``.  ``params``' ``do_finalize`` is ignored (always finalizes).  Returns ``(clamped,
-    contacts)``.
+    ``work``: ``(corr, x_ref)``, the first two fields of :data:`FtlWork`; ``collider``: the
+    fields of :data:`~hair_tracking.guides.collision.ColliderModel`.  ``params``'
+    ``do_finalize`` is ignored (always finalizes).  Returns ``(clamped, contacts)``.
     """
-    rot, pos = motion[0], motion[1]
-    center, radii, margin, friction, refine = collider
-    cx, cy, cz = world_center(rot, pos, center)
-    axes = radii + margin
-    nblk = (state[0].shape[0] + BLOCK - 1) // BLOCK
+    rot = motion[0]
+    cx, cy, cz, ax, ay, az, fr, refine = placed_shape(collider, rot, motion[1])
+    n = state[0].shape[0]
+    nblk = (n + BLOCK - 1) // BLOCK
     clamped = 0
     contacts = 0
     for blk in prange(nblk):
-        s0 = blk * BLOCK
-        s1 = min(s0 + BLOCK, state[0].shape[0])
-        c, p = ftl_collide_block(model, state, motion, params, corr, collider, x_ref,
-                                 cx, cy, cz, axes, s0, s1)
+        s0 = np.int64(blk) * BLOCK
+        contact = (rotation_entries(rot), cx, cy, cz, ax, ay, az, fr, refine)
+        c, p = ftl_collide_block(model, state, motion, params, work, contact, s0,
+                                 min(s0 + BLOCK, n))
         clamped += c
         contacts += p
     return clamped, contacts
 
 
-@njit(cache=True, fastmath=FASTMATH, error_model='numpy', **NO_REFCOUNT)
-def ftl_collide_block(model, state, motion, params, corr, collider, x_ref, cx, cy, cz, axes,
-                      s0, s1):
+@njit(cache=True, nogil=True, fastmath=FASTMATH, error_model='numpy')
+def ftl_collide_step_serial(model, state, motion, params, work, collider):
+    """:func:`ftl_collide_step` on the calling thread."""
+    contact = placed(collider, motion[0], motion[1])
+    n = state[0].shape[0]
+    nblk = (n + BLOCK - 1) // BLOCK
+    clamped = 0
+    contacts = 0
+    for blk in range(nblk):
+        s0 = blk * BLOCK
+        c, p = ftl_collide_block(model, state, motion, params, work, contact, s0,
+                                 min(s0 + BLOCK, n))
+        clamped += c
+        contacts += p
+    return clamped, contacts
+
+
+@njit(cache=True, fastmath=FASTMATH, error_model='numpy')
+def ftl_collide_block(model, state, motion, params, work, contact, s0, s1):
     """One FTL substep with the head collider of the strands ``s0 <= s < s1``
-    (:func:`ftl_collide_step`'s loop body; ``c`` the collider's centre in the world, ``axes``
-    its semi-axes with the margin); returns ``(clamped, contacts)``."""
+    (:func:`ftl_collide_step`'s loop body; ``contact`` the collider placed by the substep's
+    head pose, :data:`~hair_tracking.guides.collision.Contact`); returns ``(clamped,
+    contacts)``."""
     x, v, x_old = state                                                 # GuideState
     rest, inv_mass, rest_length, bend_rest, bend_w = model              # FtlModel
     rot, pos, rot_rel, pos_prev, gravity, damp, dt, shock = motion      # StepMotion
     bend_passes, bend_stiffness, s_damp, max_disp, _ = params          # FtlParams
-    center, radii, margin, friction, refine = collider
-    ax, ay, az = axes[0], axes[1], axes[2]
+    corr, x_ref = work                                                  # FtlWork[:2]
+    friction = contact[7]
     ref = x_ref if friction > 0.0 else x_old
     if friction > 0.0:
         carry_rigid_block(x, rot_rel, pos_prev, pos, x_ref, s0, s1)
     ftl_block(model, state, motion, bend_passes, bend_stiffness, corr, s0, s1)
-    pushed = project_block(x, ref, inv_mass, rot, cx, cy, cz, ax, ay, az, friction,
-                           refine, s0, s1)
+    pushed = project_block(x, ref, inv_mass, contact, s0, s1)
     if pushed:
-        ftl_restore_block(x, rest, rest_length, rot, cx, cy, cz, axes, refine, corr, s0, s1)
+        ftl_restore_block(x, rest, rest_length, rot, ellipsoid_of(contact), corr, s0, s1)
     return finalize_block(x, v, x_old, inv_mass, corr, s0, s1, dt, max_disp, s_damp), pushed
 
 
 @njit(cache=True, nogil=True, parallel=True, fastmath=FASTMATH, error_model='numpy')
-def ftl_advance(model, state, drive, params, corr, collide, collider, x_ref, counts, steps,
-                before, stop):
+def ftl_advance(model, state, drive, params, collide, collider, work, stop):
     """Kernel: ``K`` FTL substeps of all strands in one call.  Strands do not interact, so this
     is exactly ``K`` calls of :func:`ftl_collide_step` (with a collider) or of :func:`ftl_step`
     finalizing (without), one after another.  Without a stop rule every block of
@@ -322,49 +381,98 @@ def ftl_advance(model, state, drive, params, corr, collide, collider, x_ref, cou
     blocks take a substep before the next, and the run stops before the first substep whose
     split estimate (``stop``) exceeds the limit.
 
-    ``drive``: ``(rots (K + 1, 3, 3), poss (K + 1, 3), rels (K, 3, 3), gravity, damp, dt,
-    shock)``: the head poses at the start and at the end of every substep, ``rels[k] =
-    rots[k + 1] rots[k]^T``, and :data:`~hair_tracking.guides.integrate.StepMotion`'s constant
-    fields; ``params``: :data:`FtlParams` (``do_finalize`` ignored: always finalizes);
-    ``collide``: whether the head collider acts (``collider``, ``x_ref`` as for
-    :func:`ftl_collide_step`).  ``counts`` (B, K, 2) int64, ``steps`` (B, K) (``B`` the block
-    count) and ``before`` (S, N, 3) are work space; on return ``steps[0]`` holds every
-    substep's largest squared node displacement [m^2] (NaN when one is NaN; not measured, and
-    ``before`` not touched, when ``steps`` is (B, 0)).  ``stop``: ``(rigid (K,), limit,
-    gdt2)``, active when ``limit > 0`` and the displacements are measured: substep ``k + 1``
-    is not taken when ``max(rigid[k + 1], speed dt) + gdt2 > limit`` with ``speed`` the
-    largest displacement of substep ``k`` over ``dt`` (the simulator's split estimate,
-    :meth:`~hair_tracking.simulator.HairSimulator._split_count`).
+    ``drive``: the fields of :data:`RunDrive`: the head poses at the start and at the end of
+    every substep, ``rels[k] = rots[k + 1] rots[k]^T``, and
+    :data:`~hair_tracking.guides.integrate.StepMotion`'s constant fields; ``params``:
+    :data:`FtlParams` (``do_finalize`` ignored: always finalizes); ``collide``: whether the
+    head collider ``collider`` (:data:`~hair_tracking.guides.collision.ColliderModel`) acts;
+    ``work``: the fields of :data:`FtlWork`, ``counts``, ``steps`` and ``before`` included: on
+    return ``steps[0]`` holds every substep's largest squared node displacement [m^2] (NaN
+    when one is NaN; not measured, and ``before`` not touched, when ``steps`` is (B, 0)).
+    ``stop``: ``(rigid (K,), limit, gdt2)``, active when ``limit > 0`` and the displacements
+    are measured: substep ``k + 1`` is not taken when ``max(rigid[k + 1], speed dt) + gdt2 >
+    limit`` with ``speed`` the largest displacement of substep ``k`` over ``dt`` (the
+    simulator's split estimate, :meth:`~hair_tracking.simulator.HairSimulator._split_count`).
     Returns the substeps taken, then the clamped and the collider-moved node counts of the
     last of them and of all: ``(done, clamped, clamped_total, contacts, contacts_total)``.
     """
-    x = state[0]
-    dt = drive[5]
-    axes = collider[1] + collider[2]
-    n_sub = drive[2].shape[0]
-    measure = steps.shape[1] == n_sub
-    rigid, limit, gdt2 = stop
-    nblk = (x.shape[0] + BLOCK - 1) // BLOCK
-    chunks = min(nblk, CHUNKS)
+    n_sub, nblk, chunks, limited = _run_plan(state, drive, work, stop)
     done = n_sub
-    if measure and limit > 0.0:
+    if limited:
         for k in range(n_sub):
             for c in prange(chunks):
-                ftl_advance_blocks(model, state, drive, params, corr, collide, collider, x_ref,
-                                   axes, counts, steps, before, measure,
-                                   c * nblk // chunks, (c + 1) * nblk // chunks, k, k + 1)
-            far = _column_max(steps, k, nblk)
-            if k + 1 < n_sub and split_due(far, dt, rigid[k + 1], gdt2, limit):
+                ftl_advance_blocks(model, state, drive, params, collide, collider, work,
+                                   _chunk_blocks(np.int64(c), chunks, nblk), (k, k + 1))
+            if _split_after(drive, work, stop, k, nblk):
                 done = k + 1
                 break
     else:
         for c in prange(chunks):
-            ftl_advance_blocks(model, state, drive, params, corr, collide, collider, x_ref, axes,
-                               counts, steps, before, measure, c * nblk // chunks,
-                               (c + 1) * nblk // chunks, 0, n_sub)
-        if measure:
-            for k in range(n_sub):
-                _column_max(steps, k, nblk)
+            ftl_advance_blocks(model, state, drive, params, collide, collider, work,
+                               _chunk_blocks(np.int64(c), chunks, nblk), (0, n_sub))
+        _measured(work, n_sub, nblk)
+    return _run_counts(work, nblk, done)
+
+
+@njit(cache=True, nogil=True, fastmath=FASTMATH, error_model='numpy')
+def ftl_advance_serial(model, state, drive, params, collide, collider, work, stop):
+    """:func:`ftl_advance` on the calling thread."""
+    n_sub, nblk, chunks, limited = _run_plan(state, drive, work, stop)
+    done = n_sub
+    if limited:
+        for k in range(n_sub):
+            for c in range(chunks):
+                ftl_advance_blocks(model, state, drive, params, collide, collider, work,
+                                   _chunk_blocks(c, chunks, nblk), (k, k + 1))
+            if _split_after(drive, work, stop, k, nblk):
+                done = k + 1
+                break
+    else:
+        for c in range(chunks):
+            ftl_advance_blocks(model, state, drive, params, collide, collider, work,
+                               _chunk_blocks(c, chunks, nblk), (0, n_sub))
+        _measured(work, n_sub, nblk)
+    return _run_counts(work, nblk, done)
+
+
+@njit(cache=True, inline='always')
+def _run_plan(state, drive, work, stop):
+    """``(substeps, blocks, chunks, limited)`` of a run of :func:`ftl_advance`: ``limited``
+    when the stop rule applies (the displacements measured and a limit given)."""
+    n_sub = drive[2].shape[0]
+    nblk = (state[0].shape[0] + BLOCK - 1) // BLOCK
+    measure = work[3].shape[1] == n_sub
+    return n_sub, nblk, min(nblk, CHUNKS), measure and stop[1] > 0.0
+
+
+@njit(cache=True, inline='always')
+def _chunk_blocks(c, chunks, nblk):
+    """The blocks ``(b0, b1)`` of chunk ``c`` of ``chunks``."""
+    return c * nblk // chunks, (c + 1) * nblk // chunks
+
+
+@njit(cache=True)
+def _split_after(drive, work, stop, k, nblk):
+    """Whether the run stops after substep ``k`` (:func:`ftl_advance`'s stop rule), with the
+    substep's largest displacement gathered into ``steps[0, k]`` first."""
+    far = _column_max(work[3], k, nblk)
+    rigid, limit, gdt2 = stop
+    return k + 1 < drive[2].shape[0] and split_due(far, drive[5], rigid[k + 1], gdt2, limit)
+
+
+@njit(cache=True)
+def _measured(work, n_sub, nblk):
+    """Every substep's largest displacement into ``steps[0]`` (when measured)."""
+    if work[3].shape[1] == n_sub:
+        for k in range(n_sub):
+            _column_max(work[3], k, nblk)
+
+
+@njit(cache=True)
+def _run_counts(work, nblk, done):
+    """:func:`ftl_advance`'s return value from the per-block counts of its ``done``
+    substeps."""
+    counts = work[2]
     totals = np.zeros((done, 2), dtype=np.int64)
     for blk in range(nblk):
         for k in range(done):
@@ -385,26 +493,24 @@ def _column_max(steps, k, nblk):
     return far
 
 
-@njit(cache=True, fastmath=FASTMATH, error_model='numpy', **NO_REFCOUNT)
-def ftl_advance_blocks(model, state, drive, params, corr, collide, collider, x_ref, axes,
-                       counts, steps, before, measure, b0, b1, k0, k1):
-    """:func:`ftl_advance` for the blocks ``b0 .. b1 - 1``, each through the substeps
-    ``k0 .. k1 - 1`` (a function of its own without reference counting: the poses it slices
-    per substep cost no atomic counter updates shared between the threads)."""
-    for blk in range(b0, b1):
-        ftl_advance_block(model, state, drive, params, corr, collide, collider, x_ref, axes,
-                          counts, steps, before, measure, blk, k0, k1)
+@njit(cache=True, fastmath=FASTMATH, error_model='numpy')
+def ftl_advance_blocks(model, state, drive, params, collide, collider, work, blocks, substeps):
+    """:func:`ftl_advance` for the blocks ``blocks = (b0, b1)``, each through the substeps
+    ``substeps = (k0, k1)``."""
+    for blk in range(blocks[0], blocks[1]):
+        ftl_advance_block(model, state, drive, params, collide, collider, work, blk, substeps)
 
 
 @njit(cache=True, inline='always')
-def ftl_advance_block(model, state, drive, params, corr, collide, collider, x_ref, axes, counts,
-                      steps, before, measure, blk, k0, k1):
+def ftl_advance_block(model, state, drive, params, collide, collider, work, blk, substeps):
     """:func:`ftl_advance_blocks` for block ``blk``."""
     x, v, x_old = state
     rots, poss, rels, gravity, damp, dt, shock = drive
+    corr, x_ref, counts, steps, before = work
+    measure = steps.shape[1] > 0
     s0 = blk * BLOCK
     s1 = min(s0 + BLOCK, x.shape[0])
-    for k in range(k0, k1):
+    for k in range(substeps[0], substeps[1]):
         rot, pos = rots[k + 1], poss[k + 1]
         motion = (rot, pos, rels[k], poss[k], gravity, damp, dt, shock)
         if measure:
@@ -413,9 +519,8 @@ def ftl_advance_block(model, state, drive, params, corr, collide, collider, x_re
                     for d in range(3):
                         before[s, i, d] = x[s, i, d]
         if collide:
-            cx, cy, cz = world_center(rot, pos, collider[0])
-            c, p = ftl_collide_block(model, state, motion, params, corr, collider, x_ref,
-                                     cx, cy, cz, axes, s0, s1)
+            c, p = ftl_collide_block(model, state, motion, params, (corr, x_ref),
+                                     placed(collider, rot, pos), s0, s1)
         else:
             ftl_block(model, state, motion, params[0], params[1], corr, s0, s1)
             c = finalize_block(x, v, x_old, model[1], corr, s0, s1, dt, params[3], params[2])
@@ -423,10 +528,4 @@ def ftl_advance_block(model, state, drive, params, corr, collide, collider, x_re
         counts[blk, k, 0] = c
         counts[blk, k, 1] = p
         if measure:
-            steps[blk, k] = max_step_sq(x[s0:s1], before[s0:s1])
-
-
-ftl_step_serial = serial_twin(ftl_step)
-ftl_collide_step_serial = serial_twin(ftl_collide_step)
-ftl_advance_serial = serial_twin(ftl_advance)
-ftl_restore_serial = serial_twin(ftl_restore)
+            steps[blk, k] = max_step_sq_block(x, before, s0, s1)

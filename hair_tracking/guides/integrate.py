@@ -28,63 +28,27 @@ frame. Arrays are C-contiguous float64 ``(S, N, 3)``. The block helpers work on 
 while it is in cache (see :data:`BLOCK`).
 """
 from collections import namedtuple
-from contextlib import contextmanager
 import math
-import types
 
 import numpy as np
 from numba import njit, prange
 
-#: Below this many nodes a kernel runs its serial twin: the work is then smaller than a
-#: parallel region's launch.  The default groom's 64 guides (1 k nodes) stay serial, its 512
-#: ghosts (8 k nodes) run the parallel kernel.  Results do not depend on the thread count
+#: Below this many nodes a problem runs the serial variants of the kernels (``<kernel>_serial``:
+#: the same block bodies in a plain loop on the calling thread): the work is then smaller than
+#: a parallel region's launch.  The default groom's 64 guides (1 k nodes) stay serial, its 512
+#: ghosts (8 k nodes) run the parallel kernels.  Results do not depend on the thread count
 #: (tested).
 PARALLEL_MIN_NODES = 1 << 12
 
 
 def runs_parallel(nodes: int) -> bool:
     """Whether a problem of ``nodes`` nodes runs the parallel kernels (at least
-    PARALLEL_MIN_NODES nodes) rather than their serial twins, whatever the numba thread count:
-    on one thread a parallel kernel costs a launch but is not slower otherwise, and where LLVM
-    compiles a loop body differently in the two variants the parallel one was the faster
-    (the ellipsoid collider: 2.2x at 4 k strands), so every method runs the same code at any
-    thread count."""
+    PARALLEL_MIN_NODES nodes) rather than their serial variants, whatever the numba thread
+    count: on one thread a parallel kernel costs a launch but is not slower otherwise, and
+    where LLVM compiles a loop body differently in the two variants the parallel one was the
+    faster, so every method runs the same code at any thread count.  The simulator decides
+    once, from the whole scene's node counts, and hands the decision to each stage."""
     return nodes >= PARALLEL_MIN_NODES
-
-
-def serial_twin(kernel):
-    """The parallel numba ``kernel`` compiled without ``parallel``: its ``prange`` loops run as
-    plain loops on the calling thread.  The two agree to rounding, not always bit for bit: a
-    body compiled into both variants may be contracted (fused multiply-add) differently by
-    LLVM, as a cached and a fresh compilation may be (the tests compare them to 1e-12 m).  For
-    problems below :data:`PARALLEL_MIN_NODES`: even on one
-    thread a parallel region costs a launch through the threading layer, at 64 guides of 16
-    nodes a large part of a guide substep.
-
-    The twin is a copy of the Python function named ``<name>_serial``, so numba's on-disk cache
-    (whose index is keyed by the function's qualified name and line, not by its options) keeps
-    the two compilations apart."""
-    f = kernel.py_func
-    twin = types.FunctionType(f.__code__, f.__globals__, f.__name__ + '_serial',
-                              f.__defaults__, f.__closure__)
-    twin.__qualname__ = f.__qualname__ + '_serial'
-    twin.__module__ = f.__module__
-    twin.__doc__ = f':func:`{f.__name__}` on the calling thread (see :func:`serial_twin`).'
-    options = {k: v for k, v in kernel.targetoptions.items()
-               if k not in ('parallel', 'nopython')}
-    return njit(cache=True, **options)(twin)
-
-
-@contextmanager
-def parallel_from(nodes: int):
-    """Temporarily make :func:`runs_parallel` true from ``nodes`` nodes on (warm-up: load the
-    parallel kernels a large scene will use while running a tiny copy of it)."""
-    global PARALLEL_MIN_NODES
-    saved, PARALLEL_MIN_NODES = PARALLEL_MIN_NODES, int(nodes)
-    try:
-        yield
-    finally:
-        PARALLEL_MIN_NODES = saved
 
 
 #: Strands one thread processes together.  The constraint sweeps interleave the strands of a
@@ -96,28 +60,12 @@ BLOCK = 8
 #: infinity semantics are kept (no ``nnan``/``ninf``).
 FASTMATH = {'contract'}
 
-#: Compile option of the kernels' inner bodies (those called once per block of strands from a
-#: parallel loop, or per substep): no NRT reference counting.  numba counts references of every
-#: array view it creates (``x[j]``, ``a.reshape(...)``, an array bound as an argument of an
-#: inlined function) with an atomic ``lock`` instruction, 20-40 cycles each, and its pruning
-#: pass cannot remove the pairs inside loops with branches; in the paper tracker's ghost kernel
-#: they are about a third of the step.  Safe for functions that allocate nothing and return no
-#: array: the arrays they see are owned by their caller.  ``_nrt`` is a target option numba
-#: does not document, so it is used only where this numba has it (checked below); elsewhere the
-#: kernels run, slower, with reference counting and give the same results.
-try:
-    from numba.core.cpu import CPUTargetOptions as _CPUOptions
-    NO_REFCOUNT = {'_nrt': False} if hasattr(_CPUOptions, '_nrt') else {}
-except ImportError:         # pragma: no cover - another numba layout
-    NO_REFCOUNT = {}
-
-
 #: Arguments of the guide kernels (:func:`hair_tracking.guides.pbd_constraints.pbd_step`,
 #: :func:`~hair_tracking.guides.pbd_constraints.xpbd_step`,
 #: :func:`hair_tracking.guides.ftl.ftl_step`), grouped as NVIDIA Warp / Newton separate a
 #: solver's inputs.  The kernels take them as plain tuples in these fields' order
 #: (``tuple(GuideState(x, v, x_old))``): numba types a named tuple by encoding its class and
-#: field names on every call, a few microseconds a call.
+#: field names on every call.
 #: The guides' state, advanced in place: positions ``x`` and velocities ``v`` (S, N, 3) [m],
 #: [m/s], and ``x_old`` (S, N, 3), written: the start positions after the rigid carry.
 GuideState = namedtuple('GuideState', ['x', 'v', 'x_old'])
@@ -143,7 +91,7 @@ def relative_rotation(rot_prev, rot):
     return out
 
 
-@njit(cache=True, **NO_REFCOUNT)
+@njit(cache=True)
 def head_motion(rot_prev, pos_prev, rot, pos, rot_rel):
     """Write ``R_rel = R R_prev^T`` into ``rot_rel`` (3, 3); True if all four inputs are finite.
 
@@ -160,7 +108,7 @@ def head_motion(rot_prev, pos_prev, rot, pos, rot_rel):
     return ok
 
 
-@njit(cache=True, **NO_REFCOUNT)
+@njit(cache=True)
 def head_motions(rots, poss, rels):
     """:func:`head_motion` of every substep of a run: ``rels[k]`` (K, 3, 3) from the poses
     ``rots`` (K + 1, 3, 3), ``poss`` (K + 1, 3) at the start and at the end of each substep;
@@ -171,20 +119,23 @@ def head_motions(rots, poss, rels):
     return ok
 
 
-@njit(cache=True, fastmath=FASTMATH, error_model='numpy', **NO_REFCOUNT)
-def predict_block(x, v, x_old, rest, inv_mass, s0, s1, rot, pos, rot_rel, pos_prev, gravity,
-                  damp, dt, shock):
+@njit(cache=True, fastmath=FASTMATH, error_model='numpy')
+def predict_block(state, rest, inv_mass, motion, s0, s1):
     """Predict positions of strands ``s0..s1-1`` in place (step 1 of the module docstring).
 
-    On return ``x_old`` holds the (carried) start-of-substep positions and ``x`` the predicted
-    positions (roots at ``rot @ rest + pos``). ``v`` is read, not written: the velocity of the
-    substep is set by :func:`finalize_block` from the displacement (saves a pass over memory).
+    ``state``: the fields of :data:`GuideState`; on return ``x_old`` holds the (carried)
+    start-of-substep positions and ``x`` the predicted positions (roots at ``rot @ rest +
+    pos``). ``v`` is read, not written: the velocity of the substep is set by
+    :func:`finalize_block` from the displacement (saves a pass over memory).
 
-    Parameters: ``rot``/``pos`` head pose at the end of the substep; ``rot_rel``/``pos_prev`` the
-    head motion (see :func:`relative_rotation`); ``gravity`` (3,) [m/s^2] world frame; ``damp`` the
-    velocity factor ``exp(-damping dt)``; ``shock`` the shock-propagation fraction 0..1. Nodes
-    with ``inv_mass == 0`` beyond the roots are carried but not integrated (static).
+    ``motion``: the fields of :data:`StepMotion`: ``rot``/``pos`` head pose at the end of the
+    substep; ``rot_rel``/``pos_prev`` the head motion (see :func:`relative_rotation`);
+    ``gravity`` (3,) [m/s^2] world frame; ``damp`` the velocity factor ``exp(-damping dt)``;
+    ``shock`` the shock-propagation fraction 0..1. Nodes with ``inv_mass == 0`` beyond the
+    roots are carried but not integrated (static).
     """
+    x, v, x_old = state
+    rot, pos, rot_rel, pos_prev, gravity, damp, dt, shock = motion
     n = x.shape[1]
     r00, r01, r02 = rot[0, 0], rot[0, 1], rot[0, 2]
     r10, r11, r12 = rot[1, 0], rot[1, 1], rot[1, 2]
@@ -236,7 +187,7 @@ def predict_block(x, v, x_old, rest, inv_mass, s0, s1, rot, pos, rot_rel, pos_pr
                 x[s, i, 2] = pz
 
 
-@njit(cache=True, fastmath=FASTMATH, error_model='numpy', **NO_REFCOUNT)
+@njit(cache=True, fastmath=FASTMATH, error_model='numpy')
 def finalize_block(x, v, x_old, inv_mass, corr, s0, s1, dt, max_disp, s_damp):
     """Displacement clamp and velocity update of strands ``s0..s1-1``; returns the clamped count.
 
@@ -289,13 +240,19 @@ def finalize_block(x, v, x_old, inv_mass, corr, s0, s1, dt, max_disp, s_damp):
     return clamped
 
 
-@njit(cache=True, error_model='numpy', **NO_REFCOUNT)
+@njit(cache=True, error_model='numpy')
 def max_step_sq(x, x_old):
     """Largest squared displacement ``|x - x_old|^2`` of a node [m^2] (the simulator's speed
     estimate for splitting substeps); one serial pass, no temporary arrays.  NaN if any
     displacement is NaN."""
+    return max_step_sq_block(x, x_old, 0, x.shape[0])
+
+
+@njit(cache=True, error_model='numpy')
+def max_step_sq_block(x, x_old, s0, s1):
+    """:func:`max_step_sq` of the strands ``s0 <= s < s1``."""
     best = 0.0
-    for s in range(x.shape[0]):
+    for s in range(s0, s1):
         for i in range(x.shape[1]):
             d0 = x[s, i, 0] - x_old[s, i, 0]
             d1 = x[s, i, 1] - x_old[s, i, 1]
@@ -322,8 +279,17 @@ def finalize(x, v, x_old, inv_mass, corr, dt, max_disp, s_damp):
     """Kernel: :func:`finalize_block` over all strands (used when a collider runs in between)."""
     total = 0
     for s in prange(x.shape[0]):
-        i = np.int64(s)       # (the index as in the serial twin: one compiled finalize_block)
+        i = np.int64(s)       # (the index as in the serial variant: one compiled block body)
         total += finalize_block(x, v, x_old, inv_mass, corr, i, i + 1, dt, max_disp, s_damp)
+    return total
+
+
+@njit(cache=True, nogil=True, fastmath=FASTMATH, error_model='numpy')
+def finalize_serial(x, v, x_old, inv_mass, corr, dt, max_disp, s_damp):
+    """:func:`finalize` on the calling thread."""
+    total = 0
+    for s in range(x.shape[0]):
+        total += finalize_block(x, v, x_old, inv_mass, corr, s, s + 1, dt, max_disp, s_damp)
     return total
 
 
@@ -335,11 +301,18 @@ def carry_rigid(x, rot_rel, pos_prev, pos, out):
     head during the substep.
     """
     for s in prange(x.shape[0]):
-        i = np.int64(s)       # (the index as in the serial twin: one compiled block body)
+        i = np.int64(s)       # (the index as in the serial variant: one compiled block body)
         carry_rigid_block(x, rot_rel, pos_prev, pos, out, i, i + 1)
 
 
-@njit(cache=True, fastmath=FASTMATH, error_model='numpy', **NO_REFCOUNT)
+@njit(cache=True, nogil=True, fastmath=FASTMATH, error_model='numpy')
+def carry_rigid_serial(x, rot_rel, pos_prev, pos, out):
+    """:func:`carry_rigid` on the calling thread."""
+    for s in range(x.shape[0]):
+        carry_rigid_block(x, rot_rel, pos_prev, pos, out, s, s + 1)
+
+
+@njit(cache=True, fastmath=FASTMATH, error_model='numpy')
 def carry_rigid_block(x, rot_rel, pos_prev, pos, out, s0, s1):
     """:func:`carry_rigid` of the strands ``s0 <= s < s1``."""
     q00, q01, q02 = rot_rel[0, 0], rot_rel[0, 1], rot_rel[0, 2]
@@ -354,7 +327,3 @@ def carry_rigid_block(x, rot_rel, pos_prev, pos, out, s0, s1):
             out[s, i, 0] = q00 * ax + q01 * ay + q02 * az + pos[0]
             out[s, i, 1] = q10 * ax + q11 * ay + q12 * az + pos[1]
             out[s, i, 2] = q20 * ax + q21 * ay + q22 * az + pos[2]
-
-
-finalize_serial = serial_twin(finalize)
-carry_rigid_serial = serial_twin(carry_rigid)

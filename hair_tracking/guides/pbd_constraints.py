@@ -35,8 +35,7 @@ import math
 import numpy as np
 from numba import njit, prange, uint64
 
-from hair_tracking.guides.integrate import (FASTMATH, finalize_block, NO_REFCOUNT, predict_block,
-                                            serial_twin)
+from hair_tracking.guides.integrate import FASTMATH, finalize_block, predict_block
 
 #: Static data of :func:`pbd_step` (the last four in :func:`lane_major` layout): ``rest``
 #: (S, N, 3) head frame [m], ``inv_mass`` (S, N), ``rest_length``, ``bend_rest`` (rest
@@ -69,10 +68,8 @@ TINY_SQ = 1e-30
 #: constant distance from the others, so LLVM proves that a projection's loads and stores do not
 #: overlap and vectorises the loop over the strands.  It did not with the row length a run-time
 #: value, with 3-d indexing (numba reads the strides at run time) or with signed indices (see
-#: :func:`pbd_sweep_lanes`): the loop ran scalar.  Guide step against pypbd, 4 iterations, in
-#: turns in one process (scripts/bench.py's method): 100 / 1000 / 4000 strands 3.2 / 4.0 / 6.5x
-#: with the strand-by-strand sweep, 6.8 / 10.1 / 20.6x with these blocks.  16 strands are four
-#: AVX2 vectors, enough to overlap the square-root and division chains of consecutive nodes.
+#: :func:`pbd_sweep_lanes`): the loop ran scalar.  16 strands are four AVX2 vectors, enough
+#: to overlap the square-root and division chains of consecutive nodes.
 LANES = 16
 
 
@@ -137,7 +134,7 @@ def lane_work(strands: int, nodes: int) -> np.ndarray:
     return np.zeros((lane_blocks(strands), nodes * 3 * LANES))
 
 
-@njit(cache=True, fastmath=FASTMATH, error_model='numpy', **NO_REFCOUNT)
+@njit(cache=True, fastmath=FASTMATH, error_model='numpy')
 def pbd_sweep_block(x, rest_dist, weights, gap, k, s0, s1):
     """One PBD Gauss–Seidel sweep over the constraints ``(i, i+gap)`` of strands ``s0..s1-1``.
 
@@ -173,7 +170,7 @@ def _pair_offsets(i, gap):
     return uint64(i * 3 * LANES), uint64((i + gap) * 3 * LANES), uint64(i * LANES)
 
 
-@njit(cache=True, fastmath=FASTMATH, error_model='numpy', **NO_REFCOUNT)
+@njit(cache=True, fastmath=FASTMATH, error_model='numpy')
 def pbd_sweep_lanes(p, rest_dist, weights, n, gap, k):
     """One PBD Gauss–Seidel sweep over the constraints ``(i, i+gap)`` of the :data:`LANES` strands
     of one block, side by side: the same projections as :func:`pbd_sweep_block`, in the same
@@ -209,7 +206,7 @@ def pbd_sweep_lanes(p, rest_dist, weights, n, gap, k):
             p[e + u2 + m] -= c * dz
 
 
-@njit(cache=True, fastmath=FASTMATH, error_model='numpy', **NO_REFCOUNT)
+@njit(cache=True, fastmath=FASTMATH, error_model='numpy')
 def xpbd_sweep_lanes(p, inv_mass, rest_dist, gain, lam, n, gap, alpha_tilde):
     """One XPBD Gauss–Seidel sweep over the constraints ``(i, i+gap)`` of the :data:`LANES`
     strands of one block, side by side (layout as in :func:`pbd_sweep_lanes`).
@@ -245,7 +242,7 @@ def xpbd_sweep_lanes(p, inv_mass, rest_dist, gain, lam, n, gap, alpha_tilde):
             p[e + u2 + m] += wb * dz
 
 
-@njit(cache=True, fastmath=FASTMATH, error_model='numpy', **NO_REFCOUNT)
+@njit(cache=True, fastmath=FASTMATH, error_model='numpy')
 def lanes_in(x, s0, s1, p):
     """Positions of strands ``s0..s1-1`` (at most :data:`LANES`) into the block layout ``p``
     (its padding lanes are left as they are: zero from :func:`lane_work`)."""
@@ -256,7 +253,7 @@ def lanes_in(x, s0, s1, p):
                 p[(i * 3 + a) * LANES + j] = x[s0 + j, i, a]
 
 
-@njit(cache=True, fastmath=FASTMATH, error_model='numpy', **NO_REFCOUNT)
+@njit(cache=True, fastmath=FASTMATH, error_model='numpy')
 def lanes_out(p, x, s0, s1):
     """Inverse of :func:`lanes_in`."""
     n = x.shape[1]
@@ -267,59 +264,53 @@ def lanes_out(p, x, s0, s1):
 
 
 @njit(cache=True, inline='always', fastmath=FASTMATH, error_model='numpy')
-def _lanes_predicted(blk, x, v, x_old, rest, inv_mass, work, rot, pos, rot_rel, pos_prev,
-                     gravity, damp, dt, shock):
+def _lanes_predicted(blk, state, rest, inv_mass, motion, work):
     """Step 1 for the strands of block ``blk`` (:func:`integrate.predict_block`), their
     predicted positions into the block's row of ``work``; returns the strand range (s0, s1)."""
+    x = state[0]
     s0 = blk * LANES
     s1 = min(s0 + LANES, x.shape[0])
-    predict_block(x, v, x_old, rest, inv_mass, s0, s1, rot, pos, rot_rel, pos_prev, gravity,
-                  damp, dt, shock)
+    predict_block(state, rest, inv_mass, motion, s0, s1)
     lanes_in(x, s0, s1, work[blk])
     return s0, s1
 
 
 @njit(cache=True, inline='always', fastmath=FASTMATH, error_model='numpy')
-def _lanes_finished(p, x, v, x_old, inv_mass, s0, s1, dt, max_disp, do_finalize):
+def _lanes_finished(p, state, inv_mass, s0, s1, dt, max_disp, do_finalize):
     """The block's projected positions ``p`` back into ``x``, then (if ``do_finalize``) the
     clamp and velocity update of its strands; returns the clamped count."""
+    x, v, x_old = state
     lanes_out(p, x, s0, s1)
     if do_finalize:
         return finalize_block(x, v, x_old, inv_mass, x_old, s0, s1, dt, max_disp, 0.0)
     return 0
 
 
-@njit(cache=True, fastmath=FASTMATH, error_model='numpy', **NO_REFCOUNT)
+@njit(cache=True, fastmath=FASTMATH, error_model='numpy')
 def _pbd_block(blk, model, state, motion, params, work):
-    """Block ``blk`` of :func:`pbd_step` (a compiled body of its own: the serial twin runs the
-    same code, see :func:`hair_tracking.guides.integrate.serial_twin`)."""
-    x, v, x_old = state                                                 # GuideState
+    """Block ``blk`` of :func:`pbd_step` (a compiled body of its own: the parallel and the
+    serial kernel run the same code)."""
     rest, inv_mass, rest_length, bend_rest, stretch_w, bend_w = model   # PbdModel
-    rot, pos, rot_rel, pos_prev, gravity, damp, dt, shock = motion      # StepMotion
     iterations, stiffness, bend_stiffness, max_disp, do_finalize = params   # PbdParams
-    s0, s1 = _lanes_predicted(blk, x, v, x_old, rest, inv_mass, work, rot, pos, rot_rel,
-                              pos_prev, gravity, damp, dt, shock)
-    n = x.shape[1]
+    s0, s1 = _lanes_predicted(blk, state, rest, inv_mass, motion, work)
+    n = state[0].shape[1]
     p = work[blk]
     for _ in range(iterations):
         pbd_sweep_lanes(p, rest_length[blk], stretch_w[blk], n, 1, stiffness)
         if bend_stiffness > 0.0:
             pbd_sweep_lanes(p, bend_rest[blk], bend_w[blk], n, 2, bend_stiffness)
-    return _lanes_finished(p, x, v, x_old, inv_mass, s0, s1, dt, max_disp, do_finalize)
+    return _lanes_finished(p, state, inv_mass, s0, s1, motion[6], max_disp, do_finalize)
 
 
-@njit(cache=True, fastmath=FASTMATH, error_model='numpy', **NO_REFCOUNT)
+@njit(cache=True, fastmath=FASTMATH, error_model='numpy')
 def _xpbd_block(blk, model, state, motion, params, xwork):
     """Block ``blk`` of :func:`xpbd_step` (see :func:`_pbd_block`)."""
-    x, v, x_old = state                                                 # GuideState
     (rest, inv_mass, inv_mass_l, rest_length, bend_rest, stretch_gain,
      bend_gain) = model                                                 # XpbdModel
     work, lam_stretch, lam_bend = xwork                                 # XpbdWork
-    rot, pos, rot_rel, pos_prev, gravity, damp, dt, shock = motion      # StepMotion
     iterations, alpha_stretch, alpha_bend, max_disp, do_finalize = params   # XpbdParams
-    s0, s1 = _lanes_predicted(blk, x, v, x_old, rest, inv_mass, work, rot, pos, rot_rel,
-                              pos_prev, gravity, damp, dt, shock)
-    n = x.shape[1]
+    s0, s1 = _lanes_predicted(blk, state, rest, inv_mass, motion, work)
+    n = state[0].shape[1]
     p = work[blk]
     lam_stretch[blk, :] = 0.0
     lam_bend[blk, :] = 0.0
@@ -329,7 +320,7 @@ def _xpbd_block(blk, model, state, motion, params, xwork):
         if alpha_bend >= 0.0:
             xpbd_sweep_lanes(p, inv_mass_l[blk], bend_rest[blk], bend_gain[blk], lam_bend[blk],
                              n, 2, alpha_bend)
-    return _lanes_finished(p, x, v, x_old, inv_mass, s0, s1, dt, max_disp, do_finalize)
+    return _lanes_finished(p, state, inv_mass, s0, s1, motion[6], max_disp, do_finalize)
 
 
 @njit(cache=True, nogil=True, parallel=True, fastmath=FASTMATH, error_model='numpy')
@@ -353,8 +344,17 @@ def pbd_step(model, state, motion, params, work):
     """
     clamped = 0
     for blk in prange(work.shape[0]):
-        # (the index as in the serial twin: one compiled block body)
+        # (the index as in the serial variant: one compiled block body)
         clamped += _pbd_block(np.int64(blk), model, state, motion, params, work)
+    return clamped
+
+
+@njit(cache=True, nogil=True, fastmath=FASTMATH, error_model='numpy')
+def pbd_step_serial(model, state, motion, params, work):
+    """:func:`pbd_step` on the calling thread."""
+    clamped = 0
+    for blk in range(work.shape[0]):
+        clamped += _pbd_block(blk, model, state, motion, params, work)
     return clamped
 
 
@@ -380,5 +380,10 @@ def xpbd_step(model, state, motion, params, work):
     return clamped
 
 
-pbd_step_serial = serial_twin(pbd_step)
-xpbd_step_serial = serial_twin(xpbd_step)
+@njit(cache=True, nogil=True, fastmath=FASTMATH, error_model='numpy')
+def xpbd_step_serial(model, state, motion, params, work):
+    """:func:`xpbd_step` on the calling thread."""
+    clamped = 0
+    for blk in range(work[0].shape[0]):
+        clamped += _xpbd_block(blk, model, state, motion, params, work)
+    return clamped

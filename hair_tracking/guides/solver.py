@@ -53,7 +53,8 @@ FTL_BEND_PASSES = 1
 #: Substep [s] at which ``solver.bend_stiffness`` applies as given to FTL (the default dt); see
 #: :func:`ftl_bend_stiffness`.
 BEND_REFERENCE_DT = 1.0 / 240.0
-#: What the FTL kernels take as the collider where there is none (not read).
+#: What the FTL kernels take as the collider where there is none (not read; the fields of
+#: :data:`~hair_tracking.guides.collision.ColliderModel`).
 NO_COLLIDER = (np.zeros(3), np.ones(3), 0.0, 0.0, 0)
 #: What :func:`~hair_tracking.guides.ftl.ftl_advance` takes as its stop rule where there is
 #: none (a limit of 0: not applied).
@@ -65,12 +66,20 @@ class GuideSolver:
 
     ``strands``: a :class:`~hair_tracking.core.model.StrandSet` (changed in place; its ``x`` and
     ``v`` must be C-contiguous float64 ``(S, N, 3)``, ``N >= 3``); ``scene``: a
-    :class:`~hair_tracking.core.scene.Scene` (solver, gravity, damping, collider).
+    :class:`~hair_tracking.core.scene.Scene` (solver, gravity, damping, collider);
+    ``parallel``: run the parallel kernels rather than their serial variants (default: by the
+    node count, :func:`~hair_tracking.guides.integrate.runs_parallel`; the simulator decides
+    for the whole scene).
 
     Attributes: ``collider`` (``None`` when the scene has none; the simulator may hand it to the
     ghost tracker), ``kind`` (``'pbd'``, ``'xpbd'`` or ``'ftl'``), ``margin`` the collider margin
     in use [m]: ``scene.collider.margin``, but at most the rest clearance of the closest free node
-    and half the shortest segment (see ``_fit_margin``).
+    and half the shortest segment (see ``_fit_margin``); ``parallel`` the kernel variant;
+    ``model`` the kernels' static data, the fields of
+    :data:`~hair_tracking.guides.ftl.FtlModel`,
+    :data:`~hair_tracking.guides.pbd_constraints.PbdModel` or
+    :data:`~hair_tracking.guides.pbd_constraints.XpbdModel` as a plain tuple (XPBD's from
+    the first substep on: its gains depend on ``dt``).
 
     With FTL and a collider, a substep is predict, bend, FTL pass, collide and, when a node of
     the strand's block was pushed, a collision-aware second FTL pass
@@ -79,13 +88,15 @@ class GuideSolver:
     ``docs/stability.md``).
     """
 
-    def __init__(self, strands: StrandSet, scene):
+    def __init__(self, strands: StrandSet, scene, parallel: Optional[bool] = None):
         self.kind = scene.solver.type
         if self.kind not in ('pbd', 'xpbd', 'ftl'):
             raise ValueError(f'solver.type: {self.kind!r} is not one of ftl, pbd, xpbd')
         _check_strands(strands, self.kind)
         self.strands = strands
         self.scene = scene
+        self.parallel = bool(integrate.runs_parallel(strands.count * strands.nodes)
+                             if parallel is None else parallel)
         self.collider = collision.make_collider(scene.collider)
         self.margin = self._fit_margin()
         sv = scene.solver
@@ -101,8 +112,8 @@ class GuideSolver:
         if self.kind == 'ftl':
             self._bend_w = pbd_constraints.pair_weights(im, 2)
             self._corr = np.zeros_like(strands.x)
-            self._model = tuple(ftl.FtlModel(strands.rest, im, strands.rest_length,
-                                             self._bend_rest, self._bend_w))
+            self.model = tuple(ftl.FtlModel(strands.rest, im, strands.rest_length,
+                                            self._bend_rest, self._bend_w))
         else:
             # the PBD and XPBD kernels read their per-constraint data block by block, strands
             # side by side (pbd_constraints.lane_major), and project in a work space
@@ -114,7 +125,7 @@ class GuideSolver:
             if self.kind == 'pbd':
                 self._stretch_w = lanes(pbd_constraints.pair_weights(im, 1))
                 self._bend_w = lanes(pbd_constraints.pair_weights(im, 2))
-                self._model = tuple(pbd_constraints.PbdModel(
+                self.model = tuple(pbd_constraints.PbdModel(
                     strands.rest, im, self._rest_length_l, self._bend_rest_l, self._stretch_w,
                     self._bend_w))
             else:
@@ -140,8 +151,7 @@ class GuideSolver:
 
     def step(self, dt: float, head_prev: HeadPose, head: HeadPose) -> None:
         """Advance one substep ``dt`` [s] while the head moves from ``head_prev`` to ``head``."""
-        nodes = self.strands.x.shape[0] * self.strands.x.shape[1]
-        self._step(dt, head_prev, head, integrate.runs_parallel(nodes))
+        self._step(dt, head_prev, head, self.parallel)
 
     def advance(self, dt: float, head_prev: HeadPose, heads: Sequence[HeadPose],
                 measure: bool = False, stop=None) -> Optional[np.ndarray]:
@@ -161,8 +171,7 @@ class GuideSolver:
         if len(heads) == 1 and not measure:
             self.step(dt, head_prev, heads[0])      # one substep: the one-substep kernels
             return None
-        nodes = self.strands.x.shape[0] * self.strands.x.shape[1]
-        parallel = integrate.runs_parallel(nodes)
+        parallel = self.parallel
         rule = stop is not None and measure and stop[1] > 0.0
         if self.kind != 'ftl':
             out = []
@@ -194,11 +203,12 @@ class GuideSolver:
         rule_args = (np.ascontiguousarray(stop[0], dtype=np.float64), float(stop[1]),
                      float(stop[2])) if rule else NO_STOP
         kernel = ftl.ftl_advance if parallel else ftl.ftl_advance_serial
-        collider, x_ref = self._collider_args()
+        # plain tuples in the fields' order of ftl.FtlWork and collision.ColliderModel
+        work = (self._corr, self._friction_ref(), counts, steps,
+                self._x_before if measure else self._x_before[:0])
         done, clamped, clamped_total, contacts, contacts_total = kernel(
-            self._model, (st.x, st.v, self._x_old), drive, self._ftl_params(dt, True),
-            self._corr, self.collider is not None, collider, x_ref, counts, steps,
-            self._x_before if measure else self._x_before[:0], rule_args)
+            self.model, (st.x, st.v, self._x_old), drive, self._ftl_params(dt, True),
+            self.collider is not None, self._collider_model(), work, rule_args)
         cn = self._counters
         cn['substeps'] += int(done)
         cn['clamped'], cn['contacts'] = int(clamped), int(contacts)
@@ -242,8 +252,9 @@ class GuideSolver:
             if not fused:
                 # one kernel: friction reference, collision and second pass in the block loop
                 kernel = ftl.ftl_collide_step if parallel else ftl.ftl_collide_step_serial
-                clamped, contacts = kernel(self._model, state, motion, params, self._corr,
-                                           *self._collider_args())
+                work = (self._corr, self._friction_ref())
+                clamped, contacts = kernel(self.model, state, motion, params, work,
+                                           self._collider_model())
                 self._count(clamped, contacts)
                 return
         if self._x_ref is not None:
@@ -253,15 +264,15 @@ class GuideSolver:
             kernel = pbd_constraints.pbd_step if parallel else pbd_constraints.pbd_step_serial
             params = (self._iterations, float(sv.stiffness), float(sv.bend_stiffness),
                       self._max_disp, fused)
-            clamped = kernel(self._model, state, motion, params, self._work)
+            clamped = kernel(self.model, state, motion, params, self._work)
         elif self.kind == 'xpbd':
             a_stretch, a_bend = self._xpbd_factors(dt)
             kernel = pbd_constraints.xpbd_step if parallel else pbd_constraints.xpbd_step_serial
             params = (self._iterations, a_stretch, a_bend, self._max_disp, fused)
-            clamped = kernel(self._model, state, motion, params, self._xpbd_work)
+            clamped = kernel(self.model, state, motion, params, self._xpbd_work)
         else:
             kernel = ftl.ftl_step if parallel else ftl.ftl_step_serial
-            clamped = kernel(self._model, state, motion, params, self._corr)
+            clamped = kernel(self.model, state, motion, params, self._corr)
         contacts = 0
         if not fused:
             contacts = self.collider.project(st.x, self._friction_ref(), st.inv_mass, rot, pos,
@@ -277,14 +288,10 @@ class GuideSolver:
         return (FTL_BEND_PASSES, ftl_bend_stiffness(sv.bend_stiffness, dt),
                 float(sv.ftl_damping), self._max_disp, finalize)
 
-    def _collider_args(self) -> tuple:
-        """``(collider, x_ref)`` as the FTL kernels take them: the collider's fields (a
-        stand-in without one) and the friction reference's array (``x_old`` without
-        friction)."""
-        c = self.collider
-        collider = (c.center, c.radii, c.margin, c.friction, c.refine) if c is not None else \
-            NO_COLLIDER
-        return collider, self._friction_ref()
+    def _collider_model(self) -> tuple:
+        """The collider as the FTL kernels take it
+        (:data:`~hair_tracking.guides.collision.ColliderModel`; a stand-in without one)."""
+        return self.collider.model if self.collider is not None else NO_COLLIDER
 
     def _friction_ref(self) -> np.ndarray:
         """The collider's friction reference: the start-of-substep positions carried with the
@@ -307,7 +314,7 @@ class GuideSolver:
         the clamp limited in the last substep, ``clamped_total``; ``contacts`` nodes projected out
         of the collider in the last substep, ``contacts_total``; ``max_stretch`` = max over
         segments of ``|l / l0 - 1|`` of the current state, i.e. after the last substep (computed
-        on access, about 0.2 ms for 1000 x 16 nodes); ``margin`` the collider margin in use [m]
+        on access); ``margin`` the collider margin in use [m]
         (see :attr:`margin`).
         """
         out = dict(self._counters)
@@ -346,7 +353,7 @@ class GuideSolver:
             self._bend_gain = pbd_constraints.lane_major(
                 pbd_constraints.xpbd_gain(im, 2, a_bend))
             st = self.strands
-            self._model = tuple(pbd_constraints.XpbdModel(
+            self.model = tuple(pbd_constraints.XpbdModel(
                 st.rest, im, self._inv_mass_l, self._rest_length_l, self._bend_rest_l,
                 self._stretch_gain, self._bend_gain))
             self._xpbd_dt = dt

@@ -7,8 +7,10 @@ its dotted path (:data:`hair_tracking.core.scene_params.SCENE_PARAMS`: ``groom.g
 (:mod:`hair_tracking.ros.node`) declares one ROS parameter per row, validates a candidate change
 with :func:`apply_changes` (which builds and validates the whole scene, so cross-field rules hold
 too) and hands the resulting :class:`Settings` snapshot to the next simulation step;
-``hair_sim_bag run`` reads a params file of the node into the same snapshot.  This module imports
-no ROS package: it is plain data and checks, testable without DDS.
+``hair_sim_bag run`` reads a params file of the node into the same snapshot.  A change of the
+groom that imports a file reads it while validating (:func:`check_groom_file`), so a bad file is
+refused with the change.  This module imports no ROS package: it is plain data and checks,
+testable without DDS.
 
 Units are SI (metres, seconds, radians unless a name says ``_deg``); frames follow REP-103.
 """
@@ -17,6 +19,8 @@ from typing import Any, Dict, Mapping, Optional, Tuple
 
 from hair_tracking.core.params import Param, ParamError
 from hair_tracking.core.scene import Scene, scene_fields, scene_params, SceneError
+from hair_tracking.grooms.build import import_groom
+from hair_tracking.grooms.polylines import GroomFileError
 
 NODE_NAME = 'hair_sim'
 
@@ -248,14 +252,26 @@ def make_settings(values: Mapping[str, Any], base: Optional[Scene] = None) -> Se
     return Settings(scene=scene, **node)
 
 
+def check_groom_file(scene: Scene) -> None:
+    """ParamError naming ``groom.file`` when the scene imports a groom file that cannot be read
+    or put on the head (the file is read and imported here, so a bad one is refused before
+    anything is rebuilt); nothing for the procedural groom."""
+    if scene.groom.file:
+        try:
+            import_groom(scene.groom)
+        except GroomFileError as e:
+            raise ParamError('groom.file', str(e)) from None
+
+
 def apply_changes(settings: Settings, changes: Mapping[str, Any],
                   base: Optional[Scene] = None, allow_read_only: bool = False
                   ) -> Tuple[Settings, bool]:
     """Validate ``changes`` against ``settings``; returns ``(new settings, rebuild needed)``.
 
     Raises :class:`ParamError` (name + allowed values) for an unknown or read-only parameter,
-    a wrong type, a value out of range or a scene that fails validation; ``settings`` itself is
-    never modified (it is frozen).
+    a wrong type, a value out of range, a scene that fails validation or a changed groom whose
+    file cannot be imported (:func:`check_groom_file`); ``settings`` itself is never modified
+    (it is frozen).
     """
     params = by_name(base)
     for name in changes:
@@ -270,4 +286,6 @@ def apply_changes(settings: Settings, changes: Mapping[str, Any],
     new = make_settings(values, base)
     new_values = new.values()
     rebuild = any(params[n].rebuild and new_values[n] != old[n] for n in changes)
+    if new.scene.groom != settings.scene.groom:
+        check_groom_file(new.scene)
     return new, rebuild

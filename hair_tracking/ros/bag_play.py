@@ -18,14 +18,13 @@ lack (e.g. ``tf2_msgs`` here) cannot be published: those topics are skipped with
 live demo play a bag in-process from a thread while an executor spins the node under test.
 """
 import importlib
-import signal
 import sys
 import time
 from typing import Callable, Dict, List, Optional, Sequence
 
 from hair_tracking.bags import io as bag_io
 from hair_tracking.bags.cli import finish_parser
-from hair_tracking.bags.io import BagError, EXIT_CONTENT, EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE
+from hair_tracking.bags.io import BagError, EXIT_CONTENT, EXIT_OK, EXIT_USAGE
 from hair_tracking.bags.play import Playback
 
 CLOCK_TOPIC = '/clock'
@@ -188,9 +187,10 @@ def add_command(sub) -> None:
 
 
 def main_play(args) -> int:
-    """``hair_sim_bag play`` (arguments from :func:`add_command`)."""
+    """``hair_sim_bag play`` (arguments from :func:`add_command`; ``args.stop`` the process's
+    :class:`~hair_tracking.shutdown.StopRequest`): 0 when the bag was played or a stop was
+    asked for."""
     import rclpy
-    from rclpy.executors import ExternalShutdownException
     from rclpy.signals import SignalHandlerOptions
 
     from hair_tracking.bags.offline import progress_bar
@@ -201,19 +201,18 @@ def main_play(args) -> int:
     if args.delay < 0 or args.wait_for_subscribers < 0:
         raise BagError('--delay and --wait-for-subscribers must be >= 0', EXIT_USAGE)
     kwargs = {} if args.domain_id is None else {'domain_id': args.domain_id}
-    # Ctrl-C: not rclpy's handler invalidating the context under a publish in progress; until
-    # the player exists Python's KeyboardInterrupt, then a flag the player checks between
-    # messages (a KeyboardInterrupt raised inside a publish comes out of pybind11 as a
-    # RuntimeError).  Installed even where the parent left SIGINT ignored, as rclpy's would be.
-    signal.signal(signal.SIGINT, signal.default_int_handler)
+    stop = args.stop
+    # no rclpy signal handler: it would shut the context down under a publish in progress;
+    # the stop request stops the player between messages (and wakes its waits) instead
     rclpy.init(args=None, signal_handler_options=SignalHandlerOptions.NO, **kwargs)
     node = player = None
+    forget = None
     try:
         node = rclpy.create_node('hair_sim_bag_player')
         player = BagPlayer(node, bag, rate=args.rate, loop=args.loop,
                            start_offset_s=args.start_offset, duration_s=args.duration,
                            topics=args.topics, remap=remap, clock=not args.no_clock)
-        signal.signal(signal.SIGINT, lambda signum, frame: player.interrupt())
+        forget = stop.on_request(player.stop)
         if args.wait_for_subscribers > 0:
             lonely = player.wait_for_subscribers(args.wait_for_subscribers)
             if lonely and not player.stopping():
@@ -221,16 +220,17 @@ def main_play(args) -> int:
                       file=sys.stderr)
         if args.delay > 0:
             player.sleep(args.delay)
+        if not args.quiet:
+            print(f'playing {bag}{" in a loop" if args.loop else ""} (Ctrl-C to stop)',
+                  file=sys.stderr, flush=True)
         progress, close = progress_bar('play', args.quiet)
         stats = player.play(progress)
         close()
         print(stats.text())
-        if stats.interrupted and not args.loop:
-            return EXIT_INTERRUPTED
         return EXIT_OK
-    except ExternalShutdownException:
-        return EXIT_INTERRUPTED
     finally:
+        if forget is not None:
+            forget()
         if player is not None:
             player.destroy()
         if node is not None:

@@ -14,7 +14,6 @@ recording fails (the bag side is :class:`hair_tracking.bags.record.Recording`).
 :class:`BagRecorder` works on any node spun by the caller's executor, so tests and the live
 demo record in-process.
 """
-import signal
 import sys
 import time
 from typing import Callable, Dict, List, Optional, Sequence
@@ -155,10 +154,13 @@ def add_command(sub) -> None:
 
 
 def main_record(args) -> int:
-    """``hair_sim_bag record`` (arguments from :func:`add_command`)."""
+    """``hair_sim_bag record`` (arguments from :func:`add_command`; ``args.stop`` the process's
+    :class:`~hair_tracking.shutdown.StopRequest`): 0 when recording ended, by its limits or a
+    stop request (the bag is complete either way)."""
     import rclpy
-    from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+    from rclpy.executors import SingleThreadedExecutor
     from rclpy.parameter import Parameter
+    from rclpy.signals import SignalHandlerOptions
 
     for name in ('duration', 'idle_timeout'):
         v = getattr(args, name)
@@ -173,13 +175,12 @@ def main_record(args) -> int:
     bag_io.check_output_path(args.output, args.overwrite)
     bag_io.output_storage(args.output, args.storage)
 
-    def on_term(signum, frame):
-        raise KeyboardInterrupt
-    previous = signal.signal(signal.SIGTERM, on_term)
+    stop = args.stop
     kwargs = {} if args.domain_id is None else {'domain_id': args.domain_id}
-    rclpy.init(args=None, **kwargs)
+    # no rclpy signal handler (it would shut the context down under a take in progress): the
+    # loop below ends at the stop request, within one wait of the executor
+    rclpy.init(args=None, signal_handler_options=SignalHandlerOptions.NO, **kwargs)
     node = rec = None
-    interrupted = False
     try:
         overrides = [Parameter('use_sim_time', Parameter.Type.BOOL, True)] \
             if args.use_sim_time else []
@@ -193,37 +194,33 @@ def main_record(args) -> int:
         last_print = 0.0
         if not args.quiet:
             print(f'recording to {args.output} (Ctrl-C to stop)', file=sys.stderr)
-        try:
-            while True:
-                executor.spin_once(timeout_sec=0.05)
-                now = time.monotonic()
-                if args.duration is not None and now - start >= args.duration:
-                    break
-                if args.max_messages is not None and rec.messages >= args.max_messages:
-                    break
-                if args.idle_timeout is not None and rec.last_arrival is not None \
-                        and now - rec.last_arrival >= args.idle_timeout:
-                    break
-                if not args.quiet and sys.stderr.isatty() and now - last_print > 0.5:
-                    last_print = now
-                    sys.stderr.write(f'\r{rec.messages} messages on {len(rec.subs)} topic(s)')
-                    sys.stderr.flush()
-        except (KeyboardInterrupt, ExternalShutdownException):
-            interrupted = True
+        while not stop.requested:
+            executor.spin_once(timeout_sec=0.05)     # steady-clock timeout, /clock or not
+            now = time.monotonic()
+            if args.duration is not None and now - start >= args.duration:
+                break
+            if args.max_messages is not None and rec.messages >= args.max_messages:
+                break
+            if args.idle_timeout is not None and rec.last_arrival is not None \
+                    and now - rec.last_arrival >= args.idle_timeout:
+                break
+            if not args.quiet and sys.stderr.isatty() and now - last_print > 0.5:
+                last_print = now
+                sys.stderr.write(f'\r{rec.messages} messages on {len(rec.subs)} topic(s)')
+                sys.stderr.flush()
         if not args.quiet and sys.stderr.isatty():
             sys.stderr.write('\n')
         path = rec.close()
         print(rec.summary())
         print(f'wrote {path}')
-        if interrupted and not args.quiet:
-            print('stopped by Ctrl-C / SIGTERM; the bag is complete', file=sys.stderr)
+        if stop.requested and not args.quiet:
+            print(f'stopped by {stop.signal_name}; the bag is complete', file=sys.stderr)
         return EXIT_OK
     except BaseException:
         if rec is not None:
             rec.abort()
         raise
     finally:
-        signal.signal(signal.SIGTERM, previous)
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()

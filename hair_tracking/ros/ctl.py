@@ -11,25 +11,51 @@ It talks to a running node through rclpy's own parameter client
 ``~/reset`` service.  Values are parsed as YAML, as ``ros2 param set`` does: ``-3`` is an
 integer, ``-3.0`` a double (hair_sim takes an integer for a double parameter; other nodes may
 refuse it, so write the decimal point).
-Exit codes: 0 done, 1 the node refused or did not answer, 2 bad command line (a parameter
-the node does not have is named with the closest one it has).
+Exit codes: 0 done (or stopped by SIGINT / SIGTERM), 1 the node refused or did not answer,
+2 bad command line (a parameter the node does not have is named with the closest one it has).
 """
 import argparse
 import difflib
 import sys
+import time
 from typing import List, Optional
 
 import yaml
 
+from hair_tracking import executable, shutdown
+
 TIMEOUT_S = 10.0
 
 
-def _spin_until(node, future, timeout_s: float):
-    import rclpy
-    rclpy.spin_until_future_complete(node, future, timeout_sec=timeout_s)
-    if not future.done():
-        raise TimeoutError(f'no answer within {timeout_s:g} s')
-    return future.result()
+class _Stopped(Exception):
+    """A stop was asked for while waiting for the node."""
+
+
+class _Waits:
+    """The waits of one command: for services, for answers; each ends early on a stop."""
+
+    def __init__(self, executor, stop: shutdown.StopRequest, timeout_s: float):
+        self.executor, self.stop, self.timeout_s = executor, stop, timeout_s
+
+    def until_ready(self, ready) -> bool:
+        """Poll ``ready()`` (graph state, kept by the middleware) until true or the timeout."""
+        deadline = time.monotonic() + self.timeout_s
+        while not ready():
+            left = deadline - time.monotonic()
+            if left <= 0:
+                return False
+            if self.stop.wait(min(left, 0.1)):
+                raise _Stopped
+        return True
+
+    def answer(self, future):
+        """The result of ``future`` (a service call), spinning the executor for it."""
+        shutdown.spin_until_stopped(self.executor, self.stop, future, self.timeout_s)
+        if self.stop.requested:
+            raise _Stopped
+        if not future.done():
+            raise TimeoutError(f'no answer within {self.timeout_s:g} s')
+        return future.result()
 
 
 def _value(p):
@@ -50,7 +76,7 @@ def _unknown_name(name: str, target: str, names) -> Optional[str]:
     return f"unknown parameter '{name}' of {target}{hint}"
 
 
-def run(args, node) -> int:
+def run(args, node, wait: _Waits) -> int:
     from rcl_interfaces.msg import ParameterType
     from rclpy.parameter import Parameter
     from rclpy.parameter_client import AsyncParameterClient
@@ -58,25 +84,25 @@ def run(args, node) -> int:
     if args.cmd == 'reset':
         from std_srvs.srv import Trigger
         cli = node.create_client(Trigger, f'{target.rstrip("/")}/reset')
-        if not cli.wait_for_service(timeout_sec=args.timeout):
+        if not wait.until_ready(cli.service_is_ready):
             print(f'hair_sim_ctl: {target}/reset is not available', file=sys.stderr)
             return 1
-        res = _spin_until(node, cli.call_async(Trigger.Request()), args.timeout)
+        res = wait.answer(cli.call_async(Trigger.Request()))
         print(res.message or ('reset' if res.success else 'refused'))
         return 0 if res.success else 1
     client = AsyncParameterClient(node, target)
-    if not client.wait_for_services(timeout_sec=args.timeout):
+    if not wait.until_ready(client.services_are_ready):
         print(f'hair_sim_ctl: node {target} has no parameter services (is it running?)',
               file=sys.stderr)
         return 1
     if args.action == 'list':
-        res = _spin_until(node, client.list_parameters(), args.timeout)
+        res = wait.answer(client.list_parameters())
         for name in sorted(res.result.names):
             print(name)
         return 0
     if args.action in ('get', 'set'):
-        unknown = _unknown_name(args.name, target, _spin_until(
-            node, client.list_parameters(), args.timeout).result.names)
+        unknown = _unknown_name(args.name, target,
+                                wait.answer(client.list_parameters()).result.names)
         if unknown:
             print(f'hair_sim_ctl: {unknown}', file=sys.stderr)
             return 2
@@ -84,8 +110,8 @@ def run(args, node) -> int:
         if args.action == 'get':
             names = [args.name]
         else:
-            names = sorted(_spin_until(node, client.list_parameters(), args.timeout).result.names)
-        res = _spin_until(node, client.get_parameters(names), args.timeout)
+            names = sorted(wait.answer(client.list_parameters()).result.names)
+        res = wait.answer(client.get_parameters(names))
         got = list(res.values)
         values = {}
         for i, name in enumerate(names):
@@ -109,8 +135,7 @@ def run(args, node) -> int:
     if isinstance(value, list) and all(isinstance(v, (int, float)) for v in value) and \
             any(isinstance(v, float) for v in value):
         value = [float(v) for v in value]
-    res = _spin_until(node, client.set_parameters([Parameter(args.name, value=value)]),
-                      args.timeout)
+    res = wait.answer(client.set_parameters([Parameter(args.name, value=value)]))
     result = res.results[0]
     if not result.successful:
         print(f'hair_sim_ctl: setting {args.name} failed: {result.reason}', file=sys.stderr)
@@ -139,19 +164,26 @@ def main(argv: Optional[List[str]] = None) -> int:
     r = sub.add_parser('reset', help="call the node's ~/reset service")
     r.add_argument('node')
     args = ap.parse_args(argv)
-    import rclpy
-    rclpy.init()
-    node = rclpy.create_node('hair_sim_ctl')
-    try:
-        return run(args, node)
-    except TimeoutError as e:
-        print(f'hair_sim_ctl: {e}', file=sys.stderr)
-        return 1
-    except KeyboardInterrupt:
-        return 130
-    finally:
-        node.destroy_node()
-        rclpy.try_shutdown()
+    with executable.started() as stop:
+        import rclpy
+        from rclpy.executors import SingleThreadedExecutor
+        from rclpy.signals import SignalHandlerOptions
+        rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
+        node = rclpy.create_node('hair_sim_ctl')
+        executor = SingleThreadedExecutor()
+        executor.add_node(node)
+        try:
+            return run(args, node, _Waits(executor, stop, args.timeout))
+        except TimeoutError as e:
+            print(f'hair_sim_ctl: {e}', file=sys.stderr)
+            return 1
+        except _Stopped:
+            print(f'hair_sim_ctl: stopped ({stop.signal_name})', file=sys.stderr)
+            return 0
+        finally:
+            executor.shutdown(timeout_sec=1.0)
+            node.destroy_node()
+            rclpy.try_shutdown()
 
 
 if __name__ == '__main__':

@@ -9,10 +9,13 @@
    ``OUT/hair_output.mcap``, logging at ``/clock`` time;
 3. plays the bundled head-pose bag (CMU 131_01 walk, 8.3 s) into it with ``/clock`` before
    each message, paced by the wall clock;
-4. stops the node (SIGINT, then SIGTERM, SIGKILL only as a last resort, each said), renders
-   ``OUT/pictures/`` (``hair.gif``, ``hair.png``, ``diagnostics.png``) from the recording, and
-   prints a summary: frames, rate, the node's step times, stretch,
-   penetration, rejected poses.
+4. stops the node with SIGINT (SIGTERM and then SIGKILL only as fallbacks for a node that
+   does not stop, each said), renders ``OUT/pictures/`` (``hair.gif``, ``hair.png``,
+   ``diagnostics.png``) from the recording, and prints a summary: frames, rate, the node's
+   step times, stretch, penetration, rejected poses.
+
+SIGINT (Ctrl-C) or SIGTERM stops it at any step: the recording is closed as it is, the node
+stopped, nothing rendered, exit code 0.
 
 Everything stays on this machine (``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``) on its own
 domain id (``--domain-id``, else ``$HAIR_DEMO_DOMAIN_ID``, else 88).  Exit code 0 when hair
@@ -32,7 +35,7 @@ import numpy as np
 
 from msg_adapters.pointcloud import pointcloud2_to_strands
 
-from hair_tracking import process_tuning
+from hair_tracking import executable
 from hair_tracking.bags import io as bag_io
 from hair_tracking.bags.io import BagError
 
@@ -65,9 +68,9 @@ def start_node(domain: int, log_path: Path, params: List[str], threads: Optional
 
 
 def stop_node(proc, timeout: float = STOP_WAIT_S, log=_log) -> int:
-    """Stop the node as a user would: SIGINT (Ctrl-C), then, if it is still running after
-    ``timeout`` seconds, SIGTERM (an external shutdown, which rclpy's own handler turns into one
-    however the node waits), and only as the last resort SIGKILL; each escalation is logged.
+    """Stop the node as a user would: SIGINT (Ctrl-C; the node stops at once however it waits,
+    :mod:`hair_tracking.shutdown`).  Fallbacks for a process that does not stop within
+    ``timeout`` seconds: SIGTERM, then SIGKILL as the last resort; each escalation is logged.
     Returns the node's exit code."""
     for sig in (signal.SIGINT, signal.SIGTERM):
         if proc.poll() is not None:
@@ -114,10 +117,12 @@ def _frames(path):
     return stamps, n, finite, shape
 
 
-def run_demo(args) -> int:
+def run_demo(args, stop) -> int:
+    """The demo (module doc); ``stop`` the process's stop request."""
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.parameter import Parameter
+    from rclpy.signals import SignalHandlerOptions
 
     from hair_tracking.bags.render import render
     from hair_tracking.ros.bag_play import BagPlayer
@@ -143,7 +148,7 @@ def run_demo(args) -> int:
     node_log = out / 'node.log'
     proc, log_fh = start_node(domain, node_log, args.param or [], args.node_threads)
     _log(f'started hair_sim (pid {proc.pid}, log {node_log})')
-    rclpy.init(args=None, domain_id=domain)
+    rclpy.init(args=None, domain_id=domain, signal_handler_options=SignalHandlerOptions.NO)
     rec_node = play_node = player = recorder = None
     ok = False
     try:
@@ -155,13 +160,14 @@ def run_demo(args) -> int:
             topics.append('/hair/markers')
         player = BagPlayer(play_node, bag, rate=args.rate, duration_s=args.duration,
                            log=_log)
+        stop.on_request(player.stop)
         recorder = BagRecorder(rec_node, output, topics, log=_log)
         ex = SingleThreadedExecutor()
         ex.add_node(rec_node)
 
         def spin_until(cond, timeout):
             end = time.monotonic() + timeout
-            while not cond() and time.monotonic() < end:
+            while not cond() and time.monotonic() < end and not stop.requested:
                 if proc.poll() is not None:
                     return False
                 ex.spin_once(timeout_sec=0.05)
@@ -169,6 +175,9 @@ def run_demo(args) -> int:
 
         ready = spin_until(lambda: play_node.count_subscribers('/head_pose') > 0
                            and not recorder.missing(), NODE_READY_TIMEOUT_S)
+        if stop.requested:
+            recorder.close()
+            return 0                     # the node is stopped below
         if not ready:
             why = ('the node exited' if proc.poll() is not None
                    else f'not ready after {NODE_READY_TIMEOUT_S:.0f} s')
@@ -207,6 +216,10 @@ def run_demo(args) -> int:
         rclpy.try_shutdown()
         code = stop_node(proc)
         log_fh.close()
+        if stop.requested:
+            _log(f'{stop.signal_name}: stopped; {output} holds what was recorded')
+    if stop.requested:
+        return 0
     if not ok:
         _print_log_tail(node_log)
         return 1
@@ -288,22 +301,20 @@ def main(argv=None) -> int:
     ap.add_argument('--markers', action='store_true', help='also record /hair/markers')
     ap.add_argument('--fps', type=float, default=10.0, help='pictures per second of the GIF')
     ap.add_argument('--max-frames', type=int, default=100, help='at most this many pictures')
-    process_tuning.add_arguments(ap)
+    executable.add_arguments(ap, omp_wait_policy=None, gc_freeze=False)
     args = ap.parse_args(argv)
     if not args.rate > 0:
         ap.error('--rate must be > 0')
-    try:
-        process_tuning.apply(args)        # the player and the recorder run in this process
-    except ValueError as e:
-        ap.error(str(e))
-    try:
-        return run_demo(args)
-    except BagError as exc:
-        print(f'[demo] error: {exc}', file=sys.stderr)
-        return exc.code
-    except KeyboardInterrupt:
-        print('[demo] interrupted', file=sys.stderr)
-        return 130
+    with executable.started() as stop:
+        try:
+            executable.apply(args)        # the player and the recorder run in this process
+        except ValueError as e:
+            ap.error(str(e))
+        try:
+            return run_demo(args, stop)
+        except BagError as exc:
+            print(f'[demo] error: {exc}', file=sys.stderr)
+            return exc.code
 
 
 if __name__ == '__main__':

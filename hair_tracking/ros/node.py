@@ -1,7 +1,7 @@
 """``hair_sim``: the ROS 2 node that makes hair follow a head pose stream.
 
     ros2 run hair_tracking hair_sim_node --ros-args --params-file config/hair_sim.yaml
-    python -m hair_tracking.ros.node --ros-args -p groom.guides:=32 -r head_pose:=/face/pose
+    hair_sim_node --ros-args -p groom.guides:=32 -r head_pose:=/face/pose
 
 Inputs (all remappable, subscribed with the sensor-data QoS, so reliable and best-effort
 publishers both connect):
@@ -36,7 +36,8 @@ node's settings plus every scene field), each declared with a descriptor built f
 (:func:`descriptor`: description, range, read-only); changes are validated in the on-set callback
 (a rejection names the parameter and the allowed values and changes nothing) and stored by the
 post-set callback as a frozen :class:`~hair_tracking.output.settings.Settings` snapshot that the
-next step applies (a groom change rebuilds the hair at the current head pose).
+next step applies (a groom change rebuilds the hair at the current head pose; a ``groom.file``
+that cannot be imported is refused in the on-set callback, and the hair is kept).
 
 Everything runs in one thread (a SingleThreadedExecutor), so callbacks never race.
 """
@@ -44,7 +45,6 @@ import argparse
 import collections
 import dataclasses
 import math
-import signal
 import sys
 import time
 from typing import Callable, Dict, List, Optional
@@ -55,7 +55,7 @@ import numba
 import numpy as np
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 import rclpy
-from rclpy.exceptions import ParameterException
+from rclpy.exceptions import InvalidParameterTypeException, ParameterException
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -75,20 +75,21 @@ from msg_adapters.stamps import time_to_ns
 from msg_adapters.tf import transform_message
 from msg_adapters.tf_tree import compose as tf_compose, TfTree
 
-from hair_tracking import process_tuning
+from hair_tracking import executable, shutdown
+from hair_tracking.bags.warmup import warm_up
 from hair_tracking.core.head_track import PoseResult
 from hair_tracking.core.params import Param, ParamError
 from hair_tracking.core.scene import Scene, SceneError
+from hair_tracking.grooms.polylines import GroomFileError
 from hair_tracking.core.transforms import quat_to_matrix
 from hair_tracking.output.params_check import params_files_problem, rcl_arguments_problem, \
     unknown_parameters
-from hair_tracking.output.settings import apply_changes, make_settings, MARKER_STYLES, \
-    NODE_NAME, NODE_ROWS, table
+from hair_tracking.output.settings import apply_changes, make_settings, NODE_NAME, \
+    NODE_ROWS, table
 from hair_tracking.output.strand_colors import StrandColorCache
 from hair_tracking.resources import config_path
-from hair_tracking.ros.interrupt import interrupt_between_callbacks
 from hair_tracking.ros.load_shedding import LoadShedder
-from hair_tracking.simulator import HairSimulator, warm_up as warm_up_simulator
+from hair_tracking.simulator import HairSimulator
 
 try:                                    # optional: /tf input
     from tf2_msgs.msg import TFMessage
@@ -142,27 +143,6 @@ def load_base_scene(scene_file: str) -> Scene:
     return Scene.from_yaml(path)
 
 
-def warm_up(scene: Scene) -> float:
-    """Compile (or load from numba's on-disk cache) the kernels and encoders ``scene`` uses.
-
-    Runs a tiny copy of the scene (same solver, collider, tracking and output options, few
-    strands) through every call the node makes, so the first real frames are not late.
-    Returns the seconds it took.
-    """
-    start = time.perf_counter()
-    sim = warm_up_simulator(scene)
-    for head_frame in (False, True):
-        f = sim.frame(head_frame=head_frame, copy=False)
-        for guides, strands in ((False, f.strands), (True, f.guides)):
-            n_strands, n_points, write = sim.record_writer(guides, head_frame)
-            CloudBuffer().encode(n_strands, n_points, write, frame_id='warmup', stamp_ns=1,
-                                 packed_rgb=pack_rgb_u32(np.ones((n_strands, 4))))
-            for style in MARKER_STYLES:
-                strands_to_marker_array_cdr(strands, frame_id='warmup', style=style,
-                                            delete_all_first=True)
-    return time.perf_counter() - start
-
-
 class _Output:
     """One published strand topic: its two publishers' state and a cache of the last bytes."""
 
@@ -201,7 +181,12 @@ class HairSimNode(Node):
         self._apply_threads(settings.numba_threads)
         self.shedder = LoadShedder(settings.load_shedding_budget)
         self._work_clock = work_clock    # times the step and publish work (load shedding)
-        self.sim = HairSimulator(settings.scene, clock=work_clock)
+        try:
+            self.sim = HairSimulator(settings.scene, clock=work_clock)
+        except GroomFileError as e:
+            raise ParamError('groom.file', str(e)) from None
+        if self.sim.groom_note:
+            self.get_logger().info(self.sim.groom_note)
         if settings.warmup:
             secs = warm_up(settings.scene)
             self.get_logger().info(f'kernels and encoders ready in {secs:.2f} s')
@@ -294,15 +279,9 @@ class HairSimNode(Node):
         scene_file = self.get_parameter('scene_file').value
         self._base = load_base_scene(scene_file)
         rows = table(self._base)
-        overrides = getattr(self, '_parameter_overrides', None)
         for p in rows:
-            if p.name == 'scene_file':
-                continue
-            if isinstance(overrides, dict) and p.name in overrides:
-                fixed = _coerce_parameter(p, overrides[p.name])
-                if fixed is not None:            # `-p damping:=2` means 2.0
-                    overrides[p.name] = fixed
-            self.declare_parameter(p.name, p.default, descriptor(p))
+            if p.name != 'scene_file':
+                self._declare(p)
         values = {p.name: _plain(self.get_parameter(p.name).value) for p in rows}
         self._settings = make_settings(values, self._base)    # ParamError if invalid
         self._pending = self._settings
@@ -310,6 +289,22 @@ class HairSimNode(Node):
         self.add_pre_set_parameters_callback(self._pre_set)
         self.add_on_set_parameters_callback(self._on_set)
         self.add_post_set_parameters_callback(self._post_set)
+
+    def _declare(self, p: Param) -> None:
+        """Declare ``p``, taking an integer given for a double (``-p damping:=2``) as the double
+        it means: rclpy refuses the declaration; the value as given is read through a
+        dynamically typed declaration, which is then undeclared, and ``p`` is declared with
+        that value as a double (public rclpy API only)."""
+        try:
+            self.declare_parameter(p.name, p.default, descriptor(p))
+        except InvalidParameterTypeException as refused:
+            given = self.declare_parameter(p.name, None,
+                                           ParameterDescriptor(dynamic_typing=True))
+            self.undeclare_parameter(p.name)
+            fixed = _coerce_parameter(p, given)
+            if fixed is None:
+                raise refused
+            self.declare_parameter(p.name, fixed.value, descriptor(p), ignore_override=True)
 
     def _pre_set(self, parameters: List[Parameter]) -> List[Parameter]:
         """Integers given for doubles become doubles (``ros2 param set ... damping 2``)."""
@@ -368,12 +363,19 @@ class HairSimNode(Node):
             return
         old, self._settings = self._settings, new
         if new.scene != old.scene:
-            if self.sim.update_scene(new.scene):
+            try:
+                rebuilt = self.sim.update_scene(new.scene)
+            except GroomFileError as e:      # the file changed since the change was checked
+                self.get_logger().error(f'groom.file: {e}; the hair is kept')
+                self._settings = self._pending = old
+                return
+            if rebuilt:
                 self.shedder.reset()
                 self.rebuilds += 1
                 self.get_logger().info(
                     f'groom changed: hair rebuilt ({self.sim.guides.count} guides, '
-                    f'{self.sim.ghosts.count if self.sim.ghosts is not None else 0} ghosts)')
+                    f'{self.sim.ghosts.count if self.sim.ghosts is not None else 0} ghosts)'
+                    + (f'; {self.sim.groom_note}' if self.sim.groom_note else ''))
             self._gravity_used = None
             self._update_gravity()
         self._invalidate()
@@ -614,10 +616,8 @@ class HairSimNode(Node):
 
     def _on_publish_timer(self) -> None:
         """The publishing rate: resend or rebuild the frame, unless a pose just sent one, or
-        ``publish_on_pose`` sent one within the last period (the poses keep the rate; a resend
-        would repeat their frame: at 10 k ghosts with poses at the publishing rate the timer
-        resent about one 3.2 MB cloud per pose before, and twice as many poses went without a
-        cloud of their own while the node was busy sending them)."""
+        ``publish_on_pose`` sent one within the last period (the poses keep the rate then; a
+        resend would only repeat their frame and keep the node from the next pose)."""
         self._apply_pending()
         now, period = time.monotonic(), self._settings.publish_period
         if now - self._last_publish < 0.5 * period:
@@ -849,18 +849,18 @@ def make_parser() -> argparse.ArgumentParser:
         epilog='ROS arguments follow --ros-args, e.g. hair_sim_node --ros-args '
                '--params-file config/hair_sim.yaml -p scene_file:=long_hair '
                '-r head_pose:=/face/pose')
-    process_tuning.add_arguments(parser)
+    executable.add_arguments(parser)
     return parser
 
 
 def main(args=None) -> int:
-    """Console entry point ``hair_sim_node``: init, spin, clean exit on Ctrl-C.
+    """Console entry point ``hair_sim_node``: init, spin until a stop is asked for, clean up.
 
     ``args`` is the whole command line (``sys.argv`` by default): the options before
     ``--ros-args`` are this executable's (``--help``, the process settings of
-    :mod:`hair_tracking.process_tuning`), the rest goes to rclpy.  Returns 0 on Ctrl-C or an
-    external shutdown, 2 when the start parameters are invalid (the message names the parameter
-    and the allowed values).
+    :mod:`hair_tracking.executable`), the rest goes to rclpy.  Returns 0 once stopped (SIGINT or
+    SIGTERM, in any state: :mod:`hair_tracking.shutdown`), 2 when the start parameters are
+    invalid (the message names the parameter and the allowed values).
     """
     argv = list(sys.argv if args is None else args)
     split = argv.index('--ros-args') if '--ros-args' in argv else len(argv)
@@ -869,50 +869,49 @@ def main(args=None) -> int:
     if problem:
         print(f'[hair_sim] {problem}', file=sys.stderr)
         return 2
-    try:
-        done = process_tuning.apply(options)
-    except ValueError as e:
-        print(f'[hair_sim] {e}', file=sys.stderr)
-        return 2
-    node = executor = None
-    code = 0
-    try:
-        # Ctrl-C is a KeyboardInterrupt in the main thread (handled below), not rclpy's C-level
-        # handler shutting the context down under a running callback: until the node exists
-        # Python's own, then raised between the executor's callbacks
-        # (interrupt_between_callbacks); rclpy still turns SIGTERM into a shutdown
-        # (ExternalShutdownException).  Installed even where the parent left SIGINT ignored (a
-        # background job), as rclpy's own handler would be.
-        signal.signal(signal.SIGINT, signal.default_int_handler)
-        rclpy.init(args=argv[:1] + argv[split:],
-                   signal_handler_options=SignalHandlerOptions.SIGTERM)
-        for line in done:
-            rclpy.logging.get_logger(NODE_NAME).info(line)
-        executor = SingleThreadedExecutor()   # before the node: Ctrl-C may come at any time
-        node = HairSimNode()
-        node.warn_unknown_parameters(argv)
-        if options.gc_freeze:
-            process_tuning.freeze_heap()
-        executor.add_node(node)
-        interrupt_between_callbacks(node)
-        executor.spin()
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except (ParamError, SceneError, ParameterException) as e:
-        print(f'[hair_sim] invalid parameters: {e}', file=sys.stderr)
-        code = 2
-    except RuntimeError as e:       # rcl refused the ROS arguments params_files_problem passed
-        if rcl_arguments_problem(e) is None:
-            raise
-        print(f'[hair_sim] {rcl_arguments_problem(e)}', file=sys.stderr)
-        code = 2
-    finally:
-        if executor is not None:
-            executor.shutdown(timeout_sec=1.0)
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-    return code
+    with executable.started() as stop:
+        try:
+            done = executable.apply(options)
+        except ValueError as e:
+            print(f'[hair_sim] {e}', file=sys.stderr)
+            return 2
+        node = executor = None
+        code = 0
+        try:
+            # no rclpy signal handler: it would shut the context down from another thread,
+            # under whatever the executor runs; the stop request wakes the executor instead
+            rclpy.init(args=argv[:1] + argv[split:],
+                       signal_handler_options=SignalHandlerOptions.NO)
+            log = rclpy.logging.get_logger(NODE_NAME)
+            for line in done:
+                log.info(line)
+            executor = SingleThreadedExecutor()
+            if not stop.requested:
+                node = HairSimNode()
+                node.warn_unknown_parameters(argv)
+                if options.gc_freeze:
+                    executable.freeze_heap()
+                executor.add_node(node)
+                shutdown.spin_until_stopped(executor, stop)
+            if stop.requested:
+                log.info(f'{stop.signal_name}: stopping')
+        except ExternalShutdownException:
+            pass
+        except (ParamError, SceneError, ParameterException) as e:
+            print(f'[hair_sim] invalid parameters: {e}', file=sys.stderr)
+            code = 2
+        except RuntimeError as e:   # rcl refused the ROS arguments params_files_problem passed
+            if rcl_arguments_problem(e) is None:
+                raise
+            print(f'[hair_sim] {rcl_arguments_problem(e)}', file=sys.stderr)
+            code = 2
+        finally:
+            if executor is not None:
+                executor.shutdown(timeout_sec=1.0)
+            if node is not None:
+                node.destroy_node()
+            rclpy.try_shutdown()
+        return code
 
 
 if __name__ == '__main__':

@@ -43,7 +43,7 @@ from visualization_msgs.msg import Marker
 
 from msg_adapters.pointcloud import pointcloud2_to_strands
 
-from hair_tracking.ros.interrupt import interrupt_between_callbacks
+from hair_tracking import executable, shutdown
 
 DEFAULT_PORT = 8080
 #: The node's default ``marker_color`` as 8-bit RGB, for clouds without an ``rgb`` field.
@@ -397,12 +397,13 @@ def _check(options) -> Optional[str]:
     return None
 
 
-def serve(options, ros_args: List[str]) -> int:
-    """Start the page and the subscriptions; spin until Ctrl-C or an external shutdown."""
+def serve(options, ros_args: List[str], stop: shutdown.StopRequest) -> int:
+    """Start the page and the subscriptions; spin until a stop is asked for (``stop``)."""
     import viser
     import rclpy
     from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
     from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+    from rclpy.signals import SignalHandlerOptions
 
     qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=2,
                      reliability=ReliabilityPolicy.RELIABLE,
@@ -410,14 +411,13 @@ def serve(options, ros_args: List[str]) -> int:
     server = node = executor = None
     latest = Latest()
     try:
-        rclpy.init(args=ros_args)
+        rclpy.init(args=ros_args, signal_handler_options=SignalHandlerOptions.NO)
         executor = SingleThreadedExecutor()
         node = rclpy.create_node(NAME)
         node.create_subscription(PointCloud2, options.points_topic, latest.add_cloud, qos)
         if options.head_topic:
             node.create_subscription(Marker, options.head_topic, latest.add_head, qos)
         executor.add_node(node)
-        interrupt_between_callbacks(node)
         server = viser.ViserServer(host=options.host, port=options.port, label=NAME,
                                    verbose=False)
         server.gui.configure_theme(show_share_button=False)
@@ -431,9 +431,10 @@ def serve(options, ros_args: List[str]) -> int:
               flush=True)
         period = 1.0 / options.rate
         next_draw = time.monotonic()
-        while rclpy.ok():
-            executor.spin_once(timeout_sec=max(0.0, min(period, next_draw - time.monotonic())))
-            if time.monotonic() < next_draw or not latest:
+        while not stop.requested:
+            wait = min(period, next_draw - time.monotonic()) if latest else period
+            shutdown.spin_until_stopped(executor, stop, timeout_sec=max(0.0, wait))
+            if stop.requested or time.monotonic() < next_draw or not latest:
                 continue
             head, points = latest.take()
             try:
@@ -445,7 +446,7 @@ def serve(options, ros_args: List[str]) -> int:
                 node.get_logger().warn(f'message not drawn: {e}',
                                        throttle_duration_sec=5.0)
             next_draw = max(next_draw + period, time.monotonic())
-    except (KeyboardInterrupt, ExternalShutdownException):
+    except ExternalShutdownException:
         pass
     finally:
         if server is not None:
@@ -468,13 +469,14 @@ def main(args=None) -> int:
     if problem:
         print(f'{NAME}: {problem}', file=sys.stderr)
         return 2
-    try:
-        import viser  # noqa: F401  (optional: only this viewer needs it)
-    except ImportError:
-        print(f'{NAME} needs the viser package, which is not installed: pip install viser '
-              f'(make install does)', file=sys.stderr)
-        return 1
-    return serve(options, argv[:1] + argv[split:])
+    with executable.started() as stop:
+        try:
+            import viser  # noqa: F401  (optional: only this viewer needs it)
+        except ImportError:
+            print(f'{NAME} needs the viser package, which is not installed: pip install viser '
+                  f'(make install does)', file=sys.stderr)
+            return 1
+        return serve(options, argv[:1] + argv[split:], stop)
 
 
 if __name__ == '__main__':

@@ -1,0 +1,111 @@
+"""Compile a scene's kernels and message encoders ahead of time; ``hair_sim_warmup``.
+
+numba compiles a kernel the first time it is called and keeps the machine code on disk
+(``cache=True``), in a folder keyed by a hash of the package's sources
+(:func:`hair_tracking.executable.numba_cache_dir`).  Without a filled cache the first start of
+the node after an install or an edit spends its time compiling; ``make install`` runs
+``hair_sim_warmup``, and so can a ROS user after ``colcon build``::
+
+    ros2 run hair_tracking hair_sim_warmup                  # the default scene
+    ros2 run hair_tracking hair_sim_warmup --scene long_hair --scene stiff_extreme
+    ros2 run hair_tracking hair_sim_warmup --all-presets
+
+:func:`warm_up` is what the node runs before it subscribes (a tiny copy of the scene through
+every call the node makes, kernels and message encoders); the command runs it for each scene it
+is given and prints where the cache is and how long each scene took.  Neither needs rclpy.
+"""
+import argparse
+import glob
+import os
+import sys
+import time
+from typing import List, Optional
+
+import numpy as np
+
+from hair_tracking import executable
+from hair_tracking.core.scene import Scene
+from hair_tracking.output.settings import MARKER_STYLES
+
+
+def warm_up(scene: Scene) -> float:
+    """Compile (or load from numba's on-disk cache) the kernels and encoders ``scene`` uses.
+
+    Runs a tiny copy of the scene (same solver, collider, tracking and output options, few
+    strands) through every call the node makes (:mod:`hair_tracking.ros.node`), so the first
+    real frames are not late.  Returns the seconds it took.
+    """
+    from msg_adapters.marker_cdr import strands_to_marker_array_cdr
+    from msg_adapters.pointcloud import CloudBuffer, pack_rgb_u32
+
+    from hair_tracking.simulator import warm_up as warm_up_simulator
+
+    start = time.perf_counter()
+    sim = warm_up_simulator(scene)
+    for head_frame in (False, True):
+        f = sim.frame(head_frame=head_frame, copy=False)
+        for guides, strands in ((False, f.strands), (True, f.guides)):
+            n_strands, n_points, write = sim.record_writer(guides, head_frame)
+            CloudBuffer().encode(n_strands, n_points, write, frame_id='warmup', stamp_ns=1,
+                                 packed_rgb=pack_rgb_u32(np.ones((n_strands, 4))))
+            for style in MARKER_STYLES:
+                strands_to_marker_array_cdr(strands, frame_id='warmup', style=style,
+                                            delete_all_first=True)
+    return time.perf_counter() - start
+
+
+def preset_names() -> List[str]:
+    """The scene presets shipped in config/ (``scene_<name>.yaml``)."""
+    from hair_tracking.resources import config_dir
+    return sorted(os.path.basename(p)[len('scene_'):-len('.yaml')]
+                  for p in glob.glob(os.path.join(config_dir(), 'scene_*.yaml')))
+
+
+def main(argv: Optional[List[str]] = None) -> int:
+    """``hair_sim_warmup``: 0 when every scene is compiled (or a stop was asked for), 2 for a
+    scene that cannot be read."""
+    ap = argparse.ArgumentParser(
+        prog='hair_sim_warmup',
+        description="Compile every numba kernel a scene uses into numba's on-disk cache, so "
+                    'the next hair_sim_node, hair_sim_bag run or hair_sim_demo starts in '
+                    'seconds. Run it once after installing or editing the package.')
+    ap.add_argument('--scene', action='append', default=[], metavar='NAME_OR_FILE',
+                    help='a scene preset (e.g. long_hair) or scene YAML file; repeatable '
+                         '(default: the default scene)')
+    ap.add_argument('--all-presets', action='store_true',
+                    help='also every scene preset in config/')
+    args = ap.parse_args(argv)
+    with executable.started() as stop:
+        try:
+            with stop.interruptible():       # compiling: plain Python and numba
+                return _warm_up_scenes(args)
+        except KeyboardInterrupt:
+            print(f'hair_sim_warmup: stopped ({stop.signal_name or "interrupted"})',
+                  file=sys.stderr)
+            return 0
+
+
+def _warm_up_scenes(args) -> int:
+    from hair_tracking.bags.io import BagError
+    from hair_tracking.bags.offline import load_settings
+
+    names = list(args.scene) or ([] if args.all_presets else [''])
+    if args.all_presets:
+        names += [''] + preset_names()
+    print(f'numba cache: {os.environ["NUMBA_CACHE_DIR"]}')
+    total = time.perf_counter()
+    for name in names:
+        try:
+            scene = load_settings(scene=name).scene if name else Scene()
+        except BagError as e:
+            print(f'hair_sim_warmup: error: {e}', file=sys.stderr)
+            return 2
+        secs = warm_up(scene)
+        print(f'{name or "default scene"}: kernels and encoders ready in {secs:.1f} s',
+              flush=True)
+    print(f'done in {time.perf_counter() - total:.1f} s')
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

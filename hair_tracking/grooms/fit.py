@@ -1,0 +1,180 @@
+"""An imported groom put on the head: units and up axis (given or guessed), the transform into
+the head frame, the fit of the roots onto the scalp and the rest shape kept outside it.
+
+* **Units** (``groom.units: auto``): a head of hair's roots span about :data:`ROOT_SPAN` (0.18 m:
+  front hairline to nape, ear to ear); the unit of :data:`~hair_tracking.core.scene_params.
+  GROOM_UNITS` that makes the roots' largest bounding-box side closest to it (in ratio) is
+  taken.  A file that states its units (a USD stage's ``metersPerUnit``, an NPZ's
+  ``meters_per_unit``) is believed.
+* **Up axis** (``groom.up_axis: auto``): hair hangs, so the up axis is the one (y or z) along
+  which the roots lie farthest above the tips, on average over the strands in strand lengths; a
+  groom in which neither lies above (hair standing up) is taken as z up.  A file that states
+  its up axis is believed.  The axes then become REP-103's (x forward, y left, z up): a y-up
+  file faces +z (Maya, Houdini, Cem Yuksel's and USC-HairSalon's models), a z-up file is taken
+  as already facing +x; ``groom.file_rotation_deg`` turns anything else (Blender faces -y:
+  ``[0, 0, 90]``).
+* **Fit** (``groom.fit``): the translation (``translate``), or translation and uniform scale
+  (``scale``), that puts the roots on the scalp ellipsoid (``groom.scalp``) in the least-squares
+  sense of the normalised radial distance ``|(p - c) / a| - 1`` (Levenberg-Marquardt from the
+  roots' crown on top of the ellipsoid; the ellipsoid fit of Gander, Golub & Strebel 1994,
+  "Least-squares fitting of circles and ellipses", with the shape held fixed); ``none`` keeps
+  the coordinates.  ``groom.file_offset`` is added after the fit.
+* **Onto the scalp**: every root is moved along its ray from the ellipsoid's centre onto the
+  ellipsoid, its strand carried with it; every other vertex inside the ellipsoid scaled by
+  :data:`~hair_tracking.core.groom.REST_CLEARANCE` is pushed out along its ray, the rule of the
+  procedural groom, so no strand starts inside the head and the collider keeps its margin.
+"""
+import math
+from typing import Tuple
+
+import numpy as np
+
+from hair_tracking.core.groom import REST_CLEARANCE
+from hair_tracking.core.scene_params import GROOM_UNITS
+
+#: The span [m] of a head of hair's roots, the yardstick of the units guess.
+ROOT_SPAN = 0.18
+#: ... and of a whole groom's, when the roots all coincide (a single strand).
+GROOM_SPAN = 0.4
+#: Head-frame coordinates of a file's x, y, z per up axis (rows: head x, y, z).
+AXES = {'y': np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]),
+        'z': np.eye(3)}
+#: The up axis is guessed only when the roots lie at least this far (strand lengths, on
+#: average) above the tips.
+MIN_DROP = 0.05
+#: The fit onto the scalp uses at most this many roots (evenly picked in the file's order).
+FIT_ROOTS = 2000
+
+
+def guess_units(roots: np.ndarray, points: np.ndarray) -> Tuple[str, str]:
+    """``(unit, words)``: the unit of GROOM_UNITS whose roots' span is nearest ROOT_SPAN."""
+    span = float(np.ptp(roots, axis=0).max()) if roots.shape[0] else 0.0
+    target, what = ROOT_SPAN, 'the roots span'
+    if not span > 0.0:
+        span = float(np.ptp(points, axis=0).max()) if points.shape[0] else 0.0
+        target, what = GROOM_SPAN, 'the groom spans'
+    if not span > 0.0:
+        return 'm', 'm (nothing to measure)'
+    name = min(GROOM_UNITS, key=lambda k: abs(math.log(GROOM_UNITS[k] * span / target)))
+    return name, (f'{name} (guessed: {what} {span:.4g} units, {span * GROOM_UNITS[name]:.3g} m '
+                  f'in {name})')
+
+
+def guess_up(roots: np.ndarray, tips: np.ndarray, lengths: np.ndarray) -> Tuple[str, str]:
+    """``(axis, words)``: y or z, the axis along which the roots lie farthest above the tips
+    (mean of the difference over the strand lengths); z when neither does by MIN_DROP."""
+    drop = {a: float(np.mean((roots[:, k] - tips[:, k]) / np.maximum(lengths, 1e-300)))
+            for a, k in (('y', 1), ('z', 2))}
+    best = max(drop, key=drop.get)
+    if drop[best] < MIN_DROP:
+        return 'z', (f'z (guessed: the roots lie above the tips along neither y ({drop["y"]:.2f}'
+                     f' strand lengths) nor z ({drop["z"]:.2f}))')
+    other = 'z' if best == 'y' else 'y'
+    return best, (f'{best} (guessed: the tips hang {drop[best]:.2f} strand lengths below the '
+                  f'roots along {best}, {drop[other]:.2f} along {other})')
+
+
+def rotation(degrees) -> np.ndarray:
+    """Rotation matrix of turns about x, then y, then z (fixed axes) by ``degrees`` (3,)."""
+    ax, ay, az = np.radians(np.asarray(degrees, dtype=np.float64))
+    cx, sx, cy, sy, cz, sz = math.cos(ax), math.sin(ax), math.cos(ay), math.sin(ay), \
+        math.cos(az), math.sin(az)
+    rx = np.array([[1.0, 0.0, 0.0], [0.0, cx, -sx], [0.0, sx, cx]])
+    ry = np.array([[cy, 0.0, sy], [0.0, 1.0, 0.0], [-sy, 0.0, cy]])
+    rz = np.array([[cz, -sz, 0.0], [sz, cz, 0.0], [0.0, 0.0, 1.0]])
+    return rz @ ry @ rx
+
+
+def fit_to_scalp(roots: np.ndarray, center, radii, scale: bool,
+                 iterations: int = 60) -> Tuple[float, np.ndarray, float]:
+    """``(s, t, rms)``: the uniform scale (1 unless ``scale``) and translation putting ``roots``
+    (S, 3; at most :data:`FIT_ROOTS` of them, evenly picked) on the ellipsoid ``center``,
+    ``radii`` in the least-squares sense of ``|(s p + t - c) / a| - 1`` (Levenberg-Marquardt,
+    until a step moves less than 1e-10 of the radii), and that RMS at the fit."""
+    c = np.asarray(center, dtype=np.float64)
+    a = np.asarray(radii, dtype=np.float64)
+    p = np.asarray(roots, dtype=np.float64)
+    if p.shape[0] > FIT_ROOTS:
+        p = p[np.linspace(0, p.shape[0] - 1, FIT_ROOTS).round().astype(np.int64)]
+    lo, hi = p.min(axis=0), p.max(axis=0)
+    t = np.array([c[0] - 0.5 * (lo[0] + hi[0]), c[1] - 0.5 * (lo[1] + hi[1]),
+                  c[2] + a[2] - hi[2]])
+    log_s = 0.0
+
+    def residual(t, log_s):
+        q = (math.exp(log_s) * p + t - c) / a
+        r = np.linalg.norm(q, axis=1)
+        return q, np.maximum(r, 1e-12), r - 1.0
+
+    q, r, f = residual(t, log_s)
+    cost = float(f @ f)
+    lam = 1e-3
+    n = 4 if scale else 3
+    for _ in range(iterations):
+        jac = np.empty((p.shape[0], n))
+        jac[:, :3] = q / (a * r[:, None])
+        if scale:
+            jac[:, 3] = np.einsum('ik,ik->i', q, math.exp(log_s) * p / a) / r
+        h = jac.T @ jac
+        g = jac.T @ f
+        step = np.linalg.solve(h + lam * np.diag(np.diag(h) + 1e-12), -g)
+        t_new = t + step[:3]
+        s_new = log_s + (step[3] if scale else 0.0)
+        q_new, r_new, f_new = residual(t_new, s_new)
+        new_cost = float(f_new @ f_new)
+        if new_cost < cost:
+            t, log_s, q, r, f, cost = t_new, s_new, q_new, r_new, f_new, new_cost
+            lam = max(lam * 0.3, 1e-9)
+            if np.abs(step[:3]).max() < 1e-10 * a.min() and \
+                    (not scale or abs(step[3]) < 1e-10):
+                break
+        else:
+            lam *= 10.0
+    return math.exp(log_s), t, math.sqrt(cost / max(1, p.shape[0]))
+
+
+def onto_ellipsoid(points: np.ndarray, center, radii) -> np.ndarray:
+    """``points`` (..., 3) moved along their rays from ``center`` onto the ellipsoid."""
+    c = np.asarray(center, dtype=np.float64)
+    a = np.asarray(radii, dtype=np.float64)
+    rel = (points - c) / a
+    r = np.linalg.norm(rel, axis=-1, keepdims=True)
+    rel = np.where(r > 1e-12, rel / np.maximum(r, 1e-12), np.array([0.0, 0.0, 1.0]))
+    return c + rel * a
+
+
+def push_out(points: np.ndarray, center, radii, factor: float = REST_CLEARANCE) -> np.ndarray:
+    """``points`` (..., 3, float64; a view is fine) inside the ellipsoid scaled by ``factor``
+    moved along their rays from ``center`` onto it, in place; the others as they are.
+    Returns ``points``."""
+    c = np.asarray(center, dtype=np.float64)
+    a = np.asarray(radii, dtype=np.float64) * factor
+    flat = points.reshape(-1, 3)                  # a copy when ``points`` is a strided view
+    rel = (flat - c) / a
+    inside = np.flatnonzero(np.einsum('ij,ij->i', rel, rel) < 1.0)
+    if inside.size:
+        q = rel[inside]
+        r = np.sqrt(np.einsum('ij,ij->i', q, q))[:, None]
+        flat[inside] = c + q / np.maximum(r, 1e-12) * a
+        if not np.shares_memory(flat, points):
+            points[...] = flat.reshape(points.shape)
+    return points
+
+
+def head_axes(unit: float, up: str, degrees=(0.0, 0.0, 0.0)) -> np.ndarray:
+    """The matrix (3, 3) taking file coordinates to the head frame's axes and metres: scaled by
+    ``unit`` [m per unit], axes of ``up`` (:data:`AXES`), turned by ``degrees``
+    (:func:`rotation`)."""
+    return rotation(degrees) @ AXES[up] * unit
+
+
+def affine(points: np.ndarray, m: np.ndarray, b) -> np.ndarray:
+    """``points`` (P, 3) mapped to ``m @ p + b`` (a new array; one pass, no BLAS call)."""
+    p = np.asarray(points, dtype=np.float64)
+    out = np.empty_like(p)
+    for i in range(3):
+        out[:, i] = p[:, 0] * m[i, 0]
+        out[:, i] += p[:, 1] * m[i, 1]
+        out[:, i] += p[:, 2] * m[i, 2]
+        out[:, i] += b[i]
+    return out

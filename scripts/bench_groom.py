@@ -1,0 +1,131 @@
+#!/usr/bin/env python3
+"""Loading an imported groom, and the default frame on it against a procedural groom of the
+same counts.
+
+    python scripts/bench_groom.py [--strands 10000] [--vertices 100] [--repeats 5]
+                                  [--frames 120] [--threads N] [--json F]
+
+Writes a USC-HairSalon ``.data`` file of ``--strands`` strands of about ``--vertices``
+vertices (scripts/make_groom_file.py: the tests' synthetic groom, in centimetres, y up) into a
+temporary folder, then:
+
+* **load**: the median (wall clock and CPU time) of ``--repeats`` reads of the file alone
+  (:func:`~hair_tracking.grooms.formats.read_strands`), of imports onto the head
+  (:func:`~hair_tracking.grooms.build.import_groom`: read, resample, fit) and of whole grooms
+  (:func:`~hair_tracking.grooms.build.build_groom`: the import and the guides' choice);
+* **frame**: the default scene (blend tracker, FTL guides, one guide per 16 strands, 16 nodes)
+  on the imported groom and on a procedural groom of the same strand and node counts, each
+  following the bundled walk at 60 Hz as scripts/bench_frame.py does (push_pose, advance_to,
+  the cloud's bytes), ``--repeats`` times alternating; the median over the runs of each run's
+  median frame (wall clock and CPU time), their ratio and the guides' head contacts a substep;
+  then the same without the head collider (``collider.shape: none``), where the two grooms
+  differ only in their shapes' lengths.
+"""
+import argparse
+import json
+import os
+import sys
+import tempfile
+import time
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(0, ROOT)
+sys.path.insert(0, os.path.join(ROOT, 'scripts'))
+
+from hair_tracking.executable import use_numba_cache  # noqa: E402
+use_numba_cache()      # before numba loads: the cache make install fills
+import numba  # noqa: E402
+import numpy as np  # noqa: E402
+
+from bench_frame import frame_times  # noqa: E402
+import make_groom_file  # noqa: E402
+from hair_tracking.core.scene import Scene  # noqa: E402
+from hair_tracking.evaluation.provenance import command_line, provenance  # noqa: E402
+from hair_tracking.grooms.build import build_groom, import_groom  # noqa: E402
+from hair_tracking.grooms.formats import read_strands  # noqa: E402
+from hair_tracking.simulator import HairSimulator, warm_up  # noqa: E402
+
+
+def median_seconds(fn, repeats):
+    """Medians of the wall-clock and the CPU seconds (this process) of ``repeats`` calls (on a
+    shared machine the CPU time is what the work itself costs)."""
+    wall, cpu = [], []
+    for _ in range(repeats):
+        t0, c0 = time.perf_counter(), time.process_time()
+        fn()
+        wall.append(time.perf_counter() - t0)
+        cpu.append(time.process_time() - c0)
+    return float(np.median(wall)), float(np.median(cpu))
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split('\n')[0])
+    ap.add_argument('--strands', type=int, default=10_000)
+    ap.add_argument('--vertices', type=int, default=100)
+    ap.add_argument('--repeats', type=int, default=5)
+    ap.add_argument('--frames', type=int, default=120)
+    ap.add_argument('--threads', type=int, default=numba.config.NUMBA_NUM_THREADS)
+    ap.add_argument('--json')
+    args = ap.parse_args(argv)
+    numba.set_num_threads(args.threads)
+    with tempfile.TemporaryDirectory() as tmp:
+        path = os.path.join(tmp, 'groom.data')
+        make_groom_file.main([path, '--strands', str(args.strands), '--vertices',
+                              str(args.vertices)])
+        size_mb = os.path.getsize(path) / 1e6
+        guides = max(1, args.strands // 16)
+        imported = Scene().with_changes(groom__file=path, groom__guides=guides)
+        procedural = Scene().with_changes(groom__guides=guides, groom__ghosts_per_guide=16)
+        load = {}
+        for name, fn in (('read_s', lambda: read_strands(path)),
+                         ('import_s', lambda: import_groom(imported.groom)),
+                         ('build_s', lambda: build_groom(imported.groom))):
+            load[name], load[name.replace('_s', '_cpu_s')] = median_seconds(fn, args.repeats)
+            print(f'{name[:-2]:7s} {args.strands} x {args.vertices} ({size_mb:.1f} MB): median '
+                  f'{load[name]:.3f} s wall, {load[name.replace("_s", "_cpu_s")]:.3f} s CPU',
+                  flush=True)
+        frame = {}
+        for collider in ('ellipsoid', 'none'):
+            scenes = {'procedural': procedural.with_changes(collider__shape=collider),
+                      'imported': imported.with_changes(collider__shape=collider)}
+            for scene in scenes.values():
+                warm_up(scene)
+            wall = {name: [] for name in scenes}
+            cpu = {name: [] for name in scenes}
+            contacts = {}
+            for r in range(args.repeats):
+                for name, scene in scenes.items():
+                    sim = HairSimulator(scene)
+                    parts = frame_times(sim, args.frames)
+                    wall[name].append(float(np.median(parts['frame'])))
+                    cpu[name].append(float(np.median(parts['frame_cpu'])))
+                    contacts[name] = sim.guide_solver.stats['contacts_total'] / max(
+                        1, sim.guide_solver.stats['substeps'])
+                    print(f'collider {collider}, run {r + 1}: {name:10s} '
+                          f'{sim.ghosts.count} strands x {sim.ghosts.nodes} nodes, '
+                          f'{sim.guides.count} guides: median frame {wall[name][-1]:.3f} ms '
+                          f'wall, {cpu[name][-1]:.3f} ms CPU', flush=True)
+            row = {'wall_ms': {n: float(np.median(v)) for n, v in wall.items()},
+                   'cpu_ms': {n: float(np.median(v)) for n, v in cpu.items()},
+                   'runs_wall_ms': wall, 'runs_cpu_ms': cpu,
+                   'guide_contacts_per_substep': contacts}
+            row['ratio_wall'] = row['wall_ms']['imported'] / row['wall_ms']['procedural']
+            row['ratio_cpu'] = row['cpu_ms']['imported'] / row['cpu_ms']['procedural']
+            frame[collider] = row
+            print(f'collider {collider}: imported / procedural frame: {row["ratio_cpu"]:.3f} '
+                  f'(CPU medians {row["cpu_ms"]["imported"]:.3f} / '
+                  f'{row["cpu_ms"]["procedural"]:.3f} ms), {row["ratio_wall"]:.3f} (wall); '
+                  f'guide head contacts a substep {contacts["imported"]:.0f} / '
+                  f'{contacts["procedural"]:.0f}', flush=True)
+    if args.json:
+        record = provenance(command_line('python scripts/bench_groom.py', argv or sys.argv[1:]),
+                            args.threads)
+        out = {'provenance': record, 'strands': args.strands, 'vertices': args.vertices,
+               'file_mb': size_mb, 'frames': args.frames, 'load': load, 'frame': frame}
+        with open(args.json, 'w', encoding='utf-8') as f:
+            json.dump(out, f, indent=2)
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
