@@ -1,32 +1,29 @@
-"""The contact model (hair_tracking.colliders) against the head collider's functions in the
-guide solver and the ghost trackers (guides.collision, guides.ftl's restore, ghosts.contacts,
-ghosts.blend, ghosts.turn, ghosts.stateless): the same inputs, compiled with the flags of the
-kernels that run them, give the same positions bit for bit where the arithmetic is the same,
-and agree to rounding where it is not (the turn tracker's slide).
+"""The guide solver and the ghost trackers run the contact model (hair_tracking.colliders) on
+the head collider placed by their own plumbing (the head pose's tuples, the world quadric of the
+stateless trackers); these tests feed the same collider to the model's table-driven functions
+(hair_tracking.colliders.kernels and the per-kind functions on a posed table) and compare.
 
 numba inlines an ``inline='always'`` function into its caller, whose flags then apply, and LLVM
-fuses multiply-adds per straight run of code: the wrappers below call both sides from
-functions compiled as the kernels that run them are (``FASTMATH`` for the guide solver and the
-blend and turn trackers, ``TRACK_FASTMATH`` for the paper tracker), both sides in the same loop
-structure (LLVM's fusing of multiply-adds follows the code around them: which values are
-loaded where, which branches join; a switch on the shape's kind stays outside the loops).
-Under the paper tracker's reassociation the last bit also follows how LLVM vectorises the
-whole loop: there the two agree to 1e-15 m."""
+fuses multiply-adds per straight run of code: the wrappers below are compiled as the kernels
+that run them are (``FASTMATH`` for the guide solver and the blend and turn trackers,
+``TRACK_FASTMATH`` for the paper tracker), a switch on the shape's kind kept outside the loops.
+Under the paper tracker's reassociation the last bit follows how LLVM vectorises the whole
+loop: there the two agree to 1e-15 m."""
 import math
 
 import numpy as np
 from numba import njit
 import pytest
 
-from hair_tracking.colliders import contact, kernels, margin, pose, reference
+from hair_tracking.colliders import contact, kernels, margin, pose
 from hair_tracking.colliders import slide as stateless_slide
-from hair_tracking.colliders.shapes import (A0, A1, A2, CAPSULE, CX, CZ, ELLIPSOID, FRICTION, I0,
-                                            I1, I2, KIND, M00, PLANE, Q00, Q01, Q02, Q11, Q12,
-                                            Q22, REFINE, Shape, shape_table)
+from hair_tracking.colliders.shapes import (CAPSULE, CX, CZ, ELLIPSOID, FRICTION, KIND, M00,
+                                            PLANE, Q00, Q01, Q02, Q11, Q12, Q22, REFINE, Shape,
+                                            shape_table)
 from hair_tracking.core.model import HeadPose, StrandSet
 from hair_tracking.core.scene import Scene
 from hair_tracking.core.transforms import quat_from_axis_angle, quat_normalize, quat_to_matrix
-from hair_tracking.ghosts import blend, stateless, turn
+from hair_tracking.ghosts import stateless, turn
 from hair_tracking.ghosts import contacts as ghost_contacts
 from hair_tracking.ghosts.kernels import TRACK_FASTMATH
 from hair_tracking.guides import collision, ftl, integrate
@@ -87,11 +84,9 @@ def test_the_collision_stage_is_the_guide_solvers(radii, friction):
     x_ref = np.empty_like(x)
     integrate.carry_rigid_serial(start, rel, pos_prev, pos, x_ref)
     before = x.copy()
-    n_old = collision.project_ellipsoid_serial(before, x_ref, inv_mass, rot, pos, col.center,
-                                               col.radii, col.margin, col.friction, col.refine)
+    n_old = collision.project_ellipsoid_serial(before, x_ref, inv_mass, rot, pos, col.model)
     parallel = x.copy()
-    collision.project_ellipsoid(parallel, x_ref, inv_mass, rot, pos, col.center, col.radii,
-                                col.margin, col.friction, col.refine)
+    collision.project_ellipsoid(parallel, x_ref, inv_mass, rot, pos, col.model)
     sh = posed_head(shape, rot, pos, rot_prev, pos_prev)
     after = x.copy()
     n_new = kernels.collide(after, start, inv_mass, sh, -1.0, start.copy())
@@ -121,17 +116,8 @@ def test_the_posed_head_is_the_kernels_centre_motion_and_quadric():
         assert np.array_equal(sh[0, [Q00, Q11, Q22, Q01, Q02, Q12]], geo[3:])
 
 
-def test_the_surface_point_and_the_depth_are_the_head_colliders():
+def test_the_depth_is_the_head_colliders():
     rng = np.random.default_rng(2)
-    a = np.array([0.099, 0.084, 0.109])
-    q = rng.normal(size=(3000, 3))
-    q /= np.linalg.norm(q / a, axis=1)[:, None]
-    q *= rng.uniform(0.0, 0.999, size=(3000, 1))
-    q[::97] = 0.0
-    for refine in (0, 1, 2, 6):
-        for p in q:
-            assert contact.surface_point(*p, *a, refine) == collision.surface_point(*p, *a,
-                                                                                    refine)
     for radii in (RADII, (0.1, 0.1, 0.1)):
         rot_prev, pos_prev, rot, pos = head_poses(rng)
         shape = head_shape(radii)
@@ -157,8 +143,9 @@ def _restore_old(p, b, r, e, rot, c, axes, refine, out, flags):
         qx, qy, qz = collision.to_head(p[i, 0], p[i, 1], p[i, 2], rot, c[0], c[1], c[2])
         flags[i] = qx * qx * ix + qy * qy * iy + qz * qz * iz >= f_ok
         out[i, 0], out[i, 1], out[i, 2] = ftl.restore_node(
-            p[i, 0], p[i, 1], p[i, 2], b[i, 0], b[i, 1], b[i, 2], r[i], e[i, 0], e[i, 1],
-            e[i, 2], rot, c[0], c[1], c[2], axes[0], axes[1], axes[2], refine, 0)
+            (p[i, 0], p[i, 1], p[i, 2]), (b[i, 0], b[i, 1], b[i, 2]), r[i],
+            (e[i, 0], e[i, 1], e[i, 2]), rot, (c[0], c[1], c[2], axes[0], axes[1], axes[2],
+                                               refine), 0)
 
 
 @njit(inline='always')
@@ -221,74 +208,13 @@ def test_follow_the_leaders_restore_runs_on_the_contact_model(radii):
 
 # ----------------------------------------------------------------------------- paper tracker
 @njit(fastmath=TRACK_FASTMATH, error_model='numpy')
-def _lanes_old(X0, P, W, n, R, c, axes, friction, refine):
-    return ghost_contacts.collide_lanes(X0, X0, P, W, n, 0, np.arange(n), np.ones(n),
-                                        np.zeros((n, 3, 3)), R, 2, False, c[0], c[1], c[2],
-                                        axes[0], axes[1], axes[2], friction, refine)
-
-
-@njit(fastmath=TRACK_FASTMATH, error_model='numpy')
-def _lanes_new(X0, P, W, n, sh, k):
-    """The paper tracker's contact stage (inside test of every lane, compaction, one pass
-    without branches over the pushed lanes) on the contact model, refinements unrolled; the
-    shape's constants read into locals first, as the stage's scalar arguments were."""
-    ix, iy, iz = sh[k, I0], sh[k, I1], sh[k, I2]
-    ax, ay, az = sh[k, A0], sh[k, A1], sh[k, A2]
-    refine = int(sh[k, REFINE])
-    mu = sh[k, FRICTION]
-    n_in = 0
-    for kk in range(n):
-        q0, q1, q2 = contact.to_local(P[0, kk], P[1, kk], P[2, kk], sh, k)
-        inside = contact.ellipsoid_level(q0, q1, q2, ix, iy, iz) < 1.0
-        W[0, kk] = 1.0 if inside else 0.0
-        n_in += 1 if inside else 0
-    if n_in == 0:
-        return 0
-    m = 0
-    for kk in range(n):
-        W[1, m] = kk
-        m += 1 if W[0, kk] != 0.0 else 0
-    for j in range(m):
-        kk = int(W[1, j])
-        W[2, j] = P[0, kk]
-        W[3, j] = P[1, kk]
-        W[4, j] = P[2, kk]
-        W[5, j] = X0[0, kk]
-        W[6, j] = X0[1, kk]
-        W[7, j] = X0[2, kk]
-    ex, ey, ez = contact.centre_exit(ax, ay, az)
-    for j in range(m):
-        qx, qy, qz = contact.to_local(W[2, j], W[3, j], W[4, j], sh, k)
-        f, sc = contact.ellipsoid_radial(qx, qy, qz, ix, iy, iz)
-        yx, yy, yz = qx * sc, qy * sc, qz * sc
-        deg = f < contact.CENTRE_LEVEL
-        cc = f - 1.0
-        if refine >= 1:
-            yx, yy, yz = contact.ellipsoid_refine(qx, qy, qz, yx, yy, yz, cc, ix, iy, iz)
-        if refine >= 2:
-            yx, yy, yz = contact.ellipsoid_refine(qx, qy, qz, yx, yy, yz, cc, ix, iy, iz)
-        yx = ex if deg else yx
-        yy = ey if deg else yy
-        yz = ez if deg else yz
-        if mu > 0.0:
-            px, py, pz = contact.to_local(W[5, j], W[6, j], W[7, j], sh, k)
-            nx, ny, nz = contact.ellipsoid_normal(yx, yy, yz, ix, iy, iz)
-            yx, yy, yz = contact.friction(yx, yy, yz, px, py, pz, nx, ny, nz, mu)
-        W[2, j], W[3, j], W[4, j] = contact.from_local(yx, yy, yz, sh, k)
-    for j in range(m):
-        kk = int(W[1, j])
-        P[0, kk] = W[2, j]
-        P[1, kk] = W[3, j]
-        P[2, kk] = W[4, j]
-    return m
-
-
-@njit(fastmath=TRACK_FASTMATH, error_model='numpy')
-def _scalar_old(x, r, R, c, axes, friction, refine, out):
-    for i in range(x.shape[0]):
-        moved, out[i, 0], out[i, 1], out[i, 2] = collision.push_out(
-            x[i, 0], x[i, 1], x[i, 2], r[i, 0], r[i, 1], r[i, 2], R, c[0], c[1], c[2],
-            axes[0], axes[1], axes[2], friction, refine)
+def _lanes(X0, P, W, n, R, c, axes, friction, refine):
+    """The paper tracker's contact stage at node 0 of a block of ``n`` lanes, without FTL."""
+    contact = ((R[0, 0], R[0, 1], R[0, 2], R[1, 0], R[1, 1], R[1, 2], R[2, 0], R[2, 1], R[2, 2]),
+               c[0], c[1], c[2], axes[0], axes[1], axes[2], friction, refine)
+    return ghost_contacts.collide_lanes(X0, P, W, 0, (n, 0), (np.arange(n), np.ones((1, n)),
+                                                              np.zeros((n, 3, 3))),
+                                        False, contact, R)
 
 
 @njit(fastmath=TRACK_FASTMATH, error_model='numpy')
@@ -309,53 +235,22 @@ def test_the_paper_trackers_contact_stage_runs_on_the_contact_model(radii, frict
     n = 300
     p = around(rng, np.zeros(3), axes, R, c, n)
     start = p + rng.normal(scale=0.003, size=p.shape)
-    P, X0 = np.ascontiguousarray(p.T), np.ascontiguousarray(start.T)
     refine = 0 if len(set(radii)) == 1 else 2
     sh = posed_head(shape, R, c, R, c)
-    old, new = P.copy(), P.copy()
-    m_old = _lanes_old(X0, old, np.zeros((ghost_contacts.CONTACT_ROWS, n)), n, R, c, axes,
-                       friction, refine)
-    m_new = _lanes_new(X0, new, np.zeros((8, n)), n, sh, 0)
-    assert m_new == m_old > n // 3
-    # under reassociation the last bit follows how LLVM vectorises the whole loop
-    assert np.allclose(new, old, rtol=0, atol=1e-15) and not np.array_equal(new, P)
-    # more refinements than the lane pass unrolls: the node-by-node path
-    sh4 = sh.copy()
-    sh4[0, REFINE] = 4
-    a, b = np.empty_like(p), np.empty_like(p)
-    _scalar_old(p, start, R, c, axes, friction, 4, a)
-    _scalar_new(p, start, sh4, b)
-    assert np.array_equal(a, b)
+    want = np.empty_like(p)
+    for lane_refine in (refine, 4):       # 4: more than the lane pass unrolls, node by node
+        sh[0, REFINE] = lane_refine
+        _scalar_new(p, start, sh, want)
+        lanes = np.ascontiguousarray(p.T)[None].copy()
+        m = _lanes(np.ascontiguousarray(start.T)[None], lanes,
+                   np.zeros((ghost_contacts.CONTACT_ROWS, n)), n, R, c, axes, friction,
+                   lane_refine)
+        assert m > n // 3 and not np.array_equal(lanes[0].T, p)
+        # under reassociation the last bit follows how LLVM vectorises the whole loop
+        assert np.allclose(lanes[0].T, want, rtol=0, atol=1e-15)
 
 
 # ----------------------------------------------------------------------------- stateless
-@njit(fastmath=FASTMATH, error_model='numpy')
-def _blend_old(N, Pp, L, cw, quad, restore, out):
-    for i in range(N.shape[0]):
-        nx, ny, nz = N[i, 0], N[i, 1], N[i, 2]
-        if stateless.ellipsoid_form(nx - cw[0], ny - cw[1], nz - cw[2], quad[0], quad[1],
-                                    quad[2], quad[3], quad[4], quad[5]) < 1.0:
-            if restore:
-                nx, ny, nz = blend._slide(nx, ny, nz, Pp[i, 0], Pp[i, 1], Pp[i, 2], L[i], cw,
-                                          quad)
-            nx, ny, nz = blend._push_out(nx, ny, nz, cw, quad)
-        out[i, 0], out[i, 1], out[i, 2] = nx, ny, nz
-
-
-@njit(fastmath=FASTMATH, error_model='numpy')
-def _blend_new(N, Pp, L, sh, restore, out):
-    k = 0
-    for i in range(N.shape[0]):
-        nx, ny, nz = N[i, 0], N[i, 1], N[i, 2]
-        if stateless_slide.quadric_form(nx - sh[k, CX], ny - sh[k, CX + 1], nz - sh[k, CX + 2],
-                                        sh, k) < 1.0:
-            if restore:
-                nx, ny, nz = stateless_slide.slide_ellipsoid(nx, ny, nz, Pp[i, 0], Pp[i, 1],
-                                                             Pp[i, 2], L[i], sh, k)
-            nx, ny, nz = stateless_slide.push_ellipsoid(nx, ny, nz, sh, k)
-        out[i, 0], out[i, 1], out[i, 2] = nx, ny, nz
-
-
 @njit(fastmath=FASTMATH, error_model='numpy')
 def _slide_push_any(N, Pp, L, sh, restore, out):
     for i in range(N.shape[0]):
@@ -384,26 +279,19 @@ def stateless_case(rng, radii, n=5000):
 
 @pytest.mark.parametrize('radii', [RADII, (0.1, 0.1, 0.1)])
 @pytest.mark.parametrize('restore', [True, False])
-def test_the_blend_trackers_contact_runs_on_the_contact_model(radii, restore):
+def test_the_blend_trackers_reference_is_the_contact_models(radii, restore):
+    """The stateless trackers' plain-numpy contact (for their tests) against the compiled
+    slide and push through the switch on the kind."""
     rng = np.random.default_rng(5)
     sh, N, Pp, head, axes = stateless_case(rng, radii)
     L = np.linalg.norm(N - Pp, axis=1) * rng.uniform(0.9, 1.1, size=len(N))
-    cw = sh[0, CX:CZ + 1].copy()
-    quad = sh[0, [Q00, Q11, Q22, Q01, Q02, Q12]].copy()
-    old, new, any_kind = np.empty_like(N), np.empty_like(N), np.empty_like(N)
-    _blend_old(N, Pp, L, cw, quad, restore, old)
-    _blend_new(N, Pp, L, sh, restore, new)
-    assert np.array_equal(new, old) and not np.array_equal(old, N)
-    # through the switch on the kind: the same to rounding
-    _slide_push_any(N, Pp, L, sh, restore, any_kind)
-    assert np.allclose(any_kind, old, rtol=0, atol=1e-15)
-    # the plain-numpy statements agree
+    got = np.empty_like(N)
+    _slide_push_any(N, Pp, L, sh, restore, got)
+    assert not np.array_equal(got, N)
     for i in range(0, len(N), 37):
         want = stateless.reference_contact(N[i], Pp[i], L[i], head, axes,
                                            np.asarray(head_shape(radii).center), restore)
-        got = reference.reference_slide_push(N[i], Pp[i], L[i], sh[0], restore) \
-            if reference.reference_level(N[i], sh[0])[0] < 0.0 else N[i]
-        assert np.allclose(got, want, rtol=0, atol=1e-14)
+        assert np.allclose(got[i], want, rtol=0, atol=1e-14)
 
 
 def test_the_turn_trackers_contact_agrees_with_the_contact_model():
@@ -420,7 +308,7 @@ def test_the_turn_trackers_contact_agrees_with_the_contact_model():
         geo = np.full(12, 1e3)
         geo[:3] = sh[0, CX:CZ + 1]
         geo[3:9] = sh[0, [Q00, Q11, Q22, Q01, Q02, Q12]]
-        moved = turn._slide_push(w, kind, 0, 0, geo)
+        moved = turn._contact_pass(w, kind, 0, 0, geo)
         new = np.empty_like(N)
         _slide_push_any(N, Pp, np.linalg.norm(N - Pp, axis=1), sh, True, new)
         assert moved > 1000
@@ -447,5 +335,4 @@ def test_the_fitted_margin_is_the_guide_solvers_and_the_trackers():
         tracker = margin.fit_margin(shape, rest[:, 2:], strands.rest_length)
         assert np.array_equal(axes, np.asarray(scene.collider.radii) + tracker)
     q = rng.normal(scale=0.1, size=(500, 3))
-    assert np.array_equal(margin.outside_distance(q, RADII), collision.outside_distance(q, RADII))
     assert math.isfinite(float(margin.outside_distance(q, RADII).max()))

@@ -64,20 +64,41 @@ TINY_SQ = 1e-24
 
 # ----------------------------------------------------------------------------- frames
 @njit(cache=True, inline='always')
+def local_of(x0, x1, x2, rot, c0, c1, c2):
+    """``R^T (x - c)``: a world point [m] relative to the world point ``c``, in the axes of the
+    rotation ``R`` given by its nine entries row by row (``R_ij`` at ``3 i + j``)."""
+    dx, dy, dz = x0 - c0, x1 - c1, x2 - c2
+    return (rot[0] * dx + rot[3] * dy + rot[6] * dz,
+            rot[1] * dx + rot[4] * dy + rot[7] * dz,
+            rot[2] * dx + rot[5] * dy + rot[8] * dz)
+
+
+@njit(cache=True, inline='always')
+def world_of(y0, y1, y2, rot, c0, c1, c2):
+    """``R y + c``: a point ``y`` in the axes of ``R`` (entries as :func:`local_of`) relative to
+    the world point ``c``, back in the world."""
+    return (rot[0] * y0 + rot[1] * y1 + rot[2] * y2 + c0,
+            rot[3] * y0 + rot[4] * y1 + rot[5] * y2 + c1,
+            rot[6] * y0 + rot[7] * y1 + rot[8] * y2 + c2)
+
+
+@njit(cache=True, inline='always')
+def rotation_of(sh, k):
+    """The nine entries of shape ``k``'s world axes, row by row (:func:`local_of`)."""
+    return (sh[k, R00], sh[k, R01], sh[k, R02], sh[k, R10], sh[k, R11], sh[k, R12], sh[k, R20],
+            sh[k, R21], sh[k, R22])
+
+
+@njit(cache=True, inline='always')
 def to_local(x0, x1, x2, sh, k):
     """``R^T (x - C)``: a world point [m] in the axes of shape ``k``, relative to its centre."""
-    dx, dy, dz = x0 - sh[k, CX], x1 - sh[k, CY], x2 - sh[k, CZ]
-    return (sh[k, R00] * dx + sh[k, R10] * dy + sh[k, R20] * dz,
-            sh[k, R01] * dx + sh[k, R11] * dy + sh[k, R21] * dz,
-            sh[k, R02] * dx + sh[k, R12] * dy + sh[k, R22] * dz)
+    return local_of(x0, x1, x2, rotation_of(sh, k), sh[k, CX], sh[k, CY], sh[k, CZ])
 
 
 @njit(cache=True, inline='always')
 def from_local(yx, yy, yz, sh, k):
     """``R y + C``: a point in the axes of shape ``k`` back in the world."""
-    return (sh[k, R00] * yx + sh[k, R01] * yy + sh[k, R02] * yz + sh[k, CX],
-            sh[k, R10] * yx + sh[k, R11] * yy + sh[k, R12] * yz + sh[k, CY],
-            sh[k, R20] * yx + sh[k, R21] * yy + sh[k, R22] * yz + sh[k, CZ])
+    return world_of(yx, yy, yz, rotation_of(sh, k), sh[k, CX], sh[k, CY], sh[k, CZ])
 
 
 @njit(cache=True, inline='always')
@@ -156,6 +177,14 @@ def ellipsoid_normal(yx, yy, yz, ix, iy, iz):
     return nx * nn, ny * nn, nz * nn
 
 
+@njit(cache=True, inline='always')
+def ellipsoid_friction(yx, yy, yz, px, py, pz, ix, iy, iz, mu):
+    """:func:`friction` at the ellipsoid's surface point ``y`` (its axes; ``p`` the reference
+    in the same axes)."""
+    nx, ny, nz = ellipsoid_normal(yx, yy, yz, ix, iy, iz)
+    return friction(yx, yy, yz, px, py, pz, nx, ny, nz, mu)
+
+
 # ----------------------------------------------------------------------------- rules
 @njit(cache=True, inline='always')
 def friction(yx, yy, yz, px, py, pz, nx, ny, nz, mu):
@@ -209,20 +238,40 @@ def plane_level(x0, x1, x2, sh, k):
 
 
 @njit(cache=True, inline='always')
-def contact_ellipsoid(x0, x1, x2, r0, r1, r2, sh, k, mu):
-    """:func:`contact_of` an ellipsoid, friction ``mu`` (0: none): in its axes, in the head
-    collider's arithmetic."""
-    qx, qy, qz = to_local(x0, x1, x2, sh, k)
-    ix, iy, iz = sh[k, I0], sh[k, I1], sh[k, I2]
+def ellipsoid_contact(x0, x1, x2, r0, r1, r2, placed):
+    """The projection and friction of one node ``x`` (world [m]) against one ellipsoid: the one
+    statement of the rule every ellipsoid contact runs (the guide solver's head collider, the
+    paper tracker's, :func:`contact_ellipsoid` of a posed table).  ``placed`` = ``(rot, cx, cy,
+    cz, ax, ay, az, mu, refine)``: the nine entries of its world axes (:func:`local_of`), its
+    centre in the world, its semi-axes (margin included), friction ``mu`` (0: none) relative to
+    the reference ``r``, normal-line refinements.  Returns ``(moved, y0, y1, y2)``; a node
+    outside comes back as it is with ``moved`` false."""
+    rot, cx, cy, cz, ax, ay, az, mu, refine = placed
+    qx, qy, qz = local_of(x0, x1, x2, rot, cx, cy, cz)
+    ix, iy, iz = 1.0 / (ax * ax), 1.0 / (ay * ay), 1.0 / (az * az)
     if ellipsoid_level(qx, qy, qz, ix, iy, iz) >= 1.0:
         return False, x0, x1, x2
-    yx, yy, yz = surface_point(qx, qy, qz, sh[k, A0], sh[k, A1], sh[k, A2], int(sh[k, REFINE]))
+    yx, yy, yz = surface_point(qx, qy, qz, ax, ay, az, refine)
     if mu > 0.0:
-        px, py, pz = to_local(r0, r1, r2, sh, k)
-        nx, ny, nz = ellipsoid_normal(yx, yy, yz, ix, iy, iz)
-        yx, yy, yz = friction(yx, yy, yz, px, py, pz, nx, ny, nz, mu)
-    y0, y1, y2 = from_local(yx, yy, yz, sh, k)
+        px, py, pz = local_of(r0, r1, r2, rot, cx, cy, cz)
+        yx, yy, yz = ellipsoid_friction(yx, yy, yz, px, py, pz, ix, iy, iz, mu)
+    y0, y1, y2 = world_of(yx, yy, yz, rot, cx, cy, cz)
     return True, y0, y1, y2
+
+
+@njit(cache=True, inline='always')
+def placed_ellipsoid(sh, k, mu):
+    """The ``placed`` tuple of :func:`ellipsoid_contact` for shape ``k`` of a posed table,
+    friction ``mu``."""
+    return (rotation_of(sh, k), sh[k, CX], sh[k, CY], sh[k, CZ], sh[k, A0], sh[k, A1],
+            sh[k, A2], mu, int(sh[k, REFINE]))
+
+
+@njit(cache=True, inline='always')
+def contact_ellipsoid(x0, x1, x2, r0, r1, r2, sh, k, mu):
+    """:func:`contact_of` an ellipsoid, friction ``mu`` (0: none): :func:`ellipsoid_contact`
+    in its axes."""
+    return ellipsoid_contact(x0, x1, x2, r0, r1, r2, placed_ellipsoid(sh, k, mu))
 
 
 @njit(cache=True, inline='always')

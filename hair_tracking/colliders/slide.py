@@ -36,11 +36,24 @@ from hair_tracking.colliders.shapes import (A0, CX, CY, CZ, ELLIPSOID, I0, KIND,
 
 # ----------------------------------------------------------------------------- inside test
 @njit(cache=True, inline='always')
+def quadric(dx, dy, dz, q0, q1, q2, q3, q4, q5):
+    """``d^T Q d`` with ``Q``'s entries Q00 Q11 Q22 Q01 Q02 Q12 as scalars (in a vector loop
+    they stay in registers): below 1 inside the ellipsoid for ``d = x - C``."""
+    return q0 * dx * dx + q1 * dy * dy + q2 * dz * dz + \
+        2.0 * (q3 * dx * dy + q4 * dx * dz + q5 * dy * dz)
+
+
+@njit(cache=True, inline='always')
+def quadric_of(sh, k):
+    """The entries Q00 Q11 Q22 Q01 Q02 Q12 of shape ``k``'s world quadric."""
+    return sh[k, Q00], sh[k, Q11], sh[k, Q22], sh[k, Q01], sh[k, Q02], sh[k, Q12]
+
+
+@njit(cache=True, inline='always')
 def quadric_form(dx, dy, dz, sh, k):
-    """``d^T Q d`` for the ellipsoid quadric of shape ``k`` (below 1 inside for ``d = x -
-    C``)."""
-    return sh[k, Q00] * dx * dx + sh[k, Q11] * dy * dy + sh[k, Q22] * dz * dz + \
-        2.0 * (sh[k, Q01] * dx * dy + sh[k, Q02] * dx * dz + sh[k, Q12] * dy * dz)
+    """:func:`quadric` of shape ``k``."""
+    return quadric(dx, dy, dz, sh[k, Q00], sh[k, Q11], sh[k, Q22], sh[k, Q01], sh[k, Q02],
+                   sh[k, Q12])
 
 
 @njit(cache=True, inline='always')
@@ -82,13 +95,21 @@ def slide_along(n0, n1, n2, p0, p1, p2, gx, gy, gz, length):
 
 
 @njit(cache=True, inline='always')
-def slide_ellipsoid(n0, n1, n2, p0, p1, p2, length, sh, k):
-    """:func:`slide_along` an ellipsoid's outward normal ``Q (p - C)`` at ``p``."""
-    ex, ey, ez = p0 - sh[k, CX], p1 - sh[k, CY], p2 - sh[k, CZ]
-    gx = sh[k, Q00] * ex + sh[k, Q01] * ey + sh[k, Q02] * ez
-    gy = sh[k, Q01] * ex + sh[k, Q11] * ey + sh[k, Q12] * ez
-    gz = sh[k, Q02] * ex + sh[k, Q12] * ey + sh[k, Q22] * ez
+def slide_quadric(n0, n1, n2, p0, p1, p2, length, c, q):
+    """:func:`slide_along` the outward normal ``Q (p - c)`` at ``p`` of the ellipsoid of world
+    centre ``c`` and quadric entries ``q`` (:func:`quadric`)."""
+    ex, ey, ez = p0 - c[0], p1 - c[1], p2 - c[2]
+    gx = q[0] * ex + q[3] * ey + q[4] * ez
+    gy = q[3] * ex + q[1] * ey + q[5] * ez
+    gz = q[4] * ex + q[5] * ey + q[2] * ez
     return slide_along(n0, n1, n2, p0, p1, p2, gx, gy, gz, length)
+
+
+@njit(cache=True, inline='always')
+def slide_ellipsoid(n0, n1, n2, p0, p1, p2, length, sh, k):
+    """:func:`slide_quadric` of an ellipsoid shape."""
+    return slide_quadric(n0, n1, n2, p0, p1, p2, length, (sh[k, CX], sh[k, CY], sh[k, CZ]),
+                         quadric_of(sh, k))
 
 
 @njit(cache=True, inline='always')
@@ -107,15 +128,52 @@ def slide_plane(n0, n1, n2, p0, p1, p2, length, sh, k):
 
 # ----------------------------------------------------------------------------- push
 @njit(cache=True, inline='always')
-def push_ellipsoid(x0, x1, x2, sh, k):
-    """:func:`push_radial` of an ellipsoid: along the ray from its centre (a point at the
-    centre stays)."""
-    dx, dy, dz = x0 - sh[k, CX], x1 - sh[k, CY], x2 - sh[k, CZ]
-    e = quadric_form(dx, dy, dz, sh, k)
+def push_quadric(x0, x1, x2, c, q):
+    """:func:`push_radial` of the ellipsoid of world centre ``c`` and quadric entries ``q``:
+    along the ray from its centre (a point at the centre stays)."""
+    dx, dy, dz = x0 - c[0], x1 - c[1], x2 - c[2]
+    e = quadric(dx, dy, dz, q[0], q[1], q[2], q[3], q[4], q[5])
     if not 0.0 < e < 1.0:
         return x0, x1, x2
     f = 1.0 / math.sqrt(e)
-    return sh[k, CX] + f * dx, sh[k, CY] + f * dy, sh[k, CZ] + f * dz
+    return c[0] + f * dx, c[1] + f * dy, c[2] + f * dz
+
+
+@njit(cache=True, inline='always')
+def push_ellipsoid(x0, x1, x2, sh, k):
+    """:func:`push_quadric` of an ellipsoid shape."""
+    return push_quadric(x0, x1, x2, (sh[k, CX], sh[k, CY], sh[k, CZ]), quadric_of(sh, k))
+
+
+@njit(cache=True, inline='always')
+def slide_push_lane(n, p, c, q, acts):
+    """The slide and push of an ellipsoid (world centre ``c``, quadric entries ``q``) for node
+    ``n`` after ``p`` (x, y, z tuples) without branches, for a loop over lanes side by side:
+    ``n`` inside and ``acts`` is placed at its own step's length ``|n - p|`` from ``p`` along
+    the step without its inward part, then radially onto the surface if still inside (the
+    length of the slid step from ``|d|^2 - (d.g)^2 / g.g``: one square root); else it stays.
+    Returns ``(inside, x, y, z)``."""
+    nx, ny, nz = n
+    px, py, pz = p
+    c0, c1, c2 = c
+    q0, q1, q2, q3, q4, q5 = q
+    inside = (quadric(nx - c0, ny - c1, nz - c2, q0, q1, q2, q3, q4, q5) < 1.0) & acts
+    ex, ey, ez = px - c0, py - c1, pz - c2
+    gx = q0 * ex + q3 * ey + q4 * ez                      # outward normal Q (p - c)
+    gy = q3 * ex + q1 * ey + q5 * ez
+    gz = q4 * ex + q5 * ey + q2 * ez
+    dx, dy, dz = nx - px, ny - py, nz - pz
+    dd = dx * dx + dy * dy + dz * dz
+    dg = min(dx * gx + dy * gy + dz * gz, 0.0)
+    a = dg / max(gx * gx + gy * gy + gz * gz, 1e-300)
+    # |d - a g|^2 = dd - a dg: back to the step's length with one square root
+    f = math.sqrt(dd / max(dd - a * dg, 1e-300))
+    dx, dy, dz = dx - a * gx, dy - a * gy, dz - a * gz
+    sx, sy, sz = px + f * dx - c0, py + f * dy - c1, pz + f * dz - c2
+    e = quadric(sx, sy, sz, q0, q1, q2, q3, q4, q5)
+    k = 1.0 / math.sqrt(min(max(e, 1e-300), 1.0))         # radially onto the surface
+    return (inside, c0 + k * sx if inside else nx, c1 + k * sy if inside else ny,
+            c2 + k * sz if inside else nz)
 
 
 @njit(cache=True, inline='always')
