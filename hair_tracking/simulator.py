@@ -214,7 +214,8 @@ class HairSimulator:
         self.collider = make_collider(scene.collider)
         self.guide_solver = GuideSolver(self.guides, scene, self.parallel.guides)
         if self.ghosts is not None:
-            if scene.tracking != old.tracking or scene.collider != old.collider:
+            if scene.tracking != old.tracking or scene.collider != old.collider or \
+                    scene.body != old.body:
                 # the new tracker starts where the old one leaves the ghosts
                 np.copyto(self.ghosts.x, self.ghost_tracker.positions())
                 np.copyto(self.ghosts.v, self.ghost_tracker.velocities())
@@ -284,6 +285,15 @@ class HairSimulator:
         self.counters.last_substeps = len(times)
         self.counters.last_advance_ms = (self.clock() - start) * 1e3
         return len(times)
+
+    def set_body_frame(self, rotation, position) -> None:
+        """The pose of the scene's ``body.frame`` (rotation (3, 3), origin (3,)) in the fixed
+        frame of the head poses: the bust rides on it from the next substep on (kept until the
+        next call; without one the bust rides on the neck frame of the head pose)."""
+        for owner in (self.guide_solver, self.ghost_tracker):
+            body = getattr(owner, 'body', None)
+            if body is not None:
+                body.set_frame(rotation, position)
 
     def reset(self) -> None:
         """Rest shape at the current head pose, settled; the head track is kept."""

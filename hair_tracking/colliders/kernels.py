@@ -3,16 +3,22 @@ of a scene), built from the one-node functions of :mod:`hair_tracking.colliders.
 
 :func:`collide_block` is the collision stage of a position-based substep for a block of
 strands (a guide solver runs it block by block inside its own parallel loop); :func:`collide`
-runs it over all strands; :func:`deepest` measures how deep the hair lies inside the shapes.
+runs it over all strands; :func:`deepest` measures how deep the hair lies inside the shapes;
+:func:`slide_push_strands` is the contact of the trackers without state (blend, turn) with
+every shape, strand by strand.
 Shapes are taken in table order: a node pushed out of one shape into another is pushed out of
 that one next (one Gauss-Seidel pass, as a solver takes its constraints).
 """
-from numba import njit
+from numba import njit, prange
 
 from hair_tracking.colliders.bounds import near
 from hair_tracking.colliders.contact import (bounded_start, carried, depth, FASTMATH, push_out,
                                              surface_normal)
 from hair_tracking.colliders.shapes import FRICTION
+from hair_tracking.colliders.slide import level, slide_push
+
+#: Sweeps over the shapes a node of :func:`slide_push_strands` takes at most.
+STRAND_SWEEPS = 4
 
 
 @njit(cache=True, fastmath=FASTMATH, error_model='numpy')
@@ -79,3 +85,49 @@ def deepest(x, inv_mass, use_mass, sh, out):
                     if d > worst:
                         worst = d
         out[s] = worst
+
+
+@njit(cache=True, nogil=True, parallel=True, fastmath=FASTMATH, error_model='numpy')
+def slide_push_strands(x, rest_length, sh, first):
+    """The stateless trackers' contact (:func:`~hair_tracking.colliders.slide.slide_push`) of
+    the strands ``x`` (S, N, 3) (float32 or float64, world [m], in place) with every shape of
+    ``sh``, node by node from node ``first`` on: a node is first moved by its predecessor's
+    push (the strand below a pushed node follows it, its shape kept), then every shape whose
+    bound it is near (:func:`~hair_tracking.colliders.bounds.near`) and that it is inside
+    slides it at its rest segment's length ``rest_length[s, j - 1]`` from its predecessor and
+    pushes it onto the surface, in sweeps over the shapes (:data:`STRAND_SWEEPS` at most) until
+    one finds it inside none (a node slid out of one shape into an overlapping one, the bust's
+    shoulders and chest, slides out of that one next).  Returns the number of nodes a shape
+    moved."""
+    total = 0
+    for s in prange(x.shape[0]):
+        total += _slide_push_strand(x, rest_length, sh, first, s)
+    return total
+
+
+@njit(cache=True, fastmath=FASTMATH, error_model='numpy')
+def _slide_push_strand(x, rest_length, sh, first, s):
+    """:func:`slide_push_strands` of strand ``s``."""
+    d0, d1, d2 = 0.0, 0.0, 0.0
+    moved = 0
+    for j in range(first, x.shape[1]):
+        o0, o1, o2 = float(x[s, j, 0]), float(x[s, j, 1]), float(x[s, j, 2])
+        x0, x1, x2 = o0 + d0, o1 + d1, o2 + d2
+        hit = False
+        for _ in range(STRAND_SWEEPS):
+            again = False
+            for k in range(sh.shape[0]):
+                if not near(x0, x1, x2, sh, k) or not level(x0, x1, x2, sh, k) < 0.0:
+                    continue
+                x0, x1, x2 = slide_push(x0, x1, x2, float(x[s, j - 1, 0]),
+                                        float(x[s, j - 1, 1]), float(x[s, j - 1, 2]),
+                                        rest_length[s, j - 1], True, sh, k)
+                again = hit = True
+            if not again:
+                break
+        if hit:
+            moved += 1
+            d0, d1, d2 = x0 - o0, x1 - o1, x2 - o2
+        if hit or d0 != 0.0 or d1 != 0.0 or d2 != 0.0:
+            x[s, j, 0], x[s, j, 1], x[s, j, 2] = x0, x1, x2
+    return moved

@@ -13,9 +13,11 @@ from typing import Dict, Tuple
 import numpy as np
 from numba import njit
 
+from hair_tracking.colliders.kernels import slide_push_strands
 from hair_tracking.colliders.pose import frames_at
 from hair_tracking.colliders.reference import (reference_level, reference_pose,
                                                reference_slide_push)
+from hair_tracking.colliders.scene_body import make_body
 from hair_tracking.colliders.shapes import Shape, shape_table
 from hair_tracking.core.model import carry_rigidly, HeadPose, StrandSet, strand_part
 from hair_tracking.core.point_records import points_to_records, record_target
@@ -171,6 +173,12 @@ class StatelessTracker:
             self.center, self.axes = collider_axes(ghosts, collider)
         else:
             self.center, self.axes = np.zeros(3), np.ones(3)
+        positive = ghosts.rest_length[ghosts.rest_length > 0]
+        #: the scene's bust (``None`` without ``body.bust``): every placement is followed by
+        #: its contact pass (:func:`~hair_tracking.colliders.kernels.slide_push_strands`)
+        self.body = make_body(scene.body, float(positive.min()) if positive.size else 0.0)
+        self._head = HeadPose(np.zeros(3), np.array([0.0, 0.0, 0.0, 1.0]), np.eye(3))
+        self._rest_length = np.ascontiguousarray(ghosts.rest_length, dtype=np.float64)
         self.stats: Dict[str, int] = {'ghosts': int(ghosts.count), 'steps': 0, 'evaluations': 0,
                                       'contacts': 0, 'parallel': 1}
 
@@ -180,6 +188,7 @@ class StatelessTracker:
         guide_columns(motion.guide_x, self.seg, self.t, self._gcol)
         np.copyto(self._rot, motion.head.rotation)
         np.copyto(self._pos, motion.head.position)
+        self._head = motion.head
         self._pending = True
         self._x64 = None
         self.stats['steps'] += 1
@@ -190,6 +199,9 @@ class StatelessTracker:
             return
         self._pending = False
         self._placed_into(self._x32_target)
+        if self.body is not None:
+            self.stats['contacts'] += int(slide_push_strands(
+                self._x32, self._rest_length, self.body.posed(self._head, self._head, 0.0), 2))
 
     def _placed_into(self, target) -> bool:
         contacts, finite = self._place(target)
@@ -242,7 +254,7 @@ class StatelessTracker:
         alone from the last step when nothing has read the hair since (:meth:`_place_part`), so
         a check of a few strands does not cost a whole evaluation; else read from
         :meth:`positions`.  Returns ``(strand indices, positions (len, N, 3))``."""
-        if self._pending:
+        if self._pending and self.body is None:
             idx = self._place_part(part, parts)
             return idx, self._x32[idx]
         idx = strand_part(self.ghosts.count, part, parts)
@@ -259,7 +271,7 @@ class StatelessTracker:
         :func:`~hair_tracking.core.point_records.points_to_records`).  After a step that nothing
         has read yet the kernel writes the records itself, and the positions stay to be placed
         when read."""
-        if self._pending:
+        if self._pending and self.body is None:
             s, n = self.ghosts.rest.shape[:2]
             return self._placed_into(record_target(words, stride, s, n, rot, origin) + (True,))
         return points_to_records(words, stride, self.positions(), rot, origin)
