@@ -12,8 +12,11 @@ frames measured in the same run.
    contact (inside test of every lane a vector pass a shape, slide and push of the lanes
    inside) with no bound test, with the bound test of the block's box at each node index
    first (only the capsules that box may touch run), and node by node with the node's bound
-   test (the guide solver's order). Beside it: a copy of the same positions (read + write)
-   and the blend and turn trackers' frames at the same ghost count and thread count.
+   test (the guide solver's order). Beside it: a copy of the same positions (read + write),
+   the numpy copy bandwidth (``bench_blend.copy_bandwidth``), and the blend and turn
+   trackers' frames at the same ghost count and thread count without a body and with the
+   scene's bust (``body.bust``: the trackers' ``kernels.slide_push_strands`` after the
+   placement), whose ratio is the bust's cost in the product.
 
     python scripts/bench_colliders.py [--ghosts 100000] [--threads 1] [--rounds 9] [--json f]
 """
@@ -26,6 +29,8 @@ import time
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
+from hair_tracking.executable import use_numba_cache  # noqa: E402
+use_numba_cache()      # before numba loads: the cache make install fills
 import numba  # noqa: E402
 from numba import njit  # noqa: E402
 import numpy as np  # noqa: E402
@@ -35,7 +40,10 @@ from hair_tracking.colliders import slide as stateless  # noqa: E402
 from hair_tracking.colliders.shapes import (CAPSULE, KIND, Shape, shape_table)  # noqa: E402
 from hair_tracking.core.scene import Scene  # noqa: E402
 from hair_tracking.evaluation.provenance import command_line, provenance  # noqa: E402
+from hair_tracking.ghosts.interface import TrackStep  # noqa: E402
 from hair_tracking.simulator import HairSimulator  # noqa: E402
+
+from bench_blend import copy_bandwidth, moved  # noqa: E402  (scripts/, this script's folder)
 
 FASTMATH = contact.FASTMATH
 LANES = 64
@@ -159,14 +167,6 @@ def lane_blocks(x):
 
 
 # ----------------------------------------------------------------------------- timing
-def moved(sim, k):
-    q = [0.0, 0.0, np.sin(0.15 * np.sin(0.3 * k)), np.cos(0.15 * np.sin(0.3 * k))]
-    t = 1_000_000_000 + k * 16_666_667
-    sim.push_pose(t, [0.02 * np.sin(0.2 * k), 0.0, 0.0], q)
-    sim.advance_to(t)
-    return sim
-
-
 def shapes_around(rng, n):
     """One shape of every kind (and the two ellipsoid tests) with points around it."""
     shapes = [Shape('sphere', frame='fixed', radius=0.06, margin=0.004, friction=0.3),
@@ -218,13 +218,14 @@ def main(argv=None):
     guides = max(1, args.ghosts // 16)
     base = Scene().with_changes(groom__guides=guides, groom__ghosts_per_guide=16,
                                 solver__settle_time=0.0)
-    sims = {mode: moved(HairSimulator(base.with_changes(tracking__mode=mode)), 1)
-            for mode in ('blend', 'turn')}
+    sims = {(mode, on): moved(HairSimulator(base.with_changes(tracking__mode=mode,
+                                                              body__bust=on)), 1)
+            for mode in ('blend', 'turn') for on in (False, True)}
     for k in range(2, 5):
         for sim in sims.values():
             moved(sim, k)
-    sim = sims['blend']
-    x = np.ascontiguousarray(sim.ghosts.x)
+    sim = sims['blend', False]
+    x = np.ascontiguousarray(sim.ghost_tracker.positions(), dtype=np.float64)
     head = sim.head
     neck = body.neck_frame(head.rotation, head.position, HEIGHT)
     local = shape_table(body.bust(HEIGHT, frame='neck', margin=0.004, friction=0.3))
@@ -238,13 +239,13 @@ def main(argv=None):
               'bust, node bound (node by node)': lambda: bust_pass(xb, out, seg, bust, 2)}
     counts = {name: f() for name, f in passes.items()}
     frames = {}
-    for mode, s in sims.items():
+    for (mode, with_bust), s in sims.items():
         tr = s.ghost_tracker
 
         def frame(tr=tr, s=s):
-            tr.step(s.scene.solver.dt, s.guides.x.copy(), s.head)
+            tr.step(TrackStep(s.scene.solver.dt, 1, s.guides.x.copy(), s.guides.x, s.head))
             tr.positions()
-        frames[f'{mode} frame'] = frame
+        frames[f'{mode} frame' + (', bust' if with_bust else '')] = frame
         frame()
     times = {}
     for _ in range(args.rounds):                   # alternate, so load changes hit all alike
@@ -254,10 +255,17 @@ def main(argv=None):
             times.setdefault(name, []).append(time.perf_counter() - t)
     med = {name: statistics.median(ts) * 1e3 for name, ts in times.items()}
     copy_bw = 2 * xb.nbytes / (med['copy'] / 1e3)
+    numpy_bw = copy_bandwidth()
     print(f'{x.shape[0]} ghosts x {x.shape[1]} nodes ({nodes} nodes), {args.threads} '
-          f'thread(s); copy of the positions {med["copy"]:.2f} ms ({copy_bw / 1e9:.1f} GB/s)')
+          f'thread(s); copy of the positions {med["copy"]:.2f} ms ({copy_bw / 1e9:.1f} GB/s; '
+          f'numpy copy of 64 MB {numpy_bw / 1e9:.1f} GB/s)')
     for name in frames:
         print(f'  {name}: {med[name]:.2f} ms')
+    for mode in ('blend', 'turn'):
+        added = med[f'{mode} frame, bust'] / med[f'{mode} frame'] - 1.0
+        result[f'{mode}_bust_added'] = added
+        print(f'  the bust adds {100 * added:.0f} % to the {mode} frame '
+              f'(slide_push_strands after the placement)')
     rows = {}
     for name in passes:
         if name == 'copy':
@@ -278,7 +286,8 @@ def main(argv=None):
               f'{100 * added / med["turn frame"]:.0f} %); '
               f'{contacts} contacts, {runs / nodes:.2f} exact tests a node', flush=True)
     result.update({'ghosts': int(x.shape[0]), 'nodes': int(nodes), 'median_ms': med,
-                   'copy_bandwidth_GBps': copy_bw / 1e9, 'bust': rows})
+                   'copy_bandwidth_GBps': copy_bw / 1e9,
+                   'numpy_copy_bandwidth_GBps': numpy_bw / 1e9, 'bust': rows})
     if args.json:
         record = provenance(command_line('python scripts/bench_colliders.py', argv),
                             args.threads)

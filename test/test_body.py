@@ -71,7 +71,7 @@ def test_the_strand_pass_leaves_no_node_inside_and_the_strand_below_follows(dtyp
     rest_length = np.full((len(xs), n - 1), 0.02)
     x = np.ascontiguousarray(x.astype(dtype))
     before = x.copy()
-    moved = kernels.slide_push_strands(x, rest_length, sh, 2)
+    moved = kernels.slide_push_strands(x, rest_length, sh, 2, 0)
     assert moved > 0
     lev = np.array([[slide.level(*map(float, p), sh, 0) for p in s] for s in x])
     assert lev.min() > -1e-5                                     # float32: rounding only

@@ -9,9 +9,11 @@ every shape, strand by strand.
 Shapes are taken in table order: a node pushed out of one shape into another is pushed out of
 that one next (one Gauss-Seidel pass, as a solver takes its constraints).
 """
+import math
+
 from numba import njit, prange
 
-from hair_tracking.colliders.bounds import near
+from hair_tracking.colliders.bounds import box_near, near
 from hair_tracking.colliders.contact import (bounded_start, carried, depth, FASTMATH, push_out,
                                              surface_normal)
 from hair_tracking.colliders.shapes import FRICTION
@@ -88,46 +90,80 @@ def deepest(x, inv_mass, use_mass, sh, out):
 
 
 @njit(cache=True, nogil=True, parallel=True, fastmath=FASTMATH, error_model='numpy')
-def slide_push_strands(x, rest_length, sh, first):
+def slide_push_strands(x, rest_length, sh, first, lead):
     """The stateless trackers' contact (:func:`~hair_tracking.colliders.slide.slide_push`) of
     the strands ``x`` (S, N, 3) (float32 or float64, world [m], in place) with every shape of
     ``sh``, node by node from node ``first`` on: a node is first moved by its predecessor's
-    push (the strand below a pushed node follows it, its shape kept), then every shape whose
-    bound it is near (:func:`~hair_tracking.colliders.bounds.near`) and that it is inside
+    displacement (the strand below a moved node follows it, its shape kept); then every shape
+    whose bound it is near (:func:`~hair_tracking.colliders.bounds.near`) and that it is inside
     slides it at its rest segment's length ``rest_length[s, j - 1]`` from its predecessor and
-    pushes it onto the surface, in sweeps over the shapes (:data:`STRAND_SWEEPS` at most) until
-    one finds it inside none (a node slid out of one shape into an overlapping one, the bust's
-    shoulders and chest, slides out of that one next).  Returns the number of nodes a shape
-    moved."""
+    pushes it onto the surface, after which it is put back at the rest length along its new
+    segment, in sweeps
+    (:data:`STRAND_SWEEPS` at most) until one finds it inside no shape (a node slid out of
+    one shape into an overlapping one slides out of that one next).  The first ``lead``
+    shapes (the head collider, which the tracker or solver has applied already) are tested
+    only on nodes this pass moves; a strand whose box no other shape's bound meets
+    (:func:`~hair_tracking.colliders.bounds.box_near`) is left as it is after one read.
+    Returns the number of nodes a shape moved."""
     total = 0
     for s in prange(x.shape[0]):
-        total += _slide_push_strand(x, rest_length, sh, first, s)
+        total += _slide_push_strand(x, rest_length, sh, (first, lead), s)
     return total
 
 
 @njit(cache=True, fastmath=FASTMATH, error_model='numpy')
-def _slide_push_strand(x, rest_length, sh, first, s):
-    """:func:`slide_push_strands` of strand ``s``."""
+def _slide_push_strand(x, rest_length, sh, how, s):
+    """:func:`slide_push_strands` of strand ``s`` (``how`` = ``(first, lead)``)."""
+    first, lead = how
+    lo0 = hi0 = float(x[s, first - 1, 0])
+    lo1 = hi1 = float(x[s, first - 1, 1])
+    lo2 = hi2 = float(x[s, first - 1, 2])
+    for j in range(first, x.shape[1]):
+        lo0, hi0 = min(lo0, float(x[s, j, 0])), max(hi0, float(x[s, j, 0]))
+        lo1, hi1 = min(lo1, float(x[s, j, 1])), max(hi1, float(x[s, j, 1]))
+        lo2, hi2 = min(lo2, float(x[s, j, 2])), max(hi2, float(x[s, j, 2]))
+    far = True
+    for k in range(lead, sh.shape[0]):
+        if box_near(lo0, lo1, lo2, hi0, hi1, hi2, sh, k):
+            far = False
+            break
+    if far:
+        return 0
     d0, d1, d2 = 0.0, 0.0, 0.0
     moved = 0
     for j in range(first, x.shape[1]):
         o0, o1, o2 = float(x[s, j, 0]), float(x[s, j, 1]), float(x[s, j, 2])
         x0, x1, x2 = o0 + d0, o1 + d1, o2 + d2
+        p0, p1, p2 = float(x[s, j - 1, 0]), float(x[s, j - 1, 1]), float(x[s, j - 1, 2])
+        length = rest_length[s, j - 1]
         hit = False
+        carried = d0 != 0.0 or d1 != 0.0 or d2 != 0.0
         for _ in range(STRAND_SWEEPS):
             again = False
             for k in range(sh.shape[0]):
+                if k < lead and not (hit or carried):
+                    continue
                 if not near(x0, x1, x2, sh, k) or not level(x0, x1, x2, sh, k) < 0.0:
                     continue
-                x0, x1, x2 = slide_push(x0, x1, x2, float(x[s, j - 1, 0]),
-                                        float(x[s, j - 1, 1]), float(x[s, j - 1, 2]),
-                                        rest_length[s, j - 1], True, sh, k)
+                x0, x1, x2 = slide_push(x0, x1, x2, p0, p1, p2, length, True, sh, k)
                 again = hit = True
             if not again:
                 break
+            x0, x1, x2 = _at_length(x0, x1, x2, p0, p1, p2, length)
         if hit:
             moved += 1
-            d0, d1, d2 = x0 - o0, x1 - o1, x2 - o2
-        if hit or d0 != 0.0 or d1 != 0.0 or d2 != 0.0:
+        d0, d1, d2 = x0 - o0, x1 - o1, x2 - o2
+        if d0 != 0.0 or d1 != 0.0 or d2 != 0.0:
             x[s, j, 0], x[s, j, 1], x[s, j, 2] = x0, x1, x2
     return moved
+
+
+@njit(cache=True, inline='always')
+def _at_length(x0, x1, x2, p0, p1, p2, length):
+    """``x`` moved along ``x - p`` to ``length`` from ``p`` (as it is when ``x = p``)."""
+    e0, e1, e2 = x0 - p0, x1 - p1, x2 - p2
+    n = math.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
+    if not n > 0.0:
+        return x0, x1, x2
+    f = length / n
+    return p0 + f * e0, p1 + f * e1, p2 + f * e2

@@ -20,9 +20,10 @@ from typing import Optional, Tuple
 import numpy as np
 
 from hair_tracking.colliders.body import bust, neck_frame
+from hair_tracking.colliders.kernels import deepest
 from hair_tracking.colliders.margin import fit_margin
 from hair_tracking.colliders.pose import frames_at, posed
-from hair_tracking.colliders.shapes import FIXED_FRAME, HEAD_FRAME, shape_table
+from hair_tracking.colliders.shapes import FIXED_FRAME, HEAD_FRAME, Shape, shape_table
 
 #: The frame name the bust's shapes ride on in its table (the third frame of the table).
 TORSO = 'torso'
@@ -33,9 +34,12 @@ JUMP_SPEED = 10.0
 
 class SceneBody:
     """The bust of a scene's ``body`` section for a strand set whose shortest positive segment
-    is ``shortest_segment`` [m]; :meth:`posed` gives a substep's posed table."""
+    is ``shortest_segment`` [m]; :meth:`posed` gives a substep's posed table.  ``head``: the
+    head collider the strand set is kept out of, ``(center, axes)`` (head frame, the margin
+    included), put first in the table, so that a node pushed out of the neck is not left in
+    the head (none: the bust alone)."""
 
-    def __init__(self, spec, shortest_segment: float):
+    def __init__(self, spec, shortest_segment: float, head=None):
         self.spec = spec
         shapes = bust(spec.height, frame=TORSO, margin=spec.margin, friction=spec.friction)
         margin = fit_margin(shapes[0], None, [shortest_segment]) if shortest_segment > 0 \
@@ -43,6 +47,11 @@ class SceneBody:
         self.margin = margin
         shapes = bust(spec.height, frame=TORSO, margin=margin, friction=spec.friction)
         self.shapes = shapes
+        #: the shapes before the bust in the table (the head collider, when given)
+        self.lead = 0 if head is None else 1
+        if head is not None:
+            shapes = [Shape('ellipsoid', frame=HEAD_FRAME, center=tuple(head[0]),
+                            radii=tuple(head[1]), name='head')] + shapes
         self.local = shape_table(shapes, frames=(FIXED_FRAME, HEAD_FRAME, TORSO))
         self.bare = shape_table(bust(spec.height, frame=TORSO),
                                 frames=(FIXED_FRAME, HEAD_FRAME, TORSO))
@@ -72,11 +81,19 @@ class SceneBody:
         now = frames_at(head.rotation, head.position, [self.torso(head)])
         return posed(self.bare, now[0], now[1])
 
+    def depth(self, x, head, inv_mass=None) -> float:
+        """Deepest node [m] of ``x`` (S, N, 3, float64 or float32) inside the bare bust at the
+        head pose ``head``; with ``inv_mass`` (S, N) only the free nodes count."""
+        out = np.zeros(x.shape[0])
+        mass = np.zeros((0, 0)) if inv_mass is None else inv_mass
+        deepest(x, mass, inv_mass is not None, self.posed_bare(head), out)
+        return float(out.max()) if out.size else 0.0
+
     def push_cap(self, dt: float) -> float:
         """The push-out bound of a substep ``dt`` [s]: ``body.max_push_speed * dt`` [m]."""
         return float(self.spec.max_push_speed) * dt if math.isfinite(dt) else -1.0
 
 
-def make_body(spec, shortest_segment: float) -> Optional[SceneBody]:
-    """The scene's :class:`SceneBody`, ``None`` without ``body.bust``."""
-    return SceneBody(spec, shortest_segment) if spec.bust else None
+def make_body(spec, shortest_segment: float, head=None) -> Optional[SceneBody]:
+    """The scene's :class:`SceneBody` (``head`` as there), ``None`` without ``body.bust``."""
+    return SceneBody(spec, shortest_segment, head) if spec.bust else None

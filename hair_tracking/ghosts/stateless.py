@@ -176,7 +176,8 @@ class StatelessTracker:
         positive = ghosts.rest_length[ghosts.rest_length > 0]
         #: the scene's bust (``None`` without ``body.bust``): every placement is followed by
         #: its contact pass (:func:`~hair_tracking.colliders.kernels.slide_push_strands`)
-        self.body = make_body(scene.body, float(positive.min()) if positive.size else 0.0)
+        self.body = make_body(scene.body, float(positive.min()) if positive.size else 0.0,
+                              (self.center, self.axes) if self.collide else None)
         self._head = HeadPose(np.zeros(3), np.array([0.0, 0.0, 0.0, 1.0]), np.eye(3))
         self._rest_length = np.ascontiguousarray(ghosts.rest_length, dtype=np.float64)
         self.stats: Dict[str, int] = {'ghosts': int(ghosts.count), 'steps': 0, 'evaluations': 0,
@@ -201,7 +202,8 @@ class StatelessTracker:
         self._placed_into(self._x32_target)
         if self.body is not None:
             self.stats['contacts'] += int(slide_push_strands(
-                self._x32, self._rest_length, self.body.posed(self._head, self._head, 0.0), 2))
+                self._x32, self._rest_length, self.body.posed(self._head, self._head, 0.0), 2,
+                self.body.lead))
 
     def _placed_into(self, target) -> bool:
         contacts, finite = self._place(target)
