@@ -214,7 +214,8 @@ class HairSimulator:
         self.collider = make_collider(scene.collider)
         self.guide_solver = GuideSolver(self.guides, scene, self.parallel.guides)
         if self.ghosts is not None:
-            if scene.tracking != old.tracking or scene.collider != old.collider:
+            if scene.tracking != old.tracking or scene.collider != old.collider or \
+                    scene.body != old.body:
                 # the new tracker starts where the old one leaves the ghosts
                 np.copyto(self.ghosts.x, self.ghost_tracker.positions())
                 np.copyto(self.ghosts.v, self.ghost_tracker.velocities())
@@ -285,6 +286,15 @@ class HairSimulator:
         self.counters.last_advance_ms = (self.clock() - start) * 1e3
         return len(times)
 
+    def set_body_frame(self, rotation, position) -> None:
+        """The pose of the scene's ``body.frame`` (rotation (3, 3), origin (3,)) in the fixed
+        frame of the head poses: the bust rides on it from the next substep on (kept until the
+        next call; without one the bust rides on the neck frame of the head pose)."""
+        for owner in (self.guide_solver, self.ghost_tracker):
+            body = getattr(owner, 'body', None)
+            if body is not None:
+                body.set_frame(rotation, position)
+
     def reset(self) -> None:
         """Rest shape at the current head pose, settled; the head track is kept."""
         self._rest_at(self.head)
@@ -337,13 +347,21 @@ class HairSimulator:
         return m
 
     def penetration(self) -> float:
-        """Deepest hair node inside the head collider [m]; 0 without a collider."""
-        if self.collider is None:
-            return 0.0
-        d = self.collider.penetration(self.guides.x, self.head, parallel=self.parallel.guides)
+        """Deepest hair node inside the head collider or the body's bust [m]; 0 without
+        either."""
+        d = self._depth(self.guides.x, self.guides.inv_mass, self.parallel.guides)
         if self.ghosts is not None:
-            d = max(d, self.collider.penetration(self._ghost_positions(), self.head,
-                                                 parallel=self.parallel.ghosts))
+            d = max(d, self._depth(self._ghost_positions(), None, self.parallel.ghosts))
+        return d
+
+    def _depth(self, x, inv_mass, parallel) -> float:
+        """Deepest node of ``x`` inside the head collider (all nodes) or the bust (the free
+        nodes when ``inv_mass`` is given)."""
+        d = 0.0 if self.collider is None else \
+            self.collider.penetration(x, self.head, parallel=parallel)
+        body = self.guide_solver.body
+        if body is not None:
+            d = max(d, body.depth(x, self.head, inv_mass))
         return d
 
     def audit(self, part: int = 0, parts: int = 1) -> Tuple[float, float, np.ndarray]:
@@ -353,15 +371,13 @@ class HairSimulator:
         of the hair costs about 1 / parts of a whole check).  Returns ``(stretch, depth [m],
         the ghost strands checked)``; ``parts`` = 1 is the whole hair."""
         stretch = max_stretch(self.guides.x, self.guides.rest_length)
-        depth = 0.0 if self.collider is None else \
-            self.collider.penetration(self.guides.x, self.head, parallel=self.parallel.guides)
+        depth = self._depth(self.guides.x, self.guides.inv_mass, self.parallel.guides)
         if self.ghost_tracker is None:
             return stretch, depth, np.zeros(0, dtype=np.int64)
         idx, x = self.ghost_tracker.part_positions(part, parts)
         stretch = _worst(stretch, max_stretch(x, self.ghosts.rest_length[idx]))
-        if self.collider is not None and idx.size:
-            depth = max(depth, self.collider.penetration(x, self.head,
-                                                         parallel=self.parallel.ghosts))
+        if idx.size:
+            depth = max(depth, self._depth(x, None, self.parallel.ghosts))
         return stretch, depth, idx
 
     # ------------------------------------------------------------ internals

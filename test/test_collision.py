@@ -5,6 +5,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
+from hair_tracking.colliders import contact
 from hair_tracking.guides import collision
 
 from hair_tracking.core.model import HeadPose, StrandSet
@@ -141,7 +142,7 @@ def test_ellipsoid_projection_is_near_closest_point():
     for depth, refine, tol in ((0.01, collision.ELLIPSOID_REFINEMENTS, 1e-4),
                                (0.03, collision.PENETRATION_REFINEMENTS, 1e-4)):
         q = on - normal * rng.uniform(0.0002, depth, size=(300, 1))
-        y = np.array([collision.surface_point(*qi, *a, refine) for qi in q])
+        y = np.array([contact.surface_point(*qi, *a, refine) for qi in q])
         assert np.allclose(np.sum((y / a) ** 2, axis=1), 1.0, atol=1e-12)
         assert np.max(np.linalg.norm(y - on, axis=1)) < tol
         # the radial projection alone is much worse: the refinement does something
@@ -150,7 +151,7 @@ def test_ellipsoid_projection_is_near_closest_point():
 
 
 def test_centre_point_goes_out_along_shortest_axis():
-    y = collision.surface_point(0.0, 0.0, 0.0, *RADII, 2)
+    y = contact.surface_point(0.0, 0.0, 0.0, *RADII, 2)
     assert np.allclose(y, (0.0, RADII[1], 0.0))
 
 

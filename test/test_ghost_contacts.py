@@ -5,7 +5,7 @@ import pytest
 
 from hair_tracking.core.transforms import quat_from_axis_angle, quat_to_matrix
 from hair_tracking.ghosts import contacts as ghost_contacts
-from hair_tracking.guides.collision import push_out
+from hair_tracking.colliders.contact import ellipsoid_contact
 from hair_tracking.guides.ftl import restore_node
 
 
@@ -28,7 +28,7 @@ def lanes(rng, n, axes):
 @pytest.mark.parametrize('friction', [0.0, 0.3])
 @pytest.mark.parametrize('axes', [(0.099, 0.084, 0.109), (0.08, 0.1, 0.11), (0.11, 0.1, 0.09)])
 def test_contact_lanes_match_node_by_node(refine, ftl, friction, axes):
-    """Same positions as push_out + restore_node node by node: radial projection and
+    """Same positions as ellipsoid_contact + restore_node node by node: radial projection and
     refinements, friction, a node at the centre (pushed along the shortest semi-axis, each axis
     shortest once), collapsed and zero rest segments, placements that need more than one
     restore iteration, and more refinements than the vectorised pass unrolls."""
@@ -51,7 +51,7 @@ def test_contact_lanes_match_node_by_node(refine, ftl, friction, axes):
     pushed = 0
     for kk in range(n):
         contact = (tuple(R.reshape(-1)), *c, ax, ay, az, friction, refine)
-        moved, y0, y1, y2 = push_out(*P[:, kk], *X0[:, kk], contact)
+        moved, y0, y1, y2 = ellipsoid_contact(*P[:, kk], *X0[:, kk], contact)
         pushed += moved
         if moved and ftl:
             s = order[kk]

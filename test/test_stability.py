@@ -9,6 +9,7 @@ from hair_tracking.guides import ftl
 
 from hair_tracking import simulator
 
+from hair_tracking.colliders.contact import surface_point
 from hair_tracking.core.metrics import max_stretch
 from hair_tracking.core.model import StrandSet
 from hair_tracking.core.scene import Scene
@@ -16,7 +17,7 @@ from hair_tracking.core.transforms import quat_from_axis_angle, quat_to_matrix
 from hair_tracking.evaluation import stability
 from hair_tracking.evaluation.provenance import provenance
 from hair_tracking.evaluation import synthetic_motion as sm
-from hair_tracking.guides.collision import Collider, outside_distance, surface_point
+from hair_tracking.guides.collision import Collider, outside_distance
 from hair_tracking.guides.solver import (BEND_REFERENCE_DT, GuideSolver, ftl_bend_rounds,
                                          ftl_bend_stiffness)
 from hair_tracking.simulator import HairSimulator

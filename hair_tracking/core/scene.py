@@ -92,6 +92,19 @@ class ColliderSpec:
     friction: float
 
 
+@_section('body.')
+class BodySpec:
+    """A bust below the head (colliders.body), on a TF frame or on the neck frame the head
+    pose gives."""
+
+    bust: bool
+    height: float
+    frame: str
+    margin: float
+    friction: float
+    max_push_speed: float
+
+
 @_section('solver.')
 class SolverSpec:
     """The guide solver and its time step."""
@@ -155,6 +168,7 @@ class Scene:
 
     groom: GroomSpec
     collider: ColliderSpec
+    body: BodySpec
     solver: SolverSpec
     tracking: TrackingSpec
     head_track: HeadTrackSpec

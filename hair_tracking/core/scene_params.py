@@ -113,6 +113,25 @@ SCENE_PARAMS: Tuple[Param, ...] = (
          'hair is kept this far outside the collider surface', unit='m', lo=0.0, hi=0.1),
     _row('collider.friction', 'double', 0.3,
          'tangential damping on contact, 0 none .. 1 sticks', lo=0.0, hi=1.0),
+    _row('body.bust', 'bool', False,
+         'a bust below the head (neck, shoulders, chest and trunk: five capsules sized from '
+         'body.height as ROS4HRI human_description sizes a person) that the guides and the blend '
+         'and turn trackers\' ghosts are kept out of; see docs/colliders.md'),
+    _row('body.height', 'double', 1.7,
+         'height of the person the bust is sized from (human_description: unit = height / 7.5)',
+         unit='m', lo=0.5, hi=2.5),
+    _row('body.frame', 'string', '',
+         'TF frame the bust rides on (the torso frame, e.g. torso_<id> of a REP-155 skeleton); '
+         'empty: the neck frame computed from the head pose (the head\'s pivot below its '
+         'centre, the torso upright below it and turned with the head\'s heading)'),
+    _row('body.margin', 'double', 0.004,
+         'hair is kept this far outside the bust (at most half the shortest segment)',
+         unit='m', lo=0.0, hi=0.1),
+    _row('body.friction', 'double', 0.3,
+         'tangential damping on contact with the bust, 0 none .. 1 sticks', lo=0.0, hi=1.0),
+    _row('body.max_push_speed', 'double', 0.5,
+         'the speed a push out of the bust may add to a guide node (a body that jumps or appears '
+         'inside the hair pushes it out without launching it)', unit='m/s', lo=0.0, hi=100.0),
     _row('solver.type', 'string', 'ftl',
          'guide solver: ftl (Follow-The-Leader), pbd, xpbd', choices=SOLVERS),
     _row('solver.dt', 'double', 1.0 / 240.0,

@@ -178,7 +178,7 @@ def run_case(case: Case) -> CaseResult:
         rest = sim.ghosts.rest_length
         shortest = float(rest[rest > 0].min())
     worst = {'stretch_guides': 0.0, 'stretch_ghosts': 0.0, 'root_err_m': 0.0,
-             'pen_guides_mm': 0.0, 'pen_ghosts_mm': 0.0, 'max_speed': 0.0,
+             'pen_guides_mm': 0.0, 'pen_ghosts_mm': 0.0, 'pen_body_mm': 0.0, 'max_speed': 0.0,
              'ke_bound': ke_max, 'ke_peak': 0.0, 'ke_end': math.nan, 'energy_rise': math.nan,
              'drift': math.nan}
     failures: List[str] = []
@@ -223,6 +223,13 @@ def run_case(case: Case) -> CaseResult:
                 worst['pen_ghosts_mm'] = max(worst['pen_ghosts_mm'], 1e3 *
                                              sim.collider.penetration(states[1][1], head,
                                                                       sim.ghosts.inv_mass))
+        body = sim.guide_solver.body
+        if body is not None:             # the bare bust: no node deeper than its margin
+            worst['pen_body_mm'] = max(worst['pen_body_mm'], 1e3 * body.depth(
+                sim.guides.x, head, sim.guides.inv_mass))
+            if sim.ghost_tracker is not None:
+                worst['pen_body_mm'] = max(worst['pen_body_mm'], 1e3 * (body.depth(
+                    states[1][1], head) - slack))
         x_now = np.concatenate([x.reshape(-1, 3) for _, x, _ in states])
         t_sim = sim.time_ns
         moved = x_prev is not None and t_sim > t_prev and sim.counters.resets == resets_prev
@@ -261,6 +268,10 @@ def run_case(case: Case) -> CaseResult:
                 worst['pen_ghosts_mm'] > margin_mm + 1e-9:
             failures.append(f'ghost penetration {worst["pen_ghosts_mm"]:.2f} mm > margin '
                             f'{margin_mm:g} mm')
+        body = sim.guide_solver.body
+        if body is not None and worst['pen_body_mm'] > 1e3 * body.margin + 1e-9:
+            failures.append(f'body penetration {worst["pen_body_mm"]:.2f} mm > margin '
+                            f'{1e3 * body.margin:g} mm')
         if worst['ke_peak'] > ke_max:
             failures.append(f'kinetic energy {worst["ke_peak"]:.3g} J/kg per node > bound '
                             f'{ke_max:.3g}')
@@ -439,7 +450,8 @@ def run_matrix(cases: Sequence[Case], log=print) -> List[CaseResult]:
 
 # ==================================================================================== output
 COLUMNS = ('case', 'group', 'solver', 'passed', 'stretch_guides', 'stretch_bound',
-           'stretch_ghosts', 'root_err_m', 'pen_guides_mm', 'pen_ghosts_mm', 'margin_mm',
+           'stretch_ghosts', 'root_err_m', 'pen_guides_mm', 'pen_ghosts_mm', 'pen_body_mm',
+           'margin_mm',
            'max_speed', 'ke_peak', 'ke_bound', 'ke_end', 'energy_rise', 'substeps', 'dropped',
            'resets', 'rejected', 'split', 'drift', 'sim_s', 'wall_s', 'failures', 'description')
 

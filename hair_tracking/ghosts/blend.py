@@ -50,10 +50,11 @@ from typing import Tuple
 import numpy as np
 from numba import njit, prange
 
+from hair_tracking.colliders.slide import push_quadric, quadric, slide_quadric
 from hair_tracking.core.model import HeadPose, StrandSet, part_rows
 from hair_tracking.core.point_records import put_record
-from hair_tracking.ghosts.stateless import (StatelessTracker, at_fractions, ellipsoid_form,
-                                            node_map, reference_contact, world_collider)
+from hair_tracking.ghosts.stateless import (StatelessTracker, at_fractions, node_map,
+                                            reference_contact, world_collider)
 from hair_tracking.guides.integrate import FASTMATH
 
 #: Guides blended per ghost by default (Unreal's groom interpolation uses up to three).
@@ -151,49 +152,6 @@ def pad_guides(guide: np.ndarray, weight: np.ndarray) -> Tuple[np.ndarray, np.nd
 
 # ----------------------------------------------------------------------------- kernels
 @njit(cache=True, inline='always')
-def _push_out(nx, ny, nz, cw, quad):
-    """A world point inside the ellipsoid ``(x - cw)^T Q (x - cw) < 1`` (``cw`` its centre in
-    the world, ``quad`` the 6 entries of ``Q = R diag(1 / axes^2) R^T``: Q00 Q11 Q22 Q01 Q02
-    Q12) moved radially onto it; a point outside is returned as it is."""
-    dx, dy, dz = nx - cw[0], ny - cw[1], nz - cw[2]
-    e = _quad_form(dx, dy, dz, quad)
-    if not 0.0 < e < 1.0:
-        return nx, ny, nz
-    f = 1.0 / math.sqrt(e)
-    return cw[0] + f * dx, cw[1] + f * dy, cw[2] + f * dz
-
-
-@njit(cache=True, inline='always')
-def _quad_form(dx, dy, dz, quad):
-    return ellipsoid_form(dx, dy, dz, quad[0], quad[1], quad[2], quad[3], quad[4], quad[5])
-
-
-@njit(cache=True, inline='always')
-def _slide(nx, ny, nz, px, py, pz, length, cw, quad):
-    """The node at ``length`` from its predecessor ``p`` in the direction of ``n`` with the
-    inward part (along the collider's normal ``g = Q (p - c)`` at ``p``'s level) removed: it
-    slides along the surface instead of into it.  ``d - (d.g / g.g) g`` needs no unit normal,
-    so the slide costs one square root and two divisions.  For ``p`` outside the ellipsoid the
-    result is outside too (it lies on the outer side of the tangent plane of the convex level
-    set through ``p``)."""
-    ex, ey, ez = px - cw[0], py - cw[1], pz - cw[2]
-    gx = quad[0] * ex + quad[3] * ey + quad[4] * ez           # outward normal Q (p - c)
-    gy = quad[3] * ex + quad[1] * ey + quad[5] * ez
-    gz = quad[4] * ex + quad[5] * ey + quad[2] * ez
-    dx, dy, dz = nx - px, ny - py, nz - pz
-    inward = dx * gx + dy * gy + dz * gz
-    gg = gx * gx + gy * gy + gz * gz
-    if inward < 0.0 and gg > 0.0:
-        a = inward / gg
-        dx, dy, dz = dx - a * gx, dy - a * gy, dz - a * gz
-    d = math.sqrt(dx * dx + dy * dy + dz * dz)
-    if d <= 0.0:
-        return nx, ny, nz
-    f = length / d
-    return px + f * dx, py + f * dy, pz + f * dz
-
-
-@njit(cache=True, inline='always')
 def _deform(blk, lane, offset, rot, guide, weight, gcol, s):
     """Step 2 of strand ``s`` into lane ``lane`` of the block ``blk`` (nodes 2 on):
     ``R o_j + sum_k w_k g_k,j``, the guides three at a time (``guide``/``weight`` padded with
@@ -252,6 +210,7 @@ def _blend_blocks(target, model, pose, restore, collide, geo, blocks):
     r20, r21, r22 = rot[2, 0], rot[2, 1], rot[2, 2]
     c0, c1, c2 = cw[0], cw[1], cw[2]
     q0, q1, q2, q3, q4, q5 = quad[0], quad[1], quad[2], quad[3], quad[4], quad[5]
+    centre, entries = (c0, c1, c2), (q0, q1, q2, q3, q4, q5)
     # a block node-major: x y z, rest length of the segment ending there, inside test, and
     # the length tolerance (-1: always restored; a guide: GUIDE_LENGTH_TOLERANCE, and no
     # contacts unless the length pass moved it: the guide solver has placed it)
@@ -304,11 +263,11 @@ def _blend_blocks(target, model, pose, restore, collide, geo, blocks):
                         blk[j, 0, lane] = nx
                         blk[j, 1, lane] = ny
                         blk[j, 2, lane] = nz
-                        blk[j, 4, lane] = ellipsoid_form(nx - c0, ny - c1, nz - c2,
-                                                         q0, q1, q2, q3, q4, q5)
+                        blk[j, 4, lane] = quadric(nx - c0, ny - c1, nz - c2,
+                                                  q0, q1, q2, q3, q4, q5)
                 else:
                     for lane in range(lanes):
-                        blk[j, 4, lane] = ellipsoid_form(
+                        blk[j, 4, lane] = quadric(
                             blk[j, 0, lane] - c0, blk[j, 1, lane] - c1, blk[j, 2, lane] - c2,
                             q0, q1, q2, q3, q4, q5)
                 if not collide:
@@ -324,10 +283,10 @@ def _blend_blocks(target, model, pose, restore, collide, geo, blocks):
                     contacts += 1
                     nx, ny, nz = blk[j, 0, lane], blk[j, 1, lane], blk[j, 2, lane]
                     if restore:
-                        nx, ny, nz = _slide(nx, ny, nz, blk[j - 1, 0, lane],
-                                            blk[j - 1, 1, lane], blk[j - 1, 2, lane],
-                                            blk[j, 3, lane], cw, quad)
-                    nx, ny, nz = _push_out(nx, ny, nz, cw, quad)
+                        nx, ny, nz = slide_quadric(nx, ny, nz, blk[j - 1, 0, lane],
+                                                   blk[j - 1, 1, lane], blk[j - 1, 2, lane],
+                                                   blk[j, 3, lane], centre, entries)
+                    nx, ny, nz = push_quadric(nx, ny, nz, centre, entries)
                     blk[j, 0, lane] = nx
                     blk[j, 1, lane] = ny
                     blk[j, 2, lane] = nz

@@ -1,15 +1,16 @@
 """Head contact of the ghost nodes at one node index of a block, the pushed nodes side by side.
 
 Stage (h) of the ghost kernel (:mod:`hair_tracking.ghosts.kernels`): every node inside the
-collision ellipsoid is moved to the surface with friction (:func:`hair_tracking.guides.collision.
-push_out`) and, with length restoration, put back at its rest distance from its predecessor
-outside the surface (:func:`hair_tracking.guides.ftl.restore_node`).
+collision ellipsoid is moved to the surface with friction (the contact model's
+:func:`~hair_tracking.colliders.contact.ellipsoid_contact`) and, with length restoration, put
+back at its rest distance from its predecessor outside the surface
+(:func:`hair_tracking.guides.ftl.restore_node`).
 
 Hair resting on the head keeps 10-15 % of the ghost nodes in contact every substep (gravity
 pulls them in by ``g dt^2``).  Done node by node, each contact is a chain of about ten
 dependent square roots and divisions plus a hard-to-predict branch.  This module does the same
-arithmetic in passes over the *pushed nodes only*, laid out contiguously, so that LLVM
-vectorises them:
+arithmetic (the contact model's functions) in passes over the *pushed nodes only*, laid out
+contiguously, so that LLVM vectorises them:
 
 1. the inside test of all lanes (vectorised: the compaction is a separate loop, which keeps
    this one free of stores that depend on the test), then a branch-free compaction of the
@@ -29,8 +30,9 @@ import math
 
 from numba import njit
 
-from hair_tracking.guides.collision import (apply_friction, entries_to_head, entries_to_world,
-                                            push_out, surface_point)
+from hair_tracking.colliders.contact import (CENTRE_LEVEL, ellipsoid_contact, ellipsoid_friction,
+                                             ellipsoid_level, ellipsoid_refine, local_of,
+                                             surface_point, world_of)
 from hair_tracking.guides.ftl import ellipsoid_of, FTL_TINY_SQ, restore_f_ok, restore_node
 
 #: Normal-line refinements the vectorised pass unrolls (the ellipsoid default is 2).
@@ -40,18 +42,6 @@ MAX_VECTOR_REFINE = 2
 (_FLAG, _IDX, _PX, _PY, _PZ, _SX, _SY, _SZ, _BX, _BY, _BZ, _EX, _EY, _EZ, _LEN,
  _MORE) = range(16)
 CONTACT_ROWS = 16
-
-
-@njit(cache=True, inline='always', error_model='numpy')
-def _refine_once(qx, qy, qz, yx, yy, yz, c, ix, iy, iz):
-    """One normal-line refinement of :func:`hair_tracking.guides.collision.surface_point` (same
-    formulas), the branch on ``b`` as a select."""
-    nx, ny, nz = yx * ix, yy * iy, yz * iz
-    a = nx * nx * ix + ny * ny * iy + nz * nz * iz
-    b = qx * nx * ix + qy * ny * iy + qz * nz * iz
-    disc = math.sqrt(b * b - a * c)
-    t = -c / (b + disc) if b > 0.0 else (disc - b) / a
-    return qx + t * nx, qy + t * ny, qz + t * nz
 
 
 @njit(cache=True, inline='always', error_model='numpy')
@@ -72,8 +62,8 @@ def collide_lanes(X0, P, W, j, lanes, strands, ftl, contact, rot):
     # 1. inside test of every lane (vectorises), then the pushed lanes' indices compacted
     n_in = 0
     for kk in range(n):
-        q0, q1, q2 = entries_to_head(P[j, 0, kk], P[j, 1, kk], P[j, 2, kk], r, cx, cy, cz)
-        inside = q0 * q0 * ix + q1 * q1 * iy + q2 * q2 * iz < 1.0
+        q0, q1, q2 = local_of(P[j, 0, kk], P[j, 1, kk], P[j, 2, kk], r, cx, cy, cz)
+        inside = ellipsoid_level(q0, q1, q2, ix, iy, iz) < 1.0
         W[_FLAG, kk] = 1.0 if inside else 0.0
         n_in += 1 if inside else 0
     if n_in == 0:
@@ -103,29 +93,31 @@ def collide_lanes(X0, P, W, j, lanes, strands, ftl, contact, rot):
             W[_EZ, c] = rest[s, j, 2] - rest[s, j - 1, 2]
             W[_LEN, c] = seg_len[j - 1, kk]
     # 3. the arithmetic of every pushed node, without branches
-    # the degenerate centre point goes out along the shortest semi-axis (as surface_point)
+    # the model's surface point (contact.surface_point) with its refinements unrolled and the
+    # centre's exit as a select; written out here, in the kernel's own loop: under the
+    # kernel's reassociation an inlined function around it changes the last bit
     dx0 = ax if ax <= ay and ax <= az else 0.0
     dy0 = ay if dx0 == 0.0 and ay <= az else 0.0
     dz0 = az if dx0 == 0.0 and dy0 == 0.0 else 0.0
     f_ok = restore_f_ok(ax, ay, az)
     for c in range(m):
-        qx, qy, qz = entries_to_head(W[_PX, c], W[_PY, c], W[_PZ, c], r, cx, cy, cz)
+        qx, qy, qz = local_of(W[_PX, c], W[_PY, c], W[_PZ, c], r, cx, cy, cz)
         f = qx * qx * ix + qy * qy * iy + qz * qz * iz
-        deg = f < 1e-24
+        deg = f < CENTRE_LEVEL
         sc = 1.0 / math.sqrt(f if not deg else 1.0)
         yx, yy, yz = qx * sc, qy * sc, qz * sc
         cc = f - 1.0
         if refine >= 1:
-            yx, yy, yz = _refine_once(qx, qy, qz, yx, yy, yz, cc, ix, iy, iz)
+            yx, yy, yz = ellipsoid_refine(qx, qy, qz, yx, yy, yz, cc, ix, iy, iz)
         if refine >= 2:
-            yx, yy, yz = _refine_once(qx, qy, qz, yx, yy, yz, cc, ix, iy, iz)
+            yx, yy, yz = ellipsoid_refine(qx, qy, qz, yx, yy, yz, cc, ix, iy, iz)
         yx = dx0 if deg else yx
         yy = dy0 if deg else yy
         yz = dz0 if deg else yz
         if friction > 0.0:
-            px, py, pz = entries_to_head(W[_SX, c], W[_SY, c], W[_SZ, c], r, cx, cy, cz)
-            yx, yy, yz = apply_friction(yx, yy, yz, px, py, pz, ix, iy, iz, friction)
-        wx, wy, wz = entries_to_world(yx, yy, yz, r, cx, cy, cz)
+            px, py, pz = local_of(W[_SX, c], W[_SY, c], W[_SZ, c], r, cx, cy, cz)
+            yx, yy, yz = ellipsoid_friction(yx, yy, yz, px, py, pz, ix, iy, iz, friction)
+        wx, wy, wz = world_of(yx, yy, yz, r, cx, cy, cz)
         more = 0.0
         if ftl:     # the first placement of restore_node, its test as a flag
             bx, by, bz = W[_BX, c], W[_BY, c], W[_BZ, c]
@@ -142,8 +134,8 @@ def collide_lanes(X0, P, W, j, lanes, strands, ftl, contact, rot):
             vz = uz if use_d else (r[6] * ex + r[7] * ey + r[8] * ez if use_e else -1.0)
             g = rl / math.sqrt(l2 if use_d else (le2 if use_e else 1.0))
             wx, wy, wz = bx + g * vx, by + g * vy, bz + g * vz
-            hx, hy, hz = entries_to_head(wx, wy, wz, r, cx, cy, cz)
-            more = 0.0 if hx * hx * ix + hy * hy * iy + hz * hz * iz >= f_ok else 1.0
+            hx, hy, hz = local_of(wx, wy, wz, r, cx, cy, cz)
+            more = 0.0 if ellipsoid_level(hx, hy, hz, ix, iy, iz) >= f_ok else 1.0
         W[_PX, c] = wx
         W[_PY, c] = wy
         W[_PZ, c] = wz
@@ -153,10 +145,10 @@ def collide_lanes(X0, P, W, j, lanes, strands, ftl, contact, rot):
         kk = int(W[_IDX, c])
         wx, wy, wz = W[_PX, c], W[_PY, c], W[_PZ, c]
         if ftl and W[_MORE, c] != 0.0:
-            hx, hy, hz = entries_to_head(wx, wy, wz, r, cx, cy, cz)
+            hx, hy, hz = local_of(wx, wy, wz, r, cx, cy, cz)
             yx, yy, yz = surface_point(hx, hy, hz, ax, ay, az, refine)
             wx, wy, wz = restore_node(
-                entries_to_world(yx, yy, yz, r, cx, cy, cz), (W[_BX, c], W[_BY, c], W[_BZ, c]),
+                world_of(yx, yy, yz, r, cx, cy, cz), (W[_BX, c], W[_BY, c], W[_BZ, c]),
                 W[_LEN, c], (W[_EX, c], W[_EY, c], W[_EZ, c]), rot, ellipsoid_of(contact), 1)
         P[j, 0, kk] = wx
         P[j, 1, kk] = wy
@@ -172,8 +164,8 @@ def _collide_scalar(X0, P, W, j, pushed, strands, ftl, contact, rot):
     order, seg_len, rest = strands
     for c in range(m):
         kk = int(W[_IDX, c])
-        moved, y0, y1, y2 = push_out(P[j, 0, kk], P[j, 1, kk], P[j, 2, kk],
-                                     X0[j, 0, kk], X0[j, 1, kk], X0[j, 2, kk], contact)
+        moved, y0, y1, y2 = ellipsoid_contact(P[j, 0, kk], P[j, 1, kk], P[j, 2, kk],
+                                              X0[j, 0, kk], X0[j, 1, kk], X0[j, 2, kk], contact)
         if moved and ftl:
             s = order[k0 + kk]
             y0, y1, y2 = restore_node(

@@ -15,7 +15,7 @@ from hair_tracking.core.transforms import rotation_between
 from hair_tracking.ghosts.spread import group_variance, spread_factor
 from hair_tracking.ghosts.weights import (com_weight, elastic_code, elastic_weight, tip_weights,
                                           weighted_position)
-from hair_tracking.guides.collision import push_out
+from hair_tracking.colliders.contact import ellipsoid_contact
 from hair_tracking.guides.ftl import restore_node
 
 
@@ -129,15 +129,15 @@ def ghost_step(x, v, ghost_rest, ghost_len, guide_of, seg, t, guide_rest, gx, gx
 
 def _collide_nodes(p, start, prev, seg_len, rest_seg, head, collider, restore):
     """(h) for the nodes ``p`` (n, 3) of one node index: pushed out of the collider with
-    friction (:func:`.collision.push_out`), then with length restoration the collision-aware FTL
-    step (:func:`.ftl.restore_node`)."""
+    friction (:func:`~hair_tracking.colliders.contact.ellipsoid_contact`), then with length
+    restoration the collision-aware FTL step (:func:`.ftl.restore_node`)."""
     R = head.rotation
     c = head.position + R @ collider.center
     a = collider.radii + collider.margin
     out = p.copy()
     for k in range(p.shape[0]):
         contact = (tuple(R.reshape(-1)), *c, *a, collider.friction, collider.refine)
-        moved, y0, y1, y2 = push_out(*p[k], *start[k], contact)
+        moved, y0, y1, y2 = ellipsoid_contact(*p[k], *start[k], contact)
         if moved and restore:
             y0, y1, y2 = restore_node((y0, y1, y2), tuple(prev[k]), seg_len[k],
                                       tuple(rest_seg[k]), R, (*c, *a, collider.refine), 0)

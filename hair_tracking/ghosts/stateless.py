@@ -13,6 +13,12 @@ from typing import Dict, Tuple
 import numpy as np
 from numba import njit
 
+from hair_tracking.colliders.kernels import slide_push_strands
+from hair_tracking.colliders.pose import frames_at
+from hair_tracking.colliders.reference import (reference_level, reference_pose,
+                                               reference_slide_push)
+from hair_tracking.colliders.scene_body import make_body
+from hair_tracking.colliders.shapes import Shape, shape_table
 from hair_tracking.core.model import carry_rigidly, HeadPose, StrandSet, strand_part
 from hair_tracking.core.point_records import points_to_records, record_target
 from hair_tracking.ghosts.interface import TrackStep
@@ -63,14 +69,6 @@ def collider_axes(ghosts: StrandSet, collider) -> Tuple[np.ndarray, np.ndarray]:
 
 
 @njit(cache=True, inline='always')
-def ellipsoid_form(dx, dy, dz, q0, q1, q2, q3, q4, q5):
-    """``d^T Q d`` with ``Q``'s entries Q00 Q11 Q22 Q01 Q02 Q12 as scalars (in a vector loop they
-    stay in registers)."""
-    return q0 * dx * dx + q1 * dy * dy + q2 * dz * dz + \
-        2.0 * (q3 * dx * dy + q4 * dx * dz + q5 * dy * dz)
-
-
-@njit(cache=True, inline='always')
 def world_collider(rot, pos, center, axes, out):
     """The collider ellipsoid (``center``, ``axes``: head frame) in the world for the head pose
     ``rot``, ``pos``: ``out[0:3]`` its centre, ``out[3:9]`` the entries Q00 Q11 Q22 Q01 Q02 Q12
@@ -84,26 +82,16 @@ def world_collider(rot, pos, center, axes, out):
 
 
 def reference_contact(p, prev, length, head: HeadPose, axes, center, slide=True):
-    """Plain-numpy statement of the trackers' head contact for node ``p`` (world) after its
-    predecessor ``prev``: inside the ellipsoid ``axes`` around ``center`` (head frame), it is
-    placed at ``length`` from ``prev`` along its step with the inward part (along the normal at
-    ``prev``) removed (``slide``), then moved radially onto the surface if still inside; a node
-    outside is returned as it is.  For the tests and for reading."""
-    rot, pos = head.rotation, head.position
-    qm = rot @ np.diag(1.0 / np.asarray(axes, dtype=np.float64) ** 2) @ rot.T
-    cw = rot @ np.asarray(center, dtype=np.float64) + pos
-    if (p - cw) @ qm @ (p - cw) >= 1.0:
+    """The trackers' head contact for node ``p`` (world) after its predecessor ``prev`` in plain
+    numpy, for the tests and for reading: the contact model's statement
+    (:func:`~hair_tracking.colliders.reference.reference_slide_push`) for the ellipsoid ``axes``
+    around ``center`` (head frame) placed by ``head``; a node outside is returned as it is."""
+    local = shape_table([Shape('ellipsoid', center=tuple(center), radii=tuple(axes))])
+    frames = frames_at(head.rotation, head.position)
+    row = reference_pose(local, *frames, *frames)[0]
+    if reference_level(p, row)[0] >= 0.0:                # outside: as it is
         return p
-    if slide:                                  # slide along the surface, not into it
-        n = qm @ (prev - cw)
-        n /= np.linalg.norm(n)
-        d = p - prev
-        d = d - min(0.0, float(d @ n)) * n
-        p = prev + d * (length / np.linalg.norm(d))
-    e = float((p - cw) @ qm @ (p - cw))
-    if 0.0 < e < 1.0:                          # still inside: radially onto the surface
-        p = cw + (p - cw) / np.sqrt(e)
-    return p
+    return reference_slide_push(p, prev, length, row, slide)
 
 
 def at_fractions(points: np.ndarray, seg: np.ndarray, t: np.ndarray) -> np.ndarray:
@@ -185,6 +173,13 @@ class StatelessTracker:
             self.center, self.axes = collider_axes(ghosts, collider)
         else:
             self.center, self.axes = np.zeros(3), np.ones(3)
+        positive = ghosts.rest_length[ghosts.rest_length > 0]
+        #: the scene's bust (``None`` without ``body.bust``): every placement is followed by
+        #: its contact pass (:func:`~hair_tracking.colliders.kernels.slide_push_strands`)
+        self.body = make_body(scene.body, float(positive.min()) if positive.size else 0.0,
+                              (self.center, self.axes) if self.collide else None)
+        self._head = HeadPose(np.zeros(3), np.array([0.0, 0.0, 0.0, 1.0]), np.eye(3))
+        self._rest_length = np.ascontiguousarray(ghosts.rest_length, dtype=np.float64)
         self.stats: Dict[str, int] = {'ghosts': int(ghosts.count), 'steps': 0, 'evaluations': 0,
                                       'contacts': 0, 'parallel': 1}
 
@@ -194,6 +189,7 @@ class StatelessTracker:
         guide_columns(motion.guide_x, self.seg, self.t, self._gcol)
         np.copyto(self._rot, motion.head.rotation)
         np.copyto(self._pos, motion.head.position)
+        self._head = motion.head
         self._pending = True
         self._x64 = None
         self.stats['steps'] += 1
@@ -204,6 +200,10 @@ class StatelessTracker:
             return
         self._pending = False
         self._placed_into(self._x32_target)
+        if self.body is not None:
+            self.stats['contacts'] += int(slide_push_strands(
+                self._x32, self._rest_length, self.body.posed(self._head, self._head, 0.0), 2,
+                self.body.lead))
 
     def _placed_into(self, target) -> bool:
         contacts, finite = self._place(target)
@@ -256,7 +256,7 @@ class StatelessTracker:
         alone from the last step when nothing has read the hair since (:meth:`_place_part`), so
         a check of a few strands does not cost a whole evaluation; else read from
         :meth:`positions`.  Returns ``(strand indices, positions (len, N, 3))``."""
-        if self._pending:
+        if self._pending and self.body is None:
             idx = self._place_part(part, parts)
             return idx, self._x32[idx]
         idx = strand_part(self.ghosts.count, part, parts)
@@ -273,7 +273,7 @@ class StatelessTracker:
         :func:`~hair_tracking.core.point_records.points_to_records`).  After a step that nothing
         has read yet the kernel writes the records itself, and the positions stay to be placed
         when read."""
-        if self._pending:
+        if self._pending and self.body is None:
             s, n = self.ghosts.rest.shape[:2]
             return self._placed_into(record_target(words, stride, s, n, rot, origin) + (True,))
         return points_to_records(words, stride, self.positions(), rot, origin)

@@ -44,11 +44,12 @@ from typing import Tuple
 import numpy as np
 from numba import njit, prange
 
+from hair_tracking.colliders.slide import quadric, slide_push_lane
 from hair_tracking.core.model import HeadPose, StrandSet, part_rows
 from hair_tracking.core.point_records import put_record
 from hair_tracking.ghosts.blend import blend_weights
-from hair_tracking.ghosts.stateless import (StatelessTracker, at_fractions, ellipsoid_form,
-                                            node_map, reference_contact, world_collider)
+from hair_tracking.ghosts.stateless import (StatelessTracker, at_fractions, node_map,
+                                            reference_contact, world_collider)
 from hair_tracking.guides.integrate import FASTMATH
 
 #: Strands of one guide advanced together (one block): two AVX2 or one AVX-512 register of
@@ -212,7 +213,7 @@ def _turn_blocks(target, model, pose, turns, collide, work, blocks):
     """Steps 2-3 for the blocks ``blocks = (b0, b1)``, ``b0 .. b1 - 1`` (``target``,
     ``model``, ``pose``, ``turns`` as :func:`turn_strands` takes them), ``work`` = ``(flat,
     geo)``: ``flat`` (2 * N * 3 * lanes) the scratch and ``geo`` the collider's constants
-    (:func:`_slide_push`; the guide's node is written here); returns the number of nodes moved
+    (:func:`_contact_pass`; the guide's node is written here); returns the number of nodes moved
     by the collider and the number of points written that are not finite (counted with
     ``check`` only)."""
     out, out_rot, out_origin, moved, check = target                     # Placement
@@ -255,14 +256,14 @@ def _turn_blocks(target, model, pose, turns, collide, work, blocks):
             inside = 0
             if collide:
                 for lane in range(lanes):
-                    e = ellipsoid_form(w[0, j + 1, 0, lane] - c0, w[0, j + 1, 1, lane] - c1,
-                                       w[0, j + 1, 2, lane] - c2, q0, q1, q2, q3, q4, q5)
+                    e = quadric(w[0, j + 1, 0, lane] - c0, w[0, j + 1, 1, lane] - c1,
+                                w[0, j + 1, 2, lane] - c2, q0, q1, q2, q3, q4, q5)
                     inside += 1 if e < 1.0 else 0
             if collide and inside > 0:                       # step 3
                 geo[9] = gcol[g, 0, j + 1]
                 geo[10] = gcol[g, 1, j + 1]
                 geo[11] = gcol[g, 2, j + 1]
-                contacts += _slide_push(w, kind, b, j, geo)
+                contacts += _contact_pass(w, kind, b, j, geo)
         for lane in range(lanes):
             s = block_strand[b, lane]
             if s < 0:
@@ -288,41 +289,26 @@ def _acts(kind, dx, dy, dz):
 
 
 @njit(cache=True, fastmath=FASTMATH, error_model='numpy')
-def _slide_push(w, kind, b, j, geo):
+def _contact_pass(w, kind, b, j, geo):
     """Step 3 for node ``j + 1`` of every lane of the scratch ``w`` (block ``b``), one vector
     pass (selects, no branches; a function of its own, so LLVM vectorises its loop on its own
-    terms): a node inside the ellipsoid ``(x - c)^T Q (x - c) < 1`` is placed at its rest
-    length from node ``j`` along its step with the inward part (along the normal
-    ``Q (x_j - c)``) removed, then moved radially onto the surface if still inside; a node
-    outside, or one the collider does not act on (:func:`_acts`), is left as it is.  ``geo``:
+    terms): the contact model's slide and push of an ellipsoid for lanes side by side
+    (:func:`~hair_tracking.colliders.slide.slide_push_lane`) on every node the collider acts on
+    (:func:`_acts`).  ``geo``:
     ``c`` (3), Q's entries Q00 Q11 Q22 Q01 Q02 Q12, the guide's node ``j + 1`` (3).  Returns
     the number of nodes moved."""
-    c0, c1, c2 = geo[0], geo[1], geo[2]
-    q0, q1, q2, q3, q4, q5 = geo[3], geo[4], geo[5], geo[6], geo[7], geo[8]
+    c = (geo[0], geo[1], geo[2])
+    q = (geo[3], geo[4], geo[5], geo[6], geo[7], geo[8])
     g0, g1, g2 = geo[9], geo[10], geo[11]
     moved = 0
     for lane in range(w.shape[3]):
         nx, ny, nz = w[0, j + 1, 0, lane], w[0, j + 1, 1, lane], w[0, j + 1, 2, lane]
-        px, py, pz = w[0, j, 0, lane], w[0, j, 1, lane], w[0, j, 2, lane]
         acts = _acts(kind[b, lane], nx - g0, ny - g1, nz - g2)
-        inside = (ellipsoid_form(nx - c0, ny - c1, nz - c2, q0, q1, q2, q3, q4, q5) < 1.0) & acts
-        ex, ey, ez = px - c0, py - c1, pz - c2
-        gx = q0 * ex + q3 * ey + q4 * ez                      # outward normal Q (p - c)
-        gy = q3 * ex + q1 * ey + q5 * ez
-        gz = q4 * ex + q5 * ey + q2 * ez
-        dx, dy, dz = nx - px, ny - py, nz - pz                # the step: |d| = rest length
-        dd = dx * dx + dy * dy + dz * dz
-        dg = min(dx * gx + dy * gy + dz * gz, 0.0)
-        a = dg / max(gx * gx + gy * gy + gz * gz, 1e-300)
-        # |d - a g|^2 = dd - a dg: back to the rest length with one square root
-        f = math.sqrt(dd / max(dd - a * dg, 1e-300))
-        dx, dy, dz = dx - a * gx, dy - a * gy, dz - a * gz
-        sx, sy, sz = px + f * dx - c0, py + f * dy - c1, pz + f * dz - c2
-        e = ellipsoid_form(sx, sy, sz, q0, q1, q2, q3, q4, q5)
-        k = 1.0 / math.sqrt(min(max(e, 1e-300), 1.0))         # radially onto the surface
-        w[0, j + 1, 0, lane] = c0 + k * sx if inside else nx
-        w[0, j + 1, 1, lane] = c1 + k * sy if inside else ny
-        w[0, j + 1, 2, lane] = c2 + k * sz if inside else nz
+        inside, x0, x1, x2 = slide_push_lane(
+            (nx, ny, nz), (w[0, j, 0, lane], w[0, j, 1, lane], w[0, j, 2, lane]), c, q, acts)
+        w[0, j + 1, 0, lane] = x0
+        w[0, j + 1, 1, lane] = x1
+        w[0, j + 1, 2, lane] = x2
         moved += 1 if inside else 0
     return moved
 

@@ -5,26 +5,11 @@ frame); a sphere is the ellipsoid with three equal radii. For a sphere this is e
 offset by ``margin``; for an ellipsoid it differs from the true offset surface by a small fraction
 of ``margin`` (the head ellipsoids here are nearly spherical).
 
-Projection (:func:`surface_point`): a node inside is moved to an approximation of the closest
-point of the surface. Start from the radial projection in the scaled (unit-sphere) space,
-``y0 = q / sqrt(F(q))`` with ``F(q) = sum (q_k / a_k)^2``, which lies on the surface; then
-``refine`` times intersect the surface with the line from ``q`` along the outward normal
-``n(y) = (y_k / a_k^2)_k`` at the current estimate (a quadratic in the line parameter with exactly
-one positive root because ``q`` is inside). The closest point is the fixed point of this map
-(``q = y* - t n(y*)``); the iteration converges wherever the depth is below the local radius of
-curvature (everything but the deep interior of an elongated ellipsoid) and every iterate lies
-exactly on the surface, so the contract "ends outside surface + margin" holds regardless. For a
-sphere the radial projection is already exact (``refine = 0``). A node exactly at the centre is
-pushed out along the shortest semi-axis. Measured on the default head ellipsoid (0.095, 0.08,
-0.105) m, distance to the true closest point with 2 refinements: 3e-7 m at 2 mm depth, 5e-6 m at
-5 mm, 4e-5 m at 1 cm, 4e-4 m at 2 cm (hair nodes enter by a few mm per substep).
-
-Friction, position-level as in Macklin, Müller, Chentanez & Kim 2014 ("Unified Particle Physics
-for Real-Time Applications"), simplified from a Coulomb cone to a proportional reduction: after
-the projection the displacement of the node relative to its reference position ``x_prev`` is split
-into normal and tangential parts at the contact, and the tangential part is reduced by the factor
-``friction`` (0: frictionless, 1: sticks). The node stays on the tangent plane, which lies outside
-a convex surface.
+Projection and friction are the contact model's rule for an ellipsoid
+(:func:`hair_tracking.colliders.contact.ellipsoid_contact`: the radial projection refined along
+the normal, ``refine`` times; position-level friction relative to a reference position), which
+this module applies to the head collider placed by each substep's head pose.  For a sphere the
+radial projection is already exact (``refine = 0``).
 
 All work happens in the head frame: points are transformed with the head pose inside the
 kernels (``q = R^T (x - t) - center``); inputs and outputs are world-frame positions [m].
@@ -38,6 +23,8 @@ from typing import Optional
 import numpy as np
 from numba import njit, prange
 
+from hair_tracking.colliders.contact import ellipsoid_contact, local_of, surface_point
+from hair_tracking.colliders.margin import outside_distance  # noqa: F401 (the guides' margin)
 from hair_tracking.guides.integrate import FASTMATH, runs_parallel
 
 #: Normal-line refinements of the ellipsoid projection in :meth:`Collider.apply`.
@@ -58,37 +45,6 @@ ColliderModel = namedtuple('ColliderModel', ['center', 'radii', 'margin', 'frict
 #: calls a compiled function (:func:`surface_point`) it keeps the count in the loop.
 Contact = namedtuple('Contact', ['rot', 'cx', 'cy', 'cz', 'ax', 'ay', 'az', 'friction',
                                  'refine'])
-
-
-@njit(cache=True, fastmath=FASTMATH, error_model='numpy')
-def surface_point(qx, qy, qz, ax, ay, az, refine):
-    """Approximate closest point on the ellipsoid ``sum (y_k/a_k)^2 = 1`` of the point ``q``.
-
-    ``q`` is relative to the centre, in the ellipsoid's axes, and inside (``F(q) < 1``).
-    Returns ``(yx, yy, yz)`` on the surface. See the module docstring for the method.
-    """
-    ix, iy, iz = 1.0 / (ax * ax), 1.0 / (ay * ay), 1.0 / (az * az)
-    f = qx * qx * ix + qy * qy * iy + qz * qz * iz
-    if f < 1e-24:
-        if ax <= ay and ax <= az:
-            return ax, 0.0, 0.0
-        if ay <= az:
-            return 0.0, ay, 0.0
-        return 0.0, 0.0, az
-    sc = 1.0 / math.sqrt(f)
-    yx, yy, yz = qx * sc, qy * sc, qz * sc
-    c = f - 1.0
-    for _ in range(refine):
-        nx, ny, nz = yx * ix, yy * iy, yz * iz
-        a = nx * nx * ix + ny * ny * iy + nz * nz * iz
-        b = qx * nx * ix + qy * ny * iy + qz * nz * iz
-        disc = math.sqrt(b * b - a * c)
-        if b > 0.0:
-            t = -c / (b + disc)
-        else:
-            t = (disc - b) / a
-        yx, yy, yz = qx + t * nx, qy + t * ny, qz + t * nz
-    return yx, yy, yz
 
 
 @njit(cache=True, inline='always', fastmath=FASTMATH, error_model='numpy')
@@ -119,41 +75,6 @@ def rotation_entries(rot):
 
 
 @njit(cache=True, inline='always', fastmath=FASTMATH, error_model='numpy')
-def entries_to_head(x0, x1, x2, r, cx, cy, cz):
-    """:func:`to_head` with the rotation given by its entries ``r``
-    (:func:`rotation_entries`), as a :data:`Contact` holds it."""
-    dx, dy, dz = x0 - cx, x1 - cy, x2 - cz
-    return (r[0] * dx + r[3] * dy + r[6] * dz,
-            r[1] * dx + r[4] * dy + r[7] * dz,
-            r[2] * dx + r[5] * dy + r[8] * dz)
-
-
-@njit(cache=True, inline='always', fastmath=FASTMATH, error_model='numpy')
-def entries_to_world(y0, y1, y2, r, cx, cy, cz):
-    """``R y + c``: a point ``y`` in the head axes relative to the world point ``c`` [m], back
-    in the world (``r`` the entries of ``R``, :func:`rotation_entries`)."""
-    return (r[0] * y0 + r[1] * y1 + r[2] * y2 + cx,
-            r[3] * y0 + r[4] * y1 + r[5] * y2 + cy,
-            r[6] * y0 + r[7] * y1 + r[8] * y2 + cz)
-
-
-@njit(cache=True, inline='always', fastmath=FASTMATH, error_model='numpy')
-def apply_friction(yx, yy, yz, px, py, pz, ix, iy, iz, friction):
-    """The friction of the module docstring: ``y`` (a surface point, head axes relative to the
-    centre; ``i`` the inverse squared semi-axes) moved back toward the reference ``p`` by
-    ``friction`` times the tangential part of ``y - p``."""
-    nx, ny, nz = yx * ix, yy * iy, yz * iz
-    nn = 1.0 / math.sqrt(nx * nx + ny * ny + nz * nz)
-    nx *= nn
-    ny *= nn
-    nz *= nn
-    mx, my, mz = yx - px, yy - py, yz - pz
-    dn = mx * nx + my * ny + mz * nz
-    return (yx - friction * (mx - dn * nx), yy - friction * (my - dn * ny),
-            yz - friction * (mz - dn * nz))
-
-
-@njit(cache=True, inline='always', fastmath=FASTMATH, error_model='numpy')
 def placed(collider, rot, pos):
     """The :data:`Contact` of ``collider`` (the fields of :data:`ColliderModel`) for the head
     pose ``rot``, ``pos``."""
@@ -168,26 +89,6 @@ def placed_shape(collider, rot, pos):
     center, radii, margin, friction, refine = collider
     cx, cy, cz = world_center(rot, pos, center)
     return cx, cy, cz, radii[0] + margin, radii[1] + margin, radii[2] + margin, friction, refine
-
-
-@njit(cache=True, inline='always', fastmath=FASTMATH, error_model='numpy')
-def push_out(x0, x1, x2, r0, r1, r2, contact):
-    """One node ``x`` (world [m]) pushed out of the ellipsoid of ``contact`` (the fields of
-    :data:`Contact`: semi-axes ``a`` around the world point ``c``, axes turned by the head
-    rotation ``rot``), then the friction of the module docstring relative to the reference
-    position ``r``.  Returns ``(moved, y0, y1, y2)``; an outside node comes back unchanged
-    with ``moved`` false."""
-    rot, cx, cy, cz, ax, ay, az, friction, refine = contact
-    qx, qy, qz = entries_to_head(x0, x1, x2, rot, cx, cy, cz)
-    ix, iy, iz = 1.0 / (ax * ax), 1.0 / (ay * ay), 1.0 / (az * az)
-    if qx * qx * ix + qy * qy * iy + qz * qz * iz >= 1.0:
-        return False, x0, x1, x2
-    yx, yy, yz = surface_point(qx, qy, qz, ax, ay, az, refine)
-    if friction > 0.0:
-        px, py, pz = entries_to_head(r0, r1, r2, rot, cx, cy, cz)
-        yx, yy, yz = apply_friction(yx, yy, yz, px, py, pz, ix, iy, iz, friction)
-    wx, wy, wz = entries_to_world(yx, yy, yz, rot, cx, cy, cz)
-    return True, wx, wy, wz
 
 
 @njit(cache=True, nogil=True, parallel=True, fastmath=FASTMATH, error_model='numpy')
@@ -228,8 +129,9 @@ def project_block(x, x_prev, inv_mass, contact, s0, s1):
         for i in range(n):
             if inv_mass[s, i] <= 0.0:
                 continue
-            moved, y0, y1, y2 = push_out(x[s, i, 0], x[s, i, 1], x[s, i, 2], x_prev[s, i, 0],
-                                         x_prev[s, i, 1], x_prev[s, i, 2], contact)
+            moved, y0, y1, y2 = ellipsoid_contact(x[s, i, 0], x[s, i, 1], x[s, i, 2],
+                                                  x_prev[s, i, 0], x_prev[s, i, 1],
+                                                  x_prev[s, i, 2], contact)
             if moved:
                 x[s, i, 0] = y0
                 x[s, i, 1] = y1
@@ -270,7 +172,7 @@ def strand_depth(x, inv_mass, use_mass, contact, s):
     for i in range(x.shape[1]):
         if use_mass and inv_mass[s, i] <= 0.0:
             continue
-        qx, qy, qz = entries_to_head(x[s, i, 0], x[s, i, 1], x[s, i, 2], rot, cx, cy, cz)
+        qx, qy, qz = local_of(x[s, i, 0], x[s, i, 1], x[s, i, 2], rot, cx, cy, cz)
         if qx * qx * ix + qy * qy * iy + qz * qz * iz >= 1.0:
             continue
         yx, yy, yz = surface_point(qx, qy, qz, ax, ay, az, refine)
@@ -386,31 +288,6 @@ class Collider:
             x.flags.writeable = False
         kernel(x, mass, use, rot, pos, self.center, self.radii, self._pen_refine, out)
         return float(out.max()) if out.size else 0.0
-
-
-def outside_distance(q: np.ndarray, radii) -> np.ndarray:
-    """Distance [m] of points ``q`` (..., 3) to the ellipsoid ``sum (y_k / a_k)^2 = 1`` (centred,
-    axis-aligned, semi-axes ``radii``); 0 for points inside or on it.
-
-    The closest point of an outside point ``q`` is ``y_k = a_k^2 q_k / (t + a_k^2)`` with ``t > 0``
-    the root of ``sum (a_k q_k / (t + a_k^2))^2 = 1`` (Eberly 2013, "Distance from a point to an
-    ellipse, an ellipsoid, or a hyperellipsoid"), found here by bisection on
-    ``[0, max(a) |q|]``, where the sum is at most 1; vectorised numpy, for set-up code.
-    """
-    q = np.asarray(q, dtype=np.float64)
-    a2 = np.asarray(radii, dtype=np.float64) ** 2
-    outside = np.einsum('...k,...k->...', q * q, 1.0 / a2) > 1.0
-    lo = np.zeros(q.shape[:-1])
-    hi = np.sqrt(a2.max()) * np.linalg.norm(q, axis=-1)
-    for _ in range(64):
-        t = 0.5 * (lo + hi)
-        f = np.sum((np.sqrt(a2) * q / (t[..., None] + a2)) ** 2, axis=-1)
-        big = f > 1.0
-        lo = np.where(big, t, lo)
-        hi = np.where(big, hi, t)
-    t = 0.5 * (lo + hi)
-    y = a2 * q / (t[..., None] + a2)
-    return np.where(outside, np.linalg.norm(q - y, axis=-1), 0.0)
 
 
 def make_collider(spec) -> Optional[Collider]:

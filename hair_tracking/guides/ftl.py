@@ -32,9 +32,9 @@ import math
 import numpy as np
 from numba import int64, njit, prange
 
+from hair_tracking.colliders.contact import surface_point
 from hair_tracking.guides.collision import (placed, placed_shape, project_block,
-                                            rotation_entries, surface_point, to_head,
-                                            world_center)
+                                            rotation_entries, to_head, world_center)
 from hair_tracking.guides.integrate import (BLOCK, carry_rigid_block, FASTMATH, finalize_block,
                                             max_step_sq_block, predict_block, split_due)
 from hair_tracking.guides.pbd_constraints import pbd_sweep_block
@@ -174,7 +174,7 @@ def restore_node(p, b, r, e, rot, ellipsoid, first):
     normally): the placements already made, for a caller that made the first ones itself
     (``p`` is then the surface point the next placement starts from).  Returns the node (x, y,
     z).  The rotation is the matrix here, not a contact's entries
-    (:func:`~hair_tracking.guides.collision.entries_to_head`): the pass's placements follow its
+    (:func:`~hair_tracking.colliders.contact.local_of`): the pass's placements follow its
     arithmetic to the last bit."""
     px, py, pz = p
     bx, by, bz = b
@@ -207,7 +207,7 @@ def ftl_restore(x, rest, rest_length, rot, pos, center, axes, refine, corr):
     (:data:`RESTORE_LENGTH_TOLERANCE`), and puts each node at its rest distance from its
     predecessor (as the FTL pass does); if that point lies inside the collision ellipsoid
     (semi-axes ``axes`` = radii + margin, centre ``center``, head frame; head pose ``rot``,
-    ``pos``) it is moved to the surface (:func:`hair_tracking.guides.collision.surface_point`,
+    ``pos``) it is moved to the surface (:func:`hair_tracking.colliders.contact.surface_point`,
     ``refine`` refinements) and put back at the rest distance along the new direction, up to
     :data:`RESTORE_ITERATIONS` times (see :func:`restore_node`).
     For a predecessor outside the surface this converges to the point of the circle where the

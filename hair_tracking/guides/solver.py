@@ -15,7 +15,10 @@ and their roots follow the head. One call of :meth:`GuideSolver.step` is one sub
    ``'pbd'`` classic Gauss–Seidel PBD, ``'xpbd'`` XPBD with compliance, ``'ftl'`` Follow-The-Leader
    (see :mod:`~hair_tracking.guides.pbd_constraints` and :mod:`~hair_tracking.guides.ftl`);
 5. head collision, only if the scene has a collider (:mod:`~hair_tracking.guides.collision`), with
-   friction measured against the start-of-substep positions carried rigidly with the head;
+   friction measured against the start-of-substep positions carried rigidly with the head; then,
+   only if the scene has a body (``body.bust``), the bust's capsules
+   (:class:`~hair_tracking.colliders.scene_body.SceneBody`, the contact model's collision stage
+   :func:`~hair_tracking.colliders.kernels.collide` with its push-out velocity bound);
 6. per-substep displacement clamp (``scene.solver.max_displacement``; 0 disables) and the
    velocity update ``v = (p - x) / dt`` (FTL: minus ``ftl_damping d_{i+1} / dt``) —
    :mod:`~hair_tracking.guides.integrate`.
@@ -23,7 +26,9 @@ and their roots follow the head. One call of :meth:`GuideSolver.step` is one sub
 Without a collider steps 1–6 run in one fused numba kernel per block of strands (the strands stay
 in cache), and so do FTL's with a collider (:func:`~hair_tracking.guides.ftl.ftl_collide_step`:
 the collision and the collision-aware second pass join the block's substep); PBD and XPBD with a
-collider stop after step 4, the collision kernel runs, then the finalize kernel.
+collider stop after step 4, the collision kernel runs, then the finalize kernel; so do all three
+with a body (FTL: the head's collision-aware second pass after the head's collision), one
+substep a call.
 :meth:`GuideSolver.advance` takes a run of substeps in one call: for FTL one compiled call for
 all of them (:func:`~hair_tracking.guides.ftl.ftl_advance`). Kernels are
 looked up on their modules at call time, so only the ones the scene needs are ever called (and
@@ -38,6 +43,8 @@ from typing import Any, Dict, Optional, Sequence, Tuple
 
 import numpy as np
 
+from hair_tracking.colliders import kernels as contact_kernels
+from hair_tracking.colliders.scene_body import make_body
 from hair_tracking.guides import collision
 
 from hair_tracking.guides import ftl
@@ -101,6 +108,9 @@ class GuideSolver:
                              if parallel is None else parallel)
         self.collider = collision.make_collider(scene.collider)
         self.margin = self._fit_margin()
+        positive = strands.rest_length[strands.rest_length > 0]
+        #: the scene's bust (``None`` without ``body.bust``)
+        self.body = make_body(scene.body, float(positive.min()) if positive.size else 0.0)
         sv = scene.solver
         self._gravity = np.ascontiguousarray(scene.gravity, dtype=np.float64)
         self._damping = float(scene.damping)
@@ -175,7 +185,7 @@ class GuideSolver:
             return None
         parallel = self.parallel
         rule = stop is not None and measure and stop[1] > 0.0
-        if self.kind != 'ftl':
+        if self.kind != 'ftl' or self.body is not None:
             out = []
             prev, x0 = head_prev, self._x_before
             for k, head in enumerate(heads):
@@ -242,7 +252,7 @@ class GuideSolver:
                              f'{pos_prev if bad == "head_prev" else pos}')
         st = self.strands
         damp = math.exp(-self._damping * dt)
-        fused = self.collider is None
+        fused = self.collider is None and self.body is None
         # the kernels' arguments, plain tuples in the fields' order of integrate.GuideState,
         # integrate.StepMotion and the solver's Params (built here each substep; the models in
         # __init__ / _xpbd_factors)
@@ -251,7 +261,7 @@ class GuideSolver:
         sv = self.scene.solver
         if self.kind == 'ftl':
             params = self._ftl_params(dt, fused)
-            if not fused:
+            if self.collider is not None and self.body is None:
                 # one kernel: friction reference, collision and second pass in the block loop
                 kernel = ftl.ftl_collide_step if parallel else ftl.ftl_collide_step_serial
                 work = (self._corr, self._friction_ref())
@@ -277,11 +287,24 @@ class GuideSolver:
             clamped = kernel(self.model, state, motion, params, self._corr)
         contacts = 0
         if not fused:
-            contacts = self.collider.project(st.x, self._friction_ref(), st.inv_mass, rot, pos,
-                                             parallel)
+            if self.collider is not None:
+                contacts = self.collider.project(st.x, self._friction_ref(), st.inv_mass, rot,
+                                                 pos, parallel)
+                if contacts and self.kind == 'ftl':
+                    c = self.collider
+                    ftl.ftl_restore(st.x, st.rest, st.rest_length, rot, pos, c.center,
+                                    c.radii + c.margin, c.refine, self._corr)
+            if self.body is not None:
+                # the start of the substep is the friction reference and, moved by the
+                # push-out bound, the velocity's
+                contacts += contact_kernels.collide(
+                    st.x, self._x_old, st.inv_mass, self.body.posed(head_prev, head, dt),
+                    self.body.push_cap(dt), self._x_old)
             finalize = integrate.finalize if parallel else integrate.finalize_serial
-            clamped = finalize(st.x, st.v, self._x_old, st.inv_mass, self._x_old, dt,
-                               self._max_disp, 0.0)
+            ftl_ = self.kind == 'ftl'
+            clamped = finalize(st.x, st.v, self._x_old, st.inv_mass,
+                               self._corr if ftl_ else self._x_old, dt, self._max_disp,
+                               float(sv.ftl_damping) if ftl_ else 0.0)
         self._count(clamped, contacts)
 
     def _ftl_params(self, dt: float, finalize: bool) -> tuple:

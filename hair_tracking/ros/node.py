@@ -22,7 +22,8 @@ Outputs, built only when somebody subscribes: ``hair/points`` (organized PointCl
 strand, x y z float32, ``strand`` index, packed ``rgb``), ``hair/markers`` (MarkerArray,
 ``line_list`` or ``line_strips``, a DELETEALL first whenever the strand count or style changes,
 lifetime of a few publishing periods), optionally ``hair/guides/points`` and
-``hair/guides/markers``, the head collider on ``hair/head`` (Marker, ``head_marker``), each
+``hair/guides/markers``, the head collider on ``hair/head`` (Marker, ``head_marker``), the
+body's bust on ``hair/colliders`` (MarkerArray, ``head_marker`` and ``body.bust``), each
 head pose on ``/tf`` (``publish_tf``), and ``/diagnostics``.  Both hair outputs are serialized
 straight to CDR bytes with numpy (:mod:`msg_adapters.pointcloud`,
 :mod:`msg_adapters.marker_cdr`).  Publishing runs on its own timer (``publish_rate_hz``);
@@ -66,6 +67,7 @@ from sensor_msgs.msg import PointCloud2
 from std_srvs.srv import Trigger
 from visualization_msgs.msg import Marker, MarkerArray
 
+from msg_adapters.capsule_markers import capsule_markers
 from msg_adapters.head_marker import collider_marker
 from msg_adapters.marker_cdr import strands_to_marker_array_cdr
 from msg_adapters.pointcloud import CloudBuffer, pack_rgb_u32
@@ -81,7 +83,8 @@ from hair_tracking.core.head_track import PoseResult
 from hair_tracking.core.params import Param, ParamError
 from hair_tracking.core.scene import Scene, SceneError
 from hair_tracking.grooms.polylines import GroomFileError
-from hair_tracking.core.transforms import quat_to_matrix
+from hair_tracking.colliders.shapes import A0, A1, CX, CZ, R00, R22
+from hair_tracking.core.transforms import matrix_to_quat, quat_to_matrix
 from hair_tracking.output.params_check import params_files_problem, rcl_arguments_problem, \
     unknown_parameters
 from hair_tracking.output.settings import apply_changes, make_settings, NODE_NAME, \
@@ -109,6 +112,8 @@ WARN_THROTTLE_S = 5.0
 #: of the executor's thread, during which the poses behind it wait.
 DIAG_AUDIT_STRANDS = 4096
 HEAD_MARKER_TOPIC = 'hair/head'
+#: The scene's body (the bust's capsules) as markers.
+COLLIDERS_TOPIC = 'hair/colliders'
 
 
 def output_qos(depth: int) -> QoSProfile:
@@ -225,11 +230,14 @@ class HairSimNode(Node):
         self._diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
         self.diagnostics_sent = 0
         self._head_pub = self.create_publisher(Marker, HEAD_MARKER_TOPIC, output_qos(depth))
+        self._colliders_pub = self.create_publisher(MarkerArray, COLLIDERS_TOPIC,
+                                                    output_qos(depth))
         self._tf = TfTree()              # /tf_static and /tf, for use_tf and gravity_frame
         self._tf_pub = None              # publish_tf
         self._tf_sent_key = None         # (child, stamp) of the last transform broadcast
         self.tf_sent = 0
         self._gravity_used = None        # gravity in the pose's frame given to the simulator
+        self._body_seen = None           # (arrival [ns], static) of body.frame on /tf
         if TFMessage is not None:
             self._tf_pub = self.create_publisher(TFMessage, '/tf', QoSProfile(
                 history=HistoryPolicy.KEEP_LAST, depth=100,
@@ -249,7 +257,7 @@ class HairSimNode(Node):
                               durability=qos_profile_sensor_data.durability)
         self.create_subscription(PoseStamped, 'head_pose', self._on_pose, pose_qos)
         self.create_subscription(TransformStamped, 'head_transform', self._on_pose, pose_qos)
-        if settings.use_tf or settings.gravity_frame:
+        if settings.use_tf or settings.gravity_frame or self._body_frame():
             if TFMessage is None:
                 self.get_logger().warn('use_tf or gravity_frame is set but tf2_msgs is not '
                                        'installed: /tf is not subscribed (head_pose and '
@@ -442,6 +450,9 @@ class HairSimNode(Node):
 
     def _store_tf(self, msg, static: bool) -> None:
         self._tf.add_message(msg, static=static)
+        frame = self._body_frame()
+        if frame and any(str(tr.child_frame_id).lstrip('/') == frame for tr in msg.transforms):
+            self._body_seen = (self.get_clock().now().nanoseconds, static)
         if self._settings.gravity_frame and self._has_pose:
             self._update_gravity()
 
@@ -542,8 +553,33 @@ class HairSimNode(Node):
         self.sim.update_scene(dataclasses.replace(self.sim.scene,
                                                   gravity=tuple(float(v) for v in g)))
 
+    def _body_frame(self) -> str:
+        """The TF frame the scene's bust rides on ('' without one)."""
+        body = self.sim.scene.body
+        return body.frame.lstrip('/') if body.bust else ''
+
+    def _update_body_frame(self) -> None:
+        """``body.frame``: its pose in the pose's frame (through /tf_static and /tf) handed to
+        the simulator; the last one found is kept while none arrives."""
+        frame = self._body_frame()
+        if not frame:
+            return
+        pose_frame = self._pose_frame or self._settings.fixed_frame or 'world'
+        try:
+            found = self._tf.lookup(pose_frame, frame)
+        except ValueError:                       # a loop in the tree
+            found = None
+        if found is None:
+            self.get_logger().warn(
+                f'body.frame {frame!r}: no transform to the pose frame {pose_frame!r} on '
+                f'/tf_static or /tf; the bust keeps its last pose (the neck frame until one '
+                f'arrives)', throttle_duration_sec=WARN_THROTTLE_S)
+            return
+        self.sim.set_body_frame(quat_to_matrix(found[1]), found[0])
+
     def _step(self, t_ns: int) -> None:
         start = self._work_clock()
+        self._update_body_frame()
         self.sim.advance_to(t_ns)
         self.step_ms.append((self._work_clock() - start) * 1e3)
         self._has_pose = True
@@ -638,6 +674,7 @@ class HairSimNode(Node):
         if not self._has_pose:
             return
         self._publish_head()
+        self._publish_colliders()
         outs = self.outputs
         s = self._settings
         wanted = {k: o.wanted() for k, o in outs.items()}
@@ -733,6 +770,19 @@ class HairSimNode(Node):
         if sim.track_once_per_call:
             level = DiagnosticStatus.WARN
             problems.append('load shedding: ghosts tracked once per pose to keep up')
+        body_frame, body_age = self._body_frame(), 'n/a'
+        if body_frame:
+            seen = self._body_seen
+            if seen is None:
+                level = DiagnosticStatus.WARN
+                problems.append(f'body.frame {body_frame!r} not received: the bust rides on '
+                                'the neck frame')
+            elif not seen[1]:
+                body_age = f'{(now_ns - seen[0]) * 1e-9:.3f}'
+                if (now_ns - seen[0]) * 1e-9 > self._settings.stale_timeout:
+                    level = DiagnosticStatus.WARN
+                    problems.append(f'body.frame {body_frame!r} stale for {body_age} s (the '
+                                    'bust keeps its last pose)')
         step = list(self.step_ms)[-100:]
         pub = list(self.publish_ms)[-100:]
         ghosts = sim.ghosts.count if sim.ghosts is not None else 0
@@ -771,6 +821,7 @@ class HairSimNode(Node):
             kv('tf_sent', self.tf_sent),
             kv('gravity_in_pose_frame', 'n/a' if self._gravity_used is None else
                ' '.join(f'{v:.4f}' for v in self._gravity_used)),
+            kv('body_frame_age_s', body_age),
         ]
         return DiagnosticStatus(level=level, name=f'{self.get_name()}: hair simulation',
                                 message='; '.join(problems) if problems else 'ok',
@@ -800,6 +851,26 @@ class HairSimNode(Node):
         self._head_pub.publish(collider_marker(
             c.shape, c.center, c.radius, c.radii, frame_id=self.output_frame_id(),
             stamp_ns=stamp, color=s.head_color, **kw))
+
+    def _publish_colliders(self) -> None:
+        """The body's capsules as markers on ``hair/colliders`` in the frame of the hair, at the
+        head pose of the hair (``head_marker``; built only when somebody subscribes)."""
+        s = self._settings
+        body = getattr(self.sim.guide_solver, 'body', None)
+        if body is None or not s.head_marker or \
+                self._colliders_pub.get_subscription_count() == 0:
+            return
+        head = self.sim.head
+        sh = body.posed_bare(head)
+        centers = sh[:, CX:CZ + 1]
+        rots = sh[:, R00:R22 + 1].reshape(-1, 3, 3)
+        if s.output_frame == 'head':
+            centers = head.to_head(centers)
+            rots = np.einsum('ji,kjl->kil', head.rotation, rots)
+        stamp = max(0, (self.sim.time_ns or 0) - self._offset_ns)
+        self._colliders_pub.publish(MarkerArray(markers=capsule_markers(
+            centers, [matrix_to_quat(r) for r in rots], sh[:, A0], sh[:, A1],
+            frame_id=self.output_frame_id(), stamp_ns=stamp, color=s.head_color)))
 
     # ================================================================ parameters files
     def warn_unknown_parameters(self, argv: List[str]) -> Dict[str, List[str]]:
@@ -842,7 +913,8 @@ def make_parser() -> argparse.ArgumentParser:
         description='ROS 2 node that makes hair follow a head-pose stream: subscribes '
                     'head_pose (PoseStamped) and head_transform (TransformStamped), with use_tf '
                     '/tf and /tf_static (TFMessage); publishes hair/points (PointCloud2), '
-                    'hair/markers (MarkerArray), hair/head (Marker, the head collider), /tf (the '
+                    'hair/markers (MarkerArray), hair/head (Marker, the head collider), '
+                    'hair/colliders (MarkerArray, the body\'s bust, body.bust), /tf (the '
                     'head pose, publish_tf), /diagnostics, and with publish_guides '
                     'hair/guides/points and hair/guides/markers; offers ~/reset. Every setting '
                     'is a ROS parameter (see config/hair_sim.yaml and docs/node.md).',

@@ -1,0 +1,169 @@
+"""Array kernels of the contact model: strands ``(S, N, 3)`` against a posed table (every shape
+of a scene), built from the one-node functions of :mod:`hair_tracking.colliders.contact`.
+
+:func:`collide_block` is the collision stage of a position-based substep for a block of
+strands (a guide solver runs it block by block inside its own parallel loop); :func:`collide`
+runs it over all strands; :func:`deepest` measures how deep the hair lies inside the shapes;
+:func:`slide_push_strands` is the contact of the trackers without state (blend, turn) with
+every shape, strand by strand.
+Shapes are taken in table order: a node pushed out of one shape into another is pushed out of
+that one next (one Gauss-Seidel pass, as a solver takes its constraints).
+"""
+import math
+
+from numba import njit, prange
+
+from hair_tracking.colliders.bounds import box_near, near
+from hair_tracking.colliders.contact import (bounded_start, carried, depth, FASTMATH, push_out,
+                                             surface_normal)
+from hair_tracking.colliders.shapes import FRICTION
+from hair_tracking.colliders.slide import level, slide_push
+
+#: Sweeps over the shapes a node of :func:`slide_push_strands` takes at most.
+STRAND_SWEEPS = 4
+
+
+@njit(cache=True, fastmath=FASTMATH, error_model='numpy')
+def collide_block(x, start, inv_mass, sh, cap, x_old, s0, s1):
+    """The strands ``s0 <= s < s1`` of ``x`` (S, N, 3) world [m], in place: every node with
+    ``inv_mass > 0`` near a shape of ``sh`` (:func:`~hair_tracking.colliders.bounds.near`) is
+    pushed out of it with its friction relative to ``carried(start)`` (``start`` (S, N, 3) the
+    nodes' positions at the start of the substep); with ``cap >= 0`` [m] the push-out velocity
+    bound moves the node's entry of ``x_old`` (S, N, 3), the positions its velocity is measured
+    from (:func:`~hair_tracking.colliders.contact.bounded_start`; ``x_old`` may be ``start``).
+    Returns the number of nodes moved."""
+    n = x.shape[1]
+    moved_nodes = 0
+    for s in range(s0, s1):
+        for i in range(n):
+            if inv_mass[s, i] <= 0.0:
+                continue
+            x0, x1, x2 = x[s, i, 0], x[s, i, 1], x[s, i, 2]
+            t0, t1, t2 = start[s, i, 0], start[s, i, 1], start[s, i, 2]
+            o0, o1, o2 = x_old[s, i, 0], x_old[s, i, 1], x_old[s, i, 2]
+            hit = False
+            for k in range(sh.shape[0]):
+                if not near(x0, x1, x2, sh, k):
+                    continue
+                r0, r1, r2 = t0, t1, t2
+                if sh[k, FRICTION] > 0.0 or cap >= 0.0:
+                    r0, r1, r2 = carried(t0, t1, t2, sh, k)
+                moved, y0, y1, y2 = push_out(x0, x1, x2, r0, r1, r2, sh, k)
+                if not moved:
+                    continue
+                if cap >= 0.0:
+                    n0, n1, n2 = surface_normal(y0, y1, y2, sh, k)
+                    o0, o1, o2 = bounded_start(o0, o1, o2, y0, y1, y2, r0, r1, r2, n0, n1, n2,
+                                               cap)
+                x0, x1, x2 = y0, y1, y2
+                hit = True
+            if hit:
+                x[s, i, 0], x[s, i, 1], x[s, i, 2] = x0, x1, x2
+                if cap >= 0.0:
+                    x_old[s, i, 0], x_old[s, i, 1], x_old[s, i, 2] = o0, o1, o2
+                moved_nodes += 1
+    return moved_nodes
+
+
+@njit(cache=True, fastmath=FASTMATH, error_model='numpy')
+def collide(x, start, inv_mass, sh, cap, x_old):
+    """:func:`collide_block` over all strands; returns the number of nodes moved."""
+    return collide_block(x, start, inv_mass, sh, cap, x_old, 0, x.shape[0])
+
+
+@njit(cache=True, fastmath=FASTMATH, error_model='numpy')
+def deepest(x, inv_mass, use_mass, sh, out):
+    """``out[s]`` = the deepest [m] a node of strand ``s`` of ``x`` (S, N, 3) lies inside a
+    shape of ``sh`` (pose it without margins to measure the bare shapes); only nodes with
+    ``inv_mass > 0`` when ``use_mass``; 0 where none is inside."""
+    for s in range(x.shape[0]):
+        worst = 0.0
+        for i in range(x.shape[1]):
+            if use_mass and inv_mass[s, i] <= 0.0:
+                continue
+            for k in range(sh.shape[0]):
+                if near(x[s, i, 0], x[s, i, 1], x[s, i, 2], sh, k):
+                    d = depth(x[s, i, 0], x[s, i, 1], x[s, i, 2], sh, k)
+                    if d > worst:
+                        worst = d
+        out[s] = worst
+
+
+@njit(cache=True, nogil=True, parallel=True, fastmath=FASTMATH, error_model='numpy')
+def slide_push_strands(x, rest_length, sh, first, lead):
+    """The stateless trackers' contact (:func:`~hair_tracking.colliders.slide.slide_push`) of
+    the strands ``x`` (S, N, 3) (float32 or float64, world [m], in place) with every shape of
+    ``sh``, node by node from node ``first`` on: a node is first moved by its predecessor's
+    displacement (the strand below a moved node follows it, its shape kept); then every shape
+    whose bound it is near (:func:`~hair_tracking.colliders.bounds.near`) and that it is inside
+    slides it at its rest segment's length ``rest_length[s, j - 1]`` from its predecessor and
+    pushes it onto the surface, after which it is put back at the rest length along its new
+    segment, in sweeps
+    (:data:`STRAND_SWEEPS` at most) until one finds it inside no shape (a node slid out of
+    one shape into an overlapping one slides out of that one next).  The first ``lead``
+    shapes (the head collider, which the tracker or solver has applied already) are tested
+    only on nodes this pass moves; a strand whose box no other shape's bound meets
+    (:func:`~hair_tracking.colliders.bounds.box_near`) is left as it is after one read.
+    Returns the number of nodes a shape moved."""
+    total = 0
+    for s in prange(x.shape[0]):
+        total += _slide_push_strand(x, rest_length, sh, (first, lead), s)
+    return total
+
+
+@njit(cache=True, fastmath=FASTMATH, error_model='numpy')
+def _slide_push_strand(x, rest_length, sh, how, s):
+    """:func:`slide_push_strands` of strand ``s`` (``how`` = ``(first, lead)``)."""
+    first, lead = how
+    lo0 = hi0 = float(x[s, first - 1, 0])
+    lo1 = hi1 = float(x[s, first - 1, 1])
+    lo2 = hi2 = float(x[s, first - 1, 2])
+    for j in range(first, x.shape[1]):
+        lo0, hi0 = min(lo0, float(x[s, j, 0])), max(hi0, float(x[s, j, 0]))
+        lo1, hi1 = min(lo1, float(x[s, j, 1])), max(hi1, float(x[s, j, 1]))
+        lo2, hi2 = min(lo2, float(x[s, j, 2])), max(hi2, float(x[s, j, 2]))
+    far = True
+    for k in range(lead, sh.shape[0]):
+        if box_near(lo0, lo1, lo2, hi0, hi1, hi2, sh, k):
+            far = False
+            break
+    if far:
+        return 0
+    d0, d1, d2 = 0.0, 0.0, 0.0
+    moved = 0
+    for j in range(first, x.shape[1]):
+        o0, o1, o2 = float(x[s, j, 0]), float(x[s, j, 1]), float(x[s, j, 2])
+        x0, x1, x2 = o0 + d0, o1 + d1, o2 + d2
+        p0, p1, p2 = float(x[s, j - 1, 0]), float(x[s, j - 1, 1]), float(x[s, j - 1, 2])
+        length = rest_length[s, j - 1]
+        hit = False
+        carried = d0 != 0.0 or d1 != 0.0 or d2 != 0.0
+        for _ in range(STRAND_SWEEPS):
+            again = False
+            for k in range(sh.shape[0]):
+                if k < lead and not (hit or carried):
+                    continue
+                if not near(x0, x1, x2, sh, k) or not level(x0, x1, x2, sh, k) < 0.0:
+                    continue
+                x0, x1, x2 = slide_push(x0, x1, x2, p0, p1, p2, length, True, sh, k)
+                again = hit = True
+            if not again:
+                break
+            x0, x1, x2 = _at_length(x0, x1, x2, p0, p1, p2, length)
+        if hit:
+            moved += 1
+        d0, d1, d2 = x0 - o0, x1 - o1, x2 - o2
+        if d0 != 0.0 or d1 != 0.0 or d2 != 0.0:
+            x[s, j, 0], x[s, j, 1], x[s, j, 2] = x0, x1, x2
+    return moved
+
+
+@njit(cache=True, inline='always')
+def _at_length(x0, x1, x2, p0, p1, p2, length):
+    """``x`` moved along ``x - p`` to ``length`` from ``p`` (as it is when ``x = p``)."""
+    e0, e1, e2 = x0 - p0, x1 - p1, x2 - p2
+    n = math.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
+    if not n > 0.0:
+        return x0, x1, x2
+    f = length / n
+    return p0 + f * e0, p1 + f * e1, p2 + f * e2
