@@ -86,6 +86,29 @@ def test_the_strand_pass_leaves_no_node_inside_and_the_strand_below_follows(dtyp
     assert np.allclose(seg, 0.02, atol=1e-5)
 
 
+@pytest.mark.parametrize('dtype', [np.float64, np.float32])
+@pytest.mark.parametrize('lead', [0, 1])
+def test_the_shared_bound_test_changes_no_node(dtype, lead):
+    """Blocks of strands share a box bound test at each node index: the result is that of
+    every strand alone (a block of one, whose box is the node itself), bit for bit."""
+    body = SceneBody(Scene().with_changes(body__bust=True).body, 0.01,
+                     head=(np.zeros(3), np.array([0.1, 0.085, 0.11])))
+    sh = body.posed(head(), head(), 0.0)
+    rng = np.random.default_rng(7)
+    n = 20
+    roots = rng.normal(size=(200, 1, 3)) * 0.1 + np.array([0.0, 0.0, 1.45])
+    steps = rng.normal(size=(200, n, 3)) * 0.008 + np.array([0.0, 0.0, -0.02])
+    x = np.ascontiguousarray((roots + np.cumsum(steps, axis=1)).astype(dtype))
+    rest_length = np.linalg.norm(np.diff(x.astype(np.float64), axis=1), axis=2)
+    together = x.copy()
+    moved = kernels.slide_push_strands(together, rest_length, sh, 2, lead)
+    alone = x.copy()
+    one = sum(kernels.slide_push_strands(alone[s:s + 1], rest_length[s:s + 1], sh, 2, lead)
+              for s in range(len(x)))
+    assert moved > 100 and one == moved
+    assert np.array_equal(together, alone)
+
+
 def shoulder_box_points(points, h):
     """Points in the boxes of issue 34 at a 1.65 m person's shoulders (head frame): |y|
     0.09-0.20 m, |x| <= 0.07 m, 0.27-0.42 m below the head centre."""

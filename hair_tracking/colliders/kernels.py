@@ -12,8 +12,9 @@ that one next (one Gauss-Seidel pass, as a solver takes its constraints).
 import math
 
 from numba import njit, prange
+import numpy as np
 
-from hair_tracking.colliders.bounds import box_near, near
+from hair_tracking.colliders.bounds import lane_box, near, near_shapes
 from hair_tracking.colliders.contact import (bounded_start, carried, depth, FASTMATH, push_out,
                                              surface_normal)
 from hair_tracking.colliders.shapes import FRICTION
@@ -21,6 +22,8 @@ from hair_tracking.colliders.slide import level, slide_push
 
 #: Sweeps over the shapes a node of :func:`slide_push_strands` takes at most.
 STRAND_SWEEPS = 4
+#: Strands whose nodes at one index share a bound test in :func:`slide_push_strands`.
+STRAND_BLOCK = 64
 
 
 @njit(cache=True, fastmath=FASTMATH, error_model='numpy')
@@ -95,66 +98,94 @@ def slide_push_strands(x, rest_length, sh, first, lead):
     the strands ``x`` (S, N, 3) (float32 or float64, world [m], in place) with every shape of
     ``sh``, node by node from node ``first`` on: a node is first moved by its predecessor's
     displacement (the strand below a moved node follows it, its shape kept); then every shape
-    whose bound it is near (:func:`~hair_tracking.colliders.bounds.near`) and that it is inside
-    slides it at its rest segment's length ``rest_length[s, j - 1]`` from its predecessor and
-    pushes it onto the surface, after which it is put back at the rest length along its new
-    segment, in sweeps
+    that it is near (:func:`~hair_tracking.colliders.bounds.near`) and inside slides it at its
+    rest segment's length ``rest_length[s, j - 1]`` from its predecessor and pushes it onto the
+    surface, after which it is put back at the rest length along its new segment, in sweeps
     (:data:`STRAND_SWEEPS` at most) until one finds it inside no shape (a node slid out of
     one shape into an overlapping one slides out of that one next).  The first ``lead``
     shapes (the head collider, which the tracker or solver has applied already) are tested
-    only on nodes this pass moves; a strand whose box no other shape's bound meets
-    (:func:`~hair_tracking.colliders.bounds.box_near`) is left as it is after one read.
+    only on nodes this pass moves.
+
+    The bound test comes first and is shared: the strands go in blocks of
+    :data:`STRAND_BLOCK`, and at each node index the box of the block's nodes
+    (:func:`~hair_tracking.colliders.bounds.lane_box`) selects the shapes any of them may
+    touch (:func:`~hair_tracking.colliders.bounds.near_shapes`); a node index whose box meets
+    no shape is only carried, and a node's own tests run over the selected shapes until a
+    shape moves it (then over all of them, as it may have left the box).  The box contains
+    every node it stands for, so the result is the same as each node testing every shape.  A
+    node that is not finite is left as it is and carries nothing to the nodes after it.
     Returns the number of nodes a shape moved."""
+    blocks = (x.shape[0] + STRAND_BLOCK - 1) // STRAND_BLOCK
     total = 0
-    for s in prange(x.shape[0]):
-        total += _slide_push_strand(x, rest_length, sh, (first, lead), s)
+    for b in prange(blocks):
+        s0 = b * STRAND_BLOCK
+        total += _slide_push_block(x, rest_length, sh, (first, lead),
+                                   (s0, min(s0 + STRAND_BLOCK, x.shape[0])))
     return total
 
 
 @njit(cache=True, fastmath=FASTMATH, error_model='numpy')
-def _slide_push_strand(x, rest_length, sh, how, s):
-    """:func:`slide_push_strands` of strand ``s`` (``how`` = ``(first, lead)``)."""
+def _slide_push_block(x, rest_length, sh, how, strands):
+    """:func:`slide_push_strands` of the strands ``s0 <= s < s1`` (``how`` = ``(first,
+    lead)``, ``strands`` = ``(s0, s1)``)."""
     first, lead = how
-    lo0 = hi0 = float(x[s, first - 1, 0])
-    lo1 = hi1 = float(x[s, first - 1, 1])
-    lo2 = hi2 = float(x[s, first - 1, 2])
-    for j in range(first, x.shape[1]):
-        lo0, hi0 = min(lo0, float(x[s, j, 0])), max(hi0, float(x[s, j, 0]))
-        lo1, hi1 = min(lo1, float(x[s, j, 1])), max(hi1, float(x[s, j, 1]))
-        lo2, hi2 = min(lo2, float(x[s, j, 2])), max(hi2, float(x[s, j, 2]))
-    far = True
-    for k in range(lead, sh.shape[0]):
-        if box_near(lo0, lo1, lo2, hi0, hi1, hi2, sh, k):
-            far = False
-            break
-    if far:
-        return 0
-    d0, d1, d2 = 0.0, 0.0, 0.0
+    s0, s1 = strands
+    m = s1 - s0
+    shapes = sh.shape[0]
+    d = np.zeros((3, STRAND_BLOCK))          # each strand's carried displacement
+    cur = np.empty((3, STRAND_BLOCK))        # its node at this index, carried
+    near_k = np.empty(shapes, dtype=np.int64)
+    listed = np.zeros(shapes, dtype=np.bool_)
     moved = 0
+    carrying = False
     for j in range(first, x.shape[1]):
-        o0, o1, o2 = float(x[s, j, 0]), float(x[s, j, 1]), float(x[s, j, 2])
-        x0, x1, x2 = o0 + d0, o1 + d1, o2 + d2
-        p0, p1, p2 = float(x[s, j - 1, 0]), float(x[s, j - 1, 1]), float(x[s, j - 1, 2])
-        length = rest_length[s, j - 1]
-        hit = False
-        carried = d0 != 0.0 or d1 != 0.0 or d2 != 0.0
-        for _ in range(STRAND_SWEEPS):
-            again = False
-            for k in range(sh.shape[0]):
-                if k < lead and not (hit or carried):
-                    continue
-                if not near(x0, x1, x2, sh, k) or not level(x0, x1, x2, sh, k) < 0.0:
-                    continue
-                x0, x1, x2 = slide_push(x0, x1, x2, p0, p1, p2, length, True, sh, k)
-                again = hit = True
-            if not again:
-                break
-            x0, x1, x2 = _at_length(x0, x1, x2, p0, p1, p2, length)
-        if hit:
-            moved += 1
-        d0, d1, d2 = x0 - o0, x1 - o1, x2 - o2
-        if d0 != 0.0 or d1 != 0.0 or d2 != 0.0:
-            x[s, j, 0], x[s, j, 1], x[s, j, 2] = x0, x1, x2
+        for i in range(m):
+            for a in range(3):
+                cur[a, i] = float(x[s0 + i, j, a]) + d[a, i]
+        lo0, lo1, lo2, hi0, hi1, hi2 = lane_box(cur[0], cur[1], cur[2], m)
+        count = near_shapes(lo0, lo1, lo2, hi0, hi1, hi2, sh, near_k)
+        work = False
+        for k in range(shapes):
+            listed[k] = False
+        for i in range(count):
+            listed[near_k[i]] = True
+            work = work or near_k[i] >= lead or carrying
+        if not (work or carrying):
+            continue
+        carrying = False
+        for i in range(m):
+            s = s0 + i
+            o0, o1, o2 = float(x[s, j, 0]), float(x[s, j, 1]), float(x[s, j, 2])
+            x0, x1, x2 = cur[0, i], cur[1, i], cur[2, i]
+            carried = d[0, i] != 0.0 or d[1, i] != 0.0 or d[2, i] != 0.0
+            hit = False
+            if work:
+                p0, p1, p2 = float(x[s, j - 1, 0]), float(x[s, j - 1, 1]), \
+                    float(x[s, j - 1, 2])
+                length = rest_length[s, j - 1]
+                for _ in range(STRAND_SWEEPS):
+                    again = False
+                    for k in range(shapes):
+                        if k < lead and not (hit or carried):
+                            continue
+                        if not (hit or listed[k]):
+                            continue          # the box, which holds x, misses its bound
+                        if not near(x0, x1, x2, sh, k) or not level(x0, x1, x2, sh, k) < 0.0:
+                            continue
+                        x0, x1, x2 = slide_push(x0, x1, x2, p0, p1, p2, length, True, sh, k)
+                        again = hit = True
+                    if not again:
+                        break
+                    x0, x1, x2 = _at_length(x0, x1, x2, p0, p1, p2, length)
+            if hit:
+                moved += 1
+            d0 = d1 = d2 = 0.0
+            if (hit or carried) and math.isfinite(x0 + x1 + x2 - o0 - o1 - o2):
+                d0, d1, d2 = x0 - o0, x1 - o1, x2 - o2
+            d[0, i], d[1, i], d[2, i] = d0, d1, d2
+            if d0 != 0.0 or d1 != 0.0 or d2 != 0.0:
+                x[s, j, 0], x[s, j, 1], x[s, j, 2] = x0, x1, x2
+                carrying = True
     return moved
 
 
