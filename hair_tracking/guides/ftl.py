@@ -32,7 +32,8 @@ import math
 import numpy as np
 from numba import int64, njit, prange
 
-from hair_tracking.colliders.contact import surface_point
+from hair_tracking.colliders.bounds import near
+from hair_tracking.colliders.contact import outside_within, project, surface_point
 from hair_tracking.guides.collision import (placed, placed_shape, project_block,
                                             rotation_entries, to_head, world_center)
 from hair_tracking.guides.integrate import (BLOCK, carry_rigid_block, FASTMATH, finalize_block,
@@ -257,6 +258,86 @@ def ftl_restore_block(x, rest, rest_length, rot, ellipsoid, corr, s0, s1):
             x[s, i, 0] = px
             x[s, i, 1] = py
             x[s, i, 2] = pz
+
+
+@njit(cache=True, nogil=True, parallel=True, fastmath=FASTMATH, error_model='numpy')
+def ftl_restore_shapes(x, x_old, rest, rest_length, rot, sh, corr, cap):
+    """Kernel: the collision-aware FTL pass of :func:`ftl_restore` against every shape of the
+    posed table ``sh`` (the body's bust), run after their contact
+    (:func:`~hair_tracking.colliders.kernels.collide`) moved nodes.
+
+    Each strand is walked from its first node off its rest distance
+    (:data:`RESTORE_LENGTH_TOLERANCE`) or more than :data:`RESTORE_TOLERANCE` inside a shape:
+    each node is put at its rest distance from its predecessor (:func:`ftl_direction`, ``rot``
+    the head rotation for a collapsed segment), and while that point lies inside a shape it is
+    projected onto the surface (:func:`~hair_tracking.colliders.contact.project`) and put back
+    at the rest distance, up to :data:`RESTORE_ITERATIONS` times, so lengths stay exact.
+
+    The push-out velocity bound holds for the walk too: of a node's correction ``c``, at most
+    ``cap`` [m] (``cap < 0``: no bound) is motion, added to ``corr`` (the velocity update damps
+    it like the first pass's); the rest is applied to ``x_old`` as well (as
+    :func:`~hair_tracking.colliders.contact.bounded_start` does), so a strand pushed far by a
+    shape that jumped or appeared is moved without being launched.  Returns the number of
+    strands walked."""
+    walked = 0
+    for s in prange(x.shape[0]):
+        walked += _restore_shapes_strand(x, x_old, rest, rest_length, rot, sh, corr, cap, s)
+    return walked
+
+
+@njit(cache=True, inline='always')
+def _inside_shape(x0, x1, x2, sh):
+    """The first shape of ``sh`` that ``x`` lies more than :data:`RESTORE_TOLERANCE` inside,
+    -1 for none."""
+    for k in range(sh.shape[0]):
+        if near(x0, x1, x2, sh, k) and not outside_within(x0, x1, x2, sh, k, RESTORE_TOLERANCE):
+            return k
+    return -1
+
+
+@njit(cache=True, fastmath=FASTMATH, error_model='numpy')
+def _restore_shapes_strand(x, x_old, rest, rest_length, rot, sh, corr, cap, s):
+    """:func:`ftl_restore_shapes` of strand ``s``; 1 if walked, else 0."""
+    n = x.shape[1]
+    start = n
+    for i in range(2, n):
+        dx, dy, dz = x[s, i, 0] - x[s, i - 1, 0], x[s, i, 1] - x[s, i - 1, 1], \
+            x[s, i, 2] - x[s, i - 1, 2]
+        r2 = rest_length[s, i - 1] * rest_length[s, i - 1]
+        if abs(dx * dx + dy * dy + dz * dz - r2) > RESTORE_LENGTH_TOLERANCE * r2 or \
+                _inside_shape(x[s, i, 0], x[s, i, 1], x[s, i, 2], sh) >= 0:
+            start = i
+            break
+    for i in range(start, n):
+        ox, oy, oz = x[s, i, 0], x[s, i, 1], x[s, i, 2]
+        bx, by, bz = x[s, i - 1, 0], x[s, i - 1, 1], x[s, i - 1, 2]
+        ex, ey, ez = rest[s, i, 0] - rest[s, i - 1, 0], rest[s, i, 1] - rest[s, i - 1, 1], \
+            rest[s, i, 2] - rest[s, i - 1, 2]
+        r = rest_length[s, i - 1]
+        px, py, pz = ox, oy, oz
+        for it in range(RESTORE_ITERATIONS + 1):
+            dx, dy, dz, f = ftl_direction(px - bx, py - by, pz - bz, r, ex, ey, ez, rot)
+            px, py, pz = bx + f * dx, by + f * dy, bz + f * dz
+            if it == RESTORE_ITERATIONS:
+                break
+            k = _inside_shape(px, py, pz, sh)
+            if k < 0:
+                break
+            _, px, py, pz = project(px, py, pz, sh, k)
+        cx, cy, cz = px - ox, py - oy, pz - oz
+        c = math.sqrt(cx * cx + cy * cy + cz * cz)
+        keep = 1.0 if cap < 0.0 or c <= cap else cap / c
+        corr[s, i, 0] += keep * cx
+        corr[s, i, 1] += keep * cy
+        corr[s, i, 2] += keep * cz
+        if keep < 1.0:
+            x_old[s, i, 0] += (1.0 - keep) * cx
+            x_old[s, i, 1] += (1.0 - keep) * cy
+            x_old[s, i, 2] += (1.0 - keep) * cz
+        x[s, i, 0] = px
+        x[s, i, 1] = py
+        x[s, i, 2] = pz
+    return 1 if start < n else 0
 
 
 @njit(cache=True, nogil=True, parallel=True, fastmath=FASTMATH, error_model='numpy')

@@ -18,7 +18,8 @@ and their roots follow the head. One call of :meth:`GuideSolver.step` is one sub
    friction measured against the start-of-substep positions carried rigidly with the head; then,
    only if the scene has a body (``body.bust``), the bust's capsules
    (:class:`~hair_tracking.colliders.scene_body.SceneBody`, the contact model's collision stage
-   :func:`~hair_tracking.colliders.kernels.collide` with its push-out velocity bound);
+   :func:`~hair_tracking.colliders.kernels.collide` with its push-out velocity bound; FTL
+   then walks the pushed strands again, :func:`~hair_tracking.guides.ftl.ftl_restore_shapes`);
 6. per-substep displacement clamp (``scene.solver.max_displacement``; 0 disables) and the
    velocity update ``v = (p - x) / dt`` (FTL: minus ``ftl_damping d_{i+1} / dt``) —
    :mod:`~hair_tracking.guides.integrate`.
@@ -297,9 +298,13 @@ class GuideSolver:
             if self.body is not None:
                 # the start of the substep is the friction reference and, moved by the
                 # push-out bound, the velocity's
-                contacts += contact_kernels.collide(
-                    st.x, self._x_old, st.inv_mass, self.body.posed(head_prev, head, dt),
-                    self.body.push_cap(dt), self._x_old)
+                bust = self.body.posed(head_prev, head, dt)
+                pushed = contact_kernels.collide(st.x, self._x_old, st.inv_mass, bust,
+                                                 self.body.push_cap(dt), self._x_old)
+                if pushed and self.kind == 'ftl':
+                    ftl.ftl_restore_shapes(st.x, self._x_old, st.rest, st.rest_length, rot,
+                                           bust, self._corr, self.body.push_cap(dt))
+                contacts += pushed
             finalize = integrate.finalize if parallel else integrate.finalize_serial
             ftl_ = self.kind == 'ftl'
             clamped = finalize(st.x, st.v, self._x_old, st.inv_mass,
