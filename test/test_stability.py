@@ -56,6 +56,8 @@ def test_full_matrix_is_larger_and_has_the_hour():
     assert len(long) == 1 and 'one hour' in long[0].name
     for solver in ('ftl', 'pbd', 'xpbd'):
         assert any(c.scene.solver.type == solver and c.group == 'time step' for c in full)
+    body = [c for c in full if c.group == 'body']
+    assert len(body) == 2 and all(c.scene.body.bust for c in body)
 
 
 # ------------------------------------------------------------- the checks can fail

@@ -21,7 +21,7 @@ from hair_tracking.colliders.shapes import FRICTION
 from hair_tracking.colliders.slide import level, slide_push
 
 #: Sweeps over the shapes a node of :func:`slide_push_strands` takes at most.
-STRAND_SWEEPS = 4
+STRAND_SWEEPS = 16
 #: Strands whose nodes at one index share a bound test in :func:`slide_push_strands`.
 STRAND_BLOCK = 64
 

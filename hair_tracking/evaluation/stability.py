@@ -51,6 +51,7 @@ from hair_tracking.core.scene import Scene
 from hair_tracking.evaluation import synthetic_motion as sm
 from hair_tracking.motion.head_motion import angular_speed, HeadMotion, linear_speed
 from hair_tracking.motion.pose_table import load_bundled_walk
+from hair_tracking.resources import config_path
 from hair_tracking.simulator import HairSimulator
 
 #: Bound on the guides' max stretch ``max |l/l0 - 1|`` per solver (see docs/stability.md).
@@ -384,6 +385,13 @@ def matrix(quick: bool = False, tracking_mode: Optional[str] = None) -> List[Cas
     if not quick:
         add('ftl ghosts collide, walk', 'head speed', _scene('ftl', tracking__collide=True),
             lambda: _walk(), 'bundled walk; ghosts collide with the head (tracking.collide)')
+    # -- long hair resting on the body's bust (config/scene_long_hair.yaml, body.bust)
+    if not quick:
+        long_hair = Scene.from_yaml(config_path('long_hair')).with_changes(
+            groom__guides=BASE.groom.guides, groom__ghosts_per_guide=BASE.groom.ghosts_per_guide)
+        for label, stream, desc in fast[:2]:
+            add(f'ftl long hair on the bust, {label}', 'body', long_hair, stream,
+                desc + '; 55 cm hair on the shoulders (body.bust)')
     # -- teleports
     for solver in (('ftl',) if quick else SOLVERS):
         add(f'{solver} teleport 1 m', 'teleport', _scene(solver),
