@@ -122,8 +122,7 @@ def shoulder_box_points(points, h):
 
 def test_long_hair_rests_on_the_shoulders():
     scene = Scene.from_yaml('config/scene_long_hair.yaml').with_changes(
-        groom__guides=24, groom__ghosts_per_guide=8)
-    assert scene.body.bust
+        groom__guides=24, groom__ghosts_per_guide=8, body__bust=True)
     out = {}
     for bust in (False, True):
         sim = HairSimulator(scene.with_changes(body__bust=bust))
@@ -151,8 +150,8 @@ def test_long_hair_guides_keep_their_lengths_on_the_bust():
     """The FTL guides resting on the bust keep their segment lengths (FTL's stretch bound of
     the stability matrix) and stay out of the bare bust."""
     scene = Scene.from_yaml('config/scene_long_hair.yaml').with_changes(
-        groom__guides=24, groom__ghosts_per_guide=2)
-    assert scene.solver.type == 'ftl' and scene.body.bust
+        groom__guides=24, groom__ghosts_per_guide=2, body__bust=True)
+    assert scene.solver.type == 'ftl'
     sim = HairSimulator(scene)
     body = sim.guide_solver.body
     t = 1_000_000_000

@@ -385,10 +385,11 @@ def matrix(quick: bool = False, tracking_mode: Optional[str] = None) -> List[Cas
     if not quick:
         add('ftl ghosts collide, walk', 'head speed', _scene('ftl', tracking__collide=True),
             lambda: _walk(), 'bundled walk; ghosts collide with the head (tracking.collide)')
-    # -- long hair resting on the body's bust (config/scene_long_hair.yaml, body.bust)
+    # -- long hair resting on the body's bust (config/scene_long_hair.yaml with body.bust)
     if not quick:
         long_hair = Scene.from_yaml(config_path('long_hair')).with_changes(
-            groom__guides=BASE.groom.guides, groom__ghosts_per_guide=BASE.groom.ghosts_per_guide)
+            groom__guides=BASE.groom.guides, groom__ghosts_per_guide=BASE.groom.ghosts_per_guide,
+            body__bust=True)
         for label, stream, desc in fast[:2]:
             add(f'ftl long hair on the bust, {label}', 'body', long_hair, stream,
                 desc + '; 55 cm hair on the shoulders (body.bust)')
