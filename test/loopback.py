@@ -1,5 +1,6 @@
 """A publisher and a subscriber in one process, over DDS: what the tests of the message writers
-use to show that bytes they publish arrive as the message they stand for."""
+use to show that bytes they publish arrive as the message they stand for; and the bounded spin
+the tests that talk over DDS wait with."""
 import time
 
 

@@ -16,6 +16,7 @@ from hair_tracking.bags import io as bag_io
 from hair_tracking.ros.bag_cli import main
 from hair_tracking.ros.bag_play import BagPlayer
 from hair_tracking.ros.bag_record import BagRecorder
+from loopback import spin_until
 
 DOMAIN_ROUNDTRIP = 51
 DOMAIN_LOOP = 53
@@ -38,13 +39,6 @@ def _raw(path, topic):
     with bag_io.open_bag(path) as r:
         conns = [c for c in r.connections if c.topic == topic]
         return [(t, bytes(raw)) for _, t, raw in bag_io.messages(r, conns)]
-
-
-def _spin_until(executor, cond, timeout):
-    end = time.monotonic() + timeout
-    while not cond() and time.monotonic() < end:
-        executor.spin_once(timeout_sec=0.02)
-    return cond()
 
 
 @pytest.fixture
@@ -84,14 +78,14 @@ def test_play_into_recorder_and_sim_time_subscriber(tmp_path, ros_context):
     for n in (rec_node, sim_node):
         ex.add_node(n)
     try:
-        assert _spin_until(ex, lambda: not recorder.missing(), WAIT_S), recorder.missing()
+        assert spin_until(ex, lambda: not recorder.missing(), WAIT_S), recorder.missing()
         assert not player.wait_for_subscribers(WAIT_S)
-        assert _spin_until(ex, lambda: play_node.count_subscribers('/clock') >= 2, WAIT_S)
+        assert spin_until(ex, lambda: play_node.count_subscribers('/clock') >= 2, WAIT_S)
         stats = {}
         th = threading.Thread(target=lambda: stats.update(s=player.play()))
         th.start()
         want = int(np.sum((stamps >= stamps[0] + 10 ** 8) & (stamps < stamps[0] + 4 * 10 ** 8)))
-        _spin_until(ex, lambda: not th.is_alive() and len(seen) >= want and min(
+        spin_until(ex, lambda: not th.is_alive() and len(seen) >= want and min(
             recorder.counts.get(t, 0) for t in ('/moved/pose', '/clock')) >= want, WAIT_S)
         th.join(WAIT_S)
         path = recorder.close()
@@ -168,7 +162,7 @@ def test_loop_stops_on_request_and_restarts_time(tmp_path, ros_context):
         assert not player.wait_for_subscribers(WAIT_S)
         th = threading.Thread(target=player.play)
         th.start()
-        _spin_until(ex, lambda: len(got) >= 30, WAIT_S)
+        spin_until(ex, lambda: len(got) >= 30, WAIT_S)
         player.stop()
         th.join(WAIT_S)
         assert not th.is_alive()
