@@ -21,7 +21,6 @@ from hair_tracking.guides.reference import (ftl_pass as ref_ftl_pass,
                                             guide_finalize as ref_finalize,
                                             guide_predict as ref_predict,
                                             pbd_sweep as ref_pbd_sweep,
-                                            shape_sweep as ref_shape_sweep,
                                             xpbd_sweep as ref_xpbd_sweep)
 
 ATOL = 1e-12
@@ -92,11 +91,12 @@ def run_xpbd_step(x, v, x_old, rest, im, rest_length, bend_rest, lam_s, lam_b, c
         tuple(work))
 
 
-def run_ftl_step(x, v, x_old, corr, rest, im, rest_length, c, passes, kb, s_damp, max_disp,
-                 finalize):
+def run_ftl_step(x, v, x_old, corr, rest, im, rest_length, bend_rest, c, passes, kb, s_damp,
+                 max_disp, finalize):
     """:func:`ftl.ftl_step` with its arguments built from plain arrays."""
     return ftl.ftl_step(
-        tuple(ftl.FtlModel(rest, im, rest_length)),
+        tuple(ftl.FtlModel(rest, im, rest_length, bend_rest,
+                           pbd_constraints.pair_weights(im, 2))),
         tuple(integrate.GuideState(x, v, x_old)), kernel_common(c),
         tuple(ftl.FtlParams(passes, kb, s_damp, max_disp, finalize)), corr)
 
@@ -190,14 +190,15 @@ def test_xpbd_step_matches_reference(finalize):
 @pytest.mark.parametrize('finalize', [True, False])
 def test_ftl_step_matches_reference(finalize):
     c = random_case(4, all_free=True)
+    bend_rest = pbd_constraints.second_neighbour_rest(c['rest'])
     kb, s_damp, max_disp = 0.5, 0.85, 0.01
     p, xc, vn = reference_predict(c)
-    ref_shape_sweep(p, c['rest'], c['rot'], kb)
+    ref_pbd_sweep(p, bend_rest, c['inv_mass'], 2, kb)
     corr = ref_ftl_pass(p, c['rest'], c['rest_length'], c['rot'])
     x, v, x_old = c['x'].copy(), c['v'].copy(), np.zeros_like(c['x'])
     k_corr = np.full_like(x, np.nan)
     clamped = run_ftl_step(x, v, x_old, k_corr, c['rest'], c['inv_mass'], c['rest_length'],
-                           c, 1, kb, s_damp, max_disp, finalize)
+                           bend_rest, c, 1, kb, s_damp, max_disp, finalize)
     assert np.allclose(k_corr, corr, rtol=0, atol=ATOL)
     if finalize:
         p_ref, v_ref, clamped_ref = ref_finalize(p, xc, c['inv_mass'], corr, c['dt'], max_disp,
@@ -236,10 +237,10 @@ def test_solver_steps_match_the_package_reference_steps(kind):
                                 lanes(np.zeros((im.shape[0], im.shape[1] - 2))), c, 3, a_s, a_b,
                                 max_disp, True)
     else:
-        want = reference.ftl_step(c['x'], c['v'], c['rest'], im, c['rest_length'], motion, dt,
-                                  2, 0.4, 0.8, max_disp)
+        want = reference.ftl_step(c['x'], c['v'], c['rest'], im, c['rest_length'], bend_rest,
+                                  motion, dt, 2, 0.4, 0.8, max_disp)
         clamped = run_ftl_step(x, v, x_old, np.zeros_like(x), c['rest'], im, c['rest_length'],
-                               c, 2, 0.4, 0.8, max_disp, True)
+                               bend_rest, c, 2, 0.4, 0.8, max_disp, True)
     assert want[2] > 0 and clamped == want[2]
     assert np.allclose(x, want[0], rtol=0, atol=ATOL)
     assert np.allclose(v, want[1], rtol=0, atol=1e-9)

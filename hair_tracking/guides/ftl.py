@@ -16,10 +16,9 @@ not vanish (each substep gravity's prediction is undone by the pass, and ``v_i =
 g dt)`` settles at up to ``s_damp g dt / (1 - s_damp)``, 0.37 m/s at dt = 1/240 s and
 ``s_damp = 0.9``); use displacements, not ``v``, to judge whether FTL hair is at rest.
 
-Bending comes first: a root-to-tip sweep of the local shape constraints with
-``bend_stiffness`` (every segment pulled toward its groomed direction in its parent segment's
-frame, :func:`hair_tracking.guides.local_shape.shape_sweep_block`), then the FTL pass restores
-the lengths exactly; ``bend_passes`` rounds of both (one at the default
+Bending comes first: a PBD Gauss–Seidel sweep of the second-neighbour distance constraints
+with ``bend_stiffness`` (:func:`hair_tracking.guides.pbd_constraints.pbd_sweep_block`), then the
+FTL pass restores the lengths exactly; ``bend_passes`` rounds of both (one at the default
 substep, more at long ones: :func:`hair_tracking.guides.solver.ftl_bend_rounds`), the
 corrections ``d_i`` of the rounds summed. ``iterations`` of the scene does not apply to FTL.
 
@@ -39,11 +38,12 @@ from hair_tracking.guides.collision import (placed, placed_shape, project_block,
                                             rotation_entries, to_head, world_center)
 from hair_tracking.guides.integrate import (BLOCK, carry_rigid_block, FASTMATH, finalize_block,
                                             max_step_sq_block, predict_block, split_due)
-from hair_tracking.guides.local_shape import shape_sweep_block
+from hair_tracking.guides.pbd_constraints import pbd_sweep_block
 
-#: Static data of :func:`ftl_step`: ``rest`` (S, N, 3) the groomed shape, head frame [m] (the
-#: bending's rest directions too), ``inv_mass`` (S, N), ``rest_length`` (S, N-1).
-FtlModel = namedtuple('FtlModel', ['rest', 'inv_mass', 'rest_length'])
+#: Static data of :func:`ftl_step`: ``rest`` (S, N, 3) head frame [m], ``inv_mass`` (S, N),
+#: ``rest_length`` (S, N-1), ``bend_rest`` (S, N-2) second-neighbour rest distances [m],
+#: ``bend_w`` from :func:`hair_tracking.guides.pbd_constraints.pair_weights` with gap 2.
+FtlModel = namedtuple('FtlModel', ['rest', 'inv_mass', 'rest_length', 'bend_rest', 'bend_w'])
 #: Parameters of :func:`ftl_step`: rounds of a bending sweep and the FTL pass, the bending
 #: stiffness (0: no bending), the velocity correction ``s_damp`` 0..1, the displacement clamp
 #: [m] (0: off), whether to finalize.
@@ -387,11 +387,11 @@ def ftl_block(model, state, motion, bend_passes, bend_stiffness, corr, s0, s1):
     ``s0 <= s < s1``: a substep up to the collision and finalize (:func:`ftl_step`,
     :func:`ftl_collide_step`)."""
     x = state[0]
-    rest, inv_mass, rest_length = model                                 # FtlModel
+    rest, inv_mass, rest_length, bend_rest, bend_w = model              # FtlModel
     predict_block(state, rest, inv_mass, motion, s0, s1)
     for r in range(bend_passes):
         if bend_stiffness > 0.0:
-            shape_sweep_block(x, rest, motion[0], bend_stiffness, s0, s1)
+            pbd_sweep_block(x, bend_rest, bend_w, 2, bend_stiffness, s0, s1)
         ftl_pass_block(x, rest, rest_length, motion[0], corr, s0, s1, r > 0)
 
 
@@ -447,7 +447,7 @@ def ftl_collide_block(model, state, motion, params, work, contact, s0, s1):
     head pose, :data:`~hair_tracking.guides.collision.Contact`); returns ``(clamped,
     contacts)``."""
     x, v, x_old = state                                                 # GuideState
-    rest, inv_mass, rest_length = model                                 # FtlModel
+    rest, inv_mass, rest_length, bend_rest, bend_w = model              # FtlModel
     rot, pos, rot_rel, pos_prev, gravity, damp, dt, shock = motion      # StepMotion
     bend_passes, bend_stiffness, s_damp, max_disp, _ = params          # FtlParams
     corr, x_ref = work                                                  # FtlWork[:2]

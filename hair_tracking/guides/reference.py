@@ -15,8 +15,6 @@ Guide solvers (Mueller et al. 2007 "Position Based Dynamics"; Macklin, Mueller &
   motion, velocity damped, gravity, explicit Euler prediction;
 * :func:`pbd_sweep` / :func:`xpbd_sweep` -- one Gauss-Seidel sweep of distance constraints between
   nodes ``gap`` apart (gap 1: stretching, gap 2: bending as a second-neighbour distance);
-* :func:`shape_sweep` -- FTL's bending: every segment pulled toward its groomed direction in its
-  parent segment's frame (local shape constraints, Han & Harada 2012);
 * :func:`ftl_pass` -- Follow-The-Leader: every node put at its rest length from its parent;
 * :func:`guide_finalize` -- displacement clamp, FTL velocity correction, ``v = (x - x_old) / dt``;
 * :func:`pbd_step`, :func:`xpbd_step`, :func:`ftl_step` -- whole substeps composed of these.
@@ -78,35 +76,6 @@ def xpbd_sweep(p, rest_dist, inv_mass, lam, gap, alpha_tilde):
         lam[:, i] += dlam
         p[:, i] -= (wi * dlam)[:, None] * nrm
         p[:, j] += (wj * dlam)[:, None] * nrm
-
-
-def shape_sweep(p, rest, rot, k):
-    """One root-to-tip sweep of the local shape constraints with stiffness ``k``, in place on
-    ``p``: every segment becomes ``(1 - k)`` times itself plus ``k`` times its rest segment
-    carried by its parent segment's frame, hung from its (already moved) parent node; then the
-    frame turns by the smallest rotation from the rest segment so carried onto the new segment
-    (kept when the two are opposite).  The first frame is the head rotation ``rot``."""
-    s, n, _ = p.shape
-    frame = np.repeat(rot[None], s, axis=0)
-    parent = p[:, 1].copy()
-    for i in range(2, n):
-        a = np.einsum('sij,sj->si', frame, rest[:, i] - rest[:, i - 1])
-        old = p[:, i].copy()
-        p[:, i] = p[:, i - 1] + (1.0 - k) * (old - parent) + k * a
-        parent = old
-        b = p[:, i] - p[:, i - 1]
-        la, lb = np.einsum('si,si->s', a, a), np.einsum('si,si->s', b, b)
-        f = 1.0 / np.sqrt(np.maximum(la * lb, 1e-300))
-        c = np.einsum('si,si->s', a, b) * f
-        v = np.cross(a, b) * f[:, None]
-        turn = (la > 1e-24) & (lb > 1e-24) & (1.0 + c > 1e-24)
-        h = np.where(turn, 1.0 / np.where(turn, 1.0 + c, 1.0), 0.0)
-        cross = np.zeros((s, 3, 3))         # [v]x
-        cross[:, 0, 1], cross[:, 0, 2], cross[:, 1, 2] = -v[:, 2], v[:, 1], -v[:, 0]
-        cross[:, 1, 0], cross[:, 2, 0], cross[:, 2, 1] = v[:, 2], -v[:, 1], v[:, 0]
-        turned = c[:, None, None] * np.eye(3) + cross + \
-            h[:, None, None] * np.einsum('si,sj->sij', v, v)
-        frame = np.where(turn[:, None, None], turned @ frame, frame)
 
 
 def ftl_pass(p, rest, rest_length, rot):
@@ -183,17 +152,16 @@ def xpbd_step(x, v, rest, inv_mass, rest_length, bend_rest, motion, dt, iteratio
     return guide_finalize(p, xc, inv_mass, None, dt, max_disp, 0.0) + (lam_s, lam_b)
 
 
-def ftl_step(x, v, rest, inv_mass, rest_length, motion, dt, bend_passes, bend_stiffness,
-             s_damp, max_disp):
-    """One FTL substep of all guides: predict, ``bend_passes`` rounds of a sweep of the local
-    shape constraints (if ``bend_stiffness > 0``) and the FTL pass (the corrections of the
-    rounds summed),
+def ftl_step(x, v, rest, inv_mass, rest_length, bend_rest, motion, dt, bend_passes,
+             bend_stiffness, s_damp, max_disp):
+    """One FTL substep of all guides: predict, ``bend_passes`` rounds of a PBD bending sweep
+    (if ``bend_stiffness > 0``) and the FTL pass (the corrections of the rounds summed),
     finalize with the velocity correction ``s_damp``.  As :func:`pbd_step`; returns ``(x, v,
     clamped, corrections)``."""
     p, xc, _ = guide_predict(x, v, rest, inv_mass, dt=dt, **motion)
     corr = np.zeros_like(p)
     for _ in range(bend_passes):
         if bend_stiffness > 0.0:
-            shape_sweep(p, rest, motion['rot'], bend_stiffness)
+            pbd_sweep(p, bend_rest, inv_mass, 2, bend_stiffness)
         corr += ftl_pass(p, rest, rest_length, motion['rot'])
     return guide_finalize(p, xc, inv_mass, corr, dt, max_disp, s_damp) + (corr,)

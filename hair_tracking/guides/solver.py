@@ -121,15 +121,17 @@ class GuideSolver:
         im = strands.inv_mass
         self._x_old = np.empty_like(strands.x)
         self._rot_rel = np.empty((3, 3))
+        self._bend_rest = pbd_constraints.second_neighbour_rest(strands.rest)
         if self.kind == 'ftl':
+            self._bend_w = pbd_constraints.pair_weights(im, 2)
             self._corr = np.zeros_like(strands.x)
-            self.model = tuple(ftl.FtlModel(strands.rest, im, strands.rest_length))
+            self.model = tuple(ftl.FtlModel(strands.rest, im, strands.rest_length,
+                                            self._bend_rest, self._bend_w))
         else:
             # the PBD and XPBD kernels read their per-constraint data block by block, strands
             # side by side (pbd_constraints.lane_major), and project in a work space
             lanes = pbd_constraints.lane_major
             s, n = im.shape
-            self._bend_rest = pbd_constraints.second_neighbour_rest(strands.rest)
             self._work = pbd_constraints.lane_work(s, n)
             self._rest_length_l = lanes(strands.rest_length)
             self._bend_rest_l = lanes(self._bend_rest)
@@ -420,7 +422,7 @@ def ftl_bend_stiffness(k: float, dt: float) -> float:
     """
     k = float(k)
     ratio = dt / BEND_REFERENCE_DT
-    if ratio <= 1.0 + REFERENCE_TOLERANCE or k <= 0.0 or k >= 1.0:
+    if abs(ratio - 1.0) <= REFERENCE_TOLERANCE or k <= 0.0 or k >= 1.0:
         return k
     return 1.0 - (1.0 - k) ** (ratio * ratio / ftl_bend_rounds(dt))
 
