@@ -10,7 +10,7 @@ per-strand colours (:mod:`hair_tracking.output.strand_colors`); markers are ``li
 ``line_strips`` with a DELETEALL in front of the first array of a namespace and whenever its
 strand count or style changes, and a lifetime of ``marker_lifetime``.
 """
-from typing import Callable, Dict, NamedTuple, Sequence
+from typing import Callable, Dict, NamedTuple, Optional, Sequence
 
 import numpy as np
 
@@ -61,18 +61,25 @@ class FrameEncoder:
         return s.guide_color if ns == 'guides' else s.marker_color
 
     def cloud(self, n_strands: int, n_points: int, write_xyz: Callable, frame_id: str,
-              stamp_ns: int, ns: str = 'hair', rgba=None) -> np.ndarray:
+              stamp_ns: int, ns: str = 'hair', rgba=None, first: int = 0,
+              total: Optional[int] = None) -> np.ndarray:
         """The cloud whose coordinates ``write_xyz(words, stride)`` writes (as
         :meth:`hair_tracking.simulator.HairSimulator.record_writer`'s), in the buffer of
         ``ns``: valid until the next cloud of ``ns``.  ``rgba``: the strands' colour (default:
-        ``marker_color``, ``guide_color`` for ``ns`` guides)."""
+        ``marker_color``, ``guide_color`` for ``ns`` guides).  ``first``, ``total``: the rows
+        are strands ``first`` .. ``first + n_strands - 1`` of ``total`` (a ghost shard's),
+        numbered and coloured as in the cloud of all."""
         buf = self._clouds.get(ns)
         if buf is None:
             buf = self._clouds[ns] = CloudBuffer()
         s = self.settings
-        rgb = self.colors(ns, n_strands, self._rgba(ns, rgba)) if s.cloud_rgb else None
+        whole = n_strands if total is None else int(total)
+        rgb = None
+        if s.cloud_rgb:
+            rgb = self.colors(ns, whole, self._rgba(ns, rgba))[first:first + n_strands]
+        ids = np.arange(first, first + n_strands) if first else None
         return buf.encode(n_strands, n_points, write_xyz, frame_id=frame_id, stamp_ns=stamp_ns,
-                          packed_rgb=rgb, strand_field=s.cloud_strand)
+                          packed_rgb=rgb, strand_ids=ids, strand_field=s.cloud_strand)
 
     def markers(self, strands: np.ndarray, frame_id: str, stamp_ns: int, ns: str = 'hair',
                 rgba=None) -> Encoded:

@@ -64,10 +64,12 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from rclpy.qos import qos_profile_sensor_data
 from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import PointCloud2
+from std_msgs.msg import String
 from std_srvs.srv import Trigger
 from visualization_msgs.msg import Marker, MarkerArray
 
 from msg_adapters.capsule_markers import capsule_markers
+from msg_adapters.guide_state import GuideState
 from msg_adapters.head_marker import collider_marker
 from msg_adapters.pose import pose_from_msg, PoseError
 from msg_adapters.rcl_serialized import SerializedPublisher
@@ -90,6 +92,7 @@ from hair_tracking.output.settings import apply_changes, make_settings, NODE_NAM
 from hair_tracking.output.diagnostics import HairHealth, HARDWARE_ID, make_status, \
     status_name, WARN
 from hair_tracking.output.frame_encoder import FrameEncoder
+from hair_tracking.output.shards import fingerprint, guide_state_bytes, settings_text
 from hair_tracking.resources import config_path
 from hair_tracking.ros.load_shedding import LoadShedder
 from hair_tracking.simulator import HairSimulator
@@ -114,6 +117,17 @@ DIAG_AUDIT_STRANDS = 4096
 HEAD_MARKER_TOPIC = 'hair/head'
 #: The scene's body (the bust's capsules) as markers.
 COLLIDERS_TOPIC = 'hair/colliders'
+#: What ghost shards (hair_sim_ghosts) place their ghosts from: the guides' state of each frame
+#: and the node's settings (latched).
+GUIDE_STATE_TOPIC = 'hair/guides/state'
+SCENE_TOPIC = 'hair/scene'
+
+
+def latched_qos() -> QoSProfile:
+    """Reliable, transient-local, keep-last 1: a late subscriber gets the last message."""
+    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
+                      reliability=ReliabilityPolicy.RELIABLE,
+                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 
 def output_qos(depth: int) -> QoSProfile:
@@ -237,6 +251,11 @@ class HairSimNode(Node):
         self._head_pub = self.create_publisher(Marker, HEAD_MARKER_TOPIC, output_qos(depth))
         self._colliders_pub = self.create_publisher(MarkerArray, COLLIDERS_TOPIC,
                                                     output_qos(depth))
+        self._guide_state_pub = self._scene_pub = None
+        self._guide_state_key = None     # (sim time, tracker steps) of the last state sent
+        self.guide_states_sent = 0
+        if settings.guide_state:
+            self._start_guide_state(depth)
         self._tf = TfTree()              # /tf_static and /tf, for use_tf and gravity_frame
         self._tf_pub = None              # publish_tf
         self._tf_sent_key = None         # (child, stamp) of the last transform broadcast
@@ -391,6 +410,7 @@ class HairSimNode(Node):
                     + (f'; {self.sim.groom_note}' if self.sim.groom_note else ''))
             self._gravity_used = None
             self._update_gravity()
+        self._publish_scene()
         self._invalidate()
 
     # ================================================================ inputs
@@ -682,9 +702,12 @@ class HairSimNode(Node):
         self._publish_colliders()
         outs = self.outputs
         s = self._settings
+        self._publish_guide_state()
         wanted = {k: o.wanted() for k, o in outs.items()}
         if not s.publish_guides:
             wanted['guide_points'] = wanted['guide_markers'] = False
+        if s.shards > 0:                 # the shards publish the ghosts
+            wanted['points'] = wanted['markers'] = False
         self._last_publish = time.monotonic()
         if not any(wanted.values()):
             return
@@ -724,6 +747,49 @@ class HairSimNode(Node):
         took = (self._work_clock() - start) * 1e3
         self.publish_ms.append(took)
         self._publish_ms_since_pose += took
+
+    # ================================================================ ghost shards
+    def _start_guide_state(self, depth: int) -> None:
+        """``shards`` / ``publish_guide_state``: the guides' state and the settings for
+        hair_sim_ghosts, and this node's ghosts placed from the guides as they send them."""
+        if GuideState is None:
+            self.get_logger().warn('shards / publish_guide_state: hair_tracking_msgs is not '
+                                   'installed, the guides\' state is not published')
+            return
+        self.sim.guides_as_float32 = True
+        self._guide_state_pub = self.create_publisher(GuideState, GUIDE_STATE_TOPIC,
+                                                      output_qos(depth))
+        self._scene_pub = self.create_publisher(String, SCENE_TOPIC, latched_qos())
+        self._scene_text = None
+        self._guide_sequence = 0
+        self._publish_scene()
+
+    def _publish_scene(self) -> None:
+        """The settings on the latched scene topic when they changed."""
+        if self._scene_pub is None:
+            return
+        text = settings_text(self._settings)
+        if text != self._scene_text:
+            self._scene_text, self._scene_fingerprint = text, fingerprint(text)
+            self._scene_pub.publish(String(data=text))
+
+    def _publish_guide_state(self) -> None:
+        """The guides' state of a frame whose ghosts were placed from the guides and head
+        pose alone (not right after a reset or a jump, which carry the hair), once a frame."""
+        tracker = self.sim.ghost_tracker
+        if self._guide_state_pub is None or tracker is None or \
+                not getattr(tracker, 'from_step', False):
+            return
+        key = (self.sim.time_ns, tracker.stats['steps'])
+        if key == self._guide_state_key:
+            return
+        self._guide_state_key = key
+        stamp = max(0, (self.sim.time_ns or 0) - self._offset_ns)
+        self._guide_sequence = (self._guide_sequence + 1) % (1 << 32)
+        self._guide_state_pub.publish(guide_state_bytes(
+            self.sim, self._pose_frame or self._settings.fixed_frame or 'world', stamp,
+            self._scene_fingerprint, self._guide_sequence))
+        self.guide_states_sent += 1
 
     # ================================================================ diagnostics
     def diagnostics(self) -> DiagnosticStatus:
@@ -780,6 +846,8 @@ class HairSimNode(Node):
                                      ' '.join(f'{v:.4f}' for v in self._gravity_used),
             'body_frame_age_s': body_age,
         })
+        if self._guide_state_pub is not None:
+            values['guide_states_sent'] = str(self.guide_states_sent)
         return diagnostic_status(status_name(self.get_name()),
                                  make_status(WARN if problems else 0, problems, values))
 
