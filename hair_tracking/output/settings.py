@@ -95,7 +95,7 @@ NODE_PARAMS: Tuple[Param, ...] = (
           'also publish the guide strands on hair/guides/points and hair/guides/markers'),
     Param('shards', 'int', 0,
           'ghost shards (hair_sim_ghosts processes, launch/hair_sim_shards.launch.py) that '
-          'place and publish the ghosts on hair/shards/<k>/points and .../markers; > 0: this '
+          'place and publish the ghosts on hair/shard_<k>/points and .../markers; > 0: this '
           'node publishes no ghost cloud or markers of its own (hair/points, hair/markers) '
           'and publishes the guides\' state and the settings for them, as with '
           'publish_guide_state (docs/ros.md)', lo=0, hi=1024, read_only=True),

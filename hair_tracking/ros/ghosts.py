@@ -9,8 +9,8 @@ on ``hair/scene`` (std_msgs/String, YAML, transient-local: a shard started later
 each frame the guides' state on ``hair/guides/state`` (hair_tracking_msgs/GuideState).  The
 shard builds the same groom from the settings, places the strands of its contiguous share
 (:func:`hair_tracking.output.shards.shard_rows`) from every guides message and publishes them
-on ``hair/shards/<shard>/points`` (PointCloud2, rows numbered and coloured as in the node's
-cloud of all strands) and ``hair/shards/<shard>/markers`` (MarkerArray), each built only when
+on ``hair/shard_<shard>/points`` (PointCloud2, rows numbered and coloured as in the node's
+cloud of all strands) and ``hair/shard_<shard>/markers`` (MarkerArray), each built only when
 somebody subscribes, stamped with the guides' stamp; and ``/diagnostics``.  Concatenated in
 shard order, the shards' rows are the rows of the cloud the node would publish itself.
 
@@ -50,7 +50,7 @@ NODE_NAME = 'hair_sim_ghosts'
 
 def shard_topic(shard: int, what: str) -> str:
     """The topic of shard ``shard``'s ``what`` (points, markers)."""
-    return f'hair/shards/{int(shard)}/{what}'
+    return f'hair/shard_{int(shard)}/{what}'
 
 
 class GhostShardNode(Node):
@@ -141,7 +141,7 @@ class GhostShardNode(Node):
         if not self.gate.accept(sample.sequence):
             return False
         shard.apply(sample)
-        keys = [k for k, out in self.outputs.items() if out.pub.get_subscription_count() > 0]
+        keys = [k for k, out in self.outputs.items() if out.publisher.get_subscription_count() > 0]
         if keys:
             for key, data in shard.encode(keys, shard.frame_id(sample.frame_id)).items():
                 self.outputs[key].publish(data)
@@ -179,8 +179,8 @@ def make_parser() -> argparse.ArgumentParser:
         prog='hair_sim_ghosts',
         description='One ghost shard: places shard k of n of the ghost strands from the guides '
                     'the hair_sim node publishes (hair/scene, hair/guides/state; the node\'s '
-                    'shards parameter) and publishes them on hair/shards/<k>/points '
-                    '(PointCloud2) and hair/shards/<k>/markers (MarkerArray); /diagnostics.',
+                    'shards parameter) and publishes them on hair/shard_<k>/points '
+                    '(PointCloud2) and hair/shard_<k>/markers (MarkerArray); /diagnostics.',
         epilog='ROS arguments follow --ros-args, e.g. hair_sim_ghosts --ros-args -p shard:=1 '
                '-p shards:=2')
     executable.add_arguments(parser)
