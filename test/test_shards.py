@@ -133,3 +133,21 @@ def test_the_sequence_gate_drops_late_repeated_and_out_of_order_messages():
     assert serial_after(0, 2 ** 32 - 1) and not serial_after(2 ** 32 - 1, 0)
     gate.restart()
     assert gate.accept(1)
+
+
+def test_the_viewer_joins_the_shards_newest_clouds_and_leaves_out_a_stopped_one():
+    from msg_adapters.pointcloud import strands_to_pointcloud2
+    from hair_tracking.ros.view import ShardClouds
+
+    def cloud(first, count, t_ns):
+        x = np.arange(count * 2 * 3, dtype=np.float64).reshape(count, 2, 3) + 100 * first
+        return strands_to_pointcloud2(x, frame_id='world', stamp_ns=t_ns,
+                                      strand_ids=np.arange(first, first + count))
+    join = ShardClouds(2)
+    one = join.add(0, cloud(0, 3, 10))
+    assert one.height == 3
+    both = join.add(1, cloud(3, 2, 10))
+    assert both.height == 5 and bytes(both.data) == \
+        bytes(cloud(0, 3, 10).data) + bytes(cloud(3, 2, 10).data)
+    later = join.add(0, cloud(0, 3, 10 + 2_000_000_000))        # shard 1 stopped
+    assert later.height == 3

@@ -19,14 +19,19 @@ error; one that is not after the last one used (late, repeated, out of order: it
 dropped; both are counted in the diagnostics.  Settings the shard cannot place (a tracker other
 than blend) are refused with an error, and the shard waits for the next settings.
 
-Parameters: ``shard`` (0-based), ``shards`` (how many in all), ``output_queue_depth``,
+The guides are taken reliably with a queue of one (the newest: a shard that falls behind
+places the newest frame, as the node's pose queue does).  Parameters: ``shard`` (0-based),
+``shards`` (how many in all), ``output_queue_depth`` (of its outputs),
 ``diagnostics_rate_hz``.  Everything runs in one thread.
 """
 import argparse
+import collections
 import sys
+import time
 from typing import List, Optional
 
 from diagnostic_msgs.msg import DiagnosticArray
+import numpy as np
 import rclpy
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
@@ -82,14 +87,17 @@ class GhostShardNode(Node):
         self.unusable = 0                # guides messages that are not a GuideState
         self.waiting = 0                 # guides that came before usable settings
         self.published = 0
+        self.work_ms = collections.deque(maxlen=1000)   # placing, encoding, publishing
+        self.cloud_bytes = 0             # the size of the last cloud
         self.outputs = {
             key: SerializedPublisher(self.create_publisher(
                 kind, shard_topic(self.index, key), output_qos(depth)))
             for key, kind in (('points', PointCloud2), ('markers', MarkerArray))}
         self._diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
         self.create_subscription(String, SCENE_TOPIC, self._on_scene, latched_qos())
+        # the newest guides only: a shard that falls behind places the newest frame
         self.create_subscription(GuideState, GUIDE_STATE_TOPIC, self._on_guides,
-                                 output_qos(depth), raw=True)
+                                 output_qos(1), raw=True)
         self.create_timer(1.0 / rate, self._on_diag_timer)
         self.get_logger().info(f'shard {self.index} of {self.count}: waiting for the settings '
                                f'on {SCENE_TOPIC}')
@@ -140,12 +148,16 @@ class GhostShardNode(Node):
             return False
         if not self.gate.accept(sample.sequence):
             return False
+        start = time.perf_counter()
         shard.apply(sample)
         keys = [k for k, out in self.outputs.items() if out.publisher.get_subscription_count() > 0]
         if keys:
             for key, data in shard.encode(keys, shard.frame_id(sample.frame_id)).items():
                 self.outputs[key].publish(data)
+                if key == 'points':
+                    self.cloud_bytes = len(data)
             self.published += 1
+        self.work_ms.append((time.perf_counter() - start) * 1e3)
         return True
 
     def diagnostics(self):
@@ -163,6 +175,9 @@ class GhostShardNode(Node):
             'guides_unusable': str(self.unusable),
             'guides_before_settings': str(self.waiting),
             'frames_published': str(self.published),
+            'work_ms_median': f'{np.median(self.work_ms):.3f}' if self.work_ms else 'n/a',
+            'work_ms_p99': f'{np.percentile(self.work_ms, 99):.3f}' if self.work_ms else 'n/a',
+            'cloud_bytes': str(self.cloud_bytes),
         }
         return diagnostic_status(f'{self.get_name()}: ghost shard',
                                  make_status(WARN if problems else 0, problems, values))

@@ -92,7 +92,8 @@ from hair_tracking.output.settings import apply_changes, make_settings, NODE_NAM
 from hair_tracking.output.diagnostics import HairHealth, HARDWARE_ID, make_status, \
     status_name, WARN
 from hair_tracking.output.frame_encoder import FrameEncoder
-from hair_tracking.output.shards import fingerprint, guide_state_bytes, settings_text
+from hair_tracking.output.shards import fingerprint, guide_state_bytes, settings_text, \
+    SHARDABLE
 from hair_tracking.resources import config_path
 from hair_tracking.ros.load_shedding import LoadShedder
 from hair_tracking.simulator import HairSimulator
@@ -228,7 +229,7 @@ class HairSimNode(Node):
         self._pose_published_ns = None   # sim time of the last frame publish_on_pose sent
         self._tf_child: Optional[str] = None
         self._tf_seen_ns = 0
-        self._encoder = FrameEncoder(settings)     # the messages of a frame
+        self.encoder = FrameEncoder(settings)     # the messages of a frame
         self._rcl_refusal_logged = False
         self.rejected = 0                # poses dropped (malformed, NaN, zero quaternion ...)
         self.rebuilds = 0
@@ -254,8 +255,8 @@ class HairSimNode(Node):
         self._guide_state_pub = self._scene_pub = None
         self._guide_state_key = None     # (sim time, tracker steps) of the last state sent
         self.guide_states_sent = 0
-        if settings.guide_state:
-            self._start_guide_state(depth)
+        self._guide_state_on = False
+        self._start_guide_state(depth, settings.guide_state)
         self._tf = TfTree()              # /tf_static and /tf, for use_tf and gravity_frame
         self._tf_pub = None              # publish_tf
         self._tf_sent_key = None         # (child, stamp) of the last transform broadcast
@@ -305,6 +306,12 @@ class HairSimNode(Node):
             f'publishing at {settings.publish_rate_hz:g} Hz')
 
     # ================================================================ parameters
+    @property
+    def settings(self):
+        """The settings the node runs with now (a frozen
+        :class:`~hair_tracking.output.settings.Settings`)."""
+        return self._settings
+
     def _declare_all(self) -> None:
         sf = NODE_ROWS['scene_file']
         self.declare_parameter(sf.name, sf.default, descriptor(sf))
@@ -734,9 +741,9 @@ class HairSimNode(Node):
             frame = self.sim.frame(head_frame=head_frame, copy=False)
             self.frames_built += 1
         stamp = max(0, (self.sim.time_ns or 0) - self._offset_ns)   # the stream's time base
-        self._encoder.settings = s
-        encoded = self._encoder.frame(self.sim, [k for k, on in wanted.items() if on],
-                                      self.output_frame_id(), stamp, head_frame, frame)
+        self.encoder.settings = s
+        encoded = self.encoder.frame(self.sim, [k for k, on in wanted.items() if on],
+                                     self.output_frame_id(), stamp, head_frame, frame)
         for key, msg in encoded.items():
             o = outs[key]
             o.cached = None if msg.fresh else msg.data     # never resend a DELETEALL
@@ -749,24 +756,34 @@ class HairSimNode(Node):
         self._publish_ms_since_pose += took
 
     # ================================================================ ghost shards
-    def _start_guide_state(self, depth: int) -> None:
-        """``shards`` / ``publish_guide_state``: the guides' state and the settings for
-        hair_sim_ghosts, and this node's ghosts placed from the guides as they send them."""
+    def _start_guide_state(self, depth: int, on: bool) -> None:
+        """The publishers of the guides' state and the settings for hair_sim_ghosts (made
+        always, like the guide clouds'); with ``on`` (``shards`` / ``publish_guide_state``)
+        they publish, and this node's ghosts are placed from the guides as they send them."""
         if GuideState is None:
-            self.get_logger().warn('shards / publish_guide_state: hair_tracking_msgs is not '
-                                   'installed, the guides\' state is not published')
+            if on:
+                self.get_logger().warn('shards / publish_guide_state: hair_tracking_msgs is '
+                                       'not installed, the guides\' state is not published')
             return
-        self.sim.guides_as_float32 = True
         self._guide_state_pub = self.create_publisher(GuideState, GUIDE_STATE_TOPIC,
                                                       output_qos(depth))
         self._scene_pub = self.create_publisher(String, SCENE_TOPIC, latched_qos())
         self._scene_text = None
         self._guide_sequence = 0
+        self._guide_state_on = on
+        if not on:
+            return
+        mode = self._settings.scene.tracking.mode
+        if mode not in SHARDABLE:
+            self.get_logger().warn(f'shards / publish_guide_state: tracking.mode {mode} cannot '
+                                   f'be sharded (only {", ".join(SHARDABLE)}): no guides\' '
+                                   'state is sent, and hair_sim_ghosts refuses these settings')
+        self.sim.guides_as_float32 = True
         self._publish_scene()
 
     def _publish_scene(self) -> None:
         """The settings on the latched scene topic when they changed."""
-        if self._scene_pub is None:
+        if self._scene_pub is None or not self._guide_state_on:
             return
         text = settings_text(self._settings)
         if text != self._scene_text:
@@ -777,7 +794,7 @@ class HairSimNode(Node):
         """The guides' state of a frame whose ghosts were placed from the guides and head
         pose alone (not right after a reset or a jump, which carry the hair), once a frame."""
         tracker = self.sim.ghost_tracker
-        if self._guide_state_pub is None or tracker is None or \
+        if self._guide_state_pub is None or not self._guide_state_on or tracker is None or \
                 not getattr(tracker, 'from_step', False):
             return
         key = (self.sim.time_ns, tracker.stats['steps'])
@@ -846,7 +863,7 @@ class HairSimNode(Node):
                                      ' '.join(f'{v:.4f}' for v in self._gravity_used),
             'body_frame_age_s': body_age,
         })
-        if self._guide_state_pub is not None:
+        if self._guide_state_on:
             values['guide_states_sent'] = str(self.guide_states_sent)
         return diagnostic_status(status_name(self.get_name()),
                                  make_status(WARN if problems else 0, problems, values))
@@ -939,8 +956,10 @@ def make_parser() -> argparse.ArgumentParser:
                     '/tf and /tf_static (TFMessage); publishes hair/points (PointCloud2), '
                     'hair/markers (MarkerArray), hair/head (Marker, the head collider), '
                     'hair/colliders (MarkerArray, the body\'s bust, body.bust), /tf (the '
-                    'head pose, publish_tf), /diagnostics, and with publish_guides '
-                    'hair/guides/points and hair/guides/markers; offers ~/reset. Every setting '
+                    'head pose, publish_tf), /diagnostics, with publish_guides '
+                    'hair/guides/points and hair/guides/markers, and with shards or '
+                    'publish_guide_state hair/guides/state (GuideState) and hair/scene (the '
+                    'settings, latched) for hair_sim_ghosts; offers ~/reset. Every setting '
                     'is a ROS parameter (see config/hair_sim.yaml and docs/node.md).',
         epilog='ROS arguments follow --ros-args, e.g. hair_sim_node --ros-args '
                '--params-file config/hair_sim.yaml -p scene_file:=long_hair '
