@@ -35,6 +35,7 @@ setup(
             # each sets numba's cache folder and the stop request up before it imports its
             # executable's module (hair_tracking/executable.py)
             'hair_sim_node = hair_tracking.executable:hair_sim_node',
+            'hair_sim_ghosts = hair_tracking.executable:hair_sim_ghosts',
             'hair_sim_bag = hair_tracking.executable:hair_sim_bag',
             'hair_sim_groom = hair_tracking.executable:hair_sim_groom',
             'hair_sim_eval = hair_tracking.executable:hair_sim_eval',

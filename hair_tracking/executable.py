@@ -279,6 +279,11 @@ def hair_sim_node() -> int:
     return _main_of('hair_tracking.ros.node')
 
 
+def hair_sim_ghosts() -> int:
+    """``hair_sim_ghosts``: :func:`hair_tracking.ros.ghosts.main`."""
+    return _main_of('hair_tracking.ros.ghosts')
+
+
 def hair_sim_bag() -> int:
     """``hair_sim_bag``: :func:`hair_tracking.ros.bag_cli.main`."""
     return _main_of('hair_tracking.ros.bag_cli')

@@ -150,6 +150,10 @@ class HairSimulator:
         #: Track the ghosts once per advance_to call even when the scene says every substep
         #: (load shedding, set by the live node when it falls behind; see load_shedding.py).
         self.track_once_per_call = False
+        #: Place the blend and turn trackers' ghosts from the guides rounded to float32, as a
+        #: ghost shard receives them (hair_tracking_msgs/GuideState): set by the node that
+        #: publishes the guides' state, so its own ghosts are the shards' to the bit.
+        self.guides_as_float32 = False
         self._build()
 
     # ------------------------------------------------------------- assembly
@@ -487,7 +491,10 @@ class HairSimulator:
             return
         start = self.clock()
         start_x = None if self._stateless(self.scene) else self._ghost_guide_x
-        self.ghost_tracker.step(TrackStep(dt, substeps, start_x, self.guides.x, self.head))
+        guide_x = self.guides.x
+        if self.guides_as_float32 and start_x is None:
+            guide_x = guide_x.astype(np.float32).astype(np.float64)
+        self.ghost_tracker.step(TrackStep(dt, substeps, start_x, guide_x, self.head))
         self.counters.last_track_ms += (self.clock() - start) * 1e3
 
     def _rest_at(self, head: HeadPose) -> None:

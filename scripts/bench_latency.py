@@ -15,6 +15,17 @@ left it without a frame) is shown by the next cloud, stamped later, whose motion
 Reported for every pose (``latency_every_pose``, the headline) and for the poses with a cloud
 of their own (``latency``).
 
+Ghost shards (``--shards 0 1 2 4``; 0, the default, is the single-process node): with N > 0
+the node runs with ``shards:=N`` (it simulates the guides and publishes their state, no ghosts
+of its own) and N ``hair_sim_ghosts`` processes place and publish the ghosts, each on
+``hair/shard_<k>/points``; the probe takes every shard's cloud, and a pose's cloud has arrived
+when the last shard's has.  Also reported per shard: its own time per frame (placing, encoding
+and publishing its share, median and p99, from its diagnostics) and its cloud's bytes, the
+GuideState's bytes against the whole cloud's, and what N machines would give: the guides
+node's time per pose (step and publish) plus the slowest shard's own time, each shard on a
+machine of its own with its cloud on its own link (a model from the measured parts, not a
+measurement).
+
 Modes: ``timer`` publishes on the node's own timer at ``--publish-rate`` Hz (the latency then
 includes waiting for the next tick, up to one period); ``on_pose`` sets ``publish_on_pose`` so
 a frame goes out right after its pose was simulated (rate still capped).  Also reported: the
@@ -42,6 +53,7 @@ from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rclpy.serialization import deserialize_message
 
 from geometry_msgs.msg import PoseStamped
 from sensor_msgs.msg import PointCloud2
@@ -57,6 +69,10 @@ from hair_tracking.output.settings import by_name  # noqa: E402
 from hair_tracking.evaluation.provenance import command_line, provenance  # noqa: E402
 from cpu_steal import format_share, StealMeter  # noqa: E402  (scripts/cpu_steal.py)
 from hair_tracking.ros.node import HairSimNode  # noqa: E402
+from hair_tracking.ros.ghosts import shard_topic  # noqa: E402
+from hair_tracking.output.shards import guide_state_bytes  # noqa: E402
+from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
+import subprocess  # noqa: E402
 from msg_adapters.pose import pose_stamped_msg  # noqa: E402
 from msg_adapters.stamps import time_to_ns  # noqa: E402
 from rcl_take import SerializedTaker, SerializedWaiter  # noqa: E402  (scripts/rcl_take.py)
@@ -131,6 +147,57 @@ def copy_ms(nbytes, reps=15):
         np.copyto(dst, src)
         times.append(time.perf_counter() - t0)
     return float(np.median(times)) * 1e3
+
+
+def shown_by_all(sent, by_shard, stamps):
+    """Latency [ms] of each pose in ``stamps`` until every shard has shown it: for each shard
+    the earliest arrival of its cloud stamped at or after the pose (:func:`shown_latency`), the
+    latest of those over the shards (shards place the newest guides each, so they need not
+    publish the same stamps).  Returns (latencies, poses some shard never showed)."""
+    per = []
+    for received in by_shard:
+        clouds = np.array(sorted(received), dtype=np.int64)
+        arrival = np.array([received[c] for c in clouds.tolist()])
+        first = np.minimum.accumulate(arrival[::-1])[::-1] if clouds.size else arrival
+        per.append((clouds, first))
+    out, left = [], 0
+    for t in stamps:
+        worst = None
+        for clouds, first in per:
+            i = int(np.searchsorted(clouds, t, side='left'))
+            if i == clouds.size:
+                worst = None
+                break
+            worst = first[i] if worst is None else max(worst, first[i])
+        if worst is None:
+            left += 1
+        else:
+            out.append((worst - sent[t]) * 1e3)
+    return out, left
+
+
+def shard_alone(node, shards, reps=9):
+    """Median time [ms] one shard of ``shards`` takes for a frame (placing its share of the
+    node's ghosts from a guides message and writing its cloud, one thread) in this process
+    after the stream: what the shard costs on a core of its own, without the DDS hand-off."""
+    import numba
+    from msg_adapters.guide_state import guide_state_from_cdr
+    from hair_tracking.output.shards import fingerprint, GhostShard, settings_text
+    text = settings_text(node.settings)
+    shard = GhostShard(text, 0, shards)
+    sample = guide_state_from_cdr(guide_state_bytes(node.sim, 'world', 1, fingerprint(text), 1))
+    before = numba.get_num_threads()
+    numba.set_num_threads(1)
+    times = []
+    try:
+        for _ in range(reps + 1):
+            start = time.perf_counter()
+            shard.apply(sample)
+            shard.encode(['points'], 'world')
+            times.append((time.perf_counter() - start) * 1e3)
+    finally:
+        numba.set_num_threads(before)
+    return float(np.median(times[1:]))
 
 
 def stamp_of(raw):
@@ -243,8 +310,42 @@ def _marking(fn, clock, stage):
     return wrapped
 
 
-def run_case(ghosts, mode, args, domain_id):
+def start_shards(n, domain_id):
+    """``n`` hair_sim_ghosts processes on ``domain_id`` (numba threads shared out among
+    them); their Popen objects."""
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    env = dict(os.environ, ROS_DOMAIN_ID=str(domain_id),
+               NUMBA_NUM_THREADS=str(max(1, (os.cpu_count() or 1) // n)),
+               PYTHONPATH=os.pathsep.join(filter(None, [root, os.environ.get('PYTHONPATH')])))
+    return [subprocess.Popen([sys.executable, '-m', 'hair_tracking.ros.ghosts', '--ros-args',
+                              '-r', f'__node:=hair_sim_ghosts_{k}', '-p', f'shard:={k}',
+                              '-p', f'shards:={n}'], env=env,
+                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+            for k in range(n)]
+
+
+def stop_shards(procs):
+    for p in procs:
+        if p.poll() is None:
+            p.terminate()
+    for p in procs:
+        try:
+            p.wait(timeout=30)
+        except subprocess.TimeoutExpired:
+            p.kill()
+            p.wait()
+
+
+def run_case(ghosts, mode, args, domain_id, shards=0):
     guides, per_guide = groom_for(ghosts)
+    procs = start_shards(shards, domain_id) if shards else []
+    try:
+        return _run_case(ghosts, mode, args, domain_id, shards, guides, per_guide)
+    finally:
+        stop_shards(procs)
+
+
+def _run_case(ghosts, mode, args, domain_id, shards, guides, per_guide):
     ctx = Context()
     rclpy.init(context=ctx, domain_id=domain_id)
     overrides = {
@@ -255,6 +356,8 @@ def run_case(ghosts, mode, args, domain_id):
     if args.pose_depth is not None:
         overrides['pose_queue_depth'] = args.pose_depth
     overrides.update(args.set)
+    if shards:
+        overrides['shards'] = shards
     clock = StageClock()
     node_type = timed_node(clock) if args.stages else HairSimNode
     node = node_type(context=ctx, parameter_overrides=[
@@ -266,17 +369,43 @@ def run_case(ghosts, mode, args, domain_id):
     lock = threading.Lock()
     cloud_bytes = [0]                   # the size of the last cloud taken
 
-    def on_cloud(raw):
+    by_shard = [{} for _ in range(shards)]      # shard -> stamp -> arrival
+    shard_bytes = {}
+
+    def on_cloud(raw, shard=None):
         now = time.perf_counter()
         t = stamp_of(raw)
-        cloud_bytes[0] = len(raw)
         with lock:
+            if shard is not None:
+                shard_bytes[shard] = len(raw)
+                by_shard[shard].setdefault(t, now)
+                if not all(t in got for got in by_shard):
+                    return
+            cloud_bytes[0] = len(raw) if shard is None else sum(shard_bytes.values())
             received.setdefault(t, now)
         if args.stages:
             clock.mark(t, 'received', now)
     qos = QoSProfile(depth=5, reliability=ReliabilityPolicy.RELIABLE)
-    subs = {probe.create_subscription(PointCloud2, 'hair/points', on_cloud, qos, raw=True):
-            on_cloud}
+    if shards:
+        subs = {}
+        for k in range(shards):
+            def on_shard(raw, k=k):
+                on_cloud(raw, k)
+            subs[probe.create_subscription(PointCloud2, shard_topic(k, 'points'), on_shard,
+                                           qos, raw=True)] = on_shard
+    else:
+        subs = {probe.create_subscription(PointCloud2, 'hair/points', on_cloud, qos,
+                                          raw=True): on_cloud}
+    shard_status = {}
+
+    def on_diagnostics(msg):
+        for st in msg.status:
+            if 'ghost shard' in st.name:
+                shard_status[st.name] = {kv.key: kv.value for kv in st.values}
+    diag_sub = probe.create_subscription(DiagnosticArray, '/diagnostics', on_diagnostics, 10)
+    if shards:                          # the rcl probe takes them as bytes
+        subs[diag_sub] = lambda raw: on_diagnostics(deserialize_message(bytes(raw),
+                                                                        DiagnosticArray))
     if args.markers:
         subs[probe.create_subscription(MarkerArray, 'hair/markers', lambda raw: None, qos,
                                        raw=True)] = lambda raw: None
@@ -308,14 +437,23 @@ def run_case(ghosts, mode, args, domain_id):
                 probe_ex.spin_once(timeout_sec=0.05)
     if args.stages:
         points = node.outputs['points']
-        points.cloud.encode = _marking(points.cloud.encode, clock, 'encoded')
+        node.encoder.cloud = _marking(node.encoder.cloud, clock, 'encoded')
         points.raw.publish = _marking(points.raw.publish, clock, 'published')
     probe_thread = threading.Thread(target=spin_probe, daemon=True)
     probe_thread.start()
-    deadline = time.monotonic() + 20.0
+    deadline = time.monotonic() + (300.0 if shards else 20.0)
     while time.monotonic() < deadline and not (
-            pub.get_subscription_count() > 0 and node.outputs['points'].wanted()):
+            pub.get_subscription_count() > 0 and
+            (all(sub.get_publisher_count() > 0 for sub in list(subs)[:shards])
+             if shards else node.outputs['points'].wanted())):
         node_ex.spin_once(timeout_sec=0.01)
+    if shards:                           # every shard has built its groom
+        deadline = time.monotonic() + 300.0
+        while time.monotonic() < deadline and len(shard_status) < shards:
+            node_ex.spin_once(timeout_sec=0.05)
+        while time.monotonic() < deadline and not all(
+                v['strands'] != 'n/a' for v in shard_status.values()):
+            node_ex.spin_once(timeout_sec=0.05)
 
     dt_ns = node.sim.dt_ns
     period = 1.0 / args.pose_rate
@@ -353,6 +491,12 @@ def run_case(ghosts, mode, args, domain_id):
         end = time.monotonic() + 0.5
         while time.monotonic() < end:
             node_ex.spin_once(timeout_sec=0.05)
+    if shards:                           # the shards' diagnostics after the stream
+        end = time.monotonic() + 2.5
+        seen = {k: v.get('guides_applied') for k, v in shard_status.items()}
+        while time.monotonic() < end and any(
+                shard_status[k].get('guides_applied') == seen[k] for k in seen):
+            node_ex.spin_once(timeout_sec=0.05)
     stop.set()
     probe_thread.join(2.0)
     for taker in takers.values():
@@ -363,7 +507,10 @@ def run_case(ghosts, mode, args, domain_id):
         stamps = sorted(sent)[skip:]
         lat = [(received[t] - sent[t]) * 1e3 for t in stamps if t in received]
         missing = sum(1 for t in stamps if t not in received)
-        shown, unshown = shown_latency(sent, received, stamps)
+        if shards:
+            shown, unshown = shown_by_all(sent, by_shard, stamps)
+        else:
+            shown, unshown = shown_latency(sent, received, stamps)
     step_ms = list(node.step_ms)          # kernels were warmed up before the first pose
     pub_ms = list(node.publish_ms)
     c = node.sim.counters
@@ -385,7 +532,12 @@ def run_case(ghosts, mode, args, domain_id):
         'load_shedding_switches': int(node.shedder.switches),
         'load_shedding_at_end': bool(node.sim.track_once_per_call),
         'gc': pauses.summary(),
+        'shards': shards,
+        'guide_state_bytes': len(guide_state_bytes(node.sim, 'world', 0, 0, 0)),
     }
+    if shards:
+        result['shard'] = [_shard_figures(v) for _, v in sorted(shard_status.items())]
+        result['shard_alone'] = shard_alone(node, shards)
     if args.stages:
         result['stages'] = clock.stages(stamps)
     node_ex.shutdown(timeout_sec=1.0)
@@ -394,6 +546,31 @@ def run_case(ghosts, mode, args, domain_id):
     probe.destroy_node()
     rclpy.shutdown(context=ctx)
     return result
+
+
+def _shard_figures(values):
+    """One shard's diagnostics as numbers: its strands, time per frame, cloud bytes."""
+    def num(key):
+        try:
+            return float(values.get(key, 'nan'))
+        except ValueError:
+            return None
+    return {'strands': values.get('strands'), 'work_median_ms': num('work_ms_median'),
+            'work_p99_ms': num('work_ms_p99'), 'cloud_bytes': int(num('cloud_bytes') or 0),
+            'guides_applied': values.get('guides_applied'),
+            'guides_dropped_late': values.get('guides_dropped_late')}
+
+
+def machines_model(r, link_gbit=10.0):
+    """What N machines would give (ms), from the measured parts: the guides node's step per
+    pose (median) plus one shard's time for a frame on a core of its own
+    (:func:`shard_alone`) plus its cloud on a ``link_gbit`` link, each shard with a machine
+    and a link of its own; DDS's copies on either end are not in it."""
+    if not r['shards'] or r.get('shard_alone') is None:
+        return None
+    wire = r['cloud_bytes'] / r['shards'] * 8 / (link_gbit * 1e9) * 1e3
+    return {'median_ms': r['step']['median_ms'] + r['shard_alone'] + wire,
+            'shard_ms': r['shard_alone'], 'wire_ms': wire, 'link_gbit': link_gbit}
 
 
 def fmt(s):
@@ -429,6 +606,9 @@ def main(argv=None):
     ap.add_argument('--stages', action='store_true',
                     help='also time each stage of each pose (pickup, step, cloud, publish, the '
                          "probe's wake and take; see StageClock) and print their medians / p99")
+    ap.add_argument('--shards', type=int, nargs='+', default=[0],
+                    help='ghost shard processes (hair_sim_ghosts) per case; 0 = the '
+                         'single-process node (default)')
     ap.add_argument('--domain-id', type=int, default=48)
     ap.add_argument('--json', metavar='PATH', help='write the results as JSON')
     ap.add_argument('--switch-interval', type=float, default=0.0005,
@@ -448,38 +628,53 @@ def main(argv=None):
           f'poses at {args.pose_rate:g} Hz, publish_rate_hz {args.publish_rate:g}, '
           f'numba_threads {args.threads}, probe takes through {args.probe}, '
           f'one frame {FRAME_MS:.1f} ms')
-    print(f"{'ghosts':>7} {'mode':>8} | {'latency med':>11} {'p99':>8} | "
+    print(f"{'ghosts':>7} {'mode':>10} | {'latency med':>11} {'p99':>8} | "
           f"{'own cloud med':>13} {'p99':>8} | {'step med':>8} {'p99':>8} | "
           f"{'publish med':>11} {'p99':>8} | dropped / no cloud of their own")
-    for ghosts in args.ghosts:
-        for mode in args.modes:
-            steal = StealMeter()
-            r = run_case(ghosts, mode, args, args.domain_id)
-            r['cpu_steal_share'] = steal.share()
-            r['copy_ms'] = copy_ms(r['cloud_bytes']) if r['cloud_bytes'] else None
-            results.append(r)
-            lat = r['latency_every_pose']
-            within = '' if lat['n'] == 0 else \
-                f"; latency p90 {lat['p90_ms']:.1f} ms, {100 * lat['share_within_frame']:.0f} % " \
-                f'within {FRAME_MS:.1f} ms'
-            print(f"{r['ghosts']:>7} {mode:>8} | {fmt(lat):>20} | "
-                  f"{fmt(r['latency']):>22} | {fmt(r['step']):>17} | {fmt(r['publish']):>20} | "
-                  f"{r['substeps_dropped']} substeps, {r['poses_without_cloud']} poses{within}"
-                  f"; load shedding switched {r['load_shedding_switches']}x"
-                  f"{', on at the end' if r['load_shedding_at_end'] else ''}"
-                  f"; CPU stolen {format_share(r['cpu_steal_share'])}"
-                  f"; {r['gc']['gen2']['n']} full GC pauses (longest "
-                  f"{r['gc']['gen2']['max_ms']:.1f} ms), one full GC {r['gc']['full_ms']:.1f} ms"
-                  f"; cloud {r['cloud_bytes'] / 1e6:.1f} MB, one copy of it "
-                  f"{r['copy_ms'] or float('nan'):.2f} ms",
-                  flush=True)
-            if 'stages' in r:
-                st = r['stages']
-                parts = [f"{k} {v['median_ms']:.2f} / {v['p99_ms']:.2f}"
-                         for k, v in st.items() if isinstance(v, dict) and v['n']]
-                print(f"{'':>17}stages, median / p99 ms: " + ', '.join(parts) +
-                      f"; {100 * st['share_arriving_busy']:.0f} % of poses arrived while the "
-                      'node was busy', flush=True)
+    for ghosts, mode, shards in ((g, m, n) for g in args.ghosts for m in args.modes
+                                 for n in args.shards):
+        steal = StealMeter()
+        r = run_case(ghosts, mode, args, args.domain_id, shards)
+        r['machines_model'] = machines_model(r)
+        r['cpu_steal_share'] = steal.share()
+        r['copy_ms'] = copy_ms(r['cloud_bytes']) if r['cloud_bytes'] else None
+        results.append(r)
+        lat = r['latency_every_pose']
+        within = '' if lat['n'] == 0 else \
+            f"; latency p90 {lat['p90_ms']:.1f} ms, {100 * lat['share_within_frame']:.0f} % " \
+            f'within {FRAME_MS:.1f} ms'
+        label = mode if not shards else f'{mode} {shards}sh'
+        print(f"{r['ghosts']:>7} {label:>10} | {fmt(lat):>20} | "
+              f"{fmt(r['latency']):>22} | {fmt(r['step']):>17} | {fmt(r['publish']):>20} | "
+              f"{r['substeps_dropped']} substeps, {r['poses_without_cloud']} poses{within}"
+              f"; load shedding switched {r['load_shedding_switches']}x"
+              f"{', on at the end' if r['load_shedding_at_end'] else ''}"
+              f"; CPU stolen {format_share(r['cpu_steal_share'])}"
+              f"; {r['gc']['gen2']['n']} full GC pauses (longest "
+              f"{r['gc']['gen2']['max_ms']:.1f} ms), one full GC {r['gc']['full_ms']:.1f} ms"
+              f"; cloud {r['cloud_bytes'] / 1e6:.1f} MB, one copy of it "
+              f"{r['copy_ms'] or float('nan'):.2f} ms",
+              flush=True)
+        if shards:
+            per = '; '.join(f"shard {s['strands']}: {s['work_median_ms']:.2f} / "
+                            f"{s['work_p99_ms']:.2f} ms, {s['cloud_bytes'] / 1e6:.2f} MB"
+                            for s in r['shard'] if s['work_median_ms'] is not None)
+            model = r['machines_model']
+            print(f"{'':>17}{shards} shards, own time median / p99 and cloud: {per}; "
+                  f"GuideState {r['guide_state_bytes']} bytes = "
+                  f"{100 * r['guide_state_bytes'] / max(1, r['cloud_bytes']):.3f} % of "
+                  f"the cloud; one shard alone {r['shard_alone']:.1f} ms a frame" +
+                  ('' if model is None else
+                   f"; {shards} machines: about {model['median_ms']:.1f} ms (guides step + "
+                   f"one shard + {model['wire_ms']:.1f} ms on a {model['link_gbit']:g} Gbit/s "
+                   'link)'), flush=True)
+        if 'stages' in r:
+            st = r['stages']
+            parts = [f"{k} {v['median_ms']:.2f} / {v['p99_ms']:.2f}"
+                     for k, v in st.items() if isinstance(v, dict) and v['n']]
+            print(f"{'':>17}stages, median / p99 ms: " + ', '.join(parts) +
+                  f"; {100 * st['share_arriving_busy']:.0f} % of poses arrived while the "
+                  'node was busy', flush=True)
     if args.json:
         os.makedirs(os.path.dirname(os.path.abspath(args.json)), exist_ok=True)
         with open(args.json, 'w', encoding='utf-8') as f:

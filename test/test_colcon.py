@@ -63,8 +63,11 @@ def test_colcon_build_install_and_run_long_hair(tmp_path):
     assert 'Finished <<< hair_tracking_msgs' in build.stdout, build.stdout[-3000:]
     share = ws / 'install' / 'hair_tracking' / 'share' / 'hair_tracking'
     for rel in ('package.xml', 'config/hair_sim.yaml', 'config/scene_long_hair.yaml',
-                'launch/hair_sim.launch.py', 'rviz/hair_sim.rviz'):
+                'launch/hair_sim.launch.py', 'rviz/hair_sim.rviz',
+                'launch/hair_sim_shards.launch.py', 'rviz/hair_sim_shards.rviz'):
         assert (share / rel).is_file(), rel
+    assert (ws / 'install' / 'hair_tracking' / 'lib' / 'hair_tracking' /
+            'hair_sim_ghosts').is_file()
     assert not (ws / 'install' / 'tf2_msgs').exists()      # a ROS installation has them
     assert not (ws / 'install' / 'hri_msgs').exists()
 

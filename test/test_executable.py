@@ -66,8 +66,9 @@ def test_numba_loaded_before_the_cache_folder_is_set_is_said():
 def test_every_console_script_is_an_entry_point_of_this_module():
     """Each sets the cache folder and the stop request up before its executable's imports."""
     entries = console_scripts()
-    assert set(entries) == {'hair_sim_node', 'hair_sim_bag', 'hair_sim_groom', 'hair_sim_eval',
-                            'hair_sim_demo', 'hair_sim_warmup', 'hair_sim_ctl', 'hair_sim_view'}
+    assert set(entries) == {'hair_sim_node', 'hair_sim_ghosts', 'hair_sim_bag', 'hair_sim_groom',
+                            'hair_sim_eval', 'hair_sim_demo', 'hair_sim_warmup', 'hair_sim_ctl',
+                            'hair_sim_view'}
     for name, target in entries.items():
         assert target == f'hair_tracking.executable:{name}'
         assert callable(getattr(executable, name))

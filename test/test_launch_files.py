@@ -84,3 +84,59 @@ def test_colcon_ignores_the_interfaces_a_ros_installation_has():
                if os.path.isfile(os.path.join(ROOT, 'interfaces', name, 'COLCON_IGNORE'))}
     assert ignored == {'tf2_msgs', 'hri_msgs'}
     assert os.path.isfile(os.path.join(ROOT, 'interfaces', 'hair_tracking_msgs', 'package.xml'))
+
+
+SHARDS_LAUNCH = os.path.join(ROOT, 'launch', 'hair_sim_shards.launch.py')
+SHARDS_RVIZ = os.path.join(ROOT, 'rviz', 'hair_sim_shards.rviz')
+
+
+def test_shards_launch_file_compiles_and_names_what_exists():
+    """launch/hair_sim_shards.launch.py: the guides node and hair_sim_ghosts, the parameters
+    it sets are theirs, its shard list is checked."""
+    from hair_tracking.ros import ghosts
+
+    with open(SHARDS_LAUNCH, encoding='utf-8') as f:
+        code = f.read()
+    compile(code, SHARDS_LAUNCH, 'exec')
+    consts, tree = _constants(SHARDS_LAUNCH)
+    assert consts['PACKAGE'] == 'hair_tracking'
+    assert consts['EXECUTABLE'] in console_scripts()
+    assert consts['SHARD_EXECUTABLE'] in console_scripts()
+    assert consts['NODE_NAME'] == params.NODE_NAME
+    assert consts['SHARD_NODE_NAME'] == ghosts.NODE_NAME
+    assert os.path.isfile(os.path.join(ROOT, *consts['RVIZ_CONFIG']))
+    table = params.by_name()
+    for name in consts['SETS_PARAMETERS']:
+        assert name in table or name == 'use_sim_time', name
+    with open(os.path.join(ROOT, 'hair_tracking', 'ros', 'ghosts.py'), encoding='utf-8') as f:
+        shard_source = f.read()
+    for name in consts['SETS_SHARD_PARAMETERS']:
+        assert f"declare_parameter('{name}'" in shard_source or name == 'use_sim_time', name
+    assert {'shards', 'shard_ids', 'guides', 'rviz'} <= set(consts['ARGUMENTS'])
+    assert 'generate_launch_description' in {n.name for n in tree.body
+                                             if isinstance(n, ast.FunctionDef)}
+    # its shard list, run without the launch package
+    funcs = {n.name: n for n in tree.body if isinstance(n, ast.FunctionDef)}
+    scope = {}
+    exec(compile(ast.Module(body=[funcs['_shard_ids']], type_ignores=[]), SHARDS_LAUNCH,
+                 'exec'), scope)
+    assert scope['_shard_ids']('', 3) == [0, 1, 2]
+    assert scope['_shard_ids']('2, 3', 4) == [2, 3]
+    for bad in (('4', 4), ('', 0)):
+        try:
+            scope['_shard_ids'](*bad)
+        except ValueError:
+            continue
+        raise AssertionError(f'{bad} accepted')
+
+
+def test_shards_rviz_config_shows_the_shard_topics():
+    from hair_tracking.ros.ghosts import shard_topic
+
+    with open(SHARDS_RVIZ, encoding='utf-8') as f:
+        cfg = yaml.safe_load(f)
+    topics = {d['Topic']['Value'] for d in cfg['Visualization Manager']['Displays']
+              if 'Topic' in d}
+    for k in range(4):
+        assert '/' + shard_topic(k, 'points') in topics
+        assert '/' + shard_topic(k, 'markers') in topics

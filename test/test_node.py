@@ -257,7 +257,7 @@ def test_clouds_carry_the_simulated_ghosts_through_rcl_or_rclpy_alike(harness, o
                      what='the guide cloud')
         g = next(g for g in guides if time_to_ns(g.header.stamp) == t)
         np.testing.assert_allclose(pointcloud2_to_strands(g)[0], frame.guides, atol=1e-6)
-        buffers.add(h.node.outputs['points'].cloud._msg.ctypes.data)
+        buffers.add(h.node.outputs['points'].cached.ctypes.data)
     assert len(buffers) == 1                     # one buffer, rewritten frame after frame
     assert h.node.frames_built == 0              # no markers wanted: no frame was built
 

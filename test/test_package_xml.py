@@ -124,9 +124,12 @@ def test_package_xml_declares_what_the_package_uses_and_nothing_else():
     assert not unused, f'package.xml declares what nothing imports or starts: {unused}'
 
 
-def test_the_launch_file_starts_rviz_and_imports_launch():
-    (path,) = _launch_files()
-    assert _started_packages(path) == {'rviz2'}          # the node goes by the PACKAGE constant
-    assert {'launch', 'launch_ros', 'ament_index_python'} <= _imports(path)
+def test_the_launch_files_start_rviz_and_import_launch():
+    paths = _launch_files()
+    assert {os.path.basename(p) for p in paths} == {'hair_sim.launch.py',
+                                                    'hair_sim_shards.launch.py'}
+    for path in paths:
+        assert _started_packages(path) == {'rviz2'}      # the nodes go by the PACKAGE constant
+        assert {'launch', 'launch_ros', 'ament_index_python'} <= _imports(path)
     needed, _ = _needed()
     assert {'rviz2', 'launch', 'launch_ros', 'ros2launch'} <= set(needed)

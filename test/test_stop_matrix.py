@@ -186,6 +186,9 @@ STATES = {
     'node: sim time, the bag ended': (
         'hair_sim_node', ['--ros-args', '-p', 'use_sim_time:=true', *NODE_PARAMS], 'ended',
         'ready:'),
+    'ghosts: waiting for the settings': (
+        'hair_sim_ghosts', ['--ros-args', '-p', 'shard:=0', '-p', 'shards:=2'], None,
+        'waiting for the settings'),
     'play: waiting for subscribers': (
         'hair_sim_bag', ['play', '--wait-for-subscribers', '600'], None, 2.0),
     'play: playing': ('hair_sim_bag', ['play', '--loop', '--wait-for-subscribers', '0'], None,

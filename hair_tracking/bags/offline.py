@@ -34,7 +34,8 @@ from hair_tracking.core.params import ParamError
 from hair_tracking.core.scene import Scene, SceneError
 from hair_tracking.output.params_check import load_params_file, node_parameters, ParamsFileError
 from hair_tracking.output.settings import check_groom_file, make_settings, NODE_NAME, Settings
-from hair_tracking.output.strand_colors import StrandColorCache
+from hair_tracking.output.diagnostics import HairHealth, HARDWARE_ID, make_status, status_name
+from hair_tracking.output.frame_encoder import FrameEncoder
 
 POINTS_TOPIC = '/hair/points'
 MARKERS_TOPIC = '/hair/markers'
@@ -42,7 +43,10 @@ DIAGNOSTICS_TOPIC = '/diagnostics'
 HEAD_POSE_TOPIC = '/head_pose'
 GUIDE_POINTS_TOPIC = '/hair/guides/points'
 GUIDE_MARKERS_TOPIC = '/hair/guides/markers'
-DIAGNOSTIC_NAME = 'hair_sim: hair simulation'
+#: The topic of each message of a frame (:data:`hair_tracking.output.frame_encoder.OUTPUTS`).
+TOPICS = {'points': POINTS_TOPIC, 'markers': MARKERS_TOPIC, 'guide_points': GUIDE_POINTS_TOPIC,
+          'guide_markers': GUIDE_MARKERS_TOPIC}
+DIAGNOSTIC_NAME = status_name(NODE_NAME)
 
 
 # ================================================================ settings
@@ -107,60 +111,13 @@ def load_settings(scene: Optional[str] = None, params_file: Optional[str] = None
 
 
 # ================================================================ encoding
-class FrameEncoder:
-    """Serialized output messages of one frame, exactly as the node builds them (CDR bytes):
-    per-strand colours from :func:`hair_tracking.output.strand_colors.strand_colors`, clouds
-    rewritten in place in a buffer kept per namespace (the node's
-    :class:`msg_adapters.pointcloud.CloudBuffer`, the coordinates written straight from the
-    simulator's state), ``line_list``/``line_strips`` markers with a DELETEALL in front of the
-    first array (and whenever the strand count changes), marker lifetime of
-    ``marker_lifetime_periods`` publishing periods."""
-
-    def __init__(self, settings: Settings):
-        self.settings = settings
-        from msg_adapters.pointcloud import pack_rgb_u32
-        self._colors = StrandColorCache(pack_rgb_u32)
-        self._shapes: Dict[str, tuple] = {}
-        self._clouds: Dict[str, object] = {}
-        self.lifetime_ns = int(round(settings.marker_lifetime * 1e9))
-
-    def colors(self, ns: str, n: int, rgba) -> np.ndarray:
-        """(n,) uint32 packed per-strand colours of the cloud (cached)."""
-        return self._colors.get(ns, n, rgba)
-
-    def cloud(self, n_strands, n_points, write_xyz, frame_id, stamp_ns, ns='hair',
-              rgba=None) -> np.ndarray:
-        """The cloud whose coordinates ``write_xyz(words, stride)`` writes (as
-        :meth:`hair_tracking.simulator.HairSimulator.record_writer`'s), in the buffer of
-        ``ns``: valid until the next cloud of ``ns``."""
-        from msg_adapters.pointcloud import CloudBuffer
-        buf = self._clouds.get(ns)
-        if buf is None:
-            buf = self._clouds[ns] = CloudBuffer()
-        s = self.settings
-        rgb = self.colors(ns, n_strands, rgba or s.marker_color) if s.cloud_rgb else None
-        return buf.encode(n_strands, n_points, write_xyz, frame_id=frame_id, stamp_ns=stamp_ns,
-                          packed_rgb=rgb, strand_field=s.cloud_strand)
-
-    def markers(self, strands, frame_id, stamp_ns, ns='hair', rgba=None) -> bytes:
-        from msg_adapters.marker_cdr import strands_to_marker_array_cdr
-        s = self.settings
-        shape = (strands.shape[0], s.marker_style)
-        fresh = self._shapes.get(ns) != shape
-        self._shapes[ns] = shape
-        return strands_to_marker_array_cdr(
-            strands, frame_id=frame_id, stamp_ns=stamp_ns, ns=ns, style=s.marker_style,
-            width=s.marker_width, color=rgba or s.marker_color, lifetime_ns=self.lifetime_ns,
-            delete_all_first=fresh)
-
-
 def diagnostics_bytes(stamp_ns: int, level: int, message: str, values: Dict[str, str]) -> bytes:
     """A serialized diagnostic_msgs/DiagnosticArray with one status named DIAGNOSTIC_NAME."""
     ts = bag_io.typestore()
     t = ts.types
     sec, nanosec = divmod(int(stamp_ns), 1_000_000_000)
     status = t['diagnostic_msgs/msg/DiagnosticStatus'](
-        level=level, name=DIAGNOSTIC_NAME, message=message, hardware_id='hair_tracking',
+        level=level, name=DIAGNOSTIC_NAME, message=message, hardware_id=HARDWARE_ID,
         values=[t['diagnostic_msgs/msg/KeyValue'](key=k, value=v) for k, v in values.items()])
     arr = t['diagnostic_msgs/msg/DiagnosticArray'](
         header=t['std_msgs/msg/Header'](stamp=t['builtin_interfaces/msg/Time'](
@@ -418,6 +375,9 @@ def run_bag(input_path: str, output_path: str, settings: Settings,
         if opt.markers:
             writer.add_topic(MARKERS_TOPIC, 'visualization_msgs/msg/MarkerArray', qos)
         guides = bool(settings.publish_guides)
+        keys = [k for k, on in (('points', opt.points), ('markers', opt.markers),
+                                ('guide_points', guides and opt.points),
+                                ('guide_markers', guides and opt.markers)) if on]
         if guides and opt.points:
             writer.add_topic(GUIDE_POINTS_TOPIC, 'sensor_msgs/msg/PointCloud2', qos)
         if guides and opt.markers:
@@ -455,21 +415,8 @@ def run_bag(input_path: str, output_path: str, settings: Settings,
                     raise BagError(f'the hair became non-finite at t = {t * 1e-9:.6f} s '
                                    f'(pose {i}); no output written', EXIT_FAILURE)
                 stamp = frame.t_ns              # the time the hair state is at (node: same)
-                if opt.points:
-                    writer.write(POINTS_TOPIC, log_t,
-                                 enc.cloud(*sim.record_writer(False, head_out), out_frame,
-                                           stamp))
-                if opt.markers:
-                    writer.write(MARKERS_TOPIC, log_t, enc.markers(strands, out_frame, stamp))
-                if guides:
-                    g, gc = frame.guides, settings.guide_color
-                    if opt.points:
-                        writer.write(GUIDE_POINTS_TOPIC, log_t,
-                                     enc.cloud(*sim.record_writer(True, head_out), out_frame,
-                                               stamp, 'guides', gc))
-                    if opt.markers:
-                        writer.write(GUIDE_MARKERS_TOPIC, log_t,
-                                     enc.markers(g, out_frame, stamp, 'guides', gc))
+                for key, msg in enc.frame(sim, keys, out_frame, stamp, head_out, frame).items():
+                    writer.write(TOPICS[key], log_t, msg.data)
                 summary.frames += 1
                 measure = True
             if opt.diagnostics and diag.due(t):
@@ -504,36 +451,15 @@ def run_bag(input_path: str, output_path: str, settings: Settings,
 
 class _Diagnostics:
     """The node's diagnostic status without its wall-clock timings (so runs are repeatable):
-    same name, keys and levels (WARN when substeps were dropped or poses rejected since the
-    previous report)."""
+    same name, keys and levels (:mod:`hair_tracking.output.diagnostics`)."""
 
     def __init__(self):
-        self.marks = (0, 0)
+        self.health = HairHealth()
 
     def message(self, sim, stamp_ns, invalid, stretch, depth, frame_id) -> bytes:
-        c = sim.counters
         rejected = invalid + sim.track.counters['rejected']
-        level, problems = 0, []
-        dropped_before, rejected_before = self.marks
-        if c.substeps_dropped > dropped_before:
-            level = 1
-            problems.append(f'{c.substeps_dropped - dropped_before} substeps dropped')
-        if rejected > rejected_before:
-            level = 1
-            problems.append(f'{rejected - rejected_before} head poses rejected')
-        self.marks = (c.substeps_dropped, rejected)
-        values = {
-            'substeps': str(c.substeps),
-            'substeps_last': str(c.last_substeps),
-            'substeps_dropped': str(c.substeps_dropped),
-            'max_stretch': f'{stretch:.6f}',
-            'penetration_m': f'{depth:.6f}',
-            'poses_rejected': str(rejected),
-            'hair_resets': str(c.resets),
-            'hair_rebuilds': '0',
-            'guides': str(sim.guides.count),
-            'ghosts': str(sim.ghosts.count if sim.ghosts is not None else 0),
-            'sim_time_ns': str(sim.time_ns if sim.time_ns is not None else 'n/a'),
-            'output_frame': frame_id,
-        }
-        return diagnostics_bytes(stamp_ns, level, '; '.join(problems) or 'ok', values)
+        problems = self.health.problems(sim, rejected)
+        values = HairHealth.values(sim, stretch, depth, rejected, 0)
+        values['output_frame'] = frame_id
+        status = make_status(1 if problems else 0, problems, values)
+        return diagnostics_bytes(stamp_ns, status.level, status.message, status.values)

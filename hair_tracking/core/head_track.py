@@ -108,7 +108,7 @@ class HeadTrack:
     def latest(self) -> HeadPose:
         if not self._t:
             return IDENTITY
-        return _head_pose(self._p[-1], self._q[-1])
+        return head_pose(self._p[-1], self._q[-1])
 
     def sample(self, t_ns: int) -> HeadPose:
         """Head pose at ``t_ns``: interpolated between samples, held outside them."""
@@ -116,17 +116,17 @@ class HeadTrack:
             return IDENTITY
         ts = self._t
         if t_ns <= ts[0]:
-            return _head_pose(self._p[0], self._q[0])
+            return head_pose(self._p[0], self._q[0])
         if t_ns >= ts[-1]:
-            return _head_pose(self._p[-1], self._q[-1])
+            return head_pose(self._p[-1], self._q[-1])
         i = _bisect(ts, t_ns)           # ts[i-1] <= t < ts[i]
         u = (t_ns - ts[i - 1]) / (ts[i] - ts[i - 1])
         a, b = self._p[i - 1], self._p[i]
-        return _head_pose(tuple((1.0 - u) * a[k] + u * b[k] for k in range(3)),
-                          slerp_floats(self._q[i - 1], self._q[i], u))
+        return head_pose(tuple((1.0 - u) * a[k] + u * b[k] for k in range(3)),
+                         slerp_floats(self._q[i - 1], self._q[i], u))
 
 
-def _head_pose(p, q) -> HeadPose:
+def head_pose(p, q) -> HeadPose:
     """A HeadPose of position ``p`` and unit quaternion ``q`` (tuples of floats)."""
     return HeadPose(np.array(p), np.array(q), matrix_of_quat(*q))
 

@@ -164,6 +164,7 @@ class StatelessTracker:
         self._x32 = ghosts.x.astype(np.float32)
         self._x32_target = (self._x32, np.eye(3), np.zeros(3), False, False)      # Placement
         self._x64 = None              # the positions set by reset or carry, until a step
+        self._stepped = False         # the positions are placed from the last step
         self._v = np.zeros(ghosts.rest.shape)
         self._v.flags.writeable = False
         self.collide = bool(scene.tracking.collide and collider is not None)
@@ -192,6 +193,7 @@ class StatelessTracker:
         self._head = motion.head
         self._pending = True
         self._x64 = None
+        self._stepped = True
         self.stats['steps'] += 1
 
     def _evaluate(self) -> None:
@@ -221,8 +223,16 @@ class StatelessTracker:
     def _set(self, x: np.ndarray) -> None:
         """Positions ``x`` (S, N, 3) float64 from outside a step, kept exactly."""
         self._pending = False
+        self._stepped = False
         self._x64 = x
         self._x32[...] = x
+
+    @property
+    def from_step(self) -> bool:
+        """Whether the positions are (or will be) placed from the guides and head pose of the
+        last step alone, not set by :meth:`reset` or :meth:`carry` since: what a process given
+        the same guides and head pose places (a ghost shard, ``hair_sim_ghosts``)."""
+        return self._stepped
 
     def reset(self, head: HeadPose) -> None:
         """Rest shape carried by ``head``."""

@@ -93,6 +93,17 @@ NODE_PARAMS: Tuple[Param, ...] = (
           choices=CLOUD_FIELDS),
     Param('publish_guides', 'bool', False,
           'also publish the guide strands on hair/guides/points and hair/guides/markers'),
+    Param('shards', 'int', 0,
+          'ghost shards (hair_sim_ghosts processes, launch/hair_sim_shards.launch.py) that '
+          'place and publish the ghosts on hair/shard_<k>/points and .../markers; > 0: this '
+          'node publishes no ghost cloud or markers of its own (hair/points, hair/markers) '
+          'and publishes the guides\' state and the settings for them, as with '
+          'publish_guide_state (docs/ros.md)', lo=0, hi=1024, read_only=True),
+    Param('publish_guide_state', 'bool', False,
+          'publish the guides\' state (hair_tracking_msgs/GuideState) on hair/guides/state '
+          'each frame and the settings on hair/scene (latched), what hair_sim_ghosts shards '
+          'place their ghosts from; the node\'s own ghosts are then placed from the guides '
+          'rounded to float32, as the shards receive them', read_only=True),
     Param('marker_style', 'string', 'line_list',
           'MarkerArray layout: line_list (one marker per namespace, fastest) or line_strips '
           '(one marker per strand)', choices=MARKER_STYLES),
@@ -179,6 +190,8 @@ class Settings:
     publish_through_rcl: bool = _default('publish_through_rcl')
     cloud_fields: str = _default('cloud_fields')
     publish_guides: bool = _default('publish_guides')
+    shards: int = _default('shards')
+    publish_guide_state: bool = _default('publish_guide_state')
     marker_style: str = _default('marker_style')
     marker_width: float = _default('marker_width')
     marker_color: RGBA = _default('marker_color')
@@ -202,6 +215,11 @@ class Settings:
     def publish_period(self) -> float:
         """Seconds between two publications."""
         return 1.0 / self.publish_rate_hz
+
+    @property
+    def guide_state(self) -> bool:
+        """Whether the node publishes the guides' state for ghost shards."""
+        return self.publish_guide_state or self.shards > 0
 
     @property
     def cloud_rgb(self) -> bool:

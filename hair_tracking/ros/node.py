@@ -64,13 +64,13 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from rclpy.qos import qos_profile_sensor_data
 from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import PointCloud2
+from std_msgs.msg import String
 from std_srvs.srv import Trigger
 from visualization_msgs.msg import Marker, MarkerArray
 
 from msg_adapters.capsule_markers import capsule_markers
+from msg_adapters.guide_state import GuideState
 from msg_adapters.head_marker import collider_marker
-from msg_adapters.marker_cdr import strands_to_marker_array_cdr
-from msg_adapters.pointcloud import CloudBuffer, pack_rgb_u32
 from msg_adapters.pose import pose_from_msg, PoseError
 from msg_adapters.rcl_serialized import SerializedPublisher
 from msg_adapters.stamps import time_to_ns
@@ -89,7 +89,11 @@ from hair_tracking.output.params_check import params_files_problem, rcl_argument
     unknown_parameters
 from hair_tracking.output.settings import apply_changes, make_settings, NODE_NAME, \
     NODE_ROWS, table
-from hair_tracking.output.strand_colors import StrandColorCache
+from hair_tracking.output.diagnostics import HairHealth, HARDWARE_ID, make_status, \
+    status_name, WARN
+from hair_tracking.output.frame_encoder import FrameEncoder
+from hair_tracking.output.shards import fingerprint, guide_state_bytes, settings_text, \
+    SHARDABLE
 from hair_tracking.resources import config_path
 from hair_tracking.ros.load_shedding import LoadShedder
 from hair_tracking.simulator import HairSimulator
@@ -114,6 +118,17 @@ DIAG_AUDIT_STRANDS = 4096
 HEAD_MARKER_TOPIC = 'hair/head'
 #: The scene's body (the bust's capsules) as markers.
 COLLIDERS_TOPIC = 'hair/colliders'
+#: What ghost shards (hair_sim_ghosts) place their ghosts from: the guides' state of each frame
+#: and the node's settings (latched).
+GUIDE_STATE_TOPIC = 'hair/guides/state'
+SCENE_TOPIC = 'hair/scene'
+
+
+def latched_qos() -> QoSProfile:
+    """Reliable, transient-local, keep-last 1: a late subscriber gets the last message."""
+    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
+                      reliability=ReliabilityPolicy.RELIABLE,
+                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 
 def output_qos(depth: int) -> QoSProfile:
@@ -137,6 +152,13 @@ def descriptor(p: Param) -> ParameterDescriptor:
                                additional_constraints=p.range_text(), read_only=p.read_only)
 
 
+def diagnostic_status(name: str, status) -> DiagnosticStatus:
+    """The DiagnosticStatus of a :class:`hair_tracking.output.diagnostics.Status`."""
+    return DiagnosticStatus(level=bytes([status.level]), name=name, message=status.message,
+                            hardware_id=HARDWARE_ID,
+                            values=[KeyValue(key=k, value=v) for k, v in status.values.items()])
+
+
 def load_base_scene(scene_file: str) -> Scene:
     """The scene named by ``scene_file`` (a path or a preset name); ``Scene()`` if empty."""
     if not scene_file:
@@ -154,11 +176,9 @@ class _Output:
     def __init__(self, node: Node, topic: str, msg_type, depth: int = 2):
         self.pub = node.create_publisher(msg_type, topic, output_qos(depth))
         self.raw = SerializedPublisher(self.pub)     # direct with publish_through_rcl
-        self.cloud = CloudBuffer()       # the message a cloud output rewrites each frame
         self.cached = None               # the last message sent (bytes or a uint8 array)
         self.encoded = 0             # messages built (encoded) so far
         self.published = 0
-        self.shape = None            # (strands, style) of the last marker array sent
 
     def wanted(self) -> bool:
         return self.pub.get_subscription_count() > 0
@@ -209,7 +229,7 @@ class HairSimNode(Node):
         self._pose_published_ns = None   # sim time of the last frame publish_on_pose sent
         self._tf_child: Optional[str] = None
         self._tf_seen_ns = 0
-        self._color_cache = StrandColorCache(pack_rgb_u32)
+        self.encoder = FrameEncoder(settings)     # the messages of a frame
         self._rcl_refusal_logged = False
         self.rejected = 0                # poses dropped (malformed, NaN, zero quaternion ...)
         self.rebuilds = 0
@@ -217,7 +237,7 @@ class HairSimNode(Node):
         self.step_ms = collections.deque(maxlen=1000)
         self.publish_ms = collections.deque(maxlen=1000)
         self._publish_ms_since_pose = 0.0    # publishing time since the last pose (shedding)
-        self._diag_marks = (0, 0)        # (dropped substeps, rejected) at the last report
+        self._health = HairHealth()      # substeps dropped, poses rejected since a report
         self._audit_part = 0             # the part of the ghosts the next report checks
 
         depth = settings.output_queue_depth
@@ -232,6 +252,11 @@ class HairSimNode(Node):
         self._head_pub = self.create_publisher(Marker, HEAD_MARKER_TOPIC, output_qos(depth))
         self._colliders_pub = self.create_publisher(MarkerArray, COLLIDERS_TOPIC,
                                                     output_qos(depth))
+        self._guide_state_pub = self._scene_pub = None
+        self._guide_state_key = None     # (sim time, tracker steps) of the last state sent
+        self.guide_states_sent = 0
+        self._guide_state_on = False
+        self._start_guide_state(depth, settings.guide_state)
         self._tf = TfTree()              # /tf_static and /tf, for use_tf and gravity_frame
         self._tf_pub = None              # publish_tf
         self._tf_sent_key = None         # (child, stamp) of the last transform broadcast
@@ -281,6 +306,12 @@ class HairSimNode(Node):
             f'publishing at {settings.publish_rate_hz:g} Hz')
 
     # ================================================================ parameters
+    @property
+    def settings(self):
+        """The settings the node runs with now (a frozen
+        :class:`~hair_tracking.output.settings.Settings`)."""
+        return self._settings
+
     def _declare_all(self) -> None:
         sf = NODE_ROWS['scene_file']
         self.declare_parameter(sf.name, sf.default, descriptor(sf))
@@ -386,6 +417,7 @@ class HairSimNode(Node):
                     + (f'; {self.sim.groom_note}' if self.sim.groom_note else ''))
             self._gravity_used = None
             self._update_gravity()
+        self._publish_scene()
         self._invalidate()
 
     # ================================================================ inputs
@@ -677,9 +709,12 @@ class HairSimNode(Node):
         self._publish_colliders()
         outs = self.outputs
         s = self._settings
+        self._publish_guide_state()
         wanted = {k: o.wanted() for k, o in outs.items()}
         if not s.publish_guides:
             wanted['guide_points'] = wanted['guide_markers'] = False
+        if s.shards > 0:                 # the shards publish the ghosts
+            wanted['points'] = wanted['markers'] = False
         self._last_publish = time.monotonic()
         if not any(wanted.values()):
             return
@@ -705,82 +740,98 @@ class HairSimNode(Node):
         if wanted['markers'] or wanted['guide_markers']:
             frame = self.sim.frame(head_frame=head_frame, copy=False)
             self.frames_built += 1
-        frame_id = self.output_frame_id()
         stamp = max(0, (self.sim.time_ns or 0) - self._offset_ns)   # the stream's time base
-        lifetime_ns = int(round(s.marker_lifetime * 1e9))
-        for key, guides, ns, color in (
-                ('points', False, 'hair', s.marker_color),
-                ('markers', False, 'hair', s.marker_color),
-                ('guide_points', True, 'guides', s.guide_color),
-                ('guide_markers', True, 'guides', s.guide_color)):
-            if not wanted[key]:
-                continue
+        self.encoder.settings = s
+        encoded = self.encoder.frame(self.sim, [k for k, on in wanted.items() if on],
+                                     self.output_frame_id(), stamp, head_frame, frame)
+        for key, msg in encoded.items():
             o = outs[key]
-            if key.endswith('points'):
-                n_strands, n_points, write = self.sim.record_writer(guides, head_frame)
-                data = o.cloud.encode(
-                    n_strands, n_points, write, frame_id=frame_id, stamp_ns=stamp,
-                    packed_rgb=self._colors(ns, n_strands, color) if s.cloud_rgb else None,
-                    strand_field=s.cloud_strand)
-                o.cached = data
-            else:
-                strands = frame.guides if guides else frame.strands
-                shape = (strands.shape[0], s.marker_style)
-                fresh = o.shape != shape
-                data = strands_to_marker_array_cdr(
-                    strands, frame_id=frame_id, stamp_ns=stamp, ns=ns, style=s.marker_style,
-                    width=s.marker_width, color=color, lifetime_ns=lifetime_ns,
-                    delete_all_first=fresh)
-                o.shape = shape
-                o.cached = None if fresh else data     # never resend a DELETEALL
+            o.cached = None if msg.fresh else msg.data     # never resend a DELETEALL
             o.encoded += 1
-            o.raw.publish(data)
+            o.raw.publish(msg.data)
             o.published += 1
         self._dirty = False
         took = (self._work_clock() - start) * 1e3
         self.publish_ms.append(took)
         self._publish_ms_since_pose += took
 
-    def _colors(self, ns: str, n: int, rgba) -> np.ndarray:
-        """(n,) uint32 packed per-strand colours of the cloud (cached)."""
-        return self._color_cache.get(ns, n, rgba)
+    # ================================================================ ghost shards
+    def _start_guide_state(self, depth: int, on: bool) -> None:
+        """The publishers of the guides' state and the settings for hair_sim_ghosts (made
+        always, like the guide clouds'); with ``on`` (``shards`` / ``publish_guide_state``)
+        they publish, and this node's ghosts are placed from the guides as they send them."""
+        if GuideState is None:
+            if on:
+                self.get_logger().warn('shards / publish_guide_state: hair_tracking_msgs is '
+                                       'not installed, the guides\' state is not published')
+            return
+        self._guide_state_pub = self.create_publisher(GuideState, GUIDE_STATE_TOPIC,
+                                                      output_qos(depth))
+        self._scene_pub = self.create_publisher(String, SCENE_TOPIC, latched_qos())
+        self._scene_text = None
+        self._guide_sequence = 0
+        self._guide_state_on = on
+        if not on:
+            return
+        mode = self._settings.scene.tracking.mode
+        if mode not in SHARDABLE:
+            self.get_logger().warn(f'shards / publish_guide_state: tracking.mode {mode} cannot '
+                                   f'be sharded (only {", ".join(SHARDABLE)}): no guides\' '
+                                   'state is sent, and hair_sim_ghosts refuses these settings')
+        self.sim.guides_as_float32 = True
+        self._publish_scene()
+
+    def _publish_scene(self) -> None:
+        """The settings on the latched scene topic when they changed."""
+        if self._scene_pub is None or not self._guide_state_on:
+            return
+        text = settings_text(self._settings)
+        if text != self._scene_text:
+            self._scene_text, self._scene_fingerprint = text, fingerprint(text)
+            self._scene_pub.publish(String(data=text))
+
+    def _publish_guide_state(self) -> None:
+        """The guides' state of a frame whose ghosts were placed from the guides and head
+        pose alone (not right after a reset or a jump, which carry the hair), once a frame."""
+        tracker = self.sim.ghost_tracker
+        if self._guide_state_pub is None or not self._guide_state_on or tracker is None or \
+                not getattr(tracker, 'from_step', False):
+            return
+        key = (self.sim.time_ns, tracker.stats['steps'])
+        if key == self._guide_state_key:
+            return
+        self._guide_state_key = key
+        stamp = max(0, (self.sim.time_ns or 0) - self._offset_ns)
+        self._guide_sequence = (self._guide_sequence + 1) % (1 << 32)
+        self._guide_state_pub.publish(guide_state_bytes(
+            self.sim, self._pose_frame or self._settings.fixed_frame or 'world', stamp,
+            self._scene_fingerprint, self._guide_sequence))
+        self.guide_states_sent += 1
 
     # ================================================================ diagnostics
     def diagnostics(self) -> DiagnosticStatus:
         """The node's health: timings, substeps, stretch, rejected poses (one status)."""
         sim = self.sim
-        c = sim.counters
-        level, problems = DiagnosticStatus.OK, []
+        problems = []
         now_ns = self.get_clock().now().nanoseconds
         if self._last_arrival_ns is None:
-            level, problems = DiagnosticStatus.WARN, ['waiting for a head pose']
+            problems = ['waiting for a head pose']
         else:
             age = (now_ns - self._last_arrival_ns) * 1e-9
             if age > self._settings.stale_timeout:
-                level = DiagnosticStatus.WARN
                 problems.append(f'head pose stale for {age:.1f} s (holding the last pose)')
-        dropped_before, rejected_before = self._diag_marks
-        if c.substeps_dropped > dropped_before:
-            level = DiagnosticStatus.WARN
-            problems.append(f'{c.substeps_dropped - dropped_before} substeps dropped')
-        if self.rejected > rejected_before:
-            level = DiagnosticStatus.WARN
-            problems.append(f'{self.rejected - rejected_before} head poses rejected')
-        self._diag_marks = (c.substeps_dropped, self.rejected)
+        problems += self._health.problems(sim, self.rejected)
         if sim.track_once_per_call:
-            level = DiagnosticStatus.WARN
             problems.append('load shedding: ghosts tracked once per pose to keep up')
         body_frame, body_age = self._body_frame(), 'n/a'
         if body_frame:
             seen = self._body_seen
             if seen is None:
-                level = DiagnosticStatus.WARN
                 problems.append(f'body.frame {body_frame!r} not received: the bust rides on '
                                 'the neck frame')
             elif not seen[1]:
                 body_age = f'{(now_ns - seen[0]) * 1e-9:.3f}'
                 if (now_ns - seen[0]) * 1e-9 > self._settings.stale_timeout:
-                    level = DiagnosticStatus.WARN
                     problems.append(f'body.frame {body_frame!r} stale for {body_age} s (the '
                                     'bust keeps its last pose)')
         step = list(self.step_ms)[-100:]
@@ -790,42 +841,32 @@ class HairSimNode(Node):
         part = self._audit_part % parts
         self._audit_part = part + 1
         stretch, depth, checked = sim.audit(part, parts)
-
-        def kv(key, value):
-            return KeyValue(key=key, value=str(value))
-        values = [
-            kv('step_ms_last', f'{step[-1]:.3f}' if step else 'n/a'),
-            kv('step_ms_max_recent', f'{max(step):.3f}' if step else 'n/a'),
-            kv('publish_ms_last', f'{pub[-1]:.3f}' if pub else 'n/a'),
-            kv('publish_ms_max_recent', f'{max(pub):.3f}' if pub else 'n/a'),
-            kv('substeps', c.substeps),
-            kv('substeps_last', c.last_substeps),
-            kv('substeps_dropped', c.substeps_dropped),
-            kv('max_stretch', f'{stretch:.6f}'),
-            kv('penetration_m', f'{depth:.6f}'),
-            kv('checked_ghosts', f'{checked[0]}-{checked[-1]}' if checked.size else 'none'),
-            kv('poses_rejected', self.rejected),
-            kv('hair_resets', c.resets),
-            kv('hair_rebuilds', self.rebuilds),
-            kv('guides', sim.guides.count),
-            kv('ghosts', ghosts),
-            kv('sim_time_ns', sim.time_ns if sim.time_ns is not None else 'n/a'),
-            kv('stream_offset_ms', f'{self._offset_ns * 1e-6:.3f}'),
-            kv('numba_threads', self.numba_threads),
-            kv('load_shedding', 'active' if sim.track_once_per_call else
-               ('ready' if self._settings.load_shedding else 'off')),
-            kv('load_shedding_switches', self.shedder.switches),
-            kv('ghost_kernel', 'none' if sim.ghost_tracker is None else
-               ('parallel' if sim.ghost_tracker.stats['parallel'] else 'serial')),
-            kv('output_frame', self.output_frame_id()),
-            kv('tf_sent', self.tf_sent),
-            kv('gravity_in_pose_frame', 'n/a' if self._gravity_used is None else
-               ' '.join(f'{v:.4f}' for v in self._gravity_used)),
-            kv('body_frame_age_s', body_age),
-        ]
-        return DiagnosticStatus(level=level, name=f'{self.get_name()}: hair simulation',
-                                message='; '.join(problems) if problems else 'ok',
-                                hardware_id='hair_tracking', values=values)
+        values = {
+            'step_ms_last': f'{step[-1]:.3f}' if step else 'n/a',
+            'step_ms_max_recent': f'{max(step):.3f}' if step else 'n/a',
+            'publish_ms_last': f'{pub[-1]:.3f}' if pub else 'n/a',
+            'publish_ms_max_recent': f'{max(pub):.3f}' if pub else 'n/a',
+        }
+        values.update(HairHealth.values(sim, stretch, depth, self.rejected, self.rebuilds,
+                                        checked))
+        values.update({
+            'stream_offset_ms': f'{self._offset_ns * 1e-6:.3f}',
+            'numba_threads': str(self.numba_threads),
+            'load_shedding': 'active' if sim.track_once_per_call else
+                             ('ready' if self._settings.load_shedding else 'off'),
+            'load_shedding_switches': str(self.shedder.switches),
+            'ghost_kernel': 'none' if sim.ghost_tracker is None else
+                            ('parallel' if sim.ghost_tracker.stats['parallel'] else 'serial'),
+            'output_frame': self.output_frame_id(),
+            'tf_sent': str(self.tf_sent),
+            'gravity_in_pose_frame': 'n/a' if self._gravity_used is None else
+                                     ' '.join(f'{v:.4f}' for v in self._gravity_used),
+            'body_frame_age_s': body_age,
+        })
+        if self._guide_state_on:
+            values['guide_states_sent'] = str(self.guide_states_sent)
+        return diagnostic_status(status_name(self.get_name()),
+                                 make_status(WARN if problems else 0, problems, values))
 
     def _on_diag_timer(self) -> None:
         """Diagnostics at ``diagnostics_rate_hz``, listened to or not (an aggregator expects
@@ -915,8 +956,10 @@ def make_parser() -> argparse.ArgumentParser:
                     '/tf and /tf_static (TFMessage); publishes hair/points (PointCloud2), '
                     'hair/markers (MarkerArray), hair/head (Marker, the head collider), '
                     'hair/colliders (MarkerArray, the body\'s bust, body.bust), /tf (the '
-                    'head pose, publish_tf), /diagnostics, and with publish_guides '
-                    'hair/guides/points and hair/guides/markers; offers ~/reset. Every setting '
+                    'head pose, publish_tf), /diagnostics, with publish_guides '
+                    'hair/guides/points and hair/guides/markers, and with shards or '
+                    'publish_guide_state hair/guides/state (GuideState) and hair/scene (the '
+                    'settings, latched) for hair_sim_ghosts; offers ~/reset. Every setting '
                     'is a ROS parameter (see config/hair_sim.yaml and docs/node.md).',
         epilog='ROS arguments follow --ros-args, e.g. hair_sim_node --ros-args '
                '--params-file config/hair_sim.yaml -p scene_file:=long_hair '

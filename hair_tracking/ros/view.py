@@ -3,7 +3,9 @@
     hair_sim_view                         # then open http://127.0.0.1:8080
     hair_sim_view --follow --port 8090    # a walking head (hair_sim_bag play) stays in view
 
-It subscribes to ``hair/points`` (the organized sensor_msgs/PointCloud2 of :mod:`.node`: one
+It subscribes to ``hair/points`` (or, with ``--shards N``, to the N ghost shards' clouds
+``hair/shard_<k>/points``, joined: :class:`ShardClouds`) (the organized
+sensor_msgs/PointCloud2 of :mod:`.node`: one
 row per strand, ``x y z`` float32, packed ``rgb``) and ``hair/head`` (the collider as a
 visualization_msgs/Marker SPHERE, ``scale`` = diameters) and draws each strand as line
 segments between its consecutive points in the cloud's colours, and the head as an opaque
@@ -195,6 +197,34 @@ class Latest:
         return head, cloud
 
 
+class ShardClouds:
+    """The ghost shards' clouds (``hair_sim_ghosts``, ``--shards``) joined into one: the newest
+    cloud of each shard, in shard order, leaving out those more than ``max_age_ns`` older than
+    the newest (a shard that stopped); the rows of all shards are the rows of the node's
+    cloud of all strands."""
+
+    def __init__(self, shards: int, max_age_ns: int = 1_000_000_000):
+        self._clouds: List[Optional[PointCloud2]] = [None] * int(shards)
+        self.max_age_ns = int(max_age_ns)
+
+    def add(self, shard: int, msg: PointCloud2) -> PointCloud2:
+        """Keep ``msg`` as shard ``shard``'s newest; the joined cloud now."""
+        self._clouds[shard] = msg
+
+        def stamp(m):
+            return m.header.stamp.sec * 1_000_000_000 + m.header.stamp.nanosec
+        newest = max(stamp(m) for m in self._clouds if m is not None)
+        parts = [m for m in self._clouds if m is not None and
+                 newest - stamp(m) <= self.max_age_ns and m.width == msg.width and
+                 m.point_step == msg.point_step]
+        out = PointCloud2(header=msg.header, height=sum(m.height for m in parts),
+                          width=msg.width, fields=msg.fields, is_bigendian=msg.is_bigendian,
+                          point_step=msg.point_step, row_step=msg.row_step,
+                          is_dense=all(m.is_dense for m in parts))
+        out.data = b''.join(bytes(m.data) for m in parts)
+        return out
+
+
 # ==================================================================== the scene
 class HairScene:
     """The viser scene: the strands as one set of line segments, the head as an icosphere
@@ -367,6 +397,10 @@ def make_parser() -> argparse.ArgumentParser:
                              'next free one, printed at start)')
     parser.add_argument('--points-topic', default='hair/points',
                         help='organized PointCloud2 of the strands (default: %(default)s)')
+    parser.add_argument('--shards', type=int, default=0,
+                        help='join the clouds of this many ghost shards (hair_sim_ghosts, '
+                             'hair/shard_<k>/points) instead of --points-topic (default: '
+                             '%(default)s, none)')
     parser.add_argument('--head-topic', default='hair/head',
                         help="the head's SPHERE Marker; '' for none (default: %(default)s)")
     parser.add_argument('--rate', type=float, default=30.0,
@@ -394,6 +428,8 @@ def _check(options) -> Optional[str]:
         return f'--line-width must be > 0, got {options.line_width}'
     if not options.points_topic:
         return '--points-topic must not be empty'
+    if options.shards < 0:
+        return f'--shards must be >= 0, got {options.shards}'
     return None
 
 
@@ -414,7 +450,15 @@ def serve(options, ros_args: List[str], stop: shutdown.StopRequest) -> int:
         rclpy.init(args=ros_args, signal_handler_options=SignalHandlerOptions.NO)
         executor = SingleThreadedExecutor()
         node = rclpy.create_node(NAME)
-        node.create_subscription(PointCloud2, options.points_topic, latest.add_cloud, qos)
+        if options.shards:
+            from hair_tracking.ros.ghosts import shard_topic
+            joined = ShardClouds(options.shards)
+            for k in range(options.shards):
+                node.create_subscription(
+                    PointCloud2, shard_topic(k, 'points'),
+                    lambda msg, k=k: latest.add_cloud(joined.add(k, msg)), qos)
+        else:
+            node.create_subscription(PointCloud2, options.points_topic, latest.add_cloud, qos)
         if options.head_topic:
             node.create_subscription(Marker, options.head_topic, latest.add_head, qos)
         executor.add_node(node)
@@ -423,7 +467,8 @@ def serve(options, ros_args: List[str], stop: shutdown.StopRequest) -> int:
         server.gui.configure_theme(show_share_button=False)
         scene = HairScene(server, max_strands=options.max_strands,
                           line_width=options.line_width, follow=options.follow,
-                          topics=(node.resolve_topic_name(options.points_topic),
+                          topics=(f'{options.shards} shards' if options.shards else
+                                  node.resolve_topic_name(options.points_topic),
                                   options.head_topic and
                                   node.resolve_topic_name(options.head_topic)))
         print(f'{NAME}: serving http://{options.host}:{server.get_port()} '
