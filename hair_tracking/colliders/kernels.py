@@ -22,8 +22,11 @@ from hair_tracking.colliders.slide import level, slide_push
 
 #: Sweeps over the shapes a node of :func:`slide_push_strands` takes at most.
 STRAND_SWEEPS = 16
-#: Strands a work item of :func:`slide_push_strands`'s parallel loop takes.
+#: Strands whose nodes share the first bound test of :func:`slide_push_strands`.
 STRAND_BLOCK = 64
+#: Work items of :func:`slide_push_strands`'s parallel loop (each a run of blocks with its own
+#: scratch).
+CHUNKS = 64
 
 
 @njit(cache=True, fastmath=FASTMATH, error_model='numpy')
@@ -106,66 +109,73 @@ def slide_push_strands(x, rest_length, sh, first, lead):
     shapes (the head collider, which the tracker or solver has applied already) are tested
     only on nodes this pass moves.
 
-    The bound test comes first and is shared by a strand's nodes: a strand whose box (its
-    nodes from ``first`` on, :func:`~hair_tracking.colliders.bounds.strand_box`) meets no
-    shape after the ``lead`` ones is left as it is without a node's test (none of its nodes
-    can be moved, so none is carried); in the others a node's tests run over the shapes the
-    strand's box meets (:func:`~hair_tracking.colliders.bounds.box_near`) until a shape moves
-    it (then over all of them, as it may have left the box).  The box contains every node of
-    the strand, so the result is the same as each node testing every shape.  A node that is
-    not finite is left as it is and carries nothing to the nodes after it.
-    Returns the number of nodes a shape moved."""
+    The bound tests go from the coarse to the fine, so that hair far from every shape costs
+    one read of its nodes: the strands go in blocks of :data:`STRAND_BLOCK`; the box of a
+    block's nodes from ``first`` on against each shape's box
+    (:func:`~hair_tracking.colliders.bounds.shape_box`), then each strand's box
+    (:func:`~hair_tracking.colliders.bounds.strand_box`) against the shapes its block's box
+    meets; a strand whose box meets no shape after the ``lead`` ones is left as it is (none of
+    its nodes can be moved, so none is carried).  In the others the pass starts at the first
+    node inside a shape its box meets (a node tested exactly only inside the shape's box) and
+    a node's tests run over those shapes until one moves it (then over all of them, as it may
+    have left the box).  Each box contains every node it stands for, so the result is the
+    same as each node testing every shape.  A node that is not finite is left as it is and
+    carries nothing to the nodes after it.  Returns the number of nodes a shape moved."""
     boxes = np.empty((sh.shape[0], 6))
     for k in range(sh.shape[0]):
         boxes[k, 0], boxes[k, 1], boxes[k, 2], boxes[k, 3], boxes[k, 4], boxes[k, 5] = \
             shape_box(sh, k)
     blocks = (x.shape[0] + STRAND_BLOCK - 1) // STRAND_BLOCK
+    chunks = min(blocks, CHUNKS)
     total = 0
-    for b in prange(blocks):
-        s0 = b * STRAND_BLOCK
-        total += _slide_push_block(x, rest_length, (sh, boxes), (first, lead),
-                                   (s0, min(s0 + STRAND_BLOCK, x.shape[0])))
+    for c in prange(chunks):
+        total += _slide_push_blocks(x, rest_length, (sh, boxes), (first, lead),
+                                    (c * blocks // chunks, (c + 1) * blocks // chunks))
     return total
 
 
 @njit(cache=True, fastmath=FASTMATH, error_model='numpy')
-def _slide_push_block(x, rest_length, shapes, how, strands):
-    """:func:`slide_push_strands` of the strands ``s0 <= s < s1`` (``shapes`` = ``(sh,
+def _slide_push_blocks(x, rest_length, shapes, how, blocks):
+    """:func:`slide_push_strands` of the blocks ``b0 <= b < b1`` (``shapes`` = ``(sh,
     boxes)``, ``boxes`` (K, 6) each shape's :func:`~hair_tracking.colliders.bounds.shape_box`;
-    ``how`` = ``(first, lead)``, ``strands`` = ``(s0, s1)``)."""
+    ``how`` = ``(first, lead)``, ``blocks`` = ``(b0, b1)``)."""
     first, lead = how
-    s0, s1 = strands
     sh, boxes = shapes
     count = sh.shape[0]
-    box = np.empty((s1 - s0, 6))                        # each strand's box
-    for s in range(s0, s1):
-        i = s - s0
-        box[i, 0], box[i, 1], box[i, 2], box[i, 3], box[i, 4], box[i, 5] = \
-            strand_box(x, s, first)
-    # the block's box first: most blocks meet no shape
-    lo0, lo1, lo2 = box[:, 0].min(), box[:, 1].min(), box[:, 2].min()
-    hi0, hi1, hi2 = box[:, 3].max(), box[:, 4].max(), box[:, 5].max()
-    in_block = np.zeros(count, dtype=np.bool_)          # the shapes the block's box meets
-    any_shape = False
-    for k in range(lead, count):
-        in_block[k] = _box_meets(lo0, lo1, lo2, hi0, hi1, hi2, sh, boxes, k)
-        any_shape |= in_block[k]
-    if not any_shape:
-        return 0
+    box = np.empty((STRAND_BLOCK, 6))                   # each strand's box
+    in_block = np.zeros(count, dtype=np.bool_)          # the shapes a block's box meets
     listed = np.zeros(count, dtype=np.bool_)            # the shapes a strand's box meets
     moved = 0
-    for s in range(s0, s1):
-        i = s - s0
-        near_any = False
+    for b in range(blocks[0], blocks[1]):
+        s0 = b * STRAND_BLOCK
+        s1 = min(s0 + STRAND_BLOCK, x.shape[0])
+        lo0 = lo1 = lo2 = math.inf
+        hi0 = hi1 = hi2 = -math.inf
+        for s in range(s0, s1):
+            i = s - s0
+            box[i, 0], box[i, 1], box[i, 2], box[i, 3], box[i, 4], box[i, 5] = \
+                strand_box(x, s, first)
+            lo0, lo1, lo2 = min(lo0, box[i, 0]), min(lo1, box[i, 1]), min(lo2, box[i, 2])
+            hi0, hi1, hi2 = max(hi0, box[i, 3]), max(hi1, box[i, 4]), max(hi2, box[i, 5])
+        any_shape = False
         for k in range(lead, count):
-            listed[k] = in_block[k] and _box_meets(box[i, 0], box[i, 1], box[i, 2], box[i, 3],
-                                                   box[i, 4], box[i, 5], sh, boxes, k)
-            near_any |= listed[k]
-        if not near_any:
+            in_block[k] = _box_meets(lo0, lo1, lo2, hi0, hi1, hi2, sh, boxes, k)
+            any_shape |= in_block[k]
+        if not any_shape:
             continue
-        j0 = _first_inside(x, sh, boxes, (first, s), listed)
-        if j0 < x.shape[1]:
-            moved += _slide_push_strand(x, rest_length, sh, (j0, lead), s, listed)
+        for s in range(s0, s1):
+            i = s - s0
+            near_any = False
+            for k in range(lead, count):
+                listed[k] = in_block[k] and _box_meets(box[i, 0], box[i, 1], box[i, 2],
+                                                       box[i, 3], box[i, 4], box[i, 5], sh,
+                                                       boxes, k)
+                near_any |= listed[k]
+            if not near_any:
+                continue
+            j0 = _first_inside(x, sh, boxes, (first, s), listed)
+            if j0 < x.shape[1]:
+                moved += _slide_push_strand(x, rest_length, sh, (j0, lead), s, listed)
     return moved
 
 
