@@ -209,7 +209,8 @@ class GhostTracker:
         self._collide_after = self.collide and not self._fused_collider
         positive = ghosts.rest_length[ghosts.rest_length > 0]
         #: the scene's bust (``None`` without ``body.bust``): stage (i)
-        self.body = make_body(scene.body, float(positive.min()) if positive.size else 0.0)
+        self.body = make_body(scene.body, float(positive.min()) if positive.size else 0.0,
+                              colliders=scene.colliders)
         self._body_head: Optional[HeadPose] = None      # the head pose of the last step
         self._x_prev = np.empty(ghosts.rest.shape) \
             if self._collide_after or self.body is not None else None
