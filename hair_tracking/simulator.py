@@ -41,7 +41,7 @@ Time handling
 from dataclasses import dataclass, field
 import math
 import time
-from typing import Callable, Dict, NamedTuple, Optional, Tuple
+from typing import Callable, Dict, List, NamedTuple, Optional, Tuple
 
 import numpy as np
 
@@ -219,7 +219,7 @@ class HairSimulator:
         self.guide_solver = GuideSolver(self.guides, scene, self.parallel.guides)
         if self.ghosts is not None:
             if scene.tracking != old.tracking or scene.collider != old.collider or \
-                    scene.body != old.body:
+                    scene.body != old.body or scene.colliders != old.colliders:
                 # the new tracker starts where the old one leaves the ghosts
                 np.copyto(self.ghosts.x, self.ghost_tracker.positions())
                 np.copyto(self.ghosts.v, self.ghost_tracker.velocities())
@@ -298,6 +298,25 @@ class HairSimulator:
             body = getattr(owner, 'body', None)
             if body is not None:
                 body.set_frame(rotation, position)
+
+    def set_collider_frame(self, name: str, rotation, position) -> None:
+        """The pose of the TF frame ``name`` that a collider slot (``colliders.<slot>.frame``)
+        rides on, in the fixed frame of the head poses: its colliders ride on it from the next
+        substep on (kept until the next call; before the first one they are off)."""
+        for owner in (self.guide_solver, self.ghost_tracker):
+            body = getattr(owner, 'body', None)
+            if body is not None:
+                body.set_tf_frame(name, rotation, position)
+
+    def collider_frames(self) -> Tuple[str, ...]:
+        """The TF frames the scene's collider slots ride on (``body.frame`` not included)."""
+        body = self.guide_solver.body
+        return body.tf_frames() if body is not None else ()
+
+    def colliders_waiting(self) -> List[str]:
+        """The slot colliders that are off until their TF frame first arrives."""
+        body = self.guide_solver.body
+        return body.waiting() if body is not None else []
 
     def reset(self) -> None:
         """Rest shape at the current head pose, settled; the head track is kept."""

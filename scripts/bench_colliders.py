@@ -22,6 +22,7 @@ frames measured in the same run.
 """
 import argparse
 import json
+import math
 import os
 import statistics
 import sys
@@ -75,6 +76,39 @@ def per_node(x, sh, k, what):
 
 # ----------------------------------------------------------------------------- the bust
 @njit(inline='always')
+def near_shapes(lo0, lo1, lo2, hi0, hi1, hi2, sh, out):
+    """The shapes of the table ``sh`` that the box ``lo .. hi`` may touch, in table order, into
+    ``out`` (int64, at least one entry a shape); returns their count."""
+    m = 0
+    for k in range(sh.shape[0]):
+        if bounds.box_near(lo0, lo1, lo2, hi0, hi1, hi2, sh, k):
+            out[m] = k
+            m += 1
+    return m
+
+
+@njit(inline='always')
+def lane_box(xs, ys, zs, n):
+    """The box ``(lo0, lo1, lo2, hi0, hi1, hi2)`` of ``n`` lanes whose coordinates are the
+    first ``n`` entries of the rows ``xs``, ``ys``, ``zs`` (a block's lanes at one node
+    index).  A coordinate that is not finite is left out (the other lanes keep their bound;
+    no finite lane gives an empty box, near no shape)."""
+    lo0 = lo1 = lo2 = math.inf
+    hi0 = hi1 = hi2 = -math.inf
+    for i in range(n):
+        v = xs[i]
+        lo0 = v if v < lo0 else lo0
+        hi0 = v if v > hi0 else hi0
+        v = ys[i]
+        lo1 = v if v < lo1 else lo1
+        hi1 = v if v > hi1 else hi1
+        v = zs[i]
+        lo2 = v if v < lo2 else lo2
+        hi2 = v if v > hi2 else hi2
+    return lo0, lo1, lo2, hi0, hi1, hi2
+
+
+@njit(inline='always')
 def _contacts(xb, out, seg, b, j, sh, k, lev):
     """Node ``j`` of block ``b``: the level of every lane against capsule ``k`` (one vector
     pass), then the slide and push of the lanes inside."""
@@ -100,7 +134,7 @@ def _contacts(xb, out, seg, b, j, sh, k, lev):
 def bust_pass(xb, out, seg, sh, mode):
     """The bust against every node of ``xb`` (B, N, 3, lanes) into ``out``: ``mode`` 0 every
     capsule's level at every node index, 1 the block's box at the node index first
-    (``bounds.lane_box``, ``bounds.near_shapes``), 2 node by node, each node's bound test
+    (``lane_box``, ``near_shapes``), 2 node by node, each node's bound test
     first.  Returns ``(contacts, exact tests run)``."""
     blocks, n, _, lanes = xb.shape
     lev = np.empty(lanes)
@@ -121,9 +155,9 @@ def bust_pass(xb, out, seg, sh, mode):
                     contacts += _contacts(xb, out, seg, b, j, sh, k, lev)
                     passes += lanes
             elif mode == 1:
-                lo0, lo1, lo2, hi0, hi1, hi2 = bounds.lane_box(out[b, j, 0], out[b, j, 1],
-                                                               out[b, j, 2], lanes)
-                m = bounds.near_shapes(lo0, lo1, lo2, hi0, hi1, hi2, sh, near)
+                lo0, lo1, lo2, hi0, hi1, hi2 = lane_box(out[b, j, 0], out[b, j, 1],
+                                                        out[b, j, 2], lanes)
+                m = near_shapes(lo0, lo1, lo2, hi0, hi1, hi2, sh, near)
                 for i in range(m):
                     contacts += _contacts(xb, out, seg, b, j, sh, near[i], lev)
                 passes += m * lanes

@@ -165,3 +165,26 @@ def test_long_hair_guides_keep_their_lengths_on_the_bust():
     assert sim.guide_solver.stats['contacts_total'] > 0              # it rests on the bust
     assert stretch <= STRETCH_BOUND['ftl']
     assert depth <= body.margin
+
+
+def test_the_paper_trackers_ghosts_rest_on_the_bust():
+    """The paper tracker's ghosts collide with the bust through the contact model's collision
+    stage: long hair on a still head, with and without the bust."""
+    scene = Scene.from_yaml('config/scene_long_hair.yaml').with_changes(
+        groom__guides=24, groom__ghosts_per_guide=4, tracking__mode='paper')
+    out = {}
+    for bust in (False, True):
+        sim = HairSimulator(scene.with_changes(body__bust=bust))
+        t = 1_000_000_000
+        for k in range(30):                       # a still head, half a second
+            sim.push_pose(t + k * 16_666_667, [0.0, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0])
+            sim.advance_to(t + k * 16_666_667)
+        body = SceneBody(scene.with_changes(body__bust=True).body, 0.01)
+        ghosts = np.ascontiguousarray(sim.ghost_tracker.positions(), dtype=np.float64)
+        deep = np.zeros(ghosts.shape[0])
+        kernels.deepest(ghosts, sim.ghosts.inv_mass, True, body.posed_bare(sim.head), deep)
+        v = sim.ghost_tracker.velocities()
+        out[bust] = (deep.max(), float(np.abs(v).max()), sim.ghost_tracker.stats['contacts'])
+    assert out[False][0] > 0.01                   # without the bust the ghosts hang through it
+    assert out[True][0] < 1e-6 and out[True][2] > 0
+    assert np.isfinite(out[True][1]) and out[True][1] < 5.0

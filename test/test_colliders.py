@@ -9,10 +9,9 @@ import pytest
 
 from hair_tracking.colliders import body, bounds, contact, kernels, margin, pose, reference
 from hair_tracking.colliders import slide as stateless_slide
-from hair_tracking.colliders.shapes import (A0, BOUND, CX, CZ, FIXED_FRAME, FRICTION, HEAD_FRAME,
-                                            KIND, M00,
-                                            OX, OZ, PX, PZ, R00, capsule_between, frame_names,
-                                            Shape, shape_table, WIDTH)
+from hair_tracking.colliders.shapes import (A0, BOUND, CAPSULE, capsule_between, CX, CZ,
+                                            FIXED_FRAME, frame_names, FRICTION, HEAD_FRAME, KIND,
+                                            M00, OX, OZ, PX, PZ, R00, Shape, shape_table, WIDTH)
 from hair_tracking.core.transforms import quat_from_axis_angle, quat_normalize, quat_to_matrix
 
 FASTMATH = contact.FASTMATH
@@ -60,8 +59,30 @@ def bounded_points(s, y, r, nrm, cap, out):
 
 
 @njit(error_model='numpy')
-def lane_boxes(x, n):
-    return bounds.lane_box(x[0], x[1], x[2], n)
+def strand_boxes(x, first):
+    out = np.empty((x.shape[0], 6))
+    for s in range(x.shape[0]):
+        out[s, 0], out[s, 1], out[s, 2], out[s, 3], out[s, 4], out[s, 5] = \
+            bounds.strand_box(x, s, first)
+    return out
+
+
+@njit(error_model='numpy')
+def shape_boxes(sh):
+    out = np.empty((sh.shape[0], 6))
+    for k in range(sh.shape[0]):
+        out[k, 0], out[k, 1], out[k, 2], out[k, 3], out[k, 4], out[k, 5] = \
+            bounds.shape_box(sh, k)
+    return out
+
+
+@njit(error_model='numpy')
+def points_meet(x, boxes, k):
+    out = np.zeros(x.shape[0], dtype=np.bool_)
+    for i in range(x.shape[0]):
+        out[i] = bounds.boxes_meet(x[i, 0], x[i, 1], x[i, 2], x[i, 0], x[i, 1], x[i, 2],
+                                   boxes, k)
+    return out
 
 
 @njit(error_model='numpy')
@@ -286,23 +307,41 @@ def test_the_bound_test_never_misses_a_contact():
         assert hits.tolist() == want
 
 
-def test_the_box_of_a_blocks_lanes_holds_every_finite_lane():
+def test_the_box_of_a_strand_holds_every_finite_node_from_first_on():
     rng = np.random.default_rng(13)
-    for n in (1, 2, 64, 77):
-        x = np.ascontiguousarray(rng.normal(size=(3, n)))
-        box = np.array(lane_boxes(x, n))
-        assert np.array_equal(box[:3], x.min(axis=1)) and np.array_equal(box[3:], x.max(axis=1))
-        if n > 1:
-            y = x.copy()
-            y[:, n // 2] = np.nan                            # a lane that is not finite
-            box = np.array(lane_boxes(y, n))
-            keep = np.delete(x, n // 2, axis=1)
-            assert np.array_equal(box[:3], keep.min(axis=1))
-            assert np.array_equal(box[3:], keep.max(axis=1))
-    box = lane_boxes(np.full((3, 4), np.nan), 4)                 # no finite lane: near nothing
+    for n in (3, 16, 77):
+        x = np.ascontiguousarray(rng.normal(size=(4, n, 3)))
+        for first in (0, 2):
+            box = strand_boxes(x, first)
+            assert np.array_equal(box[:, :3], x[:, first:].min(axis=1))
+            assert np.array_equal(box[:, 3:], x[:, first:].max(axis=1))
+        y = x.copy()
+        y[:, n // 2] = np.nan                            # a node that is not finite
+        box = strand_boxes(y, 0)
+        keep = np.delete(x, n // 2, axis=1)
+        assert np.array_equal(box[:, :3], keep.min(axis=1))
+        assert np.array_equal(box[:, 3:], keep.max(axis=1))
+    box = strand_boxes(np.full((1, 4, 3), np.nan), 0)[0]     # no finite node: near nothing
     local, sh, _ = posed_scene(rng, shapes_of_every_kind())
     for k in range(sh.shape[0]):
         assert not box_tests(np.array([box[:3]]), np.array([box[3:]]), sh, k)[0]
+
+
+def test_a_shapes_box_holds_every_point_inside_it():
+    rng = np.random.default_rng(17)
+    local, sh, _ = posed_scene(rng, shapes_of_every_kind())
+    boxes = shape_boxes(sh)
+    for k in range(sh.shape[0]):
+        x = points_around(rng, sh[k])
+        values = np.empty((len(x), 10))
+        point_values(x, sh, k, 0.0, values)
+        inside = values[:, 0] > 0.0
+        meets = points_meet(x, boxes, k)
+        assert np.all(meets[inside]), k
+        lo, hi = reference.reference_shape_box(sh[k])
+        assert np.array_equal(boxes[k, :3], lo) and np.array_equal(boxes[k, 3:], hi)
+        if sh[k, KIND] == CAPSULE:                   # tighter than the bounding sphere's box
+            assert np.any(boxes[k, 3:] - boxes[k, :3] < 2.0 * sh[k, BOUND] * 0.9)
 
 
 def test_depth_level_and_normals_match_the_reference():

@@ -1,6 +1,7 @@
-"""The node with a body (body.*): a TF torso frame moved into long hair pushes it out without
-adding energy, the bust is shown on hair/colliders, and a frame that never arrives or stops
-arriving is said in /diagnostics (the bust keeps its last pose).
+"""The node with a body (body.*) and collider slots (colliders.*): a TF torso frame moved into
+long hair pushes it out without adding energy, the bust is shown on hair/colliders, a frame
+that never arrives or stops arriving is said in /diagnostics (the bust keeps its last pose),
+and a collider set live on a TF frame subscribes /tf.
 
 The node runs in-process on its own domain (test_node.py's Harness: 20-34), discovery limited
 to localhost (conftest.py); every wait is bounded.
@@ -10,6 +11,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 from diagnostic_msgs.msg import DiagnosticStatus
+from rclpy.parameter import Parameter
 from visualization_msgs.msg import Marker, MarkerArray
 
 from hair_tracking.colliders import kernels
@@ -131,3 +133,44 @@ def test_a_bad_body_is_refused_in_one_line_naming_the_field():
             Scene().with_changes(**{field: value})
         message = str(e.value)
         assert field.replace('__', '.') in message and '\n' not in message
+
+
+def test_a_collider_on_a_tf_frame_set_live_subscribes_tf_and_is_said_in_diagnostics():
+    """A collider slot set live on a TF frame: /tf is subscribed then (the node started without
+    it), the slot is off and /diagnostics says so until the frame arrives, then rides on it
+    and keeps its last pose when it stops arriving."""
+    h = Harness({'groom.length': 0.3, 'groom.guide_nodes': 8, 'groom.ghost_nodes': 8})
+    try:
+        node = h.node
+        assert not node._tf_subscribed
+        pub = h.pose_publisher()
+        t0, t1, t2 = grid_times(h, 3)
+        h.send(pub, pose_stamped_msg(t0, [0.0, 0.0, 0.0], yaw_quat(0.0), 'world'))
+        refused = node.set_parameters([Parameter('colliders.extra_1.radius', value=-0.05)])[0]
+        assert not refused.successful and 'colliders.extra_1.radius' in refused.reason
+        done = node.set_parameters([Parameter('colliders.extra_1.shape', value='sphere'),
+                                    Parameter('colliders.extra_1.frame', value='hand_1'),
+                                    Parameter('colliders.extra_1.radius', value=0.04)])
+        assert all(r.successful for r in done)
+        h.send(pub, pose_stamped_msg(t1, [0.0, 0.0, 0.0], yaw_quat(0.0), 'world'))
+        assert node._tf_subscribed and node.sim.collider_frames() == ('hand_1',)
+        assert node.sim.colliders_waiting() == ['extra_1 (hand_1)']
+        d = node.diagnostics()
+        assert d.level == DiagnosticStatus.WARN
+        assert "colliders.extra_1: TF frame 'hand_1' not received" in d.message
+        # the hand arrives, 12 cm behind the head centre: inside the hair at the back
+        tr = transform_stamped_msg(t2, [-0.12, 0.0, -0.05], yaw_quat(0.0), 'world', 'hand_1')
+        node._on_tf_dynamic(SimpleNamespace(transforms=[tr]))
+        h.send(pub, pose_stamped_msg(t2, [0.0, 0.0, 0.0], yaw_quat(0.0), 'world'))
+        sim = node.sim
+        assert sim.colliders_waiting() == []
+        sh = sim.guide_solver.body.posed_bare(sim.head)
+        assert np.allclose(sh[0, 1:4], [-0.12, 0.0, -0.05])
+        assert 'colliders.extra_1' not in node.diagnostics().message
+        seen, static = node._frames_seen['hand_1']
+        node._frames_seen['hand_1'] = (seen - 10**11, static)      # 100 s ago
+        d = node.diagnostics()
+        assert d.level == DiagnosticStatus.WARN
+        assert "colliders.extra_1: TF frame 'hand_1' stale" in d.message
+    finally:
+        h.close()

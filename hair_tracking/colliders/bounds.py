@@ -6,15 +6,18 @@ the posed table: the largest semi-axis + margin of an ellipsoid; radius + margin
 of a sphere or capsule), padded by :data:`~hair_tracking.colliders.shapes.BOUND_PAD` so that
 rounding never puts a node the exact test finds inside outside it.  A plane has no bounding
 sphere; its test is its exact one (one dot product), and a box's is the plane's height at the
-box's lowest corner.  The tests never miss a contact (``test/test_colliders.py`` holds them
-to that); they may pass nodes that are not in contact.
+box's lowest corner.  A box must also meet a capsule's axis-aligned box (its core segment's
+box grown by the radius + margin, padded alike: :func:`shape_box`), which a box along a long
+capsule's side meets where the sphere around the whole capsule reaches far beyond it.  The
+tests never miss a contact (``test/test_colliders.py`` holds them to that); they may pass nodes
+that are not in contact.
 """
 import math
 
 from numba import njit
 
-from hair_tracking.colliders.shapes import (A0, BOUND, CX, CY, CZ, KIND, PLANE, R02, R12,
-                                            R22)
+from hair_tracking.colliders.shapes import (A0, A1, BOUND, BOUND_PAD, CAPSULE, CX, CY, CZ,
+                                            KIND, PLANE, R02, R12, R22)
 
 
 @njit(cache=True, inline='always')
@@ -31,8 +34,8 @@ def near(x0, x1, x2, sh, k):
 @njit(cache=True, inline='always')
 def box_near(lo0, lo1, lo2, hi0, hi1, hi2, sh, k):
     """Whether any point of the box ``lo .. hi`` may touch shape ``k``: the box meets the
-    bounding sphere (a plane: the box's lowest corner along the normal is below the plane +
-    margin)."""
+    bounding sphere, and a capsule's box (a plane: the box's lowest corner along the normal is
+    below the plane + margin)."""
     if sh[k, KIND] == PLANE:
         n0, n1, n2 = sh[k, R02], sh[k, R12], sh[k, R22]
         low = (lo0 if n0 > 0.0 else hi0) - sh[k, CX]
@@ -46,37 +49,62 @@ def box_near(lo0, lo1, lo2, hi0, hi1, hi2, sh, k):
     d1 = max(lo1 - sh[k, CY], sh[k, CY] - hi1, 0.0)
     d2 = max(lo2 - sh[k, CZ], sh[k, CZ] - hi2, 0.0)
     b = sh[k, BOUND]
-    return d0 * d0 + d1 * d1 + d2 * d2 < b * b
+    inside = d0 * d0 + d1 * d1 + d2 * d2 < b * b
+    if sh[k, KIND] != CAPSULE:
+        return inside
+    # the tests combined without branches: which way each goes follows the hair, not the code
+    return inside & _meets(lo0, hi0, sh[k, CX], sh[k, R02], sh[k, A1], sh[k, A0]) & \
+        _meets(lo1, hi1, sh[k, CY], sh[k, R12], sh[k, A1], sh[k, A0]) & \
+        _meets(lo2, hi2, sh[k, CZ], sh[k, R22], sh[k, A1], sh[k, A0])
 
 
 @njit(cache=True, inline='always')
-def near_shapes(lo0, lo1, lo2, hi0, hi1, hi2, sh, out):
-    """The shapes of the table ``sh`` that the box ``lo .. hi`` may touch, in table order, into
-    ``out`` (int64, at least one entry a shape); returns their count."""
-    m = 0
-    for k in range(sh.shape[0]):
-        if box_near(lo0, lo1, lo2, hi0, hi1, hi2, sh, k):
-            out[m] = k
-            m += 1
-    return m
+def _meets(lo, hi, c, u, h, r):
+    """Whether ``lo .. hi`` meets the extent along one world axis of a capsule of centre
+    coordinate ``c``, axis coordinate ``u``, half length ``h`` and radius ``r`` (padded as
+    the bounding sphere)."""
+    e = (abs(u) * h + r) * (1.0 + BOUND_PAD)
+    return (lo < c + e) & (hi > c - e)
 
 
 @njit(cache=True, inline='always')
-def lane_box(xs, ys, zs, n):
-    """The box ``(lo0, lo1, lo2, hi0, hi1, hi2)`` of ``n`` lanes whose coordinates are the
-    first ``n`` entries of the rows ``xs``, ``ys``, ``zs`` (a block's lanes at one node
-    index).  A coordinate that is not finite is left out (the other lanes keep their bound;
-    no finite lane gives an empty box, near no shape)."""
+def shape_box(sh, k):
+    """The axis-aligned box ``(lo0, lo1, lo2, hi0, hi1, hi2)`` around shape ``k`` + margin,
+    padded as the bounding sphere: a capsule's core segment's box grown by its radius, the
+    bounding sphere's box of a sphere or an ellipsoid, all space for a plane."""
+    if sh[k, KIND] == PLANE:
+        return -math.inf, -math.inf, -math.inf, math.inf, math.inf, math.inf
+    e0 = e1 = e2 = sh[k, BOUND]
+    if sh[k, KIND] == CAPSULE:
+        e0 = (abs(sh[k, R02]) * sh[k, A1] + sh[k, A0]) * (1.0 + BOUND_PAD)
+        e1 = (abs(sh[k, R12]) * sh[k, A1] + sh[k, A0]) * (1.0 + BOUND_PAD)
+        e2 = (abs(sh[k, R22]) * sh[k, A1] + sh[k, A0]) * (1.0 + BOUND_PAD)
+    return (sh[k, CX] - e0, sh[k, CY] - e1, sh[k, CZ] - e2, sh[k, CX] + e0, sh[k, CY] + e1,
+            sh[k, CZ] + e2)
+
+
+@njit(cache=True, inline='always')
+def boxes_meet(lo0, lo1, lo2, hi0, hi1, hi2, boxes, k):
+    """Whether the box ``lo .. hi`` meets the box ``boxes[k]`` (lo0 lo1 lo2 hi0 hi1 hi2),
+    without a branch on the answer (which way it goes follows the hair, not the code)."""
+    return (lo0 < boxes[k, 3]) & (hi0 > boxes[k, 0]) & (lo1 < boxes[k, 4]) & \
+        (hi1 > boxes[k, 1]) & (lo2 < boxes[k, 5]) & (hi2 > boxes[k, 2])
+
+
+@njit(cache=True, inline='always')
+def strand_box(x, s, first):
+    """The box ``(lo0, lo1, lo2, hi0, hi1, hi2)`` of the nodes ``first ..`` of strand ``s`` of
+    ``x`` (S, N, 3); coordinates that are not finite are left out, as in :func:`lane_box`."""
     lo0 = lo1 = lo2 = math.inf
     hi0 = hi1 = hi2 = -math.inf
-    for i in range(n):
-        v = xs[i]
+    for j in range(first, x.shape[1]):
+        v = float(x[s, j, 0])
         lo0 = v if v < lo0 else lo0
         hi0 = v if v > hi0 else hi0
-        v = ys[i]
+        v = float(x[s, j, 1])
         lo1 = v if v < lo1 else lo1
         hi1 = v if v > hi1 else hi1
-        v = zs[i]
+        v = float(x[s, j, 2])
         lo2 = v if v < lo2 else lo2
         hi2 = v if v > hi2 else hi2
     return lo0, lo1, lo2, hi0, hi1, hi2

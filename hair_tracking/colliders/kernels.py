@@ -14,16 +14,19 @@ import math
 from numba import njit, prange
 import numpy as np
 
-from hair_tracking.colliders.bounds import lane_box, near, near_shapes
+from hair_tracking.colliders.bounds import box_near, boxes_meet, near, shape_box, strand_box
 from hair_tracking.colliders.contact import (bounded_start, carried, depth, FASTMATH, push_out,
                                              surface_normal)
-from hair_tracking.colliders.shapes import FRICTION
+from hair_tracking.colliders.shapes import FRICTION, KIND, PLANE
 from hair_tracking.colliders.slide import level, slide_push
 
 #: Sweeps over the shapes a node of :func:`slide_push_strands` takes at most.
 STRAND_SWEEPS = 16
-#: Strands whose nodes at one index share a bound test in :func:`slide_push_strands`.
+#: Strands whose nodes share the first bound test of :func:`slide_push_strands`.
 STRAND_BLOCK = 64
+#: Work items of :func:`slide_push_strands`'s parallel loop (each a run of blocks with its own
+#: scratch).
+CHUNKS = 64
 
 
 @njit(cache=True, fastmath=FASTMATH, error_model='numpy')
@@ -106,86 +109,140 @@ def slide_push_strands(x, rest_length, sh, first, lead):
     shapes (the head collider, which the tracker or solver has applied already) are tested
     only on nodes this pass moves.
 
-    The bound test comes first and is shared: the strands go in blocks of
-    :data:`STRAND_BLOCK`, and at each node index the box of the block's nodes
-    (:func:`~hair_tracking.colliders.bounds.lane_box`) selects the shapes any of them may
-    touch (:func:`~hair_tracking.colliders.bounds.near_shapes`); a node index whose box meets
-    no shape is only carried, and a node's own tests run over the selected shapes until a
-    shape moves it (then over all of them, as it may have left the box).  The box contains
-    every node it stands for, so the result is the same as each node testing every shape.  A
-    node that is not finite is left as it is and carries nothing to the nodes after it.
-    Returns the number of nodes a shape moved."""
+    The bound tests go from the coarse to the fine, so that hair far from every shape costs
+    one read of its nodes: the strands go in blocks of :data:`STRAND_BLOCK`; the box of a
+    block's nodes from ``first`` on against each shape's box
+    (:func:`~hair_tracking.colliders.bounds.shape_box`), then each strand's box
+    (:func:`~hair_tracking.colliders.bounds.strand_box`) against the shapes its block's box
+    meets; a strand whose box meets no shape after the ``lead`` ones is left as it is (none of
+    its nodes can be moved, so none is carried).  In the others the pass starts at the first
+    node inside a shape its box meets (a node tested exactly only inside the shape's box) and
+    a node's tests run over those shapes until one moves it (then over all of them, as it may
+    have left the box).  Each box contains every node it stands for, so the result is the
+    same as each node testing every shape.  A node that is not finite is left as it is and
+    carries nothing to the nodes after it.  Returns the number of nodes a shape moved."""
+    boxes = np.empty((sh.shape[0], 6))
+    for k in range(sh.shape[0]):
+        boxes[k, 0], boxes[k, 1], boxes[k, 2], boxes[k, 3], boxes[k, 4], boxes[k, 5] = \
+            shape_box(sh, k)
     blocks = (x.shape[0] + STRAND_BLOCK - 1) // STRAND_BLOCK
+    chunks = min(blocks, CHUNKS)
     total = 0
-    for b in prange(blocks):
-        s0 = b * STRAND_BLOCK
-        total += _slide_push_block(x, rest_length, sh, (first, lead),
-                                   (s0, min(s0 + STRAND_BLOCK, x.shape[0])))
+    for c in prange(chunks):
+        total += _slide_push_blocks(x, rest_length, (sh, boxes), (first, lead),
+                                    (c * blocks // chunks, (c + 1) * blocks // chunks))
     return total
 
 
 @njit(cache=True, fastmath=FASTMATH, error_model='numpy')
-def _slide_push_block(x, rest_length, sh, how, strands):
-    """:func:`slide_push_strands` of the strands ``s0 <= s < s1`` (``how`` = ``(first,
-    lead)``, ``strands`` = ``(s0, s1)``)."""
+def _slide_push_blocks(x, rest_length, shapes, how, blocks):
+    """:func:`slide_push_strands` of the blocks ``b0 <= b < b1`` (``shapes`` = ``(sh,
+    boxes)``, ``boxes`` (K, 6) each shape's :func:`~hair_tracking.colliders.bounds.shape_box`;
+    ``how`` = ``(first, lead)``, ``blocks`` = ``(b0, b1)``)."""
     first, lead = how
-    s0, s1 = strands
-    m = s1 - s0
-    shapes = sh.shape[0]
-    d = np.zeros((3, STRAND_BLOCK))          # each strand's carried displacement
-    cur = np.empty((3, STRAND_BLOCK))        # its node at this index, carried
-    near_k = np.empty(shapes, dtype=np.int64)
-    listed = np.zeros(shapes, dtype=np.bool_)
+    sh, boxes = shapes
+    count = sh.shape[0]
+    box = np.empty((STRAND_BLOCK, 6))                   # each strand's box
+    in_block = np.zeros(count, dtype=np.bool_)          # the shapes a block's box meets
+    listed = np.zeros(count, dtype=np.bool_)            # the shapes a strand's box meets
     moved = 0
-    carrying = False
-    for j in range(first, x.shape[1]):
-        for i in range(m):
-            for a in range(3):
-                cur[a, i] = float(x[s0 + i, j, a]) + d[a, i]
-        lo0, lo1, lo2, hi0, hi1, hi2 = lane_box(cur[0], cur[1], cur[2], m)
-        count = near_shapes(lo0, lo1, lo2, hi0, hi1, hi2, sh, near_k)
-        work = False
-        for k in range(shapes):
-            listed[k] = False
-        for i in range(count):
-            listed[near_k[i]] = True
-            work = work or near_k[i] >= lead or carrying
-        if not (work or carrying):
+    for b in range(blocks[0], blocks[1]):
+        s0 = b * STRAND_BLOCK
+        s1 = min(s0 + STRAND_BLOCK, x.shape[0])
+        lo0 = lo1 = lo2 = math.inf
+        hi0 = hi1 = hi2 = -math.inf
+        for s in range(s0, s1):
+            i = s - s0
+            box[i, 0], box[i, 1], box[i, 2], box[i, 3], box[i, 4], box[i, 5] = \
+                strand_box(x, s, first)
+            lo0, lo1, lo2 = min(lo0, box[i, 0]), min(lo1, box[i, 1]), min(lo2, box[i, 2])
+            hi0, hi1, hi2 = max(hi0, box[i, 3]), max(hi1, box[i, 4]), max(hi2, box[i, 5])
+        any_shape = False
+        for k in range(lead, count):
+            in_block[k] = _box_meets(lo0, lo1, lo2, hi0, hi1, hi2, sh, boxes, k)
+            any_shape |= in_block[k]
+        if not any_shape:
             continue
-        carrying = False
-        for i in range(m):
-            s = s0 + i
-            o0, o1, o2 = float(x[s, j, 0]), float(x[s, j, 1]), float(x[s, j, 2])
-            x0, x1, x2 = cur[0, i], cur[1, i], cur[2, i]
-            carried = d[0, i] != 0.0 or d[1, i] != 0.0 or d[2, i] != 0.0
-            hit = False
-            if work:
-                p0, p1, p2 = float(x[s, j - 1, 0]), float(x[s, j - 1, 1]), \
-                    float(x[s, j - 1, 2])
-                length = rest_length[s, j - 1]
-                for _ in range(STRAND_SWEEPS):
-                    again = False
-                    for k in range(shapes):
-                        if k < lead and not (hit or carried):
-                            continue
-                        if not (hit or listed[k]):
-                            continue          # the box, which holds x, misses its bound
-                        if not near(x0, x1, x2, sh, k) or not level(x0, x1, x2, sh, k) < 0.0:
-                            continue
-                        x0, x1, x2 = slide_push(x0, x1, x2, p0, p1, p2, length, True, sh, k)
-                        again = hit = True
-                    if not again:
-                        break
-                    x0, x1, x2 = _at_length(x0, x1, x2, p0, p1, p2, length)
-            if hit:
-                moved += 1
-            d0 = d1 = d2 = 0.0
-            if (hit or carried) and math.isfinite(x0 + x1 + x2 - o0 - o1 - o2):
-                d0, d1, d2 = x0 - o0, x1 - o1, x2 - o2
-            d[0, i], d[1, i], d[2, i] = d0, d1, d2
-            if d0 != 0.0 or d1 != 0.0 or d2 != 0.0:
-                x[s, j, 0], x[s, j, 1], x[s, j, 2] = x0, x1, x2
-                carrying = True
+        for s in range(s0, s1):
+            i = s - s0
+            near_any = False
+            for k in range(lead, count):
+                listed[k] = in_block[k] and _box_meets(box[i, 0], box[i, 1], box[i, 2],
+                                                       box[i, 3], box[i, 4], box[i, 5], sh,
+                                                       boxes, k)
+                near_any |= listed[k]
+            if not near_any:
+                continue
+            j0 = _first_inside(x, sh, boxes, (first, s), listed)
+            if j0 < x.shape[1]:
+                moved += _slide_push_strand(x, rest_length, sh, (j0, lead), s, listed)
+    return moved
+
+
+@njit(cache=True, inline='always')
+def _box_meets(lo0, lo1, lo2, hi0, hi1, hi2, sh, boxes, k):
+    """Whether the box ``lo .. hi`` may touch shape ``k``: it meets the shape's box
+    (:func:`~hair_tracking.colliders.bounds.boxes_meet`; a plane:
+    :func:`~hair_tracking.colliders.bounds.box_near`)."""
+    if sh[k, KIND] == PLANE:
+        return box_near(lo0, lo1, lo2, hi0, hi1, hi2, sh, k)
+    return boxes_meet(lo0, lo1, lo2, hi0, hi1, hi2, boxes, k)
+
+
+@njit(cache=True, inline='always')
+def _first_inside(x, sh, boxes, where, listed):
+    """The first node ``first ..`` of strand ``s`` (``where`` = ``(first, s)``) inside a
+    shape ``listed`` (N for none): the nodes before it are in no shape that may move them, so
+    the strand's pass starts there.  A node's exact test runs only inside the shape's box."""
+    first, s = where
+    j0 = x.shape[1]
+    for k in range(sh.shape[0]):
+        if not listed[k]:
+            continue
+        for j in range(first, j0):
+            x0, x1, x2 = float(x[s, j, 0]), float(x[s, j, 1]), float(x[s, j, 2])
+            if _box_meets(x0, x1, x2, x0, x1, x2, sh, boxes, k) and \
+                    near(x0, x1, x2, sh, k) and level(x0, x1, x2, sh, k) < 0.0:
+                j0 = j
+                break
+    return j0
+
+
+@njit(cache=True, inline='always')
+def _slide_push_strand(x, rest_length, sh, how, s, listed):
+    """:func:`slide_push_strands` of strand ``s``, a node's tests over the shapes ``listed``
+    until a shape moves it; returns the number of nodes a shape moved."""
+    first, lead = how
+    moved = 0
+    d0 = d1 = d2 = 0.0                       # the displacement carried to the next node
+    for j in range(first, x.shape[1]):
+        o0, o1, o2 = float(x[s, j, 0]), float(x[s, j, 1]), float(x[s, j, 2])
+        x0, x1, x2 = o0 + d0, o1 + d1, o2 + d2
+        carried = d0 != 0.0 or d1 != 0.0 or d2 != 0.0
+        p0, p1, p2 = float(x[s, j - 1, 0]), float(x[s, j - 1, 1]), float(x[s, j - 1, 2])
+        length = rest_length[s, j - 1]
+        hit = False
+        for _ in range(STRAND_SWEEPS):
+            again = False
+            for k in range(sh.shape[0]):
+                if k < lead and not (hit or carried):
+                    continue
+                if not (hit or carried or listed[k]):
+                    continue              # the strand's box, which holds x, misses its bound
+                if not near(x0, x1, x2, sh, k) or not level(x0, x1, x2, sh, k) < 0.0:
+                    continue
+                x0, x1, x2 = slide_push(x0, x1, x2, p0, p1, p2, length, True, sh, k)
+                again = hit = True
+            if not again:
+                break
+            x0, x1, x2 = _at_length(x0, x1, x2, p0, p1, p2, length)
+        if hit:
+            moved += 1
+        d0 = d1 = d2 = 0.0
+        if (hit or carried) and math.isfinite(x0 + x1 + x2 - o0 - o1 - o2):
+            d0, d1, d2 = x0 - o0, x1 - o1, x2 - o2
+        if d0 != 0.0 or d1 != 0.0 or d2 != 0.0:
+            x[s, j, 0], x[s, j, 1], x[s, j, 2] = x0, x1, x2
     return moved
 
 

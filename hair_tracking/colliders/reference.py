@@ -242,4 +242,20 @@ def reference_box_near(lo, hi, row) -> bool:
         n = _axes(row)[:, 2]
         corner = np.where(n > 0.0, lo, hi)
         return bool((corner - c) @ n < row[A0])
-    return bool(np.linalg.norm(np.clip(c, lo, hi) - c) < row[BOUND])
+    if not np.linalg.norm(np.clip(c, lo, hi) - c) < row[BOUND]:
+        return False
+    if int(row[KIND]) != CAPSULE:
+        return True
+    box_lo, box_hi = reference_shape_box(row)
+    return bool(np.all(lo < box_hi) and np.all(hi > box_lo))
+
+
+def reference_shape_box(row):
+    """The axis-aligned box ``(lo, hi)`` around a shape + margin (all space for a plane)."""
+    c = row[CX:CZ + 1]
+    if int(row[KIND]) == PLANE:
+        return np.full(3, -np.inf), np.full(3, np.inf)
+    e = np.full(3, row[BOUND])
+    if int(row[KIND]) == CAPSULE:
+        e = (np.abs(_axes(row)[:, 2]) * row[A1] + row[A0]) * (1.0 + BOUND_PAD)
+    return c - e, c + e

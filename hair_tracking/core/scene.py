@@ -105,6 +105,37 @@ class BodySpec:
     max_push_speed: float
 
 
+@_section('colliders.extra_1.')
+class ColliderSlotSpec:
+    """One further collider on a frame (docs/colliders.md); every slot has the same rows."""
+
+    shape: str
+    frame: str
+    center: Tuple[float, float, float]
+    rotation: Tuple[float, float, float, float]
+    radius: float
+    half_length: float
+    radii: Tuple[float, float, float]
+    margin: float
+    friction: float
+
+
+@dataclass(frozen=True)
+class CollidersSpec:
+    """Further colliders, each on a frame: the slots of
+    :data:`~hair_tracking.core.scene_params.COLLIDER_SLOTS`."""
+
+    extra_1: ColliderSlotSpec = field(default_factory=ColliderSlotSpec)
+    extra_2: ColliderSlotSpec = field(default_factory=ColliderSlotSpec)
+    extra_3: ColliderSlotSpec = field(default_factory=ColliderSlotSpec)
+    extra_4: ColliderSlotSpec = field(default_factory=ColliderSlotSpec)
+
+    def used(self) -> Tuple[Tuple[str, ColliderSlotSpec], ...]:
+        """``(slot, spec)`` of every slot whose shape is not none, in slot order."""
+        return tuple((f.name, getattr(self, f.name)) for f in fields(self)
+                     if getattr(self, f.name).shape != 'none')
+
+
 @_section('solver.')
 class SolverSpec:
     """The guide solver and its time step."""
@@ -169,6 +200,7 @@ class Scene:
     groom: GroomSpec
     collider: ColliderSpec
     body: BodySpec
+    colliders: CollidersSpec
     solver: SolverSpec
     tracking: TrackingSpec
     head_track: HeadTrackSpec
@@ -226,6 +258,15 @@ class Scene:
         if g.scalp.front_max_polar_deg > g.scalp.max_polar_deg:
             raise SceneError('groom.scalp.front_max_polar_deg',
                              'must not exceed groom.scalp.max_polar_deg')
+        for slot, c in self.colliders.used():
+            norm = math.sqrt(sum(v * v for v in c.rotation))
+            if not 0.999 < norm < 1.001:
+                raise SceneError(f'colliders.{slot}.rotation',
+                                 f'must be a unit quaternion (x, y, z, w), got {c.rotation}')
+            if not c.frame.strip('/') or c.frame.strip('/') == 'torso':
+                raise SceneError(f'colliders.{slot}.frame',
+                                 'must be head, fixed or a TF frame name (torso is the name the '
+                                 f'bust\'s frame has inside the simulator), got {c.frame!r}')
 
 
 def scene_fields(scene: Optional[Scene] = None) -> Dict[str, Any]:

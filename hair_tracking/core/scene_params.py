@@ -21,6 +21,10 @@ from typing import Any, Dict, Tuple
 from hair_tracking.core.params import Param
 
 SOLVERS = ('ftl', 'pbd', 'xpbd')
+#: Shapes of a collider slot (``colliders.extra_<i>.shape``; none: the slot is unused).
+SLOT_SHAPES = ('none', 'sphere', 'capsule', 'ellipsoid', 'plane')
+#: The collider slots: ``colliders.<slot>.*`` (docs/colliders.md).
+COLLIDER_SLOTS = ('extra_1', 'extra_2', 'extra_3', 'extra_4')
 COLLIDERS = ('none', 'sphere', 'ellipsoid')
 ELASTIC_MODES = ('kept', 'changed')
 CURVES = ('none', 'bezier', 'catmull_rom')
@@ -39,6 +43,38 @@ GROOM_FITS = ('translate', 'scale', 'none')
 
 def _row(name: str, kind: str, default: Any, description: str, **kw: Any) -> Param:
     return Param(name, kind, default, description, scene=True, **kw)
+
+
+def _slot_rows(slot: str) -> Tuple[Param, ...]:
+    """The rows of one collider slot ``colliders.<slot>.*``."""
+    p = f'colliders.{slot}.'
+    return (
+        _row(p + 'shape', 'string', 'none',
+             'a further collider the hair is kept out of (sphere, capsule, ellipsoid, plane: the '
+             'half-space below it); none: unused', choices=SLOT_SHAPES),
+        _row(p + 'frame', 'string', 'head',
+             'the frame it rides on: head (moves with the head pose), fixed (the fixed frame of '
+             'the pose), or a TF frame name (e.g. l_shoulder_<id>; its last pose is kept while '
+             'none arrives, and the collider is off until one has)'),
+        _row(p + 'center', 'double_array', (0.0, 0.0, 0.0),
+             'its centre (a capsule: the middle of its axis; a plane: a point of it) in that '
+             'frame', unit='m', lo=-100.0, hi=100.0, length=3),
+        _row(p + 'rotation', 'double_array', (0.0, 0.0, 0.0, 1.0),
+             'its axes in that frame, a unit quaternion (x, y, z, w); the capsule\'s axis and '
+             'the plane\'s normal are its local z', lo=-1.0, hi=1.0, length=4),
+        _row(p + 'radius', 'double', 0.05,
+             'sphere, capsule radius', unit='m', lo=0.0, hi=10.0, lo_open=True),
+        _row(p + 'half_length', 'double', 0.1,
+             'capsule: half the length of its axis segment', unit='m', lo=0.0, hi=10.0),
+        _row(p + 'radii', 'double_array', (0.05, 0.05, 0.05),
+             'ellipsoid semi-axes along its local x, y, z', unit='m', lo=0.0, hi=10.0,
+             lo_open=True, length=3),
+        _row(p + 'margin', 'double', 0.004,
+             'hair is kept this far outside it (at most half the shortest segment)', unit='m',
+             lo=0.0, hi=0.1),
+        _row(p + 'friction', 'double', 0.3,
+             'tangential damping on contact, 0 none .. 1 sticks', lo=0.0, hi=1.0),
+    )
 
 
 SCENE_PARAMS: Tuple[Param, ...] = (
@@ -132,6 +168,7 @@ SCENE_PARAMS: Tuple[Param, ...] = (
     _row('body.max_push_speed', 'double', 0.5,
          'the speed a push out of the bust may add to a guide node (a body that jumps or appears '
          'inside the hair pushes it out without launching it)', unit='m/s', lo=0.0, hi=100.0),
+    *(row for slot in COLLIDER_SLOTS for row in _slot_rows(slot)),
     _row('solver.type', 'string', 'ftl',
          'guide solver: ftl (Follow-The-Leader), pbd, xpbd', choices=SOLVERS),
     _row('solver.dt', 'double', 1.0 / 240.0,

@@ -175,10 +175,12 @@ class StatelessTracker:
         else:
             self.center, self.axes = np.zeros(3), np.ones(3)
         positive = ghosts.rest_length[ghosts.rest_length > 0]
-        #: the scene's bust (``None`` without ``body.bust``): every placement is followed by
-        #: its contact pass (:func:`~hair_tracking.colliders.kernels.slide_push_strands`)
+        #: the scene's bust and slot colliders (``None`` without either): every placement is
+        #: followed by their contact pass
+        #: (:func:`~hair_tracking.colliders.kernels.slide_push_strands`)
         self.body = make_body(scene.body, float(positive.min()) if positive.size else 0.0,
-                              (self.center, self.axes) if self.collide else None)
+                              (self.center, self.axes) if self.collide else None,
+                              scene.colliders)
         self._head = HeadPose(np.zeros(3), np.array([0.0, 0.0, 0.0, 1.0]), np.eye(3))
         self._rest_length = np.ascontiguousarray(ghosts.rest_length, dtype=np.float64)
         self.stats: Dict[str, int] = {'ghosts': int(ghosts.count), 'steps': 0, 'evaluations': 0,

@@ -22,7 +22,13 @@ h. optional collision with the head collider: inside the kernel for the project'
    friction, then, with length restoration on, the collision-aware FTL step of the guides,
    :func:`hair_tracking.guides.ftl.restore_node`, so a
    push does not stretch the ghost); any other collider's ``apply`` runs after the kernel on the
-   whole arrays.
+   whole arrays;
+i. with a body (``body.bust``), the contact model's collision stage against the bust's
+   capsules after the kernel, as the guide solver runs it
+   (:func:`~hair_tracking.colliders.kernels.collide`: friction relative to the body's motion,
+   the push-out velocity bound ``body.max_push_speed``; with length restoration on,
+   :func:`~hair_tracking.guides.ftl.ftl_restore_shapes`), and the pushed nodes' velocities
+   updated by their push.
 
 See ``docs/ghosts.md`` for the reasoning, the two readings of equation (4) and the energy argument.
 
@@ -36,6 +42,8 @@ from typing import Dict, Optional, Tuple
 import numba
 import numpy as np
 
+from hair_tracking.colliders.kernels import collide
+from hair_tracking.colliders.scene_body import make_body
 from hair_tracking.core.model import carry_rigidly, HeadPose, StrandSet, strand_part
 from hair_tracking.core.point_records import blocks_to_records
 from hair_tracking.core.scene import Scene
@@ -46,6 +54,7 @@ from hair_tracking.ghosts.kernels import (block_groups, chunk_count, copy_blocks
                                           track_groups_serial, TrackWork)
 from hair_tracking.ghosts.weights import elastic_code, tip_weights
 from hair_tracking.guides.collision import Collider
+from hair_tracking.guides.ftl import ftl_restore_shapes
 from hair_tracking.guides.integrate import runs_parallel
 
 
@@ -198,7 +207,13 @@ class GhostTracker:
             self._axes, self._center = np.ones(3), np.zeros(3)
             self._friction, self._refine = 0.0, 0
         self._collide_after = self.collide and not self._fused_collider
-        self._x_prev = np.empty(ghosts.rest.shape) if self._collide_after else None
+        positive = ghosts.rest_length[ghosts.rest_length > 0]
+        #: the scene's bust (``None`` without ``body.bust``): stage (i)
+        self.body = make_body(scene.body, float(positive.min()) if positive.size else 0.0,
+                              colliders=scene.colliders)
+        self._body_head: Optional[HeadPose] = None      # the head pose of the last step
+        self._x_prev = np.empty(ghosts.rest.shape) \
+            if self._collide_after or self.body is not None else None
         #: the kernel's static data: the fields of
         #: :data:`~hair_tracking.ghosts.kernels.GhostModel` (a plain tuple)
         self.model = tuple(GhostModel(
@@ -275,6 +290,7 @@ class GhostTracker:
     def reset(self, head: HeadPose) -> None:
         """Ghosts in their rest shape carried by ``head``, at rest."""
         self.set_state(head.to_world(self.ghosts.rest), np.zeros(self.ghosts.rest.shape))
+        self._body_head = head
 
     def carry(self, old: HeadPose, new: HeadPose) -> None:
         """The ghosts carried rigidly with the head from ``old`` to ``new``, at rest."""
@@ -284,6 +300,7 @@ class GhostTracker:
         copy_blocks(self._x, self._v, self.order, self._block_rows, self._xb, self._vb, True,
                     True)
         self._synced_v = True
+        self._body_head = new
 
     def zero_velocities(self) -> None:
         """The ghosts at rest where they are."""
@@ -309,7 +326,7 @@ class GhostTracker:
             raise ValueError(f'guide_x_old must be shaped {self.guides.rest.shape} like the '
                              f'guides, got {getattr(guide_x_old, "shape", None)}')
         tr = self.tracking
-        if self._collide_after:
+        if self._x_prev is not None:
             np.copyto(self._x_prev, self.positions())
         # plain tuples in the fields' order of GhostState, GuideMotion and TrackParams
         drive = (_f64(gx), _f64(guide_x_old), _f64(head.rotation), _f64(head.position),
@@ -333,6 +350,32 @@ class GhostTracker:
             np.subtract(x, self._x_prev, out=v)
             v *= 1.0 / dt
             self.set_state(x, v)
+        if self.body is not None:
+            head_contacts = self.stats['contacts'] if self.collide else 0
+            self.stats['contacts'] = head_contacts + self._collide_body(dt, head)
+        self._body_head = head
+
+    def _collide_body(self, dt: float, head: HeadPose) -> int:
+        """Stage (i): the ghosts against the bust posed over the step (``dt`` [s], the head
+        from the last step's pose to ``head``), the positions at the step's start
+        (``_x_prev``) the friction reference; a pushed node's velocity gains its push less the
+        part the push-out bound moved its start by.  Returns the number of nodes pushed."""
+        self._write_back()
+        x, v = self._x, self._v
+        before = self._body_head if self._body_head is not None else head
+        bust = self.body.posed(before, head, dt)
+        cap = self.body.push_cap(dt)
+        placed = x.copy()
+        start = self._x_prev.copy()            # moved by the push-out bound
+        pushed = int(collide(x, self._x_prev, self.ghosts.inv_mass, bust, cap, start))
+        if pushed == 0:
+            return 0
+        if self.tracking.length_restore:
+            ftl_restore_shapes(x, start, self.ghosts.rest, self.ghosts.rest_length,
+                               _f64(head.rotation), bust, np.zeros_like(x), cap)
+        v += ((x - placed) - (start - self._x_prev)) / dt
+        self.set_state(x, v)
+        return pushed
 
     def targets(self, head: HeadPose, guide_x: np.ndarray = None) -> np.ndarray:
         """(S, N, 3) where each ghost node is pulled by the offset feedback (c): its guide point

@@ -111,7 +111,8 @@ class GuideSolver:
         self.margin = self._fit_margin()
         positive = strands.rest_length[strands.rest_length > 0]
         #: the scene's bust (``None`` without ``body.bust``)
-        self.body = make_body(scene.body, float(positive.min()) if positive.size else 0.0)
+        self.body = make_body(scene.body, float(positive.min()) if positive.size else 0.0,
+                              colliders=scene.colliders)
         sv = scene.solver
         self._gravity = np.ascontiguousarray(scene.gravity, dtype=np.float64)
         self._damping = float(scene.damping)

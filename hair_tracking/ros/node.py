@@ -48,7 +48,7 @@ import dataclasses
 import math
 import sys
 import time
-from typing import Callable, Dict, List, Optional
+from typing import Callable, Dict, List, Optional, Tuple
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PoseStamped, TransformStamped
@@ -83,7 +83,7 @@ from hair_tracking.core.head_track import PoseResult
 from hair_tracking.core.params import Param, ParamError
 from hair_tracking.core.scene import Scene, SceneError
 from hair_tracking.grooms.polylines import GroomFileError
-from hair_tracking.colliders.shapes import A0, A1, CX, CZ, R00, R22
+from hair_tracking.colliders.shapes import A0, A1, CAPSULE, CX, CZ, KIND, R00, R22, SPHERE
 from hair_tracking.core.transforms import matrix_to_quat, quat_to_matrix
 from hair_tracking.output.params_check import params_files_problem, rcl_arguments_problem, \
     unknown_parameters
@@ -282,28 +282,38 @@ class HairSimNode(Node):
                               durability=qos_profile_sensor_data.durability)
         self.create_subscription(PoseStamped, 'head_pose', self._on_pose, pose_qos)
         self.create_subscription(TransformStamped, 'head_transform', self._on_pose, pose_qos)
-        if settings.use_tf or settings.gravity_frame or self._body_frame():
-            if TFMessage is None:
-                self.get_logger().warn('use_tf or gravity_frame is set but tf2_msgs is not '
-                                       'installed: /tf is not subscribed (head_pose and '
-                                       'head_transform still are)')
-            else:
-                tf_qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100,
-                                    reliability=ReliabilityPolicy.BEST_EFFORT,
-                                    durability=DurabilityPolicy.VOLATILE)
-                self.create_subscription(TFMessage, '/tf', self._on_tf if settings.use_tf
-                                         else self._on_tf_dynamic, tf_qos)
-                static_qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100,
-                                        reliability=ReliabilityPolicy.RELIABLE,
-                                        durability=DurabilityPolicy.TRANSIENT_LOCAL)
-                self.create_subscription(TFMessage, '/tf_static', self._on_tf_static,
-                                         static_qos)
+        self._tf_subscribed = False
+        self._frames_seen: Dict[str, Tuple[int, bool]] = {}   # collider TF frame: as _body_seen
+        self._subscribe_tf()
         scene = settings.scene
         ghosts = self.sim.ghosts.count if self.sim.ghosts is not None else 0
         self.get_logger().info(
             f'ready: {self.sim.guides.count} guides ({scene.groom.guide_nodes} nodes), '
             f'{ghosts} ghosts ({scene.groom.ghost_nodes} nodes), solver {scene.solver.type}, '
             f'publishing at {settings.publish_rate_hz:g} Hz')
+
+    def _subscribe_tf(self) -> None:
+        """/tf and /tf_static, once, when use_tf, gravity_frame, body.frame or a collider on a
+        TF frame asks for them (at start or when a parameter change sets one)."""
+        settings = self._settings
+        if self._tf_subscribed or not (settings.use_tf or settings.gravity_frame
+                                       or self._body_frame() or self.sim.collider_frames()):
+            return
+        self._tf_subscribed = True
+        if TFMessage is None:
+            self.get_logger().warn('use_tf, gravity_frame, body.frame or a collider on a TF '
+                                   'frame is set but tf2_msgs is not installed: /tf is not '
+                                   'subscribed (head_pose and head_transform still are)')
+            return
+        tf_qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100,
+                            reliability=ReliabilityPolicy.BEST_EFFORT,
+                            durability=DurabilityPolicy.VOLATILE)
+        self.create_subscription(TFMessage, '/tf', self._on_tf if settings.use_tf
+                                 else self._on_tf_dynamic, tf_qos)
+        static_qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100,
+                                reliability=ReliabilityPolicy.RELIABLE,
+                                durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        self.create_subscription(TFMessage, '/tf_static', self._on_tf_static, static_qos)
 
     # ================================================================ parameters
     @property
@@ -417,6 +427,7 @@ class HairSimNode(Node):
                     + (f'; {self.sim.groom_note}' if self.sim.groom_note else ''))
             self._gravity_used = None
             self._update_gravity()
+            self._subscribe_tf()
         self._publish_scene()
         self._invalidate()
 
@@ -483,8 +494,15 @@ class HairSimNode(Node):
     def _store_tf(self, msg, static: bool) -> None:
         self._tf.add_message(msg, static=static)
         frame = self._body_frame()
-        if frame and any(str(tr.child_frame_id).lstrip('/') == frame for tr in msg.transforms):
-            self._body_seen = (self.get_clock().now().nanoseconds, static)
+        colliders = self.sim.collider_frames()
+        if frame or colliders:
+            now = self.get_clock().now().nanoseconds
+            for tr in msg.transforms:
+                child = str(tr.child_frame_id).lstrip('/')
+                if child == frame:
+                    self._body_seen = (now, static)
+                if child in colliders:
+                    self._frames_seen[child] = (now, static)
         if self._settings.gravity_frame and self._has_pose:
             self._update_gravity()
 
@@ -609,9 +627,32 @@ class HairSimNode(Node):
             return
         self.sim.set_body_frame(quat_to_matrix(found[1]), found[0])
 
+    def _update_collider_frames(self) -> None:
+        """The TF frames of the collider slots: each one's pose in the pose's frame handed to
+        the simulator; the last one found is kept while none arrives."""
+        pose_frame = self._pose_frame or self._settings.fixed_frame or 'world'
+        for frame in self.sim.collider_frames():
+            try:
+                found = self._tf.lookup(pose_frame, frame)
+            except ValueError:                   # a loop in the tree
+                found = None
+            if found is None:
+                self.get_logger().warn(
+                    f'{self._colliders_on(frame)}: no transform from TF frame {frame!r} to the '
+                    f'pose frame {pose_frame!r} on /tf_static or /tf; the collider keeps its '
+                    f'last pose (off until one arrives)', throttle_duration_sec=WARN_THROTTLE_S)
+                continue
+            self.sim.set_collider_frame(frame, quat_to_matrix(found[1]), found[0])
+
+    def _colliders_on(self, frame: str) -> str:
+        """The collider slots riding on the TF frame ``frame``, as ``colliders.<slot>``."""
+        return ', '.join(f'colliders.{slot}' for slot, c in self.sim.scene.colliders.used()
+                         if c.frame.lstrip('/') == frame)
+
     def _step(self, t_ns: int) -> None:
         start = self._work_clock()
         self._update_body_frame()
+        self._update_collider_frames()
         self.sim.advance_to(t_ns)
         self.step_ms.append((self._work_clock() - start) * 1e3)
         self._has_pose = True
@@ -834,6 +875,14 @@ class HairSimNode(Node):
                 if (now_ns - seen[0]) * 1e-9 > self._settings.stale_timeout:
                     problems.append(f'body.frame {body_frame!r} stale for {body_age} s (the '
                                     'bust keeps its last pose)')
+        for frame in sim.collider_frames():
+            seen = self._frames_seen.get(frame)
+            who = self._colliders_on(frame)
+            if seen is None:
+                problems.append(f'{who}: TF frame {frame!r} not received (off until it is)')
+            elif not seen[1] and (now_ns - seen[0]) * 1e-9 > self._settings.stale_timeout:
+                problems.append(f'{who}: TF frame {frame!r} stale for '
+                                f'{(now_ns - seen[0]) * 1e-9:.3f} s (keeps its last pose)')
         step = list(self.step_ms)[-100:]
         pub = list(self.publish_ms)[-100:]
         ghosts = sim.ghosts.count if sim.ghosts is not None else 0
@@ -894,8 +943,9 @@ class HairSimNode(Node):
             stamp_ns=stamp, color=s.head_color, **kw))
 
     def _publish_colliders(self) -> None:
-        """The body's capsules as markers on ``hair/colliders`` in the frame of the hair, at the
-        head pose of the hair (``head_marker``; built only when somebody subscribes)."""
+        """The body's capsules and spheres (the bust's, the collider slots') as markers on
+        ``hair/colliders`` in the frame of the hair, at the head pose of the hair
+        (``head_marker``; built only when somebody subscribes)."""
         s = self._settings
         body = getattr(self.sim.guide_solver, 'body', None)
         if body is None or not s.head_marker or \
@@ -903,6 +953,7 @@ class HairSimNode(Node):
             return
         head = self.sim.head
         sh = body.posed_bare(head)
+        sh = sh[np.isin(sh[:, KIND], (SPHERE, CAPSULE))]
         centers = sh[:, CX:CZ + 1]
         rots = sh[:, R00:R22 + 1].reshape(-1, 3, 3)
         if s.output_frame == 'head':
