@@ -135,7 +135,8 @@ def test_rebuild_policy_is_the_groom_and_read_only_are_start_settings():
     assert {n for n, p in table.items() if p.read_only} == {'scene_file', 'warmup', 'use_tf',
                                                             'gravity_frame',
                                                             'pose_queue_depth',
-                                                            'output_queue_depth'}
+                                                            'output_queue_depth',
+                                                            'people.source', 'people.max'}
     assert not any(p.rebuild and p.read_only for p in table.values())
     for p in table.values():
         assert p.description and p.full_description().startswith(p.description)
