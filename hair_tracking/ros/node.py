@@ -91,6 +91,7 @@ from hair_tracking.output.settings import apply_changes, make_settings, NODE_NAM
     NODE_ROWS, table
 from hair_tracking.output.strand_colors import StrandColorCache
 from hair_tracking.resources import config_path
+from hair_tracking.ros.faces import FaceHair
 from hair_tracking.ros.load_shedding import LoadShedder
 from hair_tracking.simulator import HairSimulator
 
@@ -274,6 +275,9 @@ class HairSimNode(Node):
                 self.create_subscription(TFMessage, '/tf_static', self._on_tf_static,
                                          static_qos)
         scene = settings.scene
+        #: people.source hri: every tracked face's hair (ros/faces.py); None for one head
+        self.faces = FaceHair(self, lambda: self._pending) \
+            if scene.people.source == 'hri' else None
         ghosts = self.sim.ghosts.count if self.sim.ghosts is not None else 0
         self.get_logger().info(
             f'ready: {self.sim.guides.count} guides ({scene.groom.guide_nodes} nodes), '
