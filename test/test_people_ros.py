@@ -33,6 +33,7 @@ SMALL = {'groom.guides': 4, 'groom.ghosts_per_guide': 3, 'groom.guide_nodes': 6,
          'groom.ghost_nodes': 6, 'solver.settle_time': 0.05, 'publish_rate_hz': 50.0,
          'warmup': False, 'people.source': 'hri'}
 OFFSET = np.array([-0.085, 0.0, 0.01])
+DT_NS = 4_166_667          # the default substep: the hair's stamps are on its grid
 
 
 @pytest.fixture(scope='module', autouse=True)
@@ -60,7 +61,7 @@ def test_two_faces_then_one_each_hair_following_its_own_head():
     executor = SingleThreadedExecutor(context=ctx)
     node = probe = None
     try:
-        values = dict(SMALL, **{'people.lost_timeout_s': 0.3})
+        values = dict(SMALL, **{'people.lost_timeout_s': 1.0, 'warmup': True})
         node = HairSimNode(context=ctx, parameter_overrides=[
             Parameter(k, value=v) for k, v in values.items()])
         probe = Node('probe', context=ctx)
@@ -86,13 +87,14 @@ def test_two_faces_then_one_each_hair_following_its_own_head():
             return stamp[0]
 
         def centre(cloud):
-            return pointcloud2_to_strands(cloud)[:, 0].mean(axis=0)   # the roots' centre
+            return pointcloud2_to_strands(cloud)[0][:, 0].mean(axis=0)   # the roots' centre
 
         def cloud_at(pid, t):
+            """The newest cloud of ``pid`` from the substep that reached stamp ``t`` on."""
             found = []
 
             def got():
-                found[:] = [c for c in clouds[pid] if time_to_ns(c.header.stamp) >= t]
+                found[:] = [c for c in clouds[pid] if time_to_ns(c.header.stamp) > t - DT_NS]
                 return bool(found)
             assert spin_until(executor, got, 20.0), f'no cloud of {pid} from {t}'
             return found[-1]
@@ -100,19 +102,22 @@ def test_two_faces_then_one_each_hair_following_its_own_head():
         # two people, a at x = 0 turning one way, b at x = 1 the other
         for k in range(8):
             t = send({'a': (0.0, 0.05 * k), 'b': (1.0, -0.05 * k)}, k)
+        t = send({'a': (0.0, 0.35), 'b': (1.0, -0.35)}, 8)     # held: the head is there
         assert spin_until(executor, lambda: sorted(faces.people) == ['a', 'b'], 10.0)
+        roots = faces.roster.crowd.people['a'].ghosts.rest[:, 0].mean(axis=0)   # head frame
+
+        def expected(x, a):
+            """Where the roots' centre is when face_<id> is at ``x`` turned by ``a``."""
+            return np.array([x, 0.0, 1.6]) + quat_to_matrix(np.array(yaw(a))) @ (OFFSET + roots)
         for pid, x, a in (('a', 0.0, 0.35), ('b', 1.0, -0.35)):
             cloud = cloud_at(pid, t)
             assert cloud.header.frame_id == 'camera'
-            expected = np.array([x, 0.0, 1.6]) + quat_to_matrix(np.array(yaw(a))) @ OFFSET
-            # the roots sit on the scalp around the head centre (within a head's size)
-            assert np.linalg.norm(centre(cloud) - expected) < 0.12, pid
-            assert abs(centre(cloud)[0] - x) < 0.12
-        # b moves away and back in its own frame: a's hair does not follow
-        for k in range(8, 16):
+            np.testing.assert_allclose(centre(cloud), expected(x, a), atol=1e-3, err_msg=pid)
+        # b moves away, a stays: each hair follows its own head
+        for k in range(9, 16):
             t = send({'a': (0.0, 0.35), 'b': (1.5, -0.35)}, k)
-        ca, cb = centre(cloud_at('a', t)), centre(cloud_at('b', t))
-        assert abs(ca[0]) < 0.12 and abs(cb[0] - 1.5) < 0.12
+        np.testing.assert_allclose(centre(cloud_at('a', t)), expected(0.0, 0.35), atol=1e-3)
+        np.testing.assert_allclose(centre(cloud_at('b', t)), expected(1.5, -0.35), atol=1e-3)
         # b is lost: no longer listed nor on /tf; after the timeout one hair is left
         deadline = time.monotonic() + 10.0
         k = 16
@@ -123,8 +128,9 @@ def test_two_faces_then_one_each_hair_following_its_own_head():
         assert sorted(faces.people) == ['a']
         assert sorted(faces.roster.crowd.people) == ['a']
         assert spin_until(executor, lambda: probe.count_publishers(hair_topic('b')) == 0, 10.0)
-        t = send({'a': (0.2, 0.35)}, k)
-        assert abs(centre(cloud_at('a', t))[0] - 0.2) < 0.12
+        for j in range(3):
+            t = send({'a': (0.2, 0.35)}, k + j)
+        np.testing.assert_allclose(centre(cloud_at('a', t)), expected(0.2, 0.35), atol=1e-3)
     finally:
         executor.shutdown(timeout_sec=1.0)
         for n in (node, probe):
@@ -136,22 +142,26 @@ def test_two_faces_then_one_each_hair_following_its_own_head():
 def test_memory_is_flat_over_1000_people_coming_and_going():
     """The hook on a plain node, driven with messages and a clock of the test's own: each
     cycle a new id appears (hair, a publisher, a cloud encoded and sent), then is lost for the
-    timeout (hair and publisher gone).  The Python heap after 1000 cycles is where it was
-    after the first 100 (tracemalloc: exact counts, no timing)."""
+    timeout (hair and publisher gone).  The Python heap (tracemalloc: exact counts, no timing)
+    of 1000 cycles after 200 to warm up: the allocators' and rclpy's tables settle (growth per
+    cycle falls with every window), so the second 500 cycles may add little; a leak of one
+    person a cycle (a hair: kilobytes; a publisher's handles: hundreds of bytes; a dict entry:
+    100 bytes) adds 50 kB or more there."""
     ctx = Context()
     rclpy.init(context=ctx, domain_id=113)
     node = None
     try:
         node = Node('faces', context=ctx)
-        settings = make_settings(dict(SMALL, **{'people.lost_timeout_s': 0.5}))
+        rclpy.logging.set_logger_level('faces', rclpy.logging.LoggingSeverity.WARN)
+        settings = make_settings(dict(SMALL, **{'people.lost_timeout_s': 0.5,
+                                                'solver.settle_time': 0.0}))
         now = [0]
         hook = FaceHair(node, lambda: settings, now_ns=lambda: now[0])
         publishers = len(list(node.publishers))
 
         def cycle(k):
             pid = f'p{k}'
-            ids = IdsList(ids=[pid])
-            hook.on_ids(ids)
+            hook.on_ids(IdsList(ids=[pid]))
             for j in range(3):
                 now[0] += 20_000_000
                 hook.on_tf(faces_message(now[0], {pid: (0.01 * j, 0.1 * j)}))
@@ -161,20 +171,24 @@ def test_memory_is_flat_over_1000_people_coming_and_going():
             hook.on_timer()
             assert hook.people == {} and hook.roster.crowd.people == {}
 
-        for k in range(100):
+        def heap():
+            gc.collect()
+            return sum(stat.size for stat in tracemalloc.take_snapshot().statistics('filename'))
+
+        for k in range(200):
             cycle(k)
-        gc.collect()
         tracemalloc.start()
-        before = tracemalloc.take_snapshot()
-        for k in range(100, 1100):
-            cycle(k)
-        gc.collect()
-        after = tracemalloc.take_snapshot()
-        tracemalloc.stop()
-        grown = sum(s.size_diff for s in after.compare_to(before, 'filename'))
+        try:
+            sizes = [heap()]
+            for half in range(2):
+                for k in range(200 + 500 * half, 700 + 500 * half):
+                    cycle(k)
+                sizes.append(heap())
+        finally:
+            tracemalloc.stop()
         assert len(list(node.publishers)) == publishers
-        # a leak of one person a cycle (a hair: kilobytes; a dict entry: 100 bytes) shows
-        assert grown < 64 * 1024, after.compare_to(before, 'lineno')[:10]
+        assert sizes[2] - sizes[1] < 32 * 1024, sizes
+        assert sizes[2] - sizes[0] < 128 * 1024, sizes
     finally:
         if node is not None:
             node.destroy_node()

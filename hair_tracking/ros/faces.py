@@ -20,6 +20,7 @@ from the scene the node started with.
 from typing import Callable, Dict, Optional
 
 import numpy as np
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import PointCloud2
 
@@ -53,9 +54,13 @@ class _Person:
     """A person's publisher and the cloud it rewrites each frame."""
 
     def __init__(self, node, pid: str, depth: int):
+        # a callback group of its own (its QoS event handler's): rclpy's groups keep a
+        # reference to every entity ever added, so the node's default group would grow by one
+        # per person who ever came
         self.pub = node.create_publisher(PointCloud2, hair_topic(pid), QoSProfile(
             history=HistoryPolicy.KEEP_LAST, depth=depth, reliability=ReliabilityPolicy.RELIABLE,
-            durability=DurabilityPolicy.VOLATILE))
+            durability=DurabilityPolicy.VOLATILE),
+            callback_group=MutuallyExclusiveCallbackGroup())
         self.cloud = CloudBuffer()
         self.frame_id = 'world'
         self.published = 0
