@@ -44,14 +44,14 @@ def ftl_advance_heads(model, state, drive, params, collide, collider, work, stop
         for k in range(n_sub):
             for j in prange(heads * chunks):
                 _head_run(model, state, drive, params, collide, collider, work, slots,
-                          np.int64(j), chunks, nblk, k, k + 1)
+                          (np.int64(j), chunks, nblk, k, k + 1))
             if _any_split(drive, work, stop, k, nblk, heads):
                 done = k + 1
                 break
     else:
         for j in prange(heads * chunks):
             _head_run(model, state, drive, params, collide, collider, work, slots,
-                      np.int64(j), chunks, nblk, 0, n_sub)
+                      (np.int64(j), chunks, nblk, np.int64(0), n_sub))
         _all_measured(drive, work, n_sub, nblk, heads)
     return done
 
@@ -65,14 +65,14 @@ def ftl_advance_heads_serial(model, state, drive, params, collide, collider, wor
         for k in range(n_sub):
             for j in range(heads * chunks):
                 _head_run(model, state, drive, params, collide, collider, work, slots,
-                          j, chunks, nblk, k, k + 1)
+                          (j, chunks, nblk, k, k + 1))
             if _any_split(drive, work, stop, k, nblk, heads):
                 done = k + 1
                 break
     else:
         for j in range(heads * chunks):
             _head_run(model, state, drive, params, collide, collider, work, slots,
-                      j, chunks, nblk, 0, n_sub)
+                      (j, chunks, nblk, np.int64(0), n_sub))
         _all_measured(drive, work, n_sub, nblk, heads)
     return done
 
@@ -88,10 +88,10 @@ def _plan(state, drive, work, stop, slots):
 
 
 @njit(cache=True, inline='always')
-def _head_run(model, state, drive, params, collide, collider, work, slots, j, chunks, nblk,
-              k0, k1):
-    """Work item ``j``: chunk ``j % chunks`` of head ``j // chunks``'s blocks through the
-    substeps ``k0 <= k < k1``."""
+def _head_run(model, state, drive, params, collide, collider, work, slots, item):
+    """Work item ``item = (j, chunks, blocks, k0, k1)``: chunk ``j % chunks`` of head
+    ``j // chunks``'s ``blocks`` blocks through the substeps ``k0 <= k < k1``."""
+    j, chunks, nblk, k0, k1 = item
     h = j // chunks
     c = j - h * chunks
     s = slots[h]
