@@ -2,8 +2,9 @@
 
 Inputs: ``/humans/faces/tracked`` (hri_msgs/IdsList, the ids tracked now), ``/tf`` and
 ``/tf_static`` (tf2_msgs/TFMessage; every ``face_<id>`` frame, composed with its parents up to the
-root of its tree, the frame the person's hair is simulated and published in).  Both are
-subscribed best effort, so reliable and best-effort publishers connect.
+root of its tree, the frame the person's hair is simulated and published in).  The id list and
+``/tf`` are subscribed best effort, so reliable and best-effort publishers connect;
+``/tf_static`` reliable and transient local, as tf2 publishes it.
 
 Outputs, per person, as ROS4HRI's own nodes publish per id: ``/humans/faces/<id>/hair/points``
 (PointCloud2, the node's ``cloud_fields``, one row per strand, in the root frame of the face's
