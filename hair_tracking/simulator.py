@@ -136,10 +136,11 @@ class HairSimulator:
     """Guides + ghosts driven by a head-pose stream, assembled from a :class:`Scene`."""
 
     def __init__(self, scene: Scene, clock: Callable[[], float] = time.perf_counter,
-                 parallel: Optional[Parallelism] = None):
+                 parallel: Optional[Parallelism] = None, groom: Optional[Groom] = None):
         """``clock()`` [s] times the work reported in :attr:`counters` (a test injects one);
         ``parallel`` the kernel variants of the stages (default: :func:`parallelism` of the
-        scene; :func:`warm_up` runs a tiny scene through the variants of a large one)."""
+        scene; :func:`warm_up` runs a tiny scene through the variants of a large one);
+        ``groom`` the scene's groom when already built (one hair per person shares it)."""
         scene.validate()
         self.scene = scene
         self.clock = clock
@@ -154,7 +155,7 @@ class HairSimulator:
         #: ghost shard receives them (hair_tracking_msgs/GuideState): set by the node that
         #: publishes the guides' state, so its own ghosts are the shards' to the bit.
         self.guides_as_float32 = False
-        self._build()
+        self._build(groom=groom)
 
     # ------------------------------------------------------------- assembly
     def _build(self, head: HeadPose = IDENTITY, groom: Optional[Groom] = None) -> None:
@@ -267,16 +268,9 @@ class HairSimulator:
             self.counters.last_substeps = 0
             return 0
         start = self.clock()
-        due = (int(t_ns) - self.time_ns) // self.dt_ns
-        cap = self.scene.solver.max_substeps
-        if due > cap:
-            span = int(t_ns) - self.time_ns
-            times = [self.time_ns + (span * (k + 1)) // cap for k in range(cap)]
-            self.counters.substeps_dropped += int(due - cap)
-            self.time_ns = int(t_ns)
-        else:
-            times = [self.time_ns + self.dt_ns * (k + 1) for k in range(due)]
-            self.time_ns += self.dt_ns * int(due)
+        times, self.time_ns, dropped = substep_times(self.time_ns, t_ns, self.dt_ns,
+                                                     self.scene.solver.max_substeps)
+        self.counters.substeps_dropped += dropped
         dt = self.scene.solver.dt
         self.counters.last_track_ms = 0.0
         self._begin_ghosts()
@@ -440,13 +434,7 @@ class HairSimulator:
             return
         self.counters.extra['split_substeps'] = \
             self.counters.extra.get('split_substeps', 0) + parts - 1
-        heads = []
-        for k in range(1, parts):
-            u = k / parts
-            q = slerp(head_prev.quaternion, head.quaternion, u)
-            heads.append(HeadPose((1.0 - u) * head_prev.position + u * head.position, q,
-                                  quat_to_matrix(q)))
-        self._step(dt / parts, head_prev, heads + [head])
+        self._step(dt / parts, head_prev, split_heads(head_prev, head, parts))
 
     def _split_count(self, dt: float, rigid: float, speed: float) -> int:
         """Parts to split a substep into so that no node moves farther than the split limit,
@@ -571,6 +559,29 @@ class HairSimulator:
         if self.ghost_tracker is not None:
             self.ghost_tracker.carry(old, new)
         self._last_speed = 0.0
+
+
+def substep_times(time_ns: int, t_ns: int, dt_ns: int, cap: int):
+    """``(times, new time, dropped)``: the ends of the substeps that take the fixed-dt
+    accumulator at ``time_ns`` towards ``t_ns`` [ns], at most ``cap`` of them (more due: ``cap``
+    substeps spread over the whole interval, the rest dropped, the accumulator at ``t_ns``)."""
+    due = (int(t_ns) - time_ns) // dt_ns
+    if due > cap:
+        span = int(t_ns) - time_ns
+        return [time_ns + (span * (k + 1)) // cap for k in range(cap)], int(t_ns), int(due - cap)
+    return [time_ns + dt_ns * (k + 1) for k in range(due)], time_ns + dt_ns * int(due), 0
+
+
+def split_heads(head_prev: HeadPose, head: HeadPose, parts: int):
+    """The ends of ``parts`` equal parts of a substep from ``head_prev`` to ``head``: the
+    positions interpolated linearly, the rotations by slerp, ``head`` last."""
+    heads = []
+    for k in range(1, parts):
+        u = k / parts
+        q = slerp(head_prev.quaternion, head.quaternion, u)
+        heads.append(HeadPose((1.0 - u) * head_prev.position + u * head.position, q,
+                              quat_to_matrix(q)))
+    return heads + [head]
 
 
 def _worst(a: float, b: float) -> float:

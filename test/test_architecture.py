@@ -14,12 +14,13 @@ ADAPTERS = os.path.join(ROOT, 'msg_adapters')
 #: The top-level helpers (resources, executable, shutdown) are leaves any layer may use; the
 #: console entry points at the end of executable.py import the executables' modules inside
 #: their functions.
-LAYERS = ['core', 'motion', 'colliders', 'grooms', 'guides', 'ghosts', 'simulator', 'output',
-          'bags', 'evaluation', 'ros']
+LAYERS = ['core', 'motion', 'colliders', 'grooms', 'guides', 'ghosts', 'simulator', 'people',
+          'output', 'bags', 'evaluation', 'ros']
 LEAVES = {'resources', 'executable', 'shutdown'}
 #: Layers that simulate or describe head motion: numpy, numba and yaml only, no ROS messages,
 #: no rclpy, no adapters.
-SIMULATION = {'core', 'motion', 'colliders', 'grooms', 'guides', 'ghosts', 'simulator'}
+SIMULATION = {'core', 'motion', 'colliders', 'grooms', 'guides', 'ghosts', 'simulator',
+              'people'}
 #: Layers that join no ROS graph (no rclpy): they run without a ROS installation's middleware.
 NO_GRAPH = SIMULATION | {'output', 'bags', 'evaluation'}
 ROS_ROOTS = {'rclpy', 'rosidl_runtime_py', 'rosgraph_msgs', 'std_msgs', 'geometry_msgs',

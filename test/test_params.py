@@ -136,7 +136,8 @@ def test_rebuild_policy_is_the_groom_and_read_only_are_start_settings():
                                                             'gravity_frame',
                                                             'pose_queue_depth',
                                                             'output_queue_depth', 'shards',
-                                                            'publish_guide_state'}
+                                                            'publish_guide_state',
+                                                            'people.source', 'people.max'}
     assert not any(p.rebuild and p.read_only for p in table.values())
     for p in table.values():
         assert p.description and p.full_description().startswith(p.description)

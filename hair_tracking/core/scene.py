@@ -185,6 +185,16 @@ class HeadTrackSpec:
     max_gap: float
 
 
+@_section('people.')
+class PeopleSpec:
+    """Whose hair is simulated: one head, or every face REP-155 perception tracks."""
+
+    source: str
+    sellion_offset: Tuple[float, float, float]
+    lost_timeout_s: float
+    max: int
+
+
 @_section('output.')
 class OutputSpec:
     """The published strands."""
@@ -204,6 +214,7 @@ class Scene:
     solver: SolverSpec
     tracking: TrackingSpec
     head_track: HeadTrackSpec
+    people: PeopleSpec
     output: OutputSpec
     gravity: Tuple[float, float, float]
     damping: float

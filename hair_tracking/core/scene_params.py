@@ -29,6 +29,8 @@ COLLIDERS = ('none', 'sphere', 'ellipsoid')
 ELASTIC_MODES = ('kept', 'changed')
 CURVES = ('none', 'bezier', 'catmull_rom')
 TRACKING_MODES = ('paper', 'blend', 'turn')
+#: Where the heads come from: one head-pose stream, or every face REP-155 perception tracks.
+PEOPLE_SOURCES = ('pose', 'hri')
 #: Length units of a groom file: metres per unit (``tenth_in``: tenths of an inch, Cem Yuksel's
 #: models); ``auto`` guesses from the span of the roots (docs/grooms.md).
 GROOM_UNITS = {'m': 1.0, 'cm': 0.01, 'mm': 0.001, 'in': 0.0254, 'tenth_in': 0.00254}
@@ -243,6 +245,25 @@ SCENE_PARAMS: Tuple[Param, ...] = (
     _row('head_track.max_gap', 'double', 0.5,
          'poses farther apart than this count as a jump too',
          unit='s', lo=0.0, hi=3600.0, lo_open=True),
+    _row('people.source', 'string', 'pose',
+         'whose hair is simulated: pose (one head, from head_pose, head_transform or use_tf) '
+         'or hri (every face of REP-155 perception: the ids on /humans/faces/tracked and the '
+         'face_<id> frames on /tf, one hair each, published on /humans/faces/<id>/hair/points; '
+         'docs/node.md#people)', choices=PEOPLE_SOURCES, read_only=True),
+    _row('people.sellion_offset', 'double_array', (-0.085, 0.0, 0.01),
+         'people.source hri: the head centre (the origin of the head frame) in a face_<id> '
+         'frame, whose origin is the sellion (x out of the face, z toward the scalp); the '
+         'default is half an adult head length (glabella to opisthocranion, about 19 cm) less '
+         'the 1 cm the sellion lies behind the glabella, and 1 cm up, which puts the top of '
+         'the default collider 11.5 cm above the sellion, the adult sellion-to-vertex height',
+         unit='m', lo=-0.5, hi=0.5, length=3),
+    _row('people.lost_timeout_s', 'double', 1.0,
+         'people.source hri: a person neither listed on /humans/faces/tracked nor seen on /tf '
+         'for this long is removed with their hair (one who comes back gets fresh hair)',
+         unit='s', lo=0.0, hi=3600.0, lo_open=True),
+    _row('people.max', 'int', 8,
+         'people.source hri: most people followed at once (the first ids seen; others wait '
+         'for a place)', lo=1, hi=64, read_only=True),
     _row('output.curve', 'string', 'none',
          'smoothing of the output strands', choices=CURVES),
     _row('output.points_per_strand', 'int', 16,

@@ -95,6 +95,7 @@ from hair_tracking.output.frame_encoder import FrameEncoder
 from hair_tracking.output.shards import fingerprint, guide_state_bytes, settings_text, \
     SHARDABLE
 from hair_tracking.resources import config_path
+from hair_tracking.ros.faces import FaceHair
 from hair_tracking.ros.load_shedding import LoadShedder
 from hair_tracking.simulator import HairSimulator
 
@@ -286,6 +287,9 @@ class HairSimNode(Node):
         self._frames_seen: Dict[str, Tuple[int, bool]] = {}   # collider TF frame: as _body_seen
         self._subscribe_tf()
         scene = settings.scene
+        #: people.source hri: every tracked face's hair (ros/faces.py); None for one head
+        self.faces = FaceHair(self, lambda: self._pending) \
+            if scene.people.source == 'hri' else None
         ghosts = self.sim.ghosts.count if self.sim.ghosts is not None else 0
         self.get_logger().info(
             f'ready: {self.sim.guides.count} guides ({scene.groom.guide_nodes} nodes), '
