@@ -505,13 +505,15 @@ class HairSimulator:
         self.counters.last_track_ms += (self.clock() - start) * 1e3
 
     def _rest_at(self, head: HeadPose) -> None:
-        """The rest shape at ``head``, settled: ``solver.settle_time`` with the head still,
-        then, with ``solver.settle_speed``, :data:`SETTLE_CHUNK_S` at a time until no node
-        moved faster than that over the last one (at most :data:`MAX_SETTLE_S` in all).
+        """The rest shape at ``head`` (out of the body's bust), settled: ``solver.settle_time``
+        with the head still, then, with ``solver.settle_speed``, :data:`SETTLE_CHUNK_S` at a
+        time until no node moved faster than that over the last one (at most
+        :data:`MAX_SETTLE_S` in all).
         ``settled_s`` is the time simulated.  The velocities are then zero (FTL's stored
         velocities do not vanish at rest, :mod:`hair_tracking.guides.ftl`: zeroing them sets
         still FTL hair moving by a few millimetres, which settles again)."""
         self.guide_solver.reset(head)
+        self.guide_solver.leave_body(head)
         if self.ghost_tracker is not None:
             self.ghost_tracker.reset(head)
         once, self.track_once_per_call = self.track_once_per_call, False   # the scene's rest
@@ -553,8 +555,10 @@ class HairSimulator:
         return out
 
     def _carry_rigidly(self, old: HeadPose, new: HeadPose) -> None:
-        """Move all hair with the head from ``old`` to ``new``, at rest (no whip)."""
+        """Move all hair with the head from ``old`` to ``new``, at rest (no whip), and out of
+        the body's bust, which does not move with the head."""
         self.guides.x[...] = carry_rigidly(self.guides.x, old, new)
+        self.guide_solver.leave_body(new)
         self.guides.v[...] = 0.0
         if self.ghost_tracker is not None:
             self.ghost_tracker.carry(old, new)

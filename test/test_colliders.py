@@ -7,7 +7,8 @@ import numpy as np
 from numba import njit
 import pytest
 
-from hair_tracking.colliders import body, bounds, contact, kernels, margin, pose, reference
+from hair_tracking.colliders import (body, bounds, contact, crease, kernels, margin, pose,
+                                     reference)
 from hair_tracking.colliders import slide as stateless_slide
 from hair_tracking.colliders.shapes import (A0, BOUND, CAPSULE, capsule_between, CX, CZ,
                                             FIXED_FRAME, frame_names, FRICTION, HEAD_FRAME, KIND,
@@ -390,8 +391,15 @@ def test_the_kernels_collide_with_every_shape_in_turn():
             want[s, i], want_old[s, i] = p, o
             count += hit
     assert n == count and n > 500
-    assert np.allclose(got, want, rtol=0, atol=1e-11)
-    assert np.allclose(x_old, want_old, rtol=0, atol=1e-11)
+    # a node the sweep leaves inside another shape goes to the closest point outside all
+    # (test_a_node_in_a_crease_goes_to_the_closest_point_outside_both_shapes)
+    creased = union_depth(want.reshape(-1, 3), sh).reshape(x.shape[:2]) > \
+        kernels.CREASE_TOLERANCE
+    creased[:, :2] = False                                          # the roots stay
+    assert creased.sum() > 10
+    assert np.allclose(got[~creased], want[~creased], rtol=0, atol=1e-11)
+    assert np.allclose(x_old[~creased], want_old[~creased], rtol=0, atol=1e-11)
+    assert union_depth(got[creased], sh).max() <= 1e-6
     assert np.array_equal(got[:, :2], x[:, :2])
     depth = np.empty(x.shape[0])
     kernels.deepest(x, inv_mass, True, sh, depth)
@@ -613,3 +621,70 @@ def test_the_neck_frame_hangs_under_the_head_upright_and_turned_with_it():
     rot, pos = body.neck_frame(head, centre, height)
     assert np.allclose(rot, yaw, atol=1e-12)               # upright, with the head's heading
     assert np.allclose(pos, pivot - [0.0, 0.0, b.neck_length])
+
+
+# ----------------------------------------------------------------------------- creases
+@njit(fastmath=FASTMATH, error_model='numpy')
+def escape_points(x, sh, tol, out):
+    moved = np.zeros(x.shape[0], dtype=np.bool_)
+    for i in range(x.shape[0]):
+        m, y0, y1, y2 = crease.escape(x[i, 0], x[i, 1], x[i, 2], sh, tol)
+        moved[i] = m
+        out[i, 0], out[i, 1], out[i, 2] = y0, y1, y2
+    return moved
+
+
+def union_depth(y, sh):
+    """How deep [m] each point of ``y`` (M, 3) lies inside the shapes of ``sh`` (the deepest
+    of them; 0 outside every one)."""
+    return np.max([reference.reference_depth(y, sh[k]) for k in range(sh.shape[0])], axis=0)
+
+
+def test_a_node_in_a_crease_goes_to_the_closest_point_outside_both_shapes():
+    """Two overlapping balls: the closest point outside their union, against the closest of a
+    dense sample of the union's surface; pushing out of one ball at a time, in sweeps, leaves
+    nodes in the crease inside."""
+    rng = np.random.default_rng(21)
+    balls = [Shape('sphere', frame=FIXED_FRAME, radius=0.1, margin=0.004),
+             Shape('sphere', frame=FIXED_FRAME, center=(0.03, 0.0, 0.0), radius=0.1,
+                   margin=0.004)]
+    sh = pose.posed(shape_table(balls), *pose.frames_at(np.eye(3), np.zeros(3)))
+    # nodes near the crease (the circle x = 0.015, radius 0.103), inside the union
+    x = np.array([0.015, 0.09, 0.0]) + rng.uniform(-0.02, 0.02, size=(400, 3))
+    x = np.ascontiguousarray(x[union_depth(x, sh) > 1e-4])
+    y = np.empty_like(x)
+    assert escape_points(x, sh, 1e-9, y).all()
+    assert union_depth(y, sh).max() <= 1e-9                   # outside both
+    u = rng.normal(size=(400_000, 3))
+    u /= np.linalg.norm(u, axis=1)[:, None]
+    surface = np.concatenate([u * 0.104, u * 0.104 + np.array([0.03, 0.0, 0.0])])
+    surface = surface[union_depth(surface, sh) <= 1e-12]
+    closest = np.array([np.sqrt(np.min(np.sum((surface - p) ** 2, axis=1))) for p in x])
+    got = np.linalg.norm(y - x, axis=1)
+    assert np.all(got <= closest + 1e-9) and np.all(got >= closest - 1e-3)
+    # shape by shape, each ball pushes the node out along its own radius: farther
+    z = x.copy()
+    for _ in range(4):
+        for k in range(2):
+            moved, w = reference.reference_push_out(z, z, sh[k])
+            z = np.where(moved[:, None], w, z)
+    assert np.max(np.linalg.norm(z - x, axis=1) - closest) > 1e-3
+
+
+def test_the_collision_stage_leaves_no_node_inside_the_bust():
+    """Nodes inside the bust's overlapping capsules (the shoulders run into the neck and the
+    chest): the collision stage leaves none inside any of them."""
+    rng = np.random.default_rng(22)
+    shapes = body.bust(1.7, frame='torso', margin=0.004)
+    sh = pose.posed(shape_table(shapes, frames=(FIXED_FRAME, HEAD_FRAME, 'torso')),
+                    *pose.frames_at(np.eye(3), np.zeros(3), [(np.eye(3), np.zeros(3))]))
+    x = rng.uniform((-0.15, -0.3, -0.3), (0.15, 0.3, 0.1), size=(20_000, 3))
+    x = np.ascontiguousarray(x[union_depth(x, sh) > 0.0].reshape(-1, 1, 3))
+    got = x.copy()
+    kernels.collide(got, x.copy(), np.ones(x.shape[:2]), sh, -1.0, x.copy())
+    assert union_depth(got.reshape(-1, 3), sh).max() <= kernels.CREASE_TOLERANCE + 1e-12
+    alone = x.reshape(-1, 3)                     # each shape in turn, once, as a sweep does
+    for k in range(sh.shape[0]):
+        moved, w = reference.reference_push_out(alone, alone, sh[k])
+        alone = np.where(moved[:, None], w, alone)
+    assert union_depth(alone, sh).max() > 1e-3

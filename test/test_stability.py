@@ -1,5 +1,6 @@
 """Stability: the reduced matrix of stiff and extreme cases (CI), the checks themselves, and the
 simulation fixes the matrix led to (each kernel against a plain-numpy reference)."""
+from dataclasses import replace
 import math
 
 import numpy as np
@@ -57,7 +58,10 @@ def test_full_matrix_is_larger_and_has_the_hour():
     for solver in ('ftl', 'pbd', 'xpbd'):
         assert any(c.scene.solver.type == solver and c.group == 'time step' for c in full)
     body = [c for c in full if c.group == 'body']
-    assert len(body) == 2 and all(c.scene.body.bust for c in body)
+    assert len(body) == 5 and sum(c.scene.body.bust for c in body) == 4
+    names = ' '.join(c.name for c in body)
+    for needle in ('50 rad/s', 'walk', 'teleports 1 m', 'switched on inside the hair'):
+        assert needle in names, needle
 
 
 # ------------------------------------------------------------- the checks can fail
@@ -121,6 +125,22 @@ def test_glitch_expectation_is_checked():
     assert ok.passed and ok.counters['rejected'] == bad
     wrong = stability.run_case(_case(stability.BASE, stream, expect={'rejected': bad + 1}))
     assert not wrong.passed
+
+
+def test_a_bust_switched_on_inside_the_hair_pushes_it_out_without_launching_it():
+    """The switch case of the full matrix, shortened: the push-out bound keeps the guides'
+    velocity gain within the case's bound; without it (``body.max_push_speed`` 100 m/s, the
+    bound kept) the check fails."""
+    case = next(c for c in stability.matrix() if 'switched on' in c.name)
+    short = replace(case, stream=lambda: sm.still(1.0), tail_s=0.3)
+    ok = stability.run_case(short)
+    assert ok.passed, ok.failures
+    assert 0.0 < ok.worst['push_gain'] <= case.expect['push_gain'][1]
+    on = case.scene.with_changes(body__bust=True, body__max_push_speed=100.0)
+    loose = replace(short, scene=case.scene.with_changes(body__max_push_speed=100.0),
+                    events=lambda sim, t: stability._switch_bust_on(sim, t, on))
+    bad = stability.run_case(loose)
+    assert not bad.passed and any('gained' in f for f in bad.failures), bad.failures
 
 
 def test_check_catches_energy_gained_over_the_still_tail(monkeypatch):

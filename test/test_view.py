@@ -1,12 +1,14 @@
 """hair_sim_view: the strands and the head drawn from the node's topics, looked at in a real
 headless Chromium.
 
-A real ``hair_sim_node`` (domain 78) gets a still head pose; two viewers serve pages from it:
-one on the node's topics, one whose cloud topic nobody publishes (the control).  The page of
-the first must show many pixels of the cloud's own hair colours, the control's none, though
-both show the head (coloured blue by the node's ``head_color`` here, so that it is told apart
-from the hair).  Needs viser, Playwright for Python and Debian's chromium (``make install``);
-the browser tests are skipped without them.  Every wait is bounded.
+A real ``hair_sim_node`` (domain 78, with the body's bust) gets a still head pose; viewers
+serve pages from it: one on the node's topics, one whose cloud topic nobody publishes (the
+control), and, without the head, one with the bust's colliders and one without (its
+control).  The page of the first must show many pixels of the cloud's own hair colours, the
+control's none, though both show the head (coloured blue by the node's ``head_color`` here,
+so that it is told apart from the hair, as the bust is).  Needs viser, Playwright for Python
+and Debian's chromium (``make install``); the browser tests are skipped without them.  Every
+wait is bounded.
 """
 import io
 import os
@@ -23,7 +25,7 @@ import numpy as np
 import pytest
 from sensor_msgs.msg import PointCloud2, PointField
 from std_msgs.msg import Header
-from visualization_msgs.msg import Marker
+from visualization_msgs.msg import Marker, MarkerArray
 
 from hair_tracking.ros import view
 from msg_adapters.pointcloud import strands_to_pointcloud2
@@ -111,6 +113,29 @@ def test_head_shape_of_the_nodes_marker():
     look_at, eye = view.framing(np.zeros((0, 2, 3)), s)
     np.testing.assert_allclose(look_at, s.position)
     assert (eye - look_at)[0] > 0 and (eye - look_at)[2] > 0
+
+
+def test_collider_solids_of_the_nodes_capsules():
+    from msg_adapters.capsule_markers import capsule_markers
+    q = (0.0, np.sin(0.25), 0.0, np.cos(0.25))             # x y z w: 0.5 rad about y
+    markers = capsule_markers([(0.1, 0.2, 1.3)], [q], [0.05], [0.12], frame_id='world',
+                              stamp_ns=0, color=(0.1, 0.3, 0.9, 1.0))
+    solids = view.collider_solids(MarkerArray(markers=markers + [Marker(type=Marker.CUBE),
+                                                                 Marker(action=Marker.DELETEALL)]))
+    assert [s.kind for s in solids] == ['cylinder', 'sphere', 'sphere']
+    cyl, end0, end1 = solids
+    np.testing.assert_allclose(cyl.position, (0.1, 0.2, 1.3))
+    np.testing.assert_allclose(cyl.size, (0.05, 0.05, 0.24))
+    np.testing.assert_allclose(cyl.wxyz, (q[3], q[0], q[1], q[2]))
+    axis = np.array([np.sin(0.5), 0.0, np.cos(0.5)])
+    np.testing.assert_allclose(end0.position, np.array(cyl.position) - 0.12 * axis, atol=1e-12)
+    np.testing.assert_allclose(end1.position, np.array(cyl.position) + 0.12 * axis, atol=1e-12)
+    np.testing.assert_allclose(end0.size, (0.05,) * 3)
+    assert cyl.rgb == (26, 76, 230)
+    latest = view.Latest()
+    latest.add_colliders(MarkerArray(markers=markers))
+    assert latest and latest.take_colliders().markers == markers
+    assert not latest and latest.take_colliders() is None
 
 
 def test_latest_pairs_the_cloud_with_the_head_of_its_stamp():
@@ -266,11 +291,13 @@ def _feed_a_pose_until_a_cloud():
 
 @pytest.fixture(scope='module')
 def hair_colors():
-    """A running hair_sim node (blue head) with a pose; -> the colours of its strands."""
+    """A running hair_sim node (blue head and bust) with a pose; -> the colours of its
+    strands."""
     if _missing():
         pytest.skip(_missing())
     node = Proc(['-m', 'hair_tracking.ros.node', '--ros-args', '-p',
-                 f'head_color:=[{HEAD_COLOR[0]}, {HEAD_COLOR[1]}, {HEAD_COLOR[2]}, 1.0]'])
+                 f'head_color:=[{HEAD_COLOR[0]}, {HEAD_COLOR[1]}, {HEAD_COLOR[2]}, 1.0]',
+                 '-p', 'body.bust:=true'])
     try:
         node.wait_for('ready:', timeout=300)      # minutes only with an empty numba cache
         yield _feed_a_pose_until_a_cloud()
@@ -354,3 +381,25 @@ def test_a_page_without_hair_has_no_hair_coloured_pixels(hair_colors, browser, t
     finally:
         code, out = control.stop()
     assert code == 0 and 'Traceback' not in out, out
+
+
+@needs_browser
+def test_the_page_draws_the_bust(hair_colors, browser, tmp_path):
+    """The node's bust (hair/colliders, blue as the head) without the head: drawn; the same
+    page without the colliders' topic (the control) has no more blue than the view's axes
+    (about 100 pixels)."""
+    for topic, drawn in (('hair/colliders', True), ('', False)):
+        live, url = _start_view('--head-topic', '', '--colliders-topic', topic)
+        try:
+            png, hair, blue = _shoot_until(
+                browser, url, hair_colors,
+                lambda hair, blue: hair >= HAIR_PIXELS_MIN and (blue >= HEAD_PIXELS_MIN
+                                                                or not drawn))
+            (tmp_path / f'bust_{drawn}.png').write_bytes(png)
+            if drawn:
+                assert blue >= HEAD_PIXELS_MIN, (blue, str(tmp_path / 'bust_True.png'))
+            else:
+                assert blue < HEAD_PIXELS_MIN / 4, (blue, str(tmp_path / 'bust_False.png'))
+        finally:
+            code, out = live.stop()
+        assert code == 0 and 'Traceback' not in out, out

@@ -17,9 +17,13 @@ import numpy as np
 from hair_tracking.colliders.bounds import box_near, boxes_meet, near, shape_box, strand_box
 from hair_tracking.colliders.contact import (bounded_start, carried, depth, FASTMATH, push_out,
                                              surface_normal)
+from hair_tracking.colliders.crease import escape, outside_all
 from hair_tracking.colliders.shapes import FRICTION, KIND, PLANE
 from hair_tracking.colliders.slide import level, slide_push
 
+#: A node :func:`collide_block` pushed out of one shape may stay this far [m] inside another
+#: (farther, it goes to the closest point outside both, :mod:`~hair_tracking.colliders.crease`).
+CREASE_TOLERANCE = 1e-7
 #: Sweeps over the shapes a node of :func:`slide_push_strands` takes at most.
 STRAND_SWEEPS = 16
 #: Strands whose nodes share the first bound test of :func:`slide_push_strands`.
@@ -63,6 +67,16 @@ def collide_block(x, start, inv_mass, sh, cap, x_old, s0, s1):
                                                cap)
                 x0, x1, x2 = y0, y1, y2
                 hit = True
+            if hit and not outside_all(x0, x1, x2, sh, CREASE_TOLERANCE):
+                # pushed from one shape into another: the closest point outside both
+                _, y0, y1, y2 = escape(x0, x1, x2, sh, CREASE_TOLERANCE)
+                if cap >= 0.0:
+                    e0, e1, e2 = y0 - x0, y1 - x1, y2 - x2
+                    e = math.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
+                    if e > 0.0:
+                        o0, o1, o2 = bounded_start(o0, o1, o2, y0, y1, y2, x0, x1, x2, e0 / e,
+                                                   e1 / e, e2 / e, cap)
+                x0, x1, x2 = y0, y1, y2
             if hit:
                 x[s, i, 0], x[s, i, 1], x[s, i, 2] = x0, x1, x2
                 if cap >= 0.0:

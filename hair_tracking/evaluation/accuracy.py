@@ -49,6 +49,7 @@ from typing import Callable, Dict, List, Optional, Sequence
 
 import numpy as np
 
+from hair_tracking.colliders.scene_body import make_body
 from hair_tracking.core.metrics import max_stretch, position_error, tip_error
 from hair_tracking.core.model import HeadPose
 from hair_tracking.core.scene import Scene
@@ -73,7 +74,7 @@ CHAOS_PERTURBATION = 1e-6
 CHAOS_RMS = 0.01
 
 #: Per-frame metrics (see the module docstring).
-METRICS = ('rms', 'max', 'tip', 'stretch', 'pen', 'spread', 'motion')
+METRICS = ('rms', 'max', 'tip', 'stretch', 'pen', 'pen_body', 'spread', 'motion')
 
 
 # ============================================================== head poses at substep times
@@ -148,6 +149,8 @@ class Scorer:
         self.ref = ref_frames                          # (F, S, N, 3) float32
         self.ref0 = np.asarray(ref_settled, dtype=np.float64)
         self.collider = make_collider(workload.scene.collider)
+        #: the scene's bust (``body.bust``), measured bare: ``pen_body``
+        self.body = make_body(workload.scene.body, 0.0)
         self._order = np.argsort(workload.groups, kind='stable')
         g = workload.groups[self._order]
         self._starts = np.flatnonzero(np.r_[True, g[1:] != g[:-1]])
@@ -168,16 +171,19 @@ class Scorer:
         reference moved from where it started)."""
         if not np.all(np.isfinite(x)):
             return {'rms': math.inf, 'max': math.inf, 'tip': math.inf, 'stretch': math.inf,
-                    'pen': math.inf, 'spread': math.nan, 'motion': math.inf}
+                    'pen': math.inf, 'pen_body': math.inf, 'spread': math.nan,
+                    'motion': math.inf}
         ref = self.ref[j].astype(np.float64)
         rms, mx = position_error(x, ref, self.w.strand_length)
         motion, _ = position_error(x - x0, ref - self.ref0, self.w.strand_length)
-        pen = 0.0
+        pen = pen_body = 0.0
         if self.collider is not None:
             pen = self.collider.penetration(x, head, self.w.inv_mass)
+        if self.body is not None:
+            pen_body = self.body.depth(x, head, self.w.inv_mass)
         rs = self.ref_spread[j]
         return {'rms': rms, 'max': mx, 'tip': tip_error(x, ref, self.w.strand_length),
-                'stretch': max_stretch(x, self.w.rest_length), 'pen': pen,
+                'stretch': max_stretch(x, self.w.rest_length), 'pen': pen, 'pen_body': pen_body,
                 'spread': self.spread(x) / rs if rs > 0 else math.nan, 'motion': motion}
 
 

@@ -10,8 +10,8 @@ scored against a **same-solver reference** -- every strand simulated by Follow-T
   (:class:`~hair_tracking.evaluation.accuracy.Scorer`'s ``motion``); the error already present in
   the settled shape is reported apart (``settled error``);
 * **stretch** (largest ``|l / l0 - 1|``) and **penetration** (deepest node inside the bare head
-  collider) over the run: a setting is admitted only with stretch <= 1 % and penetration <= the
-  collider margin;
+  collider, and with ``body.bust`` inside the bare bust) over the run: a setting is admitted
+  only with stretch <= 1 % and penetration <= the collider's margin (the bust's);
 * **ms per frame**: guides, ghosts and everything a frame needs, medians over ``repeats`` timing
   runs interleaved across the methods (compile time excluded), min and median reported.
 
@@ -94,6 +94,7 @@ class Row:
     settled_err: float = math.nan                            # % L
     stretch: float = math.nan                                # [1]
     penetration_mm: float = math.nan
+    body_mm: float = math.nan                                # deepest in the bare bust
     admitted: bool = False
     dominates: bool = False
 
@@ -127,7 +128,9 @@ def study(workload: Workload, trajectory: Trajectory, duration_s: float, repeats
     moving = first_moving_frame(schedule)
     margin_mm = 1e3 * float(scene.collider.margin) if scene.collider.shape != 'none' else 0.0
     cands = candidates(scene)
-    rows = {c.name: Row(c.name, c.ghost, stretch=0.0, penetration_mm=0.0) for c in cands}
+    body_margin_mm = 1e3 * float(scorer.body.margin) if scorer.body is not None else 0.0
+    rows = {c.name: Row(c.name, c.ghost, stretch=0.0, penetration_mm=0.0, body_mm=0.0)
+            for c in cands}
     for c in cands:                                           # accuracy runs
         method = c.build(workload, scene)
         motion = []
@@ -145,12 +148,14 @@ def study(workload: Workload, trajectory: Trajectory, duration_s: float, repeats
                 motion.append(m['motion'])
             row.stretch = max(row.stretch, m['stretch'])
             row.penetration_mm = max(row.penetration_mm, 1e3 * m['pen'])
+            row.body_mm = max(row.body_mm, 1e3 * m['pen_body'])
         t0 = time.perf_counter()
         run_frames(method, schedule, schedule.frames, score, scene.solver.settle_time)
         row.motion_err = 100.0 * float(np.sqrt(np.mean(np.square(motion)))) if motion \
             else math.nan
         log(f'    {c.name}: motion error {row.motion_err:.2f} % L, stretch '
-            f'{100 * row.stretch:.3f} %, penetration {row.penetration_mm:.2f} mm '
+            f'{100 * row.stretch:.3f} %, penetration {row.penetration_mm:.2f} mm, bust '
+            f'{row.body_mm:.2f} mm '
             f'({time.perf_counter() - t0:.1f} s)')
     frames = min(timing_frames, schedule.frames)
     reports = []
@@ -164,36 +169,43 @@ def study(workload: Workload, trajectory: Trajectory, duration_s: float, repeats
                 timed[c.name].frame_ms.append(1e3 * float(np.median(secs)))
         base = timed[BASELINE]
         for r in timed.values():
-            r.admitted = r.stretch <= MAX_STRETCH and r.penetration_mm <= margin_mm + 1e-6
+            r.admitted = r.stretch <= MAX_STRETCH and r.penetration_mm <= margin_mm + 1e-6 \
+                and r.body_mm <= body_margin_mm + 1e-6
             r.dominates = r.ghost and r.admitted and r.ms <= TIME_SHARE * base.ms and \
                 r.motion_err <= base.motion_err
         reports.append({'motion': trajectory.name, 'description': trajectory.description,
                         'strands': workload.count, 'frames': schedule.frames,
                         'moving_from': moving, 'threads': threads,
                         'reference': f'FTL dt 1/{60 * REFERENCE_SUBSTEPS} s, every strand',
-                        'margin_mm': margin_mm, 'rows': list(timed.values())})
+                        'margin_mm': margin_mm, 'body_margin_mm': body_margin_mm,
+                        'nodes': workload.ghost_rest.shape[1], 'body': scorer.body is not None,
+                        'rows': list(timed.values())})
     return reports
 
 
 def markdown(report: Dict, threads: int) -> str:
     """The report of :func:`study` as a Markdown table."""
     base = next(r for r in report['rows'] if r.name == BASELINE)
-    lines = [f"#### {report['motion']}, {report['strands']} strands x 16 nodes, {threads} "
-             f"thread(s)",
+    body = report.get('body', False)
+    lines = [f"#### {report['motion']}, {report['strands']} strands x "
+             f"{report.get('nodes', 16)} nodes, {threads} thread(s)"
+             + (', on the bust' if body else ''),
              '',
              f"{report['description']}; {report['frames']} frames at 60 Hz, the head moves from "
              f"frame {report['moving_from']}; reference: {report['reference']}.",
              '',
              '| method | ms/frame (median, min) | share of baseline | motion error [% L] | '
-             'settled error [% L] | max stretch [%] | penetration [mm] | dominates |',
-             '|---|---:|---:|---:|---:|---:|---:|:---:|']
+             'settled error [% L] | max stretch [%] | penetration [mm] | '
+             + ('in the bust [mm] | ' if body else '') + 'dominates |',
+             '|---|---:|---:|---:|---:|---:|---:|' + ('---:|' if body else '') + ':---:|']
     for r in report['rows']:
         share = r.ms / base.ms if base.ms > 0 else math.nan
         mark = 'yes' if r.dominates else ('' if not r.ghost else
                                           ('no' if r.admitted else 'not admitted'))
         lines.append(f'| {r.name} | {r.ms:.2f}, {min(r.frame_ms):.2f} | {share:.2f} | '
                      f'{r.motion_err:.2f} | {r.settled_err:.2f} | {100 * r.stretch:.3f} | '
-                     f'{r.penetration_mm:.2f} | {mark} |')
+                     f'{r.penetration_mm:.2f} | '
+                     + (f'{r.body_mm:.2f} | ' if body else '') + f'{mark} |')
     return '\n'.join(lines) + '\n'
 
 

@@ -46,6 +46,7 @@ from typing import Callable, Dict, List, Optional, Sequence
 
 import numpy as np
 
+from hair_tracking.colliders.body import neck_frame
 from hair_tracking.core.metrics import max_stretch
 from hair_tracking.core.scene import Scene
 from hair_tracking.evaluation import synthetic_motion as sm
@@ -88,6 +89,11 @@ class Case:
     check_every: int = 1
     tail_s: float = TAIL_S
     expect: Dict[str, object] = field(default_factory=dict)
+    #: called with the simulator and the time since the first pose [s] before each pose is
+    #: pushed: what changes besides the head (a TF body frame, the scene); returns true when
+    #: a body jumped or appeared (the hair it moves out of it is not motion: the interval is
+    #: not measured, as over a reset)
+    events: Optional[Callable[[HairSimulator, float], bool]] = None
 
 
 @dataclass
@@ -180,6 +186,7 @@ def run_case(case: Case) -> CaseResult:
         shortest = float(rest[rest > 0].min())
     worst = {'stretch_guides': 0.0, 'stretch_ghosts': 0.0, 'root_err_m': 0.0,
              'pen_guides_mm': 0.0, 'pen_ghosts_mm': 0.0, 'pen_body_mm': 0.0, 'max_speed': 0.0,
+             'push_gain': 0.0,
              'ke_bound': ke_max, 'ke_peak': 0.0, 'ke_end': math.nan, 'energy_rise': math.nan,
              'drift': math.nan}
     failures: List[str] = []
@@ -193,8 +200,11 @@ def run_case(case: Case) -> CaseResult:
     last_check_t = int(t_ns[-1] - WINDOW_NS)     # the last 0.1 s are "the end"
     finite = True
     x_prev, t_prev, resets_prev = None, 0, 0
+    event_s = case.expect.get('push_gain', (math.inf, math.inf))[0]
+    around = [0.0, 0.0]        # fastest stored guide speed before and after the event
     for i in range(n):
         t = int(t_ns[i])
+        jumped = case.events is not None and bool(case.events(sim, (t - int(t_ns[0])) * 1e-9))
         sim.push_pose(t, pos[i], quat[i])
         sim.advance_to(t)
         if i % case.check_every and i != n - 1 and t < last_check_t:
@@ -231,13 +241,19 @@ def run_case(case: Case) -> CaseResult:
             if sim.ghost_tracker is not None:
                 worst['pen_body_mm'] = max(worst['pen_body_mm'], 1e3 * (body.depth(
                     states[1][1], head) - slack))
+        since = (t - int(t_ns[0])) * 1e-9 - event_s
+        if -PUSH_WINDOW_S <= since < PUSH_WINDOW_S:
+            v = math.sqrt(float(np.max(np.einsum('snk,snk->sn', sim.guides.v, sim.guides.v))))
+            around[since >= 0.0] = max(around[since >= 0.0], v)
+            worst['push_gain'] = around[1] - around[0]
         x_now = np.concatenate([x.reshape(-1, 3) for _, x, _ in states])
         t_sim = sim.time_ns
-        moved = x_prev is not None and t_sim > t_prev and sim.counters.resets == resets_prev
+        moved = x_prev is not None and t_sim > t_prev and sim.counters.resets == resets_prev \
+            and not jumped
         last = (x_prev, t_prev)
         if x_prev is None or t_sim > t_prev or sim.counters.resets != resets_prev:
             x_prev, t_prev, resets_prev = x_now, t_sim, sim.counters.resets
-        if not moved:       # first check, no substep since the last one, or a reset: skip
+        if not moved:       # first check, no substep since the last one, a reset or a jump
             continue
         ke, speed = _motion_energy(x_now, last[0], (t_sim - last[1]) * 1e-9)
         energy = ke + g_mag * float(np.mean(x_now @ up))
@@ -295,6 +311,10 @@ def run_case(case: Case) -> CaseResult:
         failures.append(f'{counters["rejected"]} poses rejected, expected {exp["rejected"]}')
     if 'min_resets' in exp and counters['resets'] < exp['min_resets']:
         failures.append(f'{counters["resets"]} resets, expected at least {exp["min_resets"]}')
+    if 'push_gain' in exp and not worst['push_gain'] <= exp['push_gain'][1]:
+        failures.append(f'the fastest guide node gained {worst["push_gain"]:.3g} m/s when the '
+                        f'body appeared at {exp["push_gain"][0]:g} s, more than '
+                        f'{exp["push_gain"][1]:g} m/s')
     sim_s = (int(t_ns[-1]) - int(t_ns[0])) * 1e-9
     return CaseResult(case, not failures, failures, worst, counters,
                       time.perf_counter() - t_wall, sim_s)
@@ -393,6 +413,22 @@ def matrix(quick: bool = False, tracking_mode: Optional[str] = None) -> List[Cas
         for label, stream, desc in fast[:2]:
             add(f'ftl long hair on the bust, {label}', 'body', long_hair, stream,
                 desc + '; 55 cm hair on the shoulders (body.bust)')
+        add('ftl long hair on the bust, walk', 'body', long_hair,
+            lambda: sm.window(_walk(), 1.5, 2.5),
+            'bundled walk, 1.5-4 s; bending down lays the hair into the creases where the '
+            'bust\'s capsules overlap (the shoulders run into the neck and the chest)')
+        add('ftl long hair, shoulder teleports 1 m', 'body',
+            long_hair.with_changes(body__frame='torso_1'), lambda: sm.still(d),
+            f'still head; the bust on a TF frame (body.frame) jumps 1 m aside at '
+            f'{BODY_AWAY_S[0]:g} s, the hair falls through where it was, and back into the '
+            f'hair at {BODY_AWAY_S[1]:g} s', events=_ShoulderTeleport(),
+            expect={'push_gain': (BODY_AWAY_S[1], PUSH_GAIN * _push_speed(long_hair))})
+        add('ftl long hair, bust switched on inside the hair', 'body',
+            long_hair.with_changes(body__bust=False), lambda: sm.still(d),
+            f'still head, the hair hanging through the body; at {BODY_ON_S:g} s the scene '
+            'turns body.bust on (update_scene): pushed out, not launched',
+            events=lambda sim, t: _switch_bust_on(sim, t, long_hair),
+            expect={'push_gain': (BODY_ON_S, PUSH_GAIN * _push_speed(long_hair))})
     # -- teleports
     for solver in (('ftl',) if quick else SOLVERS):
         add(f'{solver} teleport 1 m', 'teleport', _scene(solver),
@@ -442,6 +478,51 @@ def matrix(quick: bool = False, tracking_mode: Optional[str] = None) -> List[Cas
     return cases
 
 
+#: The body cases' TF torso frame is 1 m aside over this span [s] of the motion.
+BODY_AWAY_S = (0.5, 1.2)
+#: The switch case turns the bust on at this time [s] of the motion.
+BODY_ON_S = 0.5
+#: When a body appears in the hair, the fastest guide node's velocity (the solver's, the one
+#: the next substep moves it with) over :data:`PUSH_WINDOW_S` after may exceed the fastest of
+#: the :data:`PUSH_WINDOW_S` before by at most this many times the push-out bound
+#: ``body.max_push_speed``: the bounded normal push of the collision stage, the bounded share
+#: of the collision-aware FTL pass's correction, FTL's velocity correction (the next node's
+#: share, times ``solver.ftl_damping``) and what gravity and the hair's own swing add over
+#: the window; unbounded, a node 9 cm inside leaves at 20 m/s.
+PUSH_GAIN = 4.0
+#: [s] the windows of :data:`PUSH_GAIN`.
+PUSH_WINDOW_S = 0.1
+
+
+def _push_speed(scene: Scene) -> float:
+    return float(scene.body.max_push_speed)
+
+
+class _ShoulderTeleport:
+    """The torso frame of the still head's neck frame, 1 m along y during
+    :data:`BODY_AWAY_S`; true at the jump back into the hair."""
+
+    def __init__(self):
+        self.away = False
+
+    def __call__(self, sim: HairSimulator, t: float) -> bool:
+        rot, origin = neck_frame(np.eye(3), np.array([0.0, 0.0, sm.HEAD_HEIGHT]),
+                                 sim.scene.body.height)
+        away = BODY_AWAY_S[0] <= t < BODY_AWAY_S[1]
+        sim.set_body_frame(rot, origin + (np.array([0.0, 1.0, 0.0]) if away else 0.0))
+        back = self.away and not away and t > 0.0
+        self.away = away
+        return back
+
+
+def _switch_bust_on(sim: HairSimulator, t: float, scene: Scene) -> bool:
+    """``scene`` (with the bust) from :data:`BODY_ON_S` on; true when it switches."""
+    if t >= BODY_ON_S and not sim.scene.body.bust:
+        sim.update_scene(scene)
+        return True
+    return False
+
+
 def run_matrix(cases: Sequence[Case], log=print) -> List[CaseResult]:
     out = []
     for c in cases:
@@ -460,9 +541,9 @@ def run_matrix(cases: Sequence[Case], log=print) -> List[CaseResult]:
 # ==================================================================================== output
 COLUMNS = ('case', 'group', 'solver', 'passed', 'stretch_guides', 'stretch_bound',
            'stretch_ghosts', 'root_err_m', 'pen_guides_mm', 'pen_ghosts_mm', 'pen_body_mm',
-           'margin_mm',
-           'max_speed', 'ke_peak', 'ke_bound', 'ke_end', 'energy_rise', 'substeps', 'dropped',
-           'resets', 'rejected', 'split', 'drift', 'sim_s', 'wall_s', 'failures', 'description')
+           'margin_mm', 'max_speed', 'push_gain', 'ke_peak', 'ke_bound', 'ke_end', 'energy_rise',
+           'substeps', 'dropped', 'resets', 'rejected', 'split', 'drift', 'sim_s', 'wall_s',
+           'failures', 'description')
 
 
 def result_row(r: CaseResult) -> Dict:

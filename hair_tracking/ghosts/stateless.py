@@ -222,12 +222,19 @@ class StatelessTracker:
         ``check``)."""
         raise NotImplementedError
 
-    def _set(self, x: np.ndarray) -> None:
-        """Positions ``x`` (S, N, 3) float64 from outside a step, kept exactly."""
+    def _set(self, x: np.ndarray, head: HeadPose) -> None:
+        """Positions ``x`` (S, N, 3) float64 from outside a step, placed with the head pose
+        ``head``, kept exactly; with a bust, moved out of it by the placement's contact pass
+        (the bust does not follow the head's tilt: hair carried with the head may hang
+        through it)."""
         self._pending = False
         self._stepped = False
         self._x64 = x
         self._x32[...] = x
+        if self.body is not None and slide_push_strands(
+                self._x32, self._rest_length, self.body.posed(head, head, 0.0), 2,
+                self.body.lead):
+            self._x64 = None
 
     @property
     def from_step(self) -> bool:
@@ -238,14 +245,14 @@ class StatelessTracker:
 
     def reset(self, head: HeadPose) -> None:
         """Rest shape carried by ``head``."""
-        self._set(head.to_world(self.ghosts.rest))
+        self._set(head.to_world(self.ghosts.rest), head)
 
     def carry(self, old: HeadPose, new: HeadPose) -> None:
         """The ghosts now (placed from the last step first if not done yet) carried rigidly
         with the head from ``old`` to ``new``."""
         self._evaluate()
         x = self._x64 if self._x64 is not None else self._x32.astype(np.float64)
-        self._set(carry_rigidly(x, old, new))
+        self._set(carry_rigidly(x, old, new), new)
 
     def zero_velocities(self) -> None:
         """Nothing to do: the ghosts carry no velocity of their own."""

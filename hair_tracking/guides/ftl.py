@@ -33,7 +33,8 @@ import numpy as np
 from numba import int64, njit, prange
 
 from hair_tracking.colliders.bounds import near
-from hair_tracking.colliders.contact import outside_within, project, surface_point
+from hair_tracking.colliders.contact import outside_within, surface_point
+from hair_tracking.colliders.crease import escape
 from hair_tracking.guides.collision import (placed, placed_shape, project_block,
                                             rotation_entries, to_head, world_center)
 from hair_tracking.guides.integrate import (BLOCK, carry_rigid_block, FASTMATH, finalize_block,
@@ -270,8 +271,9 @@ def ftl_restore_shapes(x, x_old, rest, rest_length, rot, sh, corr, cap):
     (:data:`RESTORE_LENGTH_TOLERANCE`) or more than :data:`RESTORE_TOLERANCE` inside a shape:
     each node is put at its rest distance from its predecessor (:func:`ftl_direction`, ``rot``
     the head rotation for a collapsed segment), and while that point lies inside a shape it is
-    projected onto the surface (:func:`~hair_tracking.colliders.contact.project`) and put back
-    at the rest distance, up to :data:`RESTORE_ITERATIONS` times, so lengths stay exact.
+    moved to the closest point outside every shape (:func:`~hair_tracking.colliders.crease.escape`:
+    a surface, or the crease where two overlapping shapes meet) and put back at the rest
+    distance, up to :data:`RESTORE_ITERATIONS` times, so lengths stay exact.
 
     The push-out velocity bound holds for the walk too: of a node's correction ``c``, at most
     ``cap`` [m] (``cap < 0``: no bound) is motion, added to ``corr`` (the velocity update damps
@@ -323,7 +325,7 @@ def _restore_shapes_strand(x, x_old, rest, rest_length, rot, sh, corr, cap, s):
             k = _inside_shape(px, py, pz, sh)
             if k < 0:
                 break
-            _, px, py, pz = project(px, py, pz, sh, k)
+            _, px, py, pz = escape(px, py, pz, sh, RESTORE_TOLERANCE)
         cx, cy, cz = px - ox, py - oy, pz - oz
         c = math.sqrt(cx * cx + cy * cy + cz * cz)
         keep = 1.0 if cap < 0.0 or c <= cap else cap / c

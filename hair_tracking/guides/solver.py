@@ -163,6 +163,26 @@ class GuideSolver:
         for key in self._counters:
             self._counters[key] = 0
 
+    def leave_body(self, head: HeadPose) -> int:
+        """Move the strands, as they stand, out of the bust posed at the head pose ``head``:
+        after the hair was placed or carried rigidly with the head, which the bust does not
+        follow (it stays upright on the neck frame, or rides on its own TF frame), so a head
+        tilted by 10 degrees swings 55 cm hair 9 cm into the trunk.  The contact stage with
+        the bust still (no motion, no push-out bound) and, for FTL, the collision-aware pass
+        that puts the lengths back; the velocities are not touched (the caller places hair at
+        rest).  Returns the number of nodes the contact moved (0 without a body)."""
+        if self.body is None:
+            return 0
+        st = self.strands
+        rot, _ = _pose('head', head)
+        bust = self.body.posed(head, head, self.scene.solver.dt)
+        start = st.x.copy()
+        pushed = contact_kernels.collide(st.x, start, st.inv_mass, bust, -1.0, start)
+        if pushed and self.kind == 'ftl':
+            ftl.ftl_restore_shapes(st.x, start, st.rest, st.rest_length, rot, bust,
+                                   np.zeros_like(st.x), -1.0)
+        return int(pushed)
+
     def step(self, dt: float, head_prev: HeadPose, head: HeadPose) -> None:
         """Advance one substep ``dt`` [s] while the head moves from ``head_prev`` to ``head``."""
         self._step(dt, head_prev, head, self.parallel)

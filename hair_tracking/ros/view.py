@@ -10,7 +10,10 @@ row per strand, ``x y z`` float32, packed ``rgb``) and ``hair/head`` (the collid
 visualization_msgs/Marker SPHERE, ``scale`` = diameters) and draws each strand as line
 segments between its consecutive points in the cloud's colours, and the head as an opaque
 ellipsoid, both as given in the frame of the cloud (``--follow`` shifts the view so that the
-head's centre stays at its origin).  It only subscribes (reliable, keep last, as the node
+head's centre stays at its origin).  It draws the body's colliders too, from ``hair/colliders``
+(a visualization_msgs/MarkerArray of SPHEREs and CYLINDERs: the node's bust, each capsule a
+cylinder and two spheres, :mod:`msg_adapters.capsule_markers`), as solids in the cloud's
+frame.  It only subscribes (reliable, keep last, as the node
 publishes): it changes nothing in the node.  Redraws are limited to ``--rate`` per second;
 messages that come faster replace each other.
 
@@ -41,7 +44,7 @@ from typing import List, NamedTuple, Optional, Tuple
 
 import numpy as np
 from sensor_msgs.msg import PointCloud2, PointField
-from visualization_msgs.msg import Marker
+from visualization_msgs.msg import Marker, MarkerArray
 
 from msg_adapters.pointcloud import pointcloud2_to_strands
 
@@ -143,6 +146,40 @@ def head_shape(marker: Marker) -> Optional[HeadShape]:
                      rgb)
 
 
+class Solid(NamedTuple):
+    """A collider part to draw: ``kind`` ``'sphere'`` (``size`` its semi-axes) or
+    ``'cylinder'`` (``size`` = radius, radius, height along its local z), centre, orientation
+    (w, x, y, z), RGB."""
+    kind: str
+    position: Tuple[float, float, float]
+    wxyz: Tuple[float, float, float, float]
+    size: Tuple[float, float, float]
+    rgb: Tuple[int, int, int]
+
+
+def collider_solids(array: MarkerArray) -> List[Solid]:
+    """The SPHERE and CYLINDER markers of a MarkerArray that add something, as solids (other
+    types, DELETE and DELETEALL: nothing to draw)."""
+    out = []
+    for m in array.markers:
+        if m.action != Marker.ADD or m.type not in (Marker.SPHERE, Marker.CYLINDER):
+            continue
+        if m.type == Marker.SPHERE:
+            shape = head_shape(m)
+            out.append(Solid('sphere', shape.position, shape.wxyz, shape.semi_axes, shape.rgb))
+            continue
+        p, o, sc, c = m.pose.position, m.pose.orientation, m.scale, m.color
+        q = np.array([o.w, o.x, o.y, o.z], dtype=np.float64)
+        n = float(np.linalg.norm(q))
+        q = q / n if n > 0 and math.isfinite(n) else np.array([1.0, 0.0, 0.0, 0.0])
+        size = tuple(max(0.5 * float(v), 1e-6) for v in (sc.x, sc.y)) + \
+            (max(float(sc.z), 1e-6),)
+        rgb = tuple(int(round(min(max(float(v), 0.0), 1.0) * 255)) for v in (c.r, c.g, c.b))
+        out.append(Solid('cylinder', (float(p.x), float(p.y), float(p.z)),
+                         tuple(float(v) for v in q), size, rgb))
+    return out
+
+
 def framing(segments: np.ndarray, head: Optional[HeadShape]):
     """``(look_at, camera position)`` that show ``segments`` and the head: a three-quarter view
     from +x, +y and above (the front left of a head that faces +x, z up, as in the node's
@@ -171,6 +208,7 @@ class Latest:
         self._heads = collections.deque(maxlen=keep)
         self._cloud = None
         self._drawn = None                  # the head last handed out
+        self._colliders = None              # the newest collider array not drawn yet
 
     def add_cloud(self, msg: PointCloud2) -> None:
         self._cloud = msg
@@ -178,10 +216,18 @@ class Latest:
     def add_head(self, msg: Marker) -> None:
         self._heads.append(msg)
 
+    def add_colliders(self, msg: MarkerArray) -> None:
+        self._colliders = msg
+
+    def take_colliders(self) -> Optional[MarkerArray]:
+        """The newest collider array not drawn yet, or None."""
+        msg, self._colliders = self._colliders, None
+        return msg
+
     def __bool__(self) -> bool:
         """Whether something is new."""
-        return self._cloud is not None or bool(self._heads) and \
-            self._heads[-1] is not self._drawn
+        return self._cloud is not None or self._colliders is not None or \
+            bool(self._heads) and self._heads[-1] is not self._drawn
 
     def take(self) -> Tuple[Optional[Marker], Optional[PointCloud2]]:
         """-> (head or None, cloud or None) to draw now; None for what is not new."""
@@ -261,6 +307,8 @@ class HairScene:
         self._reported, self._to_turn = set(), set()
         server.on_client_connect(self._on_connect)
         server.on_client_disconnect(self._on_disconnect)
+        self._solids: List[Solid] = []
+        self._solid_handles: list = []
         self._status = server.gui.add_markdown(f'waiting for `{topics[0]}` ...')
         self._status_text = None
         self.clouds_drawn = 0
@@ -298,6 +346,28 @@ class HairScene:
                              f'{cloud.width} points, frame `{cloud.header.frame_id}`'
                              + (', following the head' if self.follow else ''))
             self.clouds_drawn += 1
+
+    def show_colliders(self, array: MarkerArray) -> None:
+        """Draw the colliders of a MarkerArray (:func:`collider_solids`) in the cloud's frame,
+        replacing those drawn before."""
+        solids = collider_solids(array)
+        if solids == self._solids:
+            return
+        scene = self.server.scene
+        with self.server.atomic():
+            for handle in self._solid_handles:
+                handle.remove()
+            self._solid_handles = []
+            for k, s in enumerate(solids):
+                name = f'/cloud/colliders/{k}'
+                if s.kind == 'sphere':
+                    handle = scene.add_icosphere(name, radius=1.0, color=s.rgb, subdivisions=3,
+                                                 scale=s.size, wxyz=s.wxyz, position=s.position)
+                else:
+                    handle = scene.add_cylinder(name, radius=s.size[0], height=s.size[2],
+                                                color=s.rgb, wxyz=s.wxyz, position=s.position)
+                self._solid_handles.append(handle)
+        self._solids = solids
 
     def _show_strands(self, seg: np.ndarray, col: np.ndarray) -> None:
         if self._lines is None or self._lines.points.shape != seg.shape:
@@ -403,6 +473,9 @@ def make_parser() -> argparse.ArgumentParser:
                              '%(default)s, none)')
     parser.add_argument('--head-topic', default='hair/head',
                         help="the head's SPHERE Marker; '' for none (default: %(default)s)")
+    parser.add_argument('--colliders-topic', default='hair/colliders',
+                        help="the body's colliders (MarkerArray of SPHEREs and CYLINDERs); '' "
+                             "for none (default: %(default)s)")
     parser.add_argument('--rate', type=float, default=30.0,
                         help='most redraws per second (default: %(default)s)')
     parser.add_argument('--max-strands', type=int, default=4096,
@@ -461,6 +534,9 @@ def serve(options, ros_args: List[str], stop: shutdown.StopRequest) -> int:
             node.create_subscription(PointCloud2, options.points_topic, latest.add_cloud, qos)
         if options.head_topic:
             node.create_subscription(Marker, options.head_topic, latest.add_head, qos)
+        if options.colliders_topic:
+            node.create_subscription(MarkerArray, options.colliders_topic,
+                                     latest.add_colliders, qos)
         executor.add_node(node)
         server = viser.ViserServer(host=options.host, port=options.port, label=NAME,
                                    verbose=False)
@@ -482,7 +558,10 @@ def serve(options, ros_args: List[str], stop: shutdown.StopRequest) -> int:
             if stop.requested or time.monotonic() < next_draw or not latest:
                 continue
             head, points = latest.take()
+            colliders = latest.take_colliders()
             try:
+                if colliders is not None:
+                    scene.show_colliders(colliders)
                 scene.show(head, points)
                 if points is not None and scene.clouds_drawn == 1:
                     print(f'{NAME}: drawing {points.height} strands x {points.width} points',
