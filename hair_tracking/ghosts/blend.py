@@ -52,8 +52,7 @@ from numba import njit, prange
 
 from hair_tracking.colliders.slide import push_quadric, quadric, slide_quadric
 from hair_tracking.core.model import HeadPose, StrandSet, part_rows
-from hair_tracking.colliders.kernels import slide_push_strands
-from hair_tracking.core.point_records import points_to_records, put_record, record_target
+from hair_tracking.core.point_records import put_record
 from hair_tracking.ghosts.stateless import (StatelessTracker, at_fractions, node_map,
                                             reference_contact, world_collider)
 from hair_tracking.guides.integrate import FASTMATH
@@ -432,29 +431,8 @@ class BlendTracker(StatelessTracker):
         return np.arange(rows.start, rows.stop)
 
     def _place_rows(self, rows: slice, target) -> Tuple[int, bool]:
+        """The strands ``rows`` (from a multiple of :data:`STRAND_BLOCK`, so they form the
+        same blocks as in a whole placement): every per-strand input sliced to them."""
         m = self.model
         model = tuple(a[rows] for a in m[:6]) + (m[6],)
         return blend_strands(target, model, self._pose, self.params)
-
-    def rows_positions(self, rows: slice) -> np.ndarray:
-        """The strands ``rows`` (a contiguous slice, from a multiple of :data:`STRAND_BLOCK`,
-        so they form the same blocks as in a whole placement) placed from the last step alone,
-        with the bust's contact pass: their float32 positions (len, N, 3), world [m], a view
-        of the tracker's array valid until the next step (the other strands are left as they
-        are)."""
-        x = self._x32[rows]
-        self._place_rows(rows, (x,) + self._x32_target[1:])
-        if self.body is not None:
-            slide_push_strands(x, self._rest_length[rows],
-                               self.body.posed(self._head, self._head, 0.0), 2, self.body.lead)
-        return x
-
-    def write_rows(self, rows: slice, words, stride, rot=None, origin=None) -> bool:
-        """float32 x y z of the nodes of the strands ``rows`` (as :meth:`rows_positions`)
-        into point records (as :meth:`write_records`), straight from the kernel without a
-        bust; returns whether every coordinate is finite."""
-        if self.body is not None:
-            return points_to_records(words, stride, self.rows_positions(rows), rot, origin)
-        s, n = rows.stop - rows.start, self.ghosts.rest.shape[1]
-        return bool(self._place_rows(rows, record_target(words, stride, s, n, rot, origin) +
-                                     (True,))[1])

@@ -287,6 +287,35 @@ class StatelessTracker:
         their indices."""
         raise NotImplementedError
 
+    def _place_rows(self, rows: slice, target) -> Tuple[int, bool]:
+        """Place the strands ``rows`` (a contiguous slice) from the last step alone into
+        ``target`` (the fields of :data:`Placement`, ``out`` holding those rows only), each
+        strand bit for bit as a whole placement places it; returns as :meth:`_place`."""
+        raise NotImplementedError
+
+    def rows_positions(self, rows: slice) -> np.ndarray:
+        """The strands ``rows`` (a contiguous slice; the blend tracker's from a multiple of
+        :data:`~hair_tracking.ghosts.blend.STRAND_BLOCK`) placed from the last step alone
+        (:meth:`_place_rows`), with the bust's contact pass: their float32 positions (len, N,
+        3), world [m], a view of the tracker's array valid until the next step (the other
+        strands are left as they are)."""
+        x = self._x32[rows]
+        self._place_rows(rows, (x,) + self._x32_target[1:])
+        if self.body is not None:
+            slide_push_strands(x, self._rest_length[rows],
+                               self.body.posed(self._head, self._head, 0.0), 2, self.body.lead)
+        return x
+
+    def write_rows(self, rows: slice, words, stride, rot=None, origin=None) -> bool:
+        """float32 x y z of the nodes of the strands ``rows`` (as :meth:`rows_positions`)
+        into point records (as :meth:`write_records`), straight from the kernel without a
+        bust; returns whether every coordinate is finite."""
+        if self.body is not None:
+            return points_to_records(words, stride, self.rows_positions(rows), rot, origin)
+        s, n = rows.stop - rows.start, self.ghosts.rest.shape[1]
+        return bool(self._place_rows(rows, record_target(words, stride, s, n, rot, origin) +
+                                     (True,))[1])
+
     def write_records(self, words, stride, rot=None, origin=None) -> bool:
         """float32 x y z of every ghost node into point records (as
         :func:`~hair_tracking.core.point_records.points_to_records`).  After a step that nothing

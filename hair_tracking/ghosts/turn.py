@@ -419,3 +419,15 @@ class TurnTracker(StatelessTracker):
         turn_strands(self._x32_target, model, self._pose, self.params, self._turns)
         idx = self.block_strand[rows]
         return np.sort(idx[idx >= 0])
+
+    def _place_rows(self, rows: slice, target) -> Tuple[int, bool]:
+        """The blocks that hold a strand of ``rows`` (blocks go by guide, so a run of rows
+        is part of several guides' blocks), each whole as in a whole placement; only the
+        strands of ``rows`` are written, numbered from ``rows.start``."""
+        bs = self.block_strand
+        ours = (bs >= rows.start) & (bs < rows.stop)
+        blocks = np.flatnonzero(ours.any(axis=1))
+        strand = np.where(ours, bs - rows.start, -1)[blocks]
+        m = self.model
+        model = tuple(a[blocks] for a in m[:4]) + (strand, m[5])
+        return turn_strands(target, model, self._pose, self.params, self._turns)

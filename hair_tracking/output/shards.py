@@ -11,9 +11,10 @@ What crosses the wire, and what each side does with it (no ROS here; the nodes w
   publishes it places its own ghosts from the guides rounded to float32 too
   (``HairSimulator.guides_as_float32``), so every process places the same ghosts to the bit;
 * each shard places a contiguous run of ghost strands (:func:`shard_rows`; the groom numbers
-  strands so that neighbours on the scalp are near in number) with the blend tracker, which
-  keeps no state from frame to frame: a shard started late places the next frame as if it had
-  been there all along.
+  strands so that neighbours on the scalp are near in number) with the blend or the turn
+  tracker, which keep no state from frame to frame: a shard started late places the next frame
+  as if it had been there all along.  The turn tracker places strands in blocks by guide: a
+  shard places every block that holds one of its strands and writes its own strands only.
 
 A guides message that is not after the last one used (its sequence, RFC 1982 serial number
 arithmetic) is late or out of order: it is dropped and counted, never applied
@@ -37,8 +38,10 @@ from hair_tracking.output.frame_encoder import FrameEncoder
 from hair_tracking.output.settings import make_settings, Settings
 from hair_tracking.simulator import HairSimulator
 
-#: The trackers whose ghosts a shard can place: stateless per frame, placed per strand.
-SHARDABLE = ('blend',)
+#: The trackers whose ghosts a shard can place: stateless per frame, any run of strands placed
+#: alone (``rows_positions``, ``write_rows`` of
+#: :class:`~hair_tracking.ghosts.stateless.StatelessTracker`).
+SHARDABLE = ('blend', 'turn')
 
 
 class ShardError(ValueError):
@@ -135,8 +138,9 @@ def guide_state_bytes(sim, frame_id: str, stamp_ns: int, scene_fingerprint: int,
 
 class GhostShard:
     """Shard ``shard`` of ``shards`` of the ghosts of ``settings_text`` (the guides node's,
-    :func:`settings_text`): the same groom, the same guides among the strands, the blend
-    tracker over all strands of which this shard places its rows (:func:`shard_rows`).
+    :func:`settings_text`): the same groom, the same guides among the strands, the scene's
+    tracker (blend or turn) over all strands of which this shard places its rows
+    (:func:`shard_rows`).
     ShardError when the scene's tracker cannot be sharded or the groom has no ghosts."""
 
     def __init__(self, text: str, shard: int, shards: int):
@@ -146,9 +150,8 @@ class GhostShard:
         if scene.tracking.mode not in SHARDABLE:
             raise ShardError(
                 f'tracking.mode {scene.tracking.mode}: ghost shards place the ghosts of the '
-                f'{", ".join(SHARDABLE)} tracker only (the paper\'s tracker integrates every '
-                'ghost over every substep; the turn tracker places strands by guide, not in '
-                'contiguous rows); run the single-process node')
+                f'{" and ".join(SHARDABLE)} trackers only (the paper\'s tracker integrates '
+                'every ghost over every substep); run the single-process node')
         self.sim = HairSimulator(scene)
         if self.sim.ghost_tracker is None:
             raise ShardError('the scene has no ghost strands to shard (groom.ghosts is 0)')

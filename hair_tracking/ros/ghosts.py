@@ -17,7 +17,7 @@ shard order, the shards' rows are the rows of the cloud the node would publish i
 A guides message of other settings (fingerprint) or another guide count is refused, with an
 error; one that is not after the last one used (late, repeated, out of order: its sequence) is
 dropped; both are counted in the diagnostics.  Settings the shard cannot place (a tracker other
-than blend) are refused with an error, and the shard waits for the next settings.
+than blend or turn) are refused with an error, and the shard waits for the next settings.
 
 The guides are taken reliably with a queue of one (the newest: a shard that falls behind
 places the newest frame, as the node's pose queue does).  Parameters: ``shard`` (0-based),
