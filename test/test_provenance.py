@@ -36,10 +36,11 @@ def test_the_record_of_this_run():
 
 
 def test_every_committed_report_has_its_provenance():
-    reports = sorted(glob.glob(os.path.join(RESULTS, '*')))
+    reports = sorted(p for p in glob.glob(os.path.join(RESULTS, '**'), recursive=True)
+                     if os.path.isfile(p))
     assert reports
     for path in reports:
-        name = os.path.basename(path)
+        name = os.path.relpath(path, RESULTS)
         stem, ext = os.path.splitext(name)
         if ext == '.json':
             with open(path, encoding='utf-8') as f:
