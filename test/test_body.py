@@ -5,7 +5,9 @@ import numpy as np
 import pytest
 
 from hair_tracking.colliders import kernels, slide
+from hair_tracking.colliders.body import bust as bust_shapes
 from hair_tracking.colliders.pose import frames_at, posed
+from hair_tracking.colliders.reference import reference_depth
 from hair_tracking.colliders.scene_body import make_body, SceneBody
 from hair_tracking.colliders.shapes import Shape, shape_table
 from hair_tracking.core.metrics import max_stretch
@@ -109,6 +111,28 @@ def test_the_shared_bound_test_changes_no_node(dtype, lead):
               for s in range(len(x)))
     assert moved > 100 and one == moved
     assert np.array_equal(together, alone)
+
+
+def test_a_ghost_node_in_the_crease_of_two_capsules_leaves_both():
+    """A node whose sweeps over the shapes, each sliding it out of one capsule into the other,
+    end inside the crease where a shoulder runs into the chest: it goes to the closest point
+    outside both and back to its rest length from its predecessor (which lies outside)."""
+    shapes = [s for s in bust_shapes(1.7, frame='torso', margin=0.004)
+              if s.name in ('r_shoulder', 'chest')]
+    sh = posed(shape_table(shapes, frames=('fixed', 'head', 'torso')),
+               *frames_at(np.eye(3), np.zeros(3), [(np.eye(3), np.zeros(3))]))
+    above = np.array([-0.01157711061042735, -0.1395403475036652, -0.04323857629120403])
+    x = np.array([[above + [0.0, 0.0, 0.02], above,
+                   [-0.00278353167093488, -0.12808622381664028, -0.03822355917954764]]])
+    rest_length = np.linalg.norm(np.diff(x, axis=1), axis=2)
+
+    def depth(p):                                     # in both capsules' surface + margin
+        return [float(reference_depth(p[None], sh[k])[0]) for k in range(sh.shape[0])]
+
+    assert max(depth(x[0, 1])) == 0.0 and min(depth(x[0, 2])) > 0.0
+    assert kernels.slide_push_strands(x, rest_length, sh, 2, 0) == 1
+    assert max(depth(x[0, 2])) <= kernels.CREASE_TOLERANCE
+    assert np.linalg.norm(x[0, 2] - x[0, 1]) == pytest.approx(rest_length[0, 1], abs=1e-12)
 
 
 def shoulder_box_points(points, h):

@@ -21,11 +21,15 @@ from hair_tracking.colliders.crease import escape, outside_all
 from hair_tracking.colliders.shapes import FRICTION, KIND, PLANE
 from hair_tracking.colliders.slide import level, slide_push
 
-#: A node :func:`collide_block` pushed out of one shape may stay this far [m] inside another
-#: (farther, it goes to the closest point outside both, :mod:`~hair_tracking.colliders.crease`).
+#: A node :func:`collide_block` pushed out of one shape (or :func:`slide_push_strands` slid out
+#: of it) may stay this far [m] inside another (farther, it goes to the closest point outside
+#: both, :mod:`~hair_tracking.colliders.crease`).
 CREASE_TOLERANCE = 1e-7
 #: Sweeps over the shapes a node of :func:`slide_push_strands` takes at most.
 STRAND_SWEEPS = 16
+#: Moves of a node :func:`slide_push_strands`'s sweeps leave inside a shape to the closest point
+#: outside every shape and back to its rest length, at most.
+STRAND_ESCAPES = 8
 #: Strands whose nodes share the first bound test of :func:`slide_push_strands`.
 STRAND_BLOCK = 64
 #: Work items of :func:`slide_push_strands`'s parallel loop (each a run of blocks with its own
@@ -119,7 +123,11 @@ def slide_push_strands(x, rest_length, sh, first, lead):
     rest segment's length ``rest_length[s, j - 1]`` from its predecessor and pushes it onto the
     surface, after which it is put back at the rest length along its new segment, in sweeps
     (:data:`STRAND_SWEEPS` at most) until one finds it inside no shape (a node slid out of
-    one shape into an overlapping one slides out of that one next).  The first ``lead``
+    one shape into an overlapping one slides out of that one next).  A node the sweeps leave
+    inside a shape (in the crease where two overlapping shapes meet, whose sweeps shrink its
+    depth slowly) goes to the closest point outside every shape
+    (:func:`~hair_tracking.colliders.crease.escape`) and back to its rest length from its
+    predecessor, up to :data:`STRAND_ESCAPES` times, so lengths stay exact.  The first ``lead``
     shapes (the head collider, which the tracker or solver has applied already) are tested
     only on nodes this pass moves.
 
@@ -249,6 +257,12 @@ def _slide_push_strand(x, rest_length, sh, how, s, listed):
                 again = hit = True
             if not again:
                 break
+            x0, x1, x2 = _at_length(x0, x1, x2, p0, p1, p2, length)
+        for _ in range(STRAND_ESCAPES):
+            if not hit or outside_all(x0, x1, x2, sh, CREASE_TOLERANCE):
+                break
+            # slid from one shape into another and back: the closest point outside all
+            x0, x1, x2 = escape(x0, x1, x2, sh, CREASE_TOLERANCE)[1:]
             x0, x1, x2 = _at_length(x0, x1, x2, p0, p1, p2, length)
         if hit:
             moved += 1
