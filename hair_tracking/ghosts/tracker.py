@@ -288,9 +288,10 @@ class GhostTracker:
                                  self.ghosts.rest.shape[1], rot, origin)
 
     def reset(self, head: HeadPose) -> None:
-        """Ghosts in their rest shape carried by ``head``, at rest."""
+        """Ghosts in their rest shape carried by ``head``, at rest (out of the bust)."""
         self.set_state(head.to_world(self.ghosts.rest), np.zeros(self.ghosts.rest.shape))
         self._body_head = head
+        self._leave_body(head)
 
     def carry(self, old: HeadPose, new: HeadPose) -> None:
         """The ghosts carried rigidly with the head from ``old`` to ``new``, at rest."""
@@ -301,6 +302,25 @@ class GhostTracker:
                     True)
         self._synced_v = True
         self._body_head = new
+        self._leave_body(new)
+
+    def _leave_body(self, head: HeadPose) -> None:
+        """Ghosts placed or carried rigidly with the head, which the bust does not follow,
+        moved out of the bust posed at ``head`` as they stand: stage (i) with the bust still
+        and no push-out bound, the lengths put back when length restoration is on; at rest
+        (as :meth:`~hair_tracking.guides.solver.GuideSolver.leave_body` does for the guides)."""
+        if self.body is None:
+            return
+        self._write_back()
+        x = self._x.copy()
+        start = x.copy()
+        bust = self.body.posed(head, head, 0.0)
+        if not collide(x, start, self.ghosts.inv_mass, bust, -1.0, start):
+            return
+        if self.tracking.length_restore:
+            ftl_restore_shapes(x, start, self.ghosts.rest, self.ghosts.rest_length,
+                               _f64(head.rotation), bust, np.zeros_like(x), -1.0)
+        self.set_state(x, np.zeros_like(x))
 
     def zero_velocities(self) -> None:
         """The ghosts at rest where they are."""
