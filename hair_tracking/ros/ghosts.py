@@ -32,11 +32,8 @@ from typing import List, Optional
 
 from diagnostic_msgs.msg import DiagnosticArray
 import numpy as np
-import rclpy
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import String
 from visualization_msgs.msg import MarkerArray
@@ -44,11 +41,12 @@ from visualization_msgs.msg import MarkerArray
 from msg_adapters.guide_state import guide_state_from_cdr, GuideState
 from msg_adapters.rcl_serialized import SerializedPublisher
 
-from hair_tracking import executable, shutdown
+from hair_tracking import executable
 from hair_tracking.output.diagnostics import make_status, WARN
 from hair_tracking.output.shards import fingerprint, GhostShard, SequenceGate, ShardError
 from hair_tracking.ros.node import diagnostic_status, GUIDE_STATE_TOPIC, latched_qos, \
     output_qos, SCENE_TOPIC, WARN_THROTTLE_S
+from hair_tracking.ros.spin_node import spin_node
 
 NODE_NAME = 'hair_sim_ghosts'
 
@@ -214,35 +212,9 @@ def main(args=None) -> int:
         except ValueError as e:
             print(f'[{NODE_NAME}] {e}', file=sys.stderr)
             return 2
-        node = executor = None
-        code = 0
-        try:
-            rclpy.init(args=argv[:1] + argv[split:],
-                       signal_handler_options=SignalHandlerOptions.NO)
-            log = rclpy.logging.get_logger(NODE_NAME)
-            for line in done:
-                log.info(line)
-            executor = SingleThreadedExecutor()
-            if not stop.requested:
-                node = GhostShardNode()
-                if options.gc_freeze:
-                    executable.freeze_heap()
-                executor.add_node(node)
-                shutdown.spin_until_stopped(executor, stop)
-            if stop.requested:
-                log.info(f'{stop.signal_name}: stopping')
-        except ExternalShutdownException:
-            pass
-        except ShardError as e:
-            print(f'[{NODE_NAME}] {e}', file=sys.stderr)
-            code = 2
-        finally:
-            if executor is not None:
-                executor.shutdown(timeout_sec=1.0)
-            if node is not None:
-                node.destroy_node()
-            rclpy.try_shutdown()
-        return code
+        return spin_node(NODE_NAME, GhostShardNode, argv[:1] + argv[split:], stop, done,
+                         options.gc_freeze,
+                         lambda e: f'[{NODE_NAME}] {e}' if isinstance(e, ShardError) else None)
 
 
 if __name__ == '__main__':

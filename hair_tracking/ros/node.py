@@ -55,14 +55,11 @@ from geometry_msgs.msg import PoseStamped, TransformStamped
 import numba
 import numpy as np
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
-import rclpy
 from rclpy.exceptions import InvalidParameterTypeException, ParameterException
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.qos import qos_profile_sensor_data
-from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import String
 from std_srvs.srv import Trigger
@@ -77,7 +74,7 @@ from msg_adapters.stamps import time_to_ns
 from msg_adapters.tf import transform_message
 from msg_adapters.tf_tree import compose as tf_compose, TfTree
 
-from hair_tracking import executable, shutdown
+from hair_tracking import executable
 from hair_tracking.bags.warmup import warm_up
 from hair_tracking.core.head_track import PoseResult
 from hair_tracking.core.params import Param, ParamError
@@ -97,6 +94,7 @@ from hair_tracking.output.shards import fingerprint, guide_state_bytes, settings
 from hair_tracking.resources import config_path
 from hair_tracking.ros.faces import FaceHair
 from hair_tracking.ros.load_shedding import LoadShedder
+from hair_tracking.ros.spin_node import spin_node
 from hair_tracking.simulator import HairSimulator
 
 try:                                    # optional: /tf input
@@ -1045,43 +1043,22 @@ def main(args=None) -> int:
         except ValueError as e:
             print(f'[hair_sim] {e}', file=sys.stderr)
             return 2
-        node = executor = None
-        code = 0
-        try:
-            # no rclpy signal handler: it would shut the context down from another thread,
-            # under whatever the executor runs; the stop request wakes the executor instead
-            rclpy.init(args=argv[:1] + argv[split:],
-                       signal_handler_options=SignalHandlerOptions.NO)
-            log = rclpy.logging.get_logger(NODE_NAME)
-            for line in done:
-                log.info(line)
-            executor = SingleThreadedExecutor()
-            if not stop.requested:
-                node = HairSimNode()
-                node.warn_unknown_parameters(argv)
-                if options.gc_freeze:
-                    executable.freeze_heap()
-                executor.add_node(node)
-                shutdown.spin_until_stopped(executor, stop)
-            if stop.requested:
-                log.info(f'{stop.signal_name}: stopping')
-        except ExternalShutdownException:
-            pass
-        except (ParamError, SceneError, ParameterException) as e:
-            print(f'[hair_sim] invalid parameters: {e}', file=sys.stderr)
-            code = 2
-        except RuntimeError as e:   # rcl refused the ROS arguments params_files_problem passed
-            if rcl_arguments_problem(e) is None:
-                raise
-            print(f'[hair_sim] {rcl_arguments_problem(e)}', file=sys.stderr)
-            code = 2
-        finally:
-            if executor is not None:
-                executor.shutdown(timeout_sec=1.0)
-            if node is not None:
-                node.destroy_node()
-            rclpy.try_shutdown()
-        return code
+
+        def make_node() -> HairSimNode:
+            node = HairSimNode()
+            node.warn_unknown_parameters(argv)
+            return node
+
+        def user_error(e: Exception) -> Optional[str]:
+            if isinstance(e, (ParamError, SceneError, ParameterException)):
+                return f'[hair_sim] invalid parameters: {e}'
+            if isinstance(e, RuntimeError):  # rcl refused the ROS arguments that
+                problem = rcl_arguments_problem(e)     # params_files_problem passed
+                return None if problem is None else f'[hair_sim] {problem}'
+            return None
+
+        return spin_node(NODE_NAME, make_node, argv[:1] + argv[split:], stop, done,
+                         options.gc_freeze, user_error)
 
 
 if __name__ == '__main__':
