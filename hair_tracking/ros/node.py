@@ -610,12 +610,9 @@ class HairSimNode(Node):
         body = self.sim.scene.body
         return body.frame.lstrip('/') if body.bust else ''
 
-    def _update_body_frame(self) -> None:
-        """``body.frame``: its pose in the pose's frame (through /tf_static and /tf) handed to
-        the simulator; the last one found is kept while none arrives."""
-        frame = self._body_frame()
-        if not frame:
-            return
+    def _frame_pose(self, frame: str, who: str, keeps: str):
+        """``frame``'s pose in the pose's frame through /tf_static and /tf as (rotation matrix,
+        position), or ``None`` (warned, throttled, naming ``who`` and what it ``keeps``)."""
         pose_frame = self._pose_frame or self._settings.fixed_frame or 'world'
         try:
             found = self._tf.lookup(pose_frame, frame)
@@ -623,28 +620,31 @@ class HairSimNode(Node):
             found = None
         if found is None:
             self.get_logger().warn(
-                f'body.frame {frame!r}: no transform to the pose frame {pose_frame!r} on '
-                f'/tf_static or /tf; the bust keeps its last pose (the neck frame until one '
-                f'arrives)', throttle_duration_sec=WARN_THROTTLE_S)
+                f'{who}: no transform from TF frame {frame!r} to the pose frame '
+                f'{pose_frame!r} on /tf_static or /tf; {keeps}',
+                throttle_duration_sec=WARN_THROTTLE_S)
+            return None
+        return quat_to_matrix(found[1]), found[0]
+
+    def _update_body_frame(self) -> None:
+        """``body.frame``: its pose handed to the simulator; the last one found is kept while
+        none arrives."""
+        frame = self._body_frame()
+        if not frame:
             return
-        self.sim.set_body_frame(quat_to_matrix(found[1]), found[0])
+        found = self._frame_pose(frame, 'body.frame',
+                                 'the bust keeps its last pose (the neck frame until one arrives)')
+        if found is not None:
+            self.sim.set_body_frame(*found)
 
     def _update_collider_frames(self) -> None:
-        """The TF frames of the collider slots: each one's pose in the pose's frame handed to
-        the simulator; the last one found is kept while none arrives."""
-        pose_frame = self._pose_frame or self._settings.fixed_frame or 'world'
+        """The TF frames of the collider slots: each one's pose handed to the simulator; the
+        last one found is kept while none arrives."""
         for frame in self.sim.collider_frames():
-            try:
-                found = self._tf.lookup(pose_frame, frame)
-            except ValueError:                   # a loop in the tree
-                found = None
-            if found is None:
-                self.get_logger().warn(
-                    f'{self._colliders_on(frame)}: no transform from TF frame {frame!r} to the '
-                    f'pose frame {pose_frame!r} on /tf_static or /tf; the collider keeps its '
-                    f'last pose (off until one arrives)', throttle_duration_sec=WARN_THROTTLE_S)
-                continue
-            self.sim.set_collider_frame(frame, quat_to_matrix(found[1]), found[0])
+            found = self._frame_pose(frame, self._colliders_on(frame),
+                                     'the collider keeps its last pose (off until one arrives)')
+            if found is not None:
+                self.sim.set_collider_frame(frame, *found)
 
     def _colliders_on(self, frame: str) -> str:
         """The collider slots riding on the TF frame ``frame``, as ``colliders.<slot>``."""
