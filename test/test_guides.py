@@ -418,7 +418,7 @@ def test_ftl_collide_step_is_the_separate_kernels_in_one_block_loop(friction):
         integrate.carry_rigid(st.x, rot_rel, h_prev.position, pos, x_ref)
         motion = (rot, pos, rot_rel, h_prev.position, gravity, np.exp(-sc.damping * dt), dt,
                   shock)
-        params = (guides.ftl_bend_rounds(dt),
+        params = (guides.ftl_inner_steps(dt),
                   guides.ftl_bend_stiffness(sc.solver.bend_stiffness, dt),
                   float(sc.solver.ftl_damping), max_disp, False)
         ftl.ftl_step(split.model, (st.x, st.v, x_old), motion, params, corr)

@@ -18,9 +18,10 @@ g dt)`` settles at up to ``s_damp g dt / (1 - s_damp)``, 0.37 m/s at dt = 1/240 
 
 Bending comes first: a PBD Gauss–Seidel sweep of the second-neighbour distance constraints
 with ``bend_stiffness`` (:func:`hair_tracking.guides.pbd_constraints.pbd_sweep_block`), then the
-FTL pass restores the lengths exactly; ``bend_passes`` rounds of both (one at the default
-substep, more at long ones: :func:`hair_tracking.guides.solver.ftl_bend_rounds`), the
-corrections ``d_i`` of the rounds summed. ``iterations`` of the scene does not apply to FTL.
+FTL pass restores the lengths exactly.  A substep longer than the bending's reference step runs
+as several inner steps of gravity, the sweep and the pass (:func:`ftl_block`,
+:func:`hair_tracking.guides.solver.ftl_inner_steps`), the corrections ``d_i`` of their passes
+summed. ``iterations`` of the scene does not apply to FTL.
 
 Degenerate input: if a segment has collapsed (``|p_i - p_{i-1}| < 1e-12`` m) the node is placed
 along the segment's rest direction carried by the head (``R (rest_i - rest_{i-1})``); a
@@ -45,10 +46,10 @@ from hair_tracking.guides.pbd_constraints import pbd_sweep_block
 #: ``rest_length`` (S, N-1), ``bend_rest`` (S, N-2) second-neighbour rest distances [m],
 #: ``bend_w`` from :func:`hair_tracking.guides.pbd_constraints.pair_weights` with gap 2.
 FtlModel = namedtuple('FtlModel', ['rest', 'inv_mass', 'rest_length', 'bend_rest', 'bend_w'])
-#: Parameters of :func:`ftl_step`: rounds of a bending sweep and the FTL pass, the bending
+#: Parameters of :func:`ftl_step`: inner steps of a substep (:func:`ftl_block`), the bending
 #: stiffness (0: no bending), the velocity correction ``s_damp`` 0..1, the displacement clamp
 #: [m] (0: off), whether to finalize.
-FtlParams = namedtuple('FtlParams', ['bend_passes', 'bend_stiffness', 's_damp', 'max_disp',
+FtlParams = namedtuple('FtlParams', ['inner_steps', 'bend_stiffness', 's_damp', 'max_disp',
                                      'do_finalize'])
 #: Work space of the FTL kernels: ``corr`` (S, N, 3) the FTL corrections, ``x_ref`` (S, N, 3)
 #: the friction reference (the start-of-substep positions carried rigidly with the head;
@@ -374,27 +375,81 @@ def ftl_step_serial(model, state, motion, params, corr):
 def ftl_step_block(model, state, motion, params, corr, blk):
     """Block ``blk`` of :func:`ftl_step`; returns its clamped node count."""
     x, v, x_old = state                                                 # GuideState
-    bend_passes, bend_stiffness, s_damp, max_disp, do_finalize = params     # FtlParams
+    inner_steps, bend_stiffness, s_damp, max_disp, do_finalize = params     # FtlParams
     s0 = blk * BLOCK
     s1 = min(s0 + BLOCK, x.shape[0])
-    ftl_block(model, state, motion, bend_passes, bend_stiffness, corr, s0, s1)
+    ftl_block(model, state, motion, inner_steps, bend_stiffness, s_damp, corr, s0, s1)
     if do_finalize:
         return finalize_block(x, v, x_old, model[1], corr, s0, s1, motion[6], max_disp, s_damp)
     return 0
 
 
 @njit(cache=True, fastmath=FASTMATH, error_model='numpy')
-def ftl_block(model, state, motion, bend_passes, bend_stiffness, corr, s0, s1):
-    """Predict and ``bend_passes`` rounds of a bending sweep and the FTL pass of the strands
-    ``s0 <= s < s1``: a substep up to the collision and finalize (:func:`ftl_step`,
-    :func:`ftl_collide_step`)."""
-    x = state[0]
+def ftl_block(model, state, motion, inner_steps, bend_stiffness, s_damp, corr, s0, s1):
+    """Predict, the bending sweep and the FTL pass of the strands ``s0 <= s < s1`` in
+    ``inner_steps`` inner steps: a substep up to the collision and finalize (:func:`ftl_step`,
+    :func:`ftl_collide_step`).
+
+    With more than one, the substep ``dt`` runs as that many steps ``h = dt / inner_steps`` of
+    gravity and the free nodes' own motion (:func:`inner_predict_block`), each followed by the
+    sweep and the pass; the head moves, and the roots with it, in the first.  The corrections
+    of the passes are summed into ``corr``; the collider and finalize then act once on the whole
+    substep.  At rest the hair so settles where substeps of ``h`` leave it."""
+    x, v, x_old = state
     rest, inv_mass, rest_length, bend_rest, bend_w = model              # FtlModel
-    predict_block(state, rest, inv_mass, motion, s0, s1)
-    for r in range(bend_passes):
+    rot, pos, rot_rel, pos_prev, gravity, damp, dt, shock = motion      # StepMotion
+    h = dt / inner_steps
+    damp_h = damp ** (1.0 / inner_steps) if inner_steps > 1 else damp
+    predict_block(state, rest, inv_mass, (rot, pos, rot_rel, pos_prev, gravity, damp_h, h, shock),
+                  s0, s1)
+    for r in range(inner_steps):
+        if r > 0:
+            inner_predict_block(x, v, x_old, inv_mass, corr, gravity, damp_h, h, s_damp, r == 1,
+                                s0, s1)
         if bend_stiffness > 0.0:
             pbd_sweep_block(x, bend_rest, bend_w, 2, bend_stiffness, s0, s1)
         ftl_pass_block(x, rest, rest_length, motion[0], corr, s0, s1, r > 0)
+
+
+@njit(cache=True, fastmath=FASTMATH, error_model='numpy')
+def inner_predict_block(x, v, x_old, inv_mass, corr, gravity, damp, h, s_damp, first, s0, s1):
+    """The prediction of an inner step ``h`` [s] after the first (see :func:`ftl_block`) of the
+    free nodes of strands ``s0 <= s < s1``: each node's velocity over the inner step before,
+    ``(x - x_start) / h - s_damp corr_{i+1} / h`` with that step's FTL correction (as
+    :func:`~hair_tracking.guides.integrate.finalize_block` sets it), damped (``damp`` the
+    factor of ``h``) and accelerated by ``gravity``, then moved on by it.
+
+    ``v`` holds, between inner steps, ``-x_start / h + s_damp corr_{i+1} / h`` of the step to
+    come (``corr`` the sum of the passes so far), so that no start positions are stored;
+    ``first``: the step before was the first, whose start is ``x_old`` and whose correction is
+    all of ``corr``.  Finalize overwrites ``v``."""
+    n = x.shape[1]
+    inv_h = 1.0 / h
+    gx, gy, gz = gravity[0] * h, gravity[1] * h, gravity[2] * h
+    for s in range(s0, s1):
+        for i in range(2, n):
+            if inv_mass[s, i] <= 0.0:
+                continue
+            cx, cy, cz = 0.0, 0.0, 0.0
+            if i + 1 < n:
+                cx = s_damp * corr[s, i + 1, 0] * inv_h
+                cy = s_damp * corr[s, i + 1, 1] * inv_h
+                cz = s_damp * corr[s, i + 1, 2] * inv_h
+            px, py, pz = x[s, i, 0], x[s, i, 1], x[s, i, 2]
+            if first:
+                vx = (px - x_old[s, i, 0]) * inv_h - cx
+                vy = (py - x_old[s, i, 1]) * inv_h - cy
+                vz = (pz - x_old[s, i, 2]) * inv_h - cz
+            else:
+                vx = px * inv_h + v[s, i, 0] - cx
+                vy = py * inv_h + v[s, i, 1] - cy
+                vz = pz * inv_h + v[s, i, 2] - cz
+            v[s, i, 0] = cx - px * inv_h
+            v[s, i, 1] = cy - py * inv_h
+            v[s, i, 2] = cz - pz * inv_h
+            x[s, i, 0] = px + (vx * damp + gx) * h
+            x[s, i, 1] = py + (vy * damp + gy) * h
+            x[s, i, 2] = pz + (vz * damp + gz) * h
 
 
 @njit(cache=True, nogil=True, parallel=True, fastmath=FASTMATH, error_model='numpy')
@@ -451,13 +506,13 @@ def ftl_collide_block(model, state, motion, params, work, contact, s0, s1):
     x, v, x_old = state                                                 # GuideState
     rest, inv_mass, rest_length, bend_rest, bend_w = model              # FtlModel
     rot, pos, rot_rel, pos_prev, gravity, damp, dt, shock = motion      # StepMotion
-    bend_passes, bend_stiffness, s_damp, max_disp, _ = params          # FtlParams
+    inner_steps, bend_stiffness, s_damp, max_disp, _ = params          # FtlParams
     corr, x_ref = work                                                  # FtlWork[:2]
     friction = contact[7]
     ref = x_ref if friction > 0.0 else x_old
     if friction > 0.0:
         carry_rigid_block(x, rot_rel, pos_prev, pos, x_ref, s0, s1)
-    ftl_block(model, state, motion, bend_passes, bend_stiffness, corr, s0, s1)
+    ftl_block(model, state, motion, inner_steps, bend_stiffness, s_damp, corr, s0, s1)
     pushed = 0
     for s in range(s0, s1):      # strand by strand: only the strands pushed are walked again
         p = project_block(x, ref, inv_mass, contact, s, s + 1)
@@ -618,7 +673,8 @@ def ftl_advance_block(model, state, drive, params, collide, collider, work, blk,
             c, p = ftl_collide_block(model, state, motion, params, (corr, x_ref),
                                      placed(collider, rot, pos), s0, s1)
         else:
-            ftl_block(model, state, motion, params[0], params[1], corr, s0, s1)
+            ftl_block(model, state, motion, params[0], params[1], params[2], corr, s0,
+                      s1)
             c = finalize_block(x, v, x_old, model[1], corr, s0, s1, dt, params[3], params[2])
             p = 0
         counts[blk, k, 0] = c

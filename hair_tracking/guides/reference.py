@@ -152,16 +152,30 @@ def xpbd_step(x, v, rest, inv_mass, rest_length, bend_rest, motion, dt, iteratio
     return guide_finalize(p, xc, inv_mass, None, dt, max_disp, 0.0) + (lam_s, lam_b)
 
 
-def ftl_step(x, v, rest, inv_mass, rest_length, bend_rest, motion, dt, bend_passes,
+def ftl_step(x, v, rest, inv_mass, rest_length, bend_rest, motion, dt, inner_steps,
              bend_stiffness, s_damp, max_disp):
-    """One FTL substep of all guides: predict, ``bend_passes`` rounds of a PBD bending sweep
-    (if ``bend_stiffness > 0``) and the FTL pass (the corrections of the rounds summed),
-    finalize with the velocity correction ``s_damp``.  As :func:`pbd_step`; returns ``(x, v,
-    clamped, corrections)``."""
-    p, xc, _ = guide_predict(x, v, rest, inv_mass, dt=dt, **motion)
+    """One FTL substep of all guides in ``inner_steps`` inner steps ``h = dt / inner_steps``:
+    predict over ``h`` (the head's whole motion in the first), a PBD bending sweep (if
+    ``bend_stiffness > 0``) and the FTL pass; every later inner step first moves the free nodes
+    on with their velocity over the one before (its FTL correction damped as finalize damps it)
+    and gravity.  Finalize over the whole substep with the corrections summed, the velocity
+    correction ``s_damp``.  As :func:`pbd_step`; returns ``(x, v, clamped, corrections)``."""
+    h = dt / inner_steps
+    p, xc, _ = guide_predict(x, v, rest, inv_mass, dt=h, **motion)
     corr = np.zeros_like(p)
-    for _ in range(bend_passes):
+    step = np.zeros_like(p)
+    moving = (inv_mass > 0)[..., None]
+    moving[:, :2] = False
+    start = xc
+    for r in range(inner_steps):
+        if r > 0:
+            vel = (p - start) / h
+            vel[:, :-1] -= s_damp * step[:, 1:] / h
+            start = p.copy()
+            vel = vel * np.exp(-motion['damping'] * h) + np.asarray(motion['gravity']) * h
+            p = np.where(moving, p + vel * h, p)
         if bend_stiffness > 0.0:
             pbd_sweep(p, bend_rest, inv_mass, 2, bend_stiffness)
-        corr += ftl_pass(p, rest, rest_length, motion['rot'])
+        step = ftl_pass(p, rest, rest_length, motion['rot'])
+        corr += step
     return guide_finalize(p, xc, inv_mass, corr, dt, max_disp, s_damp) + (corr,)

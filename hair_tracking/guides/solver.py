@@ -56,9 +56,9 @@ from hair_tracking.core.metrics import max_stretch
 from hair_tracking.core.model import HeadPose, StrandSet
 from hair_tracking.guides import pbd_constraints
 
-#: Substep [s] at which ``solver.bend_stiffness`` applies as given to FTL (the default dt), with
-#: one round of a bending sweep and the FTL pass; see :func:`ftl_bend_stiffness` and
-#: :func:`ftl_bend_rounds`.
+#: Substep [s] at which ``solver.bend_stiffness`` applies as given to FTL (the default dt), and
+#: the longest inner step of an FTL substep; see :func:`ftl_bend_stiffness` and
+#: :func:`ftl_inner_steps`.
 BEND_REFERENCE_DT = 1.0 / 240.0
 #: A substep within this fraction of :data:`BEND_REFERENCE_DT` is that substep (the presets'
 #: 0.004166667 s is 1/240 s).
@@ -336,7 +336,7 @@ class GuideSolver:
     def _ftl_params(self, dt: float, finalize: bool) -> tuple:
         """The FTL kernels' :data:`~hair_tracking.guides.ftl.FtlParams` for a substep ``dt``."""
         sv = self.scene.solver
-        return (ftl_bend_rounds(dt), ftl_bend_stiffness(sv.bend_stiffness, dt),
+        return (ftl_inner_steps(dt), ftl_bend_stiffness(sv.bend_stiffness, dt),
                 float(sv.ftl_damping), self._max_disp, finalize)
 
     def _collider_model(self) -> tuple:
@@ -411,41 +411,47 @@ class GuideSolver:
         return a_stretch, a_bend
 
 
-def ftl_bend_rounds(dt: float) -> int:
-    """Rounds of a bending sweep and the FTL pass in an FTL substep ``dt`` [s]: one up to
-    :data:`BEND_REFERENCE_DT`, beyond it as many as substeps of that length would take
+def ftl_inner_steps(dt: float) -> int:
+    """Inner steps of an FTL substep ``dt`` [s] (:func:`~hair_tracking.guides.ftl.ftl_block`):
+    one up to :data:`BEND_REFERENCE_DT`, beyond it as many as substeps of that length would take
     (``ceil(dt / dt_ref)``, a step within :data:`REFERENCE_TOLERANCE` of a multiple counted
-    as that multiple), so a long step iterates bending and lengths as often per second.
+    as that multiple).
+
+    Where the hair comes to rest is a balance struck anew each step: gravity's prediction
+    pushes every bend by an amount in ``g h^2``, the bending sweep takes a fraction of it back,
+    and the FTL pass and its velocity correction move it again; a step of ``h`` settles where
+    steps of ``h`` settle.  So a long substep runs inner steps no longer than ``dt_ref`` (the
+    head, the collider and finalize still once a substep), and the settled shape of any longer
+    substep is that of ``dt_ref`` or shorter (``scripts/settle_shape.py``, docs/grooms.md).
     """
     return max(1, math.ceil(dt / BEND_REFERENCE_DT - REFERENCE_TOLERANCE))
 
 
 def ftl_bend_stiffness(k: float, dt: float) -> float:
-    """Bending stiffness of each of the :func:`ftl_bend_rounds` ``n`` rounds of an FTL substep
-    ``dt`` [s].
+    """Bending stiffness of the sweep of each :func:`ftl_inner_steps` inner step of an FTL
+    substep ``dt`` [s].
 
     ``solver.bend_stiffness`` ``k`` is the fraction of the bending violation one sweep removes
-    at the substep :data:`BEND_REFERENCE_DT`.  At rest, each substep gravity's prediction pushes
-    a bend by an amount proportional to ``g dt^2`` (FTL's stored velocities at rest are ``g dt``
-    times a constant, :mod:`~hair_tracking.guides.ftl`), which the sweeps take back; for the
-    hair to settle to the same bend at any ``dt``, the sweeps of a substep must act as
-    ``(dt / dt_ref)^2`` sweeps of ``k`` do.  Spread over the ``n`` rounds with Müller et al.
-    2007's rule for a stiffness independent of the iteration count (section 3.3: ``n`` sweeps
-    of ``1 - (1 - k)^(m / n)`` remove what ``m`` sweeps of ``k`` remove):
+    at the step :data:`BEND_REFERENCE_DT`.  At rest, each step gravity's prediction pushes
+    a bend by an amount proportional to ``g h^2`` (FTL's stored velocities at rest are ``g h``
+    times a constant, :mod:`~hair_tracking.guides.ftl`), which the sweep takes back; for the
+    hair to settle to the same bend at a shorter inner step ``h``, its sweep must act as
+    ``(h / dt_ref)^2`` sweeps of ``k`` do (Müller et al. 2007's rule for a stiffness independent
+    of the iteration count, section 3.3: ``n`` sweeps of ``1 - (1 - k)^(m / n)`` remove what
+    ``m`` sweeps of ``k`` remove):
 
-        k(dt) = 1 - (1 - k)^((dt / dt_ref)^2 / n).
+        k(h) = 1 - (1 - k)^((h / dt_ref)^2).
 
-    At short steps the stiffness falls as ``dt^2``, faster than FTL's velocity correction
-    ``s_damp d / dt`` grows: a stiffness that does not fall let 25 cm strands at dt = 1/4000 s
-    and 1.5 m strands at 1/480 s never come to rest after a head shake (measured).  At long steps
-    one sweep saturates (a fraction of 0.997 at 1/60 s for ``k`` 0.3 leaves the hair sagging
-    more than at 1/240 s): the rounds carry the rest.
+    The stiffness falls as ``h^2``, faster than FTL's velocity correction ``s_damp d / h``
+    grows: a stiffness that does not fall let 25 cm strands at dt = 1/4000 s and 1.5 m strands
+    at 1/480 s never come to rest after a head shake (measured).  A substep of a multiple of
+    ``dt_ref`` runs inner steps of ``dt_ref`` with ``k`` itself.
     """
     k = float(k)
-    ratio = dt / BEND_REFERENCE_DT
+    ratio = dt / ftl_inner_steps(dt) / BEND_REFERENCE_DT
     if abs(ratio - 1.0) <= REFERENCE_TOLERANCE or k <= 0.0 or k >= 1.0:
         return k
-    return 1.0 - (1.0 - k) ** (ratio * ratio / ftl_bend_rounds(dt))
+    return 1.0 - (1.0 - k) ** (ratio * ratio)
 
 
 def _check_dt(dt) -> float:
