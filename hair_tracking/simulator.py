@@ -52,6 +52,7 @@ from hair_tracking.core.metrics import max_stretch
 from hair_tracking.core.model import carry_rigidly, HeadPose, StrandSet
 from hair_tracking.core.point_records import points_to_records
 from hair_tracking.core.scene import GUIDES_AMONG_STRANDS, Scene
+from hair_tracking.core.settle import settle
 from hair_tracking.core.transforms import quat_angle, quat_to_matrix, slerp
 from hair_tracking.ghosts.blend import BlendTracker
 from hair_tracking.ghosts.interface import GhostTracking, TrackStep
@@ -72,10 +73,6 @@ MIN_SPLIT_DT = 1.0 / 960.0
 SPLIT_FRACTION = 0.5
 #: ... or this distance [m] when the clamp is off (``solver.max_displacement = 0``).
 SPLIT_DISTANCE = 0.025
-#: A settle until still (``solver.settle_speed``) goes on this long [s] at a time ...
-SETTLE_CHUNK_S = 0.1
-#: ... and, with ``solver.settle_time``, at most this long [s] in all.
-MAX_SETTLE_S = 30.0
 
 
 @dataclass
@@ -506,9 +503,8 @@ class HairSimulator:
 
     def _rest_at(self, head: HeadPose) -> None:
         """The rest shape at ``head`` (out of the body's bust), settled: ``solver.settle_time``
-        with the head still, then, with ``solver.settle_speed``, :data:`SETTLE_CHUNK_S` at a
-        time until no node moved faster than that over the last one (at most
-        :data:`MAX_SETTLE_S` in all).
+        with the head still, then, with ``solver.settle_speed``, on until no node moves faster
+        than that (:func:`hair_tracking.core.settle.settle`).
         ``settled_s`` is the time simulated.  The velocities are then zero (FTL's stored
         velocities do not vanish at rest, :mod:`hair_tracking.guides.ftl`: zeroing them sets
         still FTL hair moving by a few millimetres, which settles again)."""
@@ -519,19 +515,8 @@ class HairSimulator:
         once, self.track_once_per_call = self.track_once_per_call, False   # the scene's rest
         sv = self.scene.solver
         try:
-            steps = int(round(sv.settle_time / sv.dt))
-            self._settle(head, steps)
-            self.settled_s = steps * sv.dt
-            if sv.settle_speed > 0.0:
-                chunk = max(1, int(round(SETTLE_CHUNK_S / sv.dt)))
-                while self.settled_s + chunk * sv.dt <= MAX_SETTLE_S + 1e-9:
-                    before = self._settling_nodes()
-                    self._settle(head, chunk)
-                    self.settled_s += chunk * sv.dt
-                    moved = max(float(np.max(np.abs(a - b))) if a.size else 0.0
-                                for a, b in zip(self._settling_nodes(), before))
-                    if moved <= sv.settle_speed * chunk * sv.dt:
-                        break
+            self.settled_s = settle(lambda steps: self._settle(head, steps),
+                                    self._settling_nodes, sv.dt, sv.settle_time, sv.settle_speed)
         finally:
             self.track_once_per_call = once
         self.guides.v[...] = 0.0
@@ -547,11 +532,11 @@ class HairSimulator:
         self._track_ghosts(self.scene.solver.dt * steps, steps)
 
     def _settling_nodes(self):
-        """Copies of the positions that settle: the guides, and the paper tracker's ghosts
-        (the blend and turn trackers place theirs from the guides)."""
-        out = [self.guides.x.copy()]
+        """The positions that settle: the guides, and the paper tracker's ghosts (the blend and
+        turn trackers place theirs from the guides)."""
+        out = [self.guides.x]
         if self.ghost_tracker is not None and not self._stateless(self.scene):
-            out.append(self.ghost_tracker.positions().copy())
+            out.append(self.ghost_tracker.positions())
         return out
 
     def _carry_rigidly(self, old: HeadPose, new: HeadPose) -> None:

@@ -427,7 +427,8 @@ def test_ftl_collide_step_is_the_separate_kernels_in_one_block_loop(friction):
         if pushed:
             ftl.ftl_restore(st.x, st.rest, st.rest_length, rot, pos, c.center, c.radii + c.margin,
                             c.refine, corr)
-        clamped += integrate.finalize(st.x, st.v, x_old, st.inv_mass, corr, dt, max_disp,
+        clamped += integrate.finalize(st.x, st.v, x_old, st.inv_mass, corr, dt,
+                                      max_disp * guides.ftl_inner_steps(dt),
                                       float(sc.solver.ftl_damping))
         contacts += pushed
         h_prev = head

@@ -53,6 +53,7 @@ from hair_tracking.colliders.scene_body import make_body
 from hair_tracking.core.metrics import max_stretch, position_error, tip_error
 from hair_tracking.core.model import HeadPose
 from hair_tracking.core.scene import Scene
+from hair_tracking.core.settle import settle as settle_until_still
 from hair_tracking.core.transforms import quat_to_matrix, slerp
 from hair_tracking.evaluation.methods import (FullSim, GhostTracking, Method, PyPBD, RigidOffset,
                                               Workload,
@@ -224,26 +225,31 @@ class RunResult:
         return out
 
 
-def settle(method: Method, head: HeadPose, seconds: float) -> None:
-    """Rest shape at ``head``, ``seconds`` of substeps with the head still, velocities zeroed."""
+def settle(method: Method, head: HeadPose, seconds: float, speed: float = 0.0) -> float:
+    """Rest shape at ``head``: ``seconds`` of substeps with the head still, then, with ``speed``
+    [m/s], on until no output node moves faster (:func:`hair_tracking.core.settle.settle`);
+    velocities zeroed.  Returns the time simulated [s]."""
     method.reset(head)
-    method.advance(method.dt, head, [head] * int(round(seconds / method.dt)))
+    simulated = settle_until_still(
+        lambda steps: method.advance(method.dt, head, [head] * steps),
+        lambda: [method.output(head)], method.dt, seconds, speed)
     method.output(head)             # methods that work per frame catch up here
     method.zero_velocities()
+    return simulated
 
 
 def run_frames(method: Method, schedule: HeadSchedule, frames: int,
                on_frame: Optional[Callable[[int, np.ndarray, HeadPose], None]] = None,
-               settle_s: float = 0.0) -> np.ndarray:
-    """Settle, then run ``frames`` output frames; returns the seconds each frame took (only the
-    stepping and the output, not ``on_frame`` nor what the method reports in
-    ``excluded_seconds``, i.e. pypbd's root driving).  ``on_frame(j, x, head)`` is called with
+               settle_s: float = 0.0, settle_speed: float = 0.0) -> np.ndarray:
+    """Settle (:func:`settle`), then run ``frames`` output frames; returns the seconds each
+    frame took (only the stepping and the output, not ``on_frame`` nor what the method reports
+    in ``excluded_seconds``, i.e. pypbd's root driving).  ``on_frame(j, x, head)`` is called with
     ``j = -1`` once after settling, then for every frame ``j = 0 .. frames - 1``.  Stops early
     (returning fewer times) when the output becomes non-finite."""
     k = substeps_per_frame(method.dt, schedule.frame_rate)
     poses = schedule.poses(k)
     head0 = schedule.start()
-    settle(method, head0, settle_s)
+    settle(method, head0, settle_s, settle_speed)
     if on_frame is not None:
         on_frame(-1, method.output(head0), head0)       # the settled state, before the motion
     secs = np.empty(frames)
@@ -288,7 +294,8 @@ def record_reference(workload: Workload, schedule: HeadSchedule,
             out[j] = x
 
     t0 = time.perf_counter()
-    secs = run_frames(ref, schedule, schedule.frames, keep, scene.solver.settle_time)
+    secs = run_frames(ref, schedule, schedule.frames, keep, scene.solver.settle_time,
+                      scene.solver.settle_speed)
     if len(secs) < schedule.frames:
         raise RuntimeError('the reference run produced non-finite positions')
     log(f'  reference ({scene.solver.type}, dt 1/{1 / scene.solver.dt:.0f} s, '
@@ -312,7 +319,8 @@ def perturbed_reference(workload: Workload, schedule: HeadSchedule, ref_frames: 
             x[:, 2:] += rng.normal(scale=perturbation, size=x[:, 2:].shape)
             return
         out[j] = position_error(x, ref_frames[j].astype(np.float64), workload.strand_length)[0]
-    run_frames(method, schedule, schedule.frames, watch, scene.solver.settle_time)
+    run_frames(method, schedule, schedule.frames, watch, scene.solver.settle_time,
+               scene.solver.settle_speed)
     return out
 
 
@@ -334,7 +342,8 @@ def reference_convergence(workload: Workload, schedule: HeadSchedule, ref_frames
             return
         for key, val in scorer.frame(j, x, head, x0).items():
             pf[key][j] = val
-    run_frames(method, schedule, frames, score, fine.solver.settle_time)
+    run_frames(method, schedule, frames, score, fine.solver.settle_time,
+               fine.solver.settle_speed)
     res.per_frame = pf
     s = res.summary()
     log(f'  reference self-convergence over {frames} frames: RMS {s["rms_err"]:.2e} L, '
@@ -480,6 +489,7 @@ def evaluate(workload: Workload, trajectory: Trajectory, specs: Sequence[MethodS
         f'{horizon / FRAME_RATE:.2f} s (predictable window), ends at {100 * chaos[-1]:.1f} % L')
     scorer = Scorer(workload, ref, ref0)
     settle_s = workload.scene.solver.settle_time
+    settle_speed = workload.scene.solver.settle_speed
     results, skipped = [], []
     for spec in specs:
         try:
@@ -502,7 +512,8 @@ def evaluate(workload: Workload, trajectory: Trajectory, specs: Sequence[MethodS
         try:
             run_frames(method, sched, 2, None, 0.0)            # compile + warm up, not timed
             method.excluded_seconds = 0.0
-            secs = run_frames(method, sched, sched.frames, score, settle_s)
+            secs = run_frames(method, sched, sched.frames, score, settle_s,
+                              settle_speed)
             res.frame_ms.append(1e3 * secs)
             if len(secs) < sched.frames:
                 res.failed = f'non-finite output at frame {len(secs)}'
@@ -528,7 +539,8 @@ def evaluate(workload: Workload, trajectory: Trajectory, specs: Sequence[MethodS
             method = res.spec.build(workload)
             try:
                 run_frames(method, sched, 2, None, 0.0)
-                res.frame_ms.append(1e3 * run_frames(method, sched, frames, None, settle_s))
+                res.frame_ms.append(1e3 * run_frames(method, sched, frames, None, settle_s,
+                                                     settle_speed))
             finally:
                 method.close()
         log(f'  timing run {rep + 1}/{repeats} done')

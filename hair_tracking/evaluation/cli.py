@@ -50,6 +50,11 @@ MOTIONS = ('walk', 'vr', 'shake')
 #: current folder (``out/`` is ignored by git).
 OUT_DIR = os.path.join('out', 'eval')
 
+#: The accuracy and dominance studies settle every method at the first pose until no node moves
+#: faster than this [m/s] (``solver.settle_speed``), so the settled shapes they compare are
+#: the shapes at rest (a fixed settle of 0.5 s leaves hair still moving 8-11 % L a second).
+SETTLE_SPEED = 0.002
+
 
 def _set_threads(n: int) -> None:
     # must happen before numba kernels run / pypbd is imported (OpenMP reads it at start)
@@ -86,11 +91,18 @@ def trajectories(names, quick: bool, vr_path: str, log=print):
     return out
 
 
-def cmd_accuracy(args) -> int:
+def study_scene(args):
+    """The scene of an accuracy or dominance study: ``--scene`` or the default, every method
+    settled until still (``--settle-speed``)."""
     from hair_tracking.core.scene import Scene
+    scene = Scene.from_yaml(args.scene) if args.scene else Scene()
+    return scene.with_changes(solver__settle_speed=args.settle_speed)
+
+
+def cmd_accuracy(args) -> int:
     from hair_tracking.evaluation import accuracy as ea
     from hair_tracking.evaluation.methods import make_workload, pypbd_available
-    scene = Scene.from_yaml(args.scene) if args.scene else Scene()
+    scene = study_scene(args)
     ghosts = args.ghosts or (128 if args.quick else 512)
     workload = make_workload(scene, ghosts)
     missing = pypbd_available()
@@ -176,10 +188,9 @@ def recorded(args, duration=None):
 def cmd_dominance(args) -> int:
     import json
 
-    from hair_tracking.core.scene import Scene
     from hair_tracking.evaluation import dominance as dm
     from hair_tracking.evaluation.methods import make_workload
-    scene = Scene.from_yaml(args.scene) if args.scene else Scene()
+    scene = study_scene(args)
     tracks = trajectories(args.motions, False, args.vr) + args.recorded
     record = provenance(command_line(args), max(args.thread_counts))
     md = ['# Do the ghosts pay for themselves?', ''] + markdown_lines(record) + [
@@ -251,6 +262,10 @@ def main(argv=None) -> int:
     a.add_argument('--ghosts', type=int, default=0, help='ghost strands (default 512, quick 128)')
     a.add_argument('--repeats', type=int, default=2, help='timing runs per method')
     a.add_argument('--scene', default='', help='scene YAML (default: the default scene)')
+    a.add_argument('--settle-speed', type=float, default=SETTLE_SPEED,
+                   help='every method settles at the first pose until no node moves faster '
+                        f'[m/s] (solver.settle_speed; default {SETTLE_SPEED}; 0: '
+                        'solver.settle_time alone)')
     a.add_argument('--vr', default=DEFAULT_VR, help='VR360 trace (timestamp viewpoint w x y z)')
     _motions(a, 'all of them; --quick: walk')
     a.add_argument('--duration', type=float, default=0.0,
@@ -268,6 +283,10 @@ def main(argv=None) -> int:
     d.add_argument('--thread-counts', type=int, nargs='+', default=[1],
                    help='numba thread counts to time (default 1)')
     d.add_argument('--scene', default='', help='scene YAML (default: the default scene)')
+    d.add_argument('--settle-speed', type=float, default=SETTLE_SPEED,
+                   help='every method settles at the first pose until no node moves faster '
+                        f'[m/s] (solver.settle_speed; default {SETTLE_SPEED}; 0: '
+                        'solver.settle_time alone)')
     _outputs(d, 'dominance', 'dominance.md / .json', figures=True)
     s = sub.add_parser('stability', help='the matrix of stiff and extreme cases')
     s.add_argument('--quick', action='store_true', help='the reduced matrix (CI)')

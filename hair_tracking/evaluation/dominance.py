@@ -150,7 +150,8 @@ def study(workload: Workload, trajectory: Trajectory, duration_s: float, repeats
             row.penetration_mm = max(row.penetration_mm, 1e3 * m['pen'])
             row.body_mm = max(row.body_mm, 1e3 * m['pen_body'])
         t0 = time.perf_counter()
-        run_frames(method, schedule, schedule.frames, score, scene.solver.settle_time)
+        run_frames(method, schedule, schedule.frames, score, scene.solver.settle_time,
+                   scene.solver.settle_speed)
         row.motion_err = 100.0 * float(np.sqrt(np.mean(np.square(motion)))) if motion \
             else math.nan
         log(f'    {c.name}: motion error {row.motion_err:.2f} % L, stretch '

@@ -392,9 +392,11 @@ def ftl_block(model, state, motion, inner_steps, bend_stiffness, s_damp, corr, s
 
     With more than one, the substep ``dt`` runs as that many steps ``h = dt / inner_steps`` of
     gravity and the free nodes' own motion (:func:`inner_predict_block`), each followed by the
-    sweep and the pass; the head moves, and the roots with it, in the first.  The corrections
-    of the passes are summed into ``corr``; the collider and finalize then act once on the whole
-    substep.  At rest the hair so settles where substeps of ``h`` leave it."""
+    sweep and the pass; the roots move a share of the head's motion in each
+    (:func:`place_roots_block`, along the straight line: exact where the substep ends).  The
+    corrections of the passes are summed into ``corr``; the collider and finalize then act once
+    on the whole substep (finalize's velocity is the mean of the inner steps').  At rest the
+    hair so settles where substeps of ``h`` leave it."""
     x, v, x_old = state
     rest, inv_mass, rest_length, bend_rest, bend_w = model              # FtlModel
     rot, pos, rot_rel, pos_prev, gravity, damp, dt, shock = motion      # StepMotion
@@ -403,12 +405,28 @@ def ftl_block(model, state, motion, inner_steps, bend_stiffness, s_damp, corr, s
     predict_block(state, rest, inv_mass, (rot, pos, rot_rel, pos_prev, gravity, damp_h, h, shock),
                   s0, s1)
     for r in range(inner_steps):
+        if inner_steps > 1:
+            place_roots_block(x, x_old, rest, rot, pos, (r + 1) / inner_steps, s0, s1)
         if r > 0:
             inner_predict_block(x, v, x_old, inv_mass, corr, gravity, damp_h, h, s_damp, r == 1,
                                 s0, s1)
         if bend_stiffness > 0.0:
             pbd_sweep_block(x, bend_rest, bend_w, 2, bend_stiffness, s0, s1)
         ftl_pass_block(x, rest, rest_length, motion[0], corr, s0, s1, r > 0)
+
+
+@njit(cache=True, fastmath=FASTMATH, error_model='numpy')
+def place_roots_block(x, x_old, rest, rot, pos, t, s0, s1):
+    """The roots (nodes 0 and 1) of strands ``s0 <= s < s1`` at the fraction ``t`` of the way
+    from their start ``x_old`` to where the head pose ``rot``, ``pos`` puts them (``t`` 1: there
+    exactly): the head's motion spread over the inner steps of :func:`ftl_block`, so the
+    velocity of an inner step holds its share of it."""
+    for s in range(s0, s1):
+        for i in range(2):
+            for d in range(3):
+                end = rot[d, 0] * rest[s, i, 0] + rot[d, 1] * rest[s, i, 1] + \
+                    rot[d, 2] * rest[s, i, 2] + pos[d]
+                x[s, i, d] = end if t >= 1.0 else x_old[s, i, d] + t * (end - x_old[s, i, d])
 
 
 @njit(cache=True, fastmath=FASTMATH, error_model='numpy')

@@ -155,7 +155,8 @@ def xpbd_step(x, v, rest, inv_mass, rest_length, bend_rest, motion, dt, iteratio
 def ftl_step(x, v, rest, inv_mass, rest_length, bend_rest, motion, dt, inner_steps,
              bend_stiffness, s_damp, max_disp):
     """One FTL substep of all guides in ``inner_steps`` inner steps ``h = dt / inner_steps``:
-    predict over ``h`` (the head's whole motion in the first), a PBD bending sweep (if
+    predict over ``h`` (the roots a share ``(r + 1) / inner_steps`` of the way from their
+    start to where the head puts them, along the straight line), a PBD bending sweep (if
     ``bend_stiffness > 0``) and the FTL pass; every later inner step first moves the free nodes
     on with their velocity over the one before (its FTL correction damped as finalize damps it)
     and gravity.  Finalize over the whole substep with the corrections summed, the velocity
@@ -167,7 +168,10 @@ def ftl_step(x, v, rest, inv_mass, rest_length, bend_rest, motion, dt, inner_ste
     moving = (inv_mass > 0)[..., None]
     moving[:, :2] = False
     start = xc
+    roots = p[:, :2].copy()                       # where the head puts them at the end
     for r in range(inner_steps):
+        t = (r + 1) / inner_steps
+        p[:, :2] = roots if t >= 1.0 else xc[:, :2] + t * (roots - xc[:, :2])
         if r > 0:
             vel = (p - start) / h
             vel[:, :-1] -= s_damp * step[:, 1:] / h

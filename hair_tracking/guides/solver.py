@@ -20,8 +20,9 @@ and their roots follow the head. One call of :meth:`GuideSolver.step` is one sub
    (:class:`~hair_tracking.colliders.scene_body.SceneBody`, the contact model's collision stage
    :func:`~hair_tracking.colliders.kernels.collide` with its push-out velocity bound; FTL
    then walks the pushed strands again, :func:`~hair_tracking.guides.ftl.ftl_restore_shapes`);
-6. per-substep displacement clamp (``scene.solver.max_displacement``; 0 disables) and the
-   velocity update ``v = (p - x) / dt`` (FTL: minus ``ftl_damping d_{i+1} / dt``) —
+6. per-substep displacement clamp (``scene.solver.max_displacement``, FTL's an inner step;
+   0 disables) and the velocity update ``v = (p - x) / dt`` (FTL: minus
+   ``ftl_damping d_{i+1} / dt``) —
    :mod:`~hair_tracking.guides.integrate`.
 
 Without a collider steps 1–6 run in one fused numba kernel per block of strands (the strands stay
@@ -329,7 +330,8 @@ class GuideSolver:
             finalize = integrate.finalize if parallel else integrate.finalize_serial
             ftl_ = self.kind == 'ftl'
             clamped = finalize(st.x, st.v, self._x_old, st.inv_mass,
-                               self._corr if ftl_ else self._x_old, dt, self._max_disp,
+                               self._corr if ftl_ else self._x_old, dt,
+                               self._ftl_clamp(dt) if ftl_ else self._max_disp,
                                float(sv.ftl_damping) if ftl_ else 0.0)
         self._count(clamped, contacts)
 
@@ -337,7 +339,12 @@ class GuideSolver:
         """The FTL kernels' :data:`~hair_tracking.guides.ftl.FtlParams` for a substep ``dt``."""
         sv = self.scene.solver
         return (ftl_inner_steps(dt), ftl_bend_stiffness(sv.bend_stiffness, dt),
-                float(sv.ftl_damping), self._max_disp, finalize)
+                float(sv.ftl_damping), self._ftl_clamp(dt), finalize)
+
+    def _ftl_clamp(self, dt: float) -> float:
+        """FTL's displacement clamp over a substep ``dt`` [m]: ``solver.max_displacement`` an
+        inner step (:func:`ftl_inner_steps`), so it bounds the same speed at any ``dt``."""
+        return self._max_disp * ftl_inner_steps(dt)
 
     def _collider_model(self) -> tuple:
         """The collider as the FTL kernels take it
