@@ -16,10 +16,11 @@ not vanish (each substep gravity's prediction is undone by the pass, and ``v_i =
 g dt)`` settles at up to ``s_damp g dt / (1 - s_damp)``, 0.37 m/s at dt = 1/240 s and
 ``s_damp = 0.9``); use displacements, not ``v``, to judge whether FTL hair is at rest.
 
-Bending comes first: a PBD Gauss–Seidel sweep of the second-neighbour distance constraints
-with ``bend_stiffness`` (:func:`hair_tracking.guides.pbd_constraints.pbd_sweep_block`), then the
-FTL pass restores the lengths exactly.  A substep longer than the bending's reference step runs
-as several inner steps of gravity, the sweep and the pass (:func:`ftl_block`,
+Bending comes first: a Jacobi sweep of the second-neighbour distance constraints with
+``bend_stiffness`` (:func:`hair_tracking.guides.pbd_constraints.jacobi_bend_block`: the gradient
+of their energy, not a Gauss–Seidel sweep, so that bent strands come to rest), then the FTL pass
+restores the lengths exactly.  A substep longer than the bending's reference step runs as
+several inner steps of gravity, the sweep and the pass (:func:`ftl_block`,
 :func:`hair_tracking.guides.solver.ftl_inner_steps`), the corrections ``d_i`` of their passes
 summed. ``iterations`` of the scene does not apply to FTL.
 
@@ -40,7 +41,7 @@ from hair_tracking.guides.collision import (placed, placed_shape, project_block,
                                             rotation_entries, to_head, world_center)
 from hair_tracking.guides.integrate import (BLOCK, carry_rigid_block, FASTMATH, finalize_block,
                                             max_step_sq_block, predict_block, split_due)
-from hair_tracking.guides.pbd_constraints import pbd_sweep_block
+from hair_tracking.guides.pbd_constraints import jacobi_bend_block
 
 #: Static data of :func:`ftl_step`: ``rest`` (S, N, 3) head frame [m], ``inv_mass`` (S, N),
 #: ``rest_length`` (S, N-1), ``bend_rest`` (S, N-2) second-neighbour rest distances [m],
@@ -411,7 +412,7 @@ def ftl_block(model, state, motion, inner_steps, bend_stiffness, s_damp, corr, s
             inner_predict_block(x, v, x_old, inv_mass, corr, gravity, damp_h, h, s_damp, r == 1,
                                 s0, s1)
         if bend_stiffness > 0.0:
-            pbd_sweep_block(x, bend_rest, bend_w, 2, bend_stiffness, s0, s1)
+            jacobi_bend_block(x, bend_rest, bend_w, bend_stiffness, s0, s1)
         ftl_pass_block(x, rest, rest_length, motion[0], corr, s0, s1, r > 0)
 
 

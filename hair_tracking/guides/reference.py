@@ -15,6 +15,7 @@ Guide solvers (Mueller et al. 2007 "Position Based Dynamics"; Macklin, Mueller &
   motion, velocity damped, gravity, explicit Euler prediction;
 * :func:`pbd_sweep` / :func:`xpbd_sweep` -- one Gauss-Seidel sweep of distance constraints between
   nodes ``gap`` apart (gap 1: stretching, gap 2: bending as a second-neighbour distance);
+* :func:`jacobi_bend` -- FTL's bending: a Jacobi sweep of the second-neighbour constraints;
 * :func:`ftl_pass` -- Follow-The-Leader: every node put at its rest length from its parent;
 * :func:`guide_finalize` -- displacement clamp, FTL velocity correction, ``v = (x - x_old) / dt``;
 * :func:`pbd_step`, :func:`xpbd_step`, :func:`ftl_step` -- whole substeps composed of these.
@@ -58,6 +59,23 @@ def pbd_sweep(p, rest_dist, inv_mass, gap, k):
         safe = np.where(ws > 0, ws, 1.0)
         p[:, i] += (k * wi / safe * c)[:, None] * nrm
         p[:, j] -= (k * wj / safe * c)[:, None] * nrm
+
+
+def jacobi_bend(p, rest_dist, inv_mass, k):
+    """FTL's bending sweep, in place on ``p``: every constraint ``C = |p_{i+2} - p_i| -
+    rest_dist[:, i]`` projected from the positions before the sweep with stiffness ``k / 2``
+    (Jacobi), the correction shared by the inverse masses."""
+    d = p[:, 2:] - p[:, :-2]
+    length = np.linalg.norm(d, axis=2)
+    c = length - rest_dist
+    nrm = d / np.maximum(length, 1e-15)[..., None]
+    wi, wj = inv_mass[:, :-2], inv_mass[:, 2:]
+    ws = wi + wj
+    safe = np.where(ws > 0, ws, 1.0)
+    dp = np.zeros_like(p)
+    dp[:, :-2] += (0.5 * k * wi / safe * c)[..., None] * nrm
+    dp[:, 2:] -= (0.5 * k * wj / safe * c)[..., None] * nrm
+    p += dp
 
 
 def xpbd_sweep(p, rest_dist, inv_mass, lam, gap, alpha_tilde):
@@ -156,11 +174,12 @@ def ftl_step(x, v, rest, inv_mass, rest_length, bend_rest, motion, dt, inner_ste
              bend_stiffness, s_damp, max_disp):
     """One FTL substep of all guides in ``inner_steps`` inner steps ``h = dt / inner_steps``:
     predict over ``h`` (the roots a share ``(r + 1) / inner_steps`` of the way from their
-    start to where the head puts them, along the straight line), a PBD bending sweep (if
-    ``bend_stiffness > 0``) and the FTL pass; every later inner step first moves the free nodes
-    on with their velocity over the one before (its FTL correction damped as finalize damps it)
-    and gravity.  Finalize over the whole substep with the corrections summed, the velocity
-    correction ``s_damp``.  As :func:`pbd_step`; returns ``(x, v, clamped, corrections)``."""
+    start to where the head puts them, along the straight line), a Jacobi bending sweep (if
+    ``bend_stiffness > 0``, :func:`jacobi_bend`) and the FTL pass; every later inner step first
+    moves the free nodes on with their velocity over the one before (its FTL correction damped
+    as finalize damps it) and gravity.  Finalize over the whole substep with the corrections
+    summed, the velocity correction ``s_damp``.  As :func:`pbd_step`; returns ``(x, v, clamped,
+    corrections)``."""
     h = dt / inner_steps
     p, xc, _ = guide_predict(x, v, rest, inv_mass, dt=h, **motion)
     corr = np.zeros_like(p)
@@ -179,7 +198,7 @@ def ftl_step(x, v, rest, inv_mass, rest_length, bend_rest, motion, dt, inner_ste
             vel = vel * np.exp(-motion['damping'] * h) + np.asarray(motion['gravity']) * h
             p = np.where(moving, p + vel * h, p)
         if bend_stiffness > 0.0:
-            pbd_sweep(p, bend_rest, inv_mass, 2, bend_stiffness)
+            jacobi_bend(p, bend_rest, inv_mass, bend_stiffness)
         step = ftl_pass(p, rest, rest_length, motion['rot'])
         corr += step
     return guide_finalize(p, xc, inv_mass, corr, dt, max_disp, s_damp) + (corr,)
