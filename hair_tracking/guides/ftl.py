@@ -73,7 +73,7 @@ FTL_TINY_SQ = 1e-24
 @njit(cache=True, fastmath=FASTMATH, error_model='numpy')
 def ftl_pass_block(x, rest, rest_length, rot, corr, s0, s1, add):
     """FTL pass over strands ``s0..s1-1`` in place; ``corr`` (S, N, 3) receives the ``d_i``
-    (``add``: added to what it holds, a later round of :func:`ftl_block`).
+    (``add``: added to what it holds, a later inner step of :func:`ftl_block`).
 
     ``rot`` (3, 3) is the head rotation (only used for collapsed segments).
     """
