@@ -487,9 +487,11 @@ BODY_ON_S = 0.5
 #: the :data:`PUSH_WINDOW_S` before by at most this many times the push-out bound
 #: ``body.max_push_speed``: the bounded normal push of the collision stage, the bounded share
 #: of the collision-aware FTL pass's correction, FTL's velocity correction (the next node's
-#: share, times ``solver.ftl_damping``) and what gravity and the hair's own swing add over
-#: the window; unbounded, a node 9 cm inside leaves at 20 m/s.
-PUSH_GAIN = 4.0
+#: share, times ``solver.ftl_damping``), the bending sweep's share of a pushed second
+#: neighbour's move (a Jacobi sweep moves both ends of a constraint) and what gravity and the
+#: hair's own swing add over the window (gravity alone 0.98 m/s in 0.1 s); unbounded, a node
+#: 9 cm inside leaves at 20 m/s.
+PUSH_GAIN = 5.0
 #: [s] the windows of :data:`PUSH_GAIN`.
 PUSH_WINDOW_S = 0.1
 
