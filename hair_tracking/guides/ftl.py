@@ -465,14 +465,8 @@ def ftl_collide_block(model, state, motion, params, work, contact, s0, s1):
     if friction > 0.0:
         carry_rigid_block(x, rot_rel, pos_prev, pos, x_ref, s0, s1)
     ftl_block(model, state, motion, bend_passes, bend_stiffness, corr, s0, s1)
-    pushed = 0
-    walked = 0                   # only the strands pushed are walked again
-    for s in range(s0, s1):
-        p = project_block(x, ref, inv_mass, contact, s, s + 1)
-        if p:
-            walked |= 1 << (s - s0)
-        pushed += p
-    if walked:
+    pushed, walked = project_block(x, ref, inv_mass, contact, s0, s1)
+    if walked:                   # only the strands pushed are walked again
         ftl_restore_block(x, rest, rest_length, rot, ellipsoid_of(contact), corr, s0, s1,
                           walked)
     return finalize_block(x, v, x_old, inv_mass, corr, s0, s1, dt, max_disp, s_damp), pushed
