@@ -231,7 +231,7 @@ def ftl_restore_block(x, rest, rest_length, rot, ellipsoid, corr, s0, s1, walked
     ``walked`` (an integer; at most 64 strands), ``rot`` the head rotation (3, 3),
     ``ellipsoid`` the fields of :data:`Ellipsoid`.  The strands are walked side by side, node
     by node (each node depends on its predecessor only, so the chains of independent strands
-    overlap in the processor); each strand's arithmetic is the strand-by-strand walk's.  A
+    overlap in the processor); each strand's arithmetic is that of a walk of it alone.  A
     function of its own, so every kernel that runs it runs the same compiled code (inlined into
     each, LLVM may contract the arithmetic differently: the results would differ in the last
     bits)."""
