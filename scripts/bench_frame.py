@@ -40,14 +40,16 @@ WARM_FRAMES = 30
 def frame_times(sim, frames, warm=WARM_FRAMES):
     """Per-frame times [ms] of ``sim`` following the bundled walk at 60 Hz for ``frames``
     frames after ``warm`` untimed ones: ``{'guides', 'ghosts_cloud', 'frame'}`` lists (see the
-    module docstring) and ``'frame_cpu'``, the CPU time of this process a frame (on a shared
-    machine, what the frame's work costs whatever else runs)."""
+    module docstring) and ``'frame_cpu'``, ``'guides_cpu'``, ``'ghosts_cloud_cpu'``, the CPU time
+    of this process a frame and in each part (on a shared machine, what the work costs whatever
+    else runs)."""
     poses = bag_io.read_head_poses(bag_io.bundled_bag())
     idx = np.arange(0, len(poses), 2)
     n_frames = min(frames + warm, len(idx))
     cloud = CloudBuffer()
     rgb = pack_rgb_u32(np.ones((sim.ghosts.count, 4)))
-    parts = {'guides': [], 'ghosts_cloud': [], 'frame': [], 'frame_cpu': []}
+    parts = {'guides': [], 'ghosts_cloud': [], 'frame': [], 'frame_cpu': [], 'guides_cpu': [],
+             'ghosts_cloud_cpu': []}
     for k in range(n_frames):
         i = idx[k]
         t = int(poses.t_ns[i])
@@ -56,12 +58,15 @@ def frame_times(sim, frames, warm=WARM_FRAMES):
         sim.push_pose(t, poses.position[i], poses.quaternion[i])
         sim.advance_to(t)
         t1 = time.perf_counter()
+        c1 = time.process_time()
         n_strands, n_points, write = sim.record_writer()
         cloud.encode(n_strands, n_points, write, frame_id='world', stamp_ns=t, packed_rgb=rgb)
         t2 = time.perf_counter()
         c2 = time.process_time()
         if k >= warm:
             parts['frame_cpu'].append((c2 - c0) * 1e3)
+            parts['guides_cpu'].append((c1 - c0) * 1e3)
+            parts['ghosts_cloud_cpu'].append((c2 - c1) * 1e3)
             parts['guides'].append((t1 - t0) * 1e3)
             parts['ghosts_cloud'].append((t2 - t1) * 1e3)
             parts['frame'].append((t2 - t0) * 1e3)

@@ -17,9 +17,10 @@ temporary folder, then:
   on the imported groom and on a procedural groom of the same strand and node counts, each
   following the bundled walk at 60 Hz as scripts/bench_frame.py does (push_pose, advance_to,
   the cloud's bytes), ``--repeats`` times alternating; the median over the runs of each run's
-  median frame (wall clock and CPU time), their ratio and the guides' head contacts a substep;
-  then the same without the head collider (``collider.shape: none``), where the two grooms
-  differ only in their shapes' lengths.
+  median frame (wall clock and CPU time), their ratio, the same for the frame's two parts (CPU
+  time: the guide substeps, ``advance_to``; the ghosts with the cloud's bytes) and the guides'
+  head contacts a substep; then the same without the head collider (``collider.shape: none``),
+  where the two grooms differ only in their shapes' lengths.
 """
 import argparse
 import json
@@ -44,6 +45,10 @@ from hair_tracking.evaluation.provenance import command_line, provenance  # noqa
 from hair_tracking.grooms.build import build_groom, import_groom  # noqa: E402
 from hair_tracking.grooms.formats import read_strands  # noqa: E402
 from hair_tracking.simulator import HairSimulator, warm_up  # noqa: E402
+
+#: The parts of a frame timed on their own (:func:`bench_frame.frame_times`): the guide
+#: substeps and the ghosts with the cloud's bytes.
+PARTS = ('guides', 'ghosts_cloud')
 
 
 def median_seconds(fn, repeats):
@@ -92,6 +97,7 @@ def main(argv=None):
                 warm_up(scene)
             wall = {name: [] for name in scenes}
             cpu = {name: [] for name in scenes}
+            part_cpu = {part: {name: [] for name in scenes} for part in PARTS}
             contacts = {}
             for r in range(args.repeats):
                 for name, scene in scenes.items():
@@ -99,22 +105,32 @@ def main(argv=None):
                     parts = frame_times(sim, args.frames)
                     wall[name].append(float(np.median(parts['frame'])))
                     cpu[name].append(float(np.median(parts['frame_cpu'])))
+                    for part in PARTS:
+                        part_cpu[part][name].append(float(np.median(parts[part + '_cpu'])))
                     contacts[name] = sim.guide_solver.stats['contacts_total'] / max(
                         1, sim.guide_solver.stats['substeps'])
                     print(f'collider {collider}, run {r + 1}: {name:10s} '
                           f'{sim.ghosts.count} strands x {sim.ghosts.nodes} nodes, '
                           f'{sim.guides.count} guides: median frame {wall[name][-1]:.3f} ms '
-                          f'wall, {cpu[name][-1]:.3f} ms CPU', flush=True)
+                          f'wall, {cpu[name][-1]:.3f} ms CPU (guides '
+                          f'{part_cpu["guides"][name][-1]:.3f}, ghosts + cloud '
+                          f'{part_cpu["ghosts_cloud"][name][-1]:.3f})', flush=True)
             row = {'wall_ms': {n: float(np.median(v)) for n, v in wall.items()},
                    'cpu_ms': {n: float(np.median(v)) for n, v in cpu.items()},
                    'runs_wall_ms': wall, 'runs_cpu_ms': cpu,
                    'guide_contacts_per_substep': contacts}
             row['ratio_wall'] = row['wall_ms']['imported'] / row['wall_ms']['procedural']
             row['ratio_cpu'] = row['cpu_ms']['imported'] / row['cpu_ms']['procedural']
+            for part in PARTS:
+                med = {n: float(np.median(v)) for n, v in part_cpu[part].items()}
+                row[part + '_cpu_ms'] = med
+                row[part + '_ratio_cpu'] = med['imported'] / med['procedural']
             frame[collider] = row
             print(f'collider {collider}: imported / procedural frame: {row["ratio_cpu"]:.3f} '
                   f'(CPU medians {row["cpu_ms"]["imported"]:.3f} / '
                   f'{row["cpu_ms"]["procedural"]:.3f} ms), {row["ratio_wall"]:.3f} (wall); '
+                  f'guides {row["guides_ratio_cpu"]:.3f}, ghosts + cloud '
+                  f'{row["ghosts_cloud_ratio_cpu"]:.3f} (CPU); '
                   f'guide head contacts a substep {contacts["imported"]:.0f} / '
                   f'{contacts["procedural"]:.0f}', flush=True)
     if args.json:

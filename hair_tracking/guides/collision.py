@@ -23,9 +23,12 @@ from typing import Optional
 import numpy as np
 from numba import njit, prange
 
-from hair_tracking.colliders.contact import ellipsoid_contact, local_of, surface_point
+from hair_tracking.colliders.contact import (CENTRE_LEVEL, centre_exit, ellipsoid_contact,
+                                             ellipsoid_friction, ellipsoid_level,
+                                             ellipsoid_radial, ellipsoid_refine, local_of,
+                                             surface_point, world_of)
 from hair_tracking.colliders.margin import outside_distance  # noqa: F401 (the guides' margin)
-from hair_tracking.guides.integrate import FASTMATH, runs_parallel
+from hair_tracking.guides.integrate import BLOCK, FASTMATH, runs_parallel
 
 #: Normal-line refinements of the ellipsoid projection in :meth:`Collider.apply`.
 ELLIPSOID_REFINEMENTS = 2
@@ -100,11 +103,12 @@ def project_ellipsoid(x, x_prev, inv_mass, rot, pos, collider):
     the fields of :data:`ColliderModel`. Returns the number of nodes projected.
     """
     cx, cy, cz, ax, ay, az, fr, refine = placed_shape(collider, rot, pos)
+    n = x.shape[0]
     contacts = 0
-    for s in prange(x.shape[0]):
-        i = np.int64(s)       # (the index as in the serial variant: one compiled block body)
+    for blk in prange((n + BLOCK - 1) // BLOCK):
+        s0 = np.int64(blk) * BLOCK   # (as in the serial variant: one compiled block body)
         contact = (rotation_entries(rot), cx, cy, cz, ax, ay, az, fr, refine)
-        contacts += project_block(x, x_prev, inv_mass, contact, i, i + 1)
+        contacts += project_block(x, x_prev, inv_mass, contact, s0, min(s0 + BLOCK, n))[0]
     return contacts
 
 
@@ -112,32 +116,102 @@ def project_ellipsoid(x, x_prev, inv_mass, rot, pos, collider):
 def project_ellipsoid_serial(x, x_prev, inv_mass, rot, pos, collider):
     """:func:`project_ellipsoid` on the calling thread."""
     contact = placed(collider, rot, pos)
+    n = x.shape[0]
     contacts = 0
-    for s in range(x.shape[0]):
-        contacts += project_block(x, x_prev, inv_mass, contact, s, s + 1)
+    for s0 in range(0, n, BLOCK):
+        contacts += project_block(x, x_prev, inv_mass, contact, s0, min(s0 + BLOCK, n))[0]
     return contacts
+
+
+#: Normal-line refinements :func:`project_block`'s pass over the pushed nodes unrolls (the
+#: ellipsoid default is :data:`ELLIPSOID_REFINEMENTS`); more take the node-by-node path.
+MAX_VECTOR_REFINE = 2
+#: Rows of :func:`project_block`'s work space (per node of the block): inside flag, index of a
+#: pushed node, its position, its friction reference.
+(_FLAG, _IDX, _PX, _PY, _PZ, _RX, _RY, _RZ) = range(8)
 
 
 @njit(cache=True, fastmath=FASTMATH, error_model='numpy')
 def project_block(x, x_prev, inv_mass, contact, s0, s1):
     """:func:`project_ellipsoid` of the strands ``s0 <= s < s1`` (``contact`` the fields of
     :data:`Contact`): its loop body, and the collision of a kernel that runs a whole substep
-    block by block (:func:`~hair_tracking.guides.ftl.ftl_collide_step`)."""
+    block by block (:func:`~hair_tracking.guides.ftl.ftl_collide_step`).  Returns ``(contacts,
+    pushed)``: the nodes moved, and an integer with bit ``s - s0`` set for every strand with a
+    node moved (the first 64 strands).
+
+    Every node's arithmetic is :func:`~hair_tracking.colliders.contact.ellipsoid_contact`'s,
+    in passes over the pushed nodes only, laid out contiguously (as the ghosts' contact,
+    :mod:`hair_tracking.ghosts.contacts`): the inside test of every node, a branch-free
+    compaction of the pushed ones, their positions and references gathered, one loop without
+    data-dependent branches (the surface point of
+    :func:`~hair_tracking.colliders.contact.surface_point` with its refinements unrolled and the
+    centre's exit as a select, friction, back to the world), the results scattered.  Hair
+    resting on the head keeps many nodes in contact every substep; node by node each is a
+    chain of dependent square roots and divisions behind a hard-to-predict branch."""
+    rot, cx, cy, cz, ax, ay, az, mu, refine = contact
     n = x.shape[1]
-    contacts = 0
+    ix, iy, iz = 1.0 / (ax * ax), 1.0 / (ay * ay), 1.0 / (az * az)
+    w = np.empty((8, (s1 - s0) * n))
+    # 1. inside test of every node (NaN compares as ellipsoid_contact's tests), then compaction
+    m = 0
     for s in range(s0, s1):
         for i in range(n):
-            if inv_mass[s, i] <= 0.0:
-                continue
-            moved, y0, y1, y2 = ellipsoid_contact(x[s, i, 0], x[s, i, 1], x[s, i, 2],
-                                                  x_prev[s, i, 0], x_prev[s, i, 1],
-                                                  x_prev[s, i, 2], contact)
-            if moved:
-                x[s, i, 0] = y0
-                x[s, i, 1] = y1
-                x[s, i, 2] = y2
-                contacts += 1
-    return contacts
+            q0, q1, q2 = local_of(x[s, i, 0], x[s, i, 1], x[s, i, 2], rot, cx, cy, cz)
+            inside = not inv_mass[s, i] <= 0.0 and \
+                not ellipsoid_level(q0, q1, q2, ix, iy, iz) >= 1.0
+            w[_FLAG, (s - s0) * n + i] = 1.0 if inside else 0.0
+            m += 1 if inside else 0
+    if m == 0:
+        return 0, 0
+    m = 0
+    for c in range((s1 - s0) * n):
+        w[_IDX, m] = c
+        m += 1 if w[_FLAG, c] != 0.0 else 0
+    # 2. gather
+    for c in range(m):
+        j = int(w[_IDX, c])
+        s, i = s0 + j // n, j % n
+        w[_PX, c] = x[s, i, 0]
+        w[_PY, c] = x[s, i, 1]
+        w[_PZ, c] = x[s, i, 2]
+        w[_RX, c] = x_prev[s, i, 0]
+        w[_RY, c] = x_prev[s, i, 1]
+        w[_RZ, c] = x_prev[s, i, 2]
+    # 3. the arithmetic of every pushed node
+    if refine > MAX_VECTOR_REFINE:
+        for c in range(m):
+            _, w[_PX, c], w[_PY, c], w[_PZ, c] = ellipsoid_contact(
+                w[_PX, c], w[_PY, c], w[_PZ, c], w[_RX, c], w[_RY, c], w[_RZ, c], contact)
+    else:
+        ex, ey, ez = centre_exit(ax, ay, az)
+        for c in range(m):
+            qx, qy, qz = local_of(w[_PX, c], w[_PY, c], w[_PZ, c], rot, cx, cy, cz)
+            f, sc = ellipsoid_radial(qx, qy, qz, ix, iy, iz)
+            yx, yy, yz = qx * sc, qy * sc, qz * sc
+            cc = f - 1.0
+            if refine >= 1:
+                yx, yy, yz = ellipsoid_refine(qx, qy, qz, yx, yy, yz, cc, ix, iy, iz)
+            if refine >= 2:
+                yx, yy, yz = ellipsoid_refine(qx, qy, qz, yx, yy, yz, cc, ix, iy, iz)
+            deg = f < CENTRE_LEVEL
+            yx = ex if deg else yx
+            yy = ey if deg else yy
+            yz = ez if deg else yz
+            if mu > 0.0:
+                px, py, pz = local_of(w[_RX, c], w[_RY, c], w[_RZ, c], rot, cx, cy, cz)
+                yx, yy, yz = ellipsoid_friction(yx, yy, yz, px, py, pz, ix, iy, iz, mu)
+            w[_PX, c], w[_PY, c], w[_PZ, c] = world_of(yx, yy, yz, rot, cx, cy, cz)
+    # 4. scatter
+    pushed = 0
+    for c in range(m):
+        j = int(w[_IDX, c])
+        s, i = s0 + j // n, j % n
+        x[s, i, 0] = w[_PX, c]
+        x[s, i, 1] = w[_PY, c]
+        x[s, i, 2] = w[_PZ, c]
+        if s - s0 < 64:
+            pushed |= 1 << (s - s0)
+    return m, pushed
 
 
 @njit(cache=True, nogil=True, parallel=True, fastmath=FASTMATH, error_model='numpy')

@@ -224,31 +224,38 @@ def ftl_restore(x, rest, rest_length, rot, pos, center, axes, refine, corr):
     ellipsoid = (cx, cy, cz, axes[0], axes[1], axes[2], refine)
     for s in prange(x.shape[0]):
         i = int64(s)
-        ftl_restore_block(x, rest, rest_length, rot, ellipsoid, corr, i, i + 1)
+        ftl_restore_block(x, rest, rest_length, rot, ellipsoid, corr, i, i + 1, 1)
 
 
 @njit(cache=True, fastmath=FASTMATH, error_model='numpy')
-def ftl_restore_block(x, rest, rest_length, rot, ellipsoid, corr, s0, s1):
-    """:func:`ftl_restore` on the strands ``s0 <= s < s1`` (``rot`` the head rotation (3, 3),
-    ``ellipsoid`` the fields of :data:`Ellipsoid`).  A function of its own, so every kernel
-    that runs it runs the same compiled code (inlined into each, LLVM may contract the
-    arithmetic differently: the results would differ in the last bits)."""
+def ftl_restore_block(x, rest, rest_length, rot, ellipsoid, corr, s0, s1, walked):
+    """:func:`ftl_restore` on the strands ``s0 <= s < s1`` whose bit ``s - s0`` is set in
+    ``walked`` (an integer; at most 64 strands), ``rot`` the head rotation (3, 3),
+    ``ellipsoid`` the fields of :data:`Ellipsoid`.  The strands are walked side by side, node
+    by node (each node depends on its predecessor only, so the chains of independent strands
+    overlap in the processor); each strand's arithmetic is that of a walk of it alone.  A
+    function of its own, so every kernel that runs it runs the same compiled code (inlined into
+    each, LLVM may contract the arithmetic differently: the results would differ in the last
+    bits)."""
     cx, cy, cz, ax, ay, az, _ = ellipsoid
     ix, iy, iz = 1.0 / (ax * ax), 1.0 / (ay * ay), 1.0 / (az * az)
     f_ok = restore_f_ok(ax, ay, az)
     n = x.shape[1]
-    for s in range(s0, s1):
-        start = n                  # the first node the collider left off its rest distance
-        for i in range(2, n):      # or inside: the nodes before it are as the pass leaves them
-            dx, dy, dz = x[s, i, 0] - x[s, i - 1, 0], x[s, i, 1] - x[s, i - 1, 1], \
-                x[s, i, 2] - x[s, i - 1, 2]
-            r2 = rest_length[s, i - 1] * rest_length[s, i - 1]
-            qx, qy, qz = to_head(x[s, i, 0], x[s, i, 1], x[s, i, 2], rot, cx, cy, cz)
-            if abs(dx * dx + dy * dy + dz * dz - r2) > RESTORE_LENGTH_TOLERANCE * r2 or \
-                    qx * qx * ix + qy * qy * iy + qz * qz * iz < f_ok:
-                start = i
-                break
-        for i in range(start, n):
+    started = 0          # the strands past their first node the collider left off its rest
+    for i in range(2, n):  # distance or inside: the nodes before it are as the pass leaves them
+        for s in range(s0, s1):
+            bit = 1 << (s - s0)
+            if not walked & bit:
+                continue
+            if not started & bit:
+                dx, dy, dz = x[s, i, 0] - x[s, i - 1, 0], x[s, i, 1] - x[s, i - 1, 1], \
+                    x[s, i, 2] - x[s, i - 1, 2]
+                r2 = rest_length[s, i - 1] * rest_length[s, i - 1]
+                qx, qy, qz = to_head(x[s, i, 0], x[s, i, 1], x[s, i, 2], rot, cx, cy, cz)
+                if not (abs(dx * dx + dy * dy + dz * dz - r2) > RESTORE_LENGTH_TOLERANCE * r2
+                        or qx * qx * ix + qy * qy * iy + qz * qz * iz < f_ok):
+                    continue
+                started |= bit
             ox, oy, oz = x[s, i, 0], x[s, i, 1], x[s, i, 2]
             px, py, pz = restore_node(
                 (ox, oy, oz), (x[s, i - 1, 0], x[s, i - 1, 1], x[s, i - 1, 2]),
@@ -532,12 +539,10 @@ def ftl_collide_block(model, state, motion, params, work, contact, s0, s1):
     if friction > 0.0:
         carry_rigid_block(x, rot_rel, pos_prev, pos, x_ref, s0, s1)
     ftl_block(model, state, motion, inner_steps, bend_stiffness, s_damp, corr, s0, s1)
-    pushed = 0
-    for s in range(s0, s1):      # strand by strand: only the strands pushed are walked again
-        p = project_block(x, ref, inv_mass, contact, s, s + 1)
-        if p:
-            ftl_restore_block(x, rest, rest_length, rot, ellipsoid_of(contact), corr, s, s + 1)
-        pushed += p
+    pushed, walked = project_block(x, ref, inv_mass, contact, s0, s1)
+    if walked:                   # only the strands pushed are walked again
+        ftl_restore_block(x, rest, rest_length, rot, ellipsoid_of(contact), corr, s0, s1,
+                          walked)
     return finalize_block(x, v, x_old, inv_mass, corr, s0, s1, dt, max_disp, s_damp), pushed
 
 
