@@ -37,21 +37,26 @@ from msg_adapters.pointcloud import CloudBuffer, pack_rgb_u32  # noqa: E402
 WARM_FRAMES = 30
 
 
-def frame_times(sim, frames, warm=WARM_FRAMES):
-    """Per-frame times [ms] of ``sim`` following the bundled walk at 60 Hz for ``frames``
-    frames after ``warm`` untimed ones: ``{'guides', 'ghosts_cloud', 'frame'}`` lists (see the
-    module docstring) and ``'frame_cpu'``, ``'guides_cpu'``, ``'ghosts_cloud_cpu'``, the CPU time
-    of this process a frame and in each part (on a shared machine, what the work costs whatever
-    else runs)."""
-    poses = bag_io.read_head_poses(bag_io.bundled_bag())
-    idx = np.arange(0, len(poses), 2)
-    n_frames = min(frames + warm, len(idx))
-    cloud = CloudBuffer()
-    rgb = pack_rgb_u32(np.ones((sim.ghosts.count, 4)))
-    parts = {'guides': [], 'ghosts_cloud': [], 'frame': [], 'frame_cpu': [], 'guides_cpu': [],
-             'ghosts_cloud_cpu': []}
-    for k in range(n_frames):
-        i = idx[k]
+class FrameClock:
+    """One simulator following the bundled walk at 60 Hz, a frame at a time: :meth:`frame`
+    runs frame ``k`` (``push_pose`` + ``advance_to`` + the cloud's bytes) and returns its times
+    [ms]: ``frame``, ``guides``, ``ghosts_cloud`` (wall clock) and ``frame_cpu``, ``guides_cpu``,
+    ``ghosts_cloud_cpu`` (CPU time of this process: on a shared machine, what the work costs
+    whatever else runs)."""
+
+    def __init__(self, sim):
+        self.sim = sim
+        poses = bag_io.read_head_poses(bag_io.bundled_bag())
+        self.poses = poses
+        self.idx = np.arange(0, len(poses), 2)
+        self.cloud = CloudBuffer()
+        self.rgb = pack_rgb_u32(np.ones((sim.ghosts.count, 4)))
+
+    def __len__(self):
+        return len(self.idx)
+
+    def frame(self, k):
+        sim, poses, i = self.sim, self.poses, self.idx[k]
         t = int(poses.t_ns[i])
         c0 = time.process_time()
         t0 = time.perf_counter()
@@ -60,16 +65,28 @@ def frame_times(sim, frames, warm=WARM_FRAMES):
         t1 = time.perf_counter()
         c1 = time.process_time()
         n_strands, n_points, write = sim.record_writer()
-        cloud.encode(n_strands, n_points, write, frame_id='world', stamp_ns=t, packed_rgb=rgb)
+        self.cloud.encode(n_strands, n_points, write, frame_id='world', stamp_ns=t,
+                          packed_rgb=self.rgb)
         t2 = time.perf_counter()
         c2 = time.process_time()
+        return {'frame_cpu': (c2 - c0) * 1e3, 'guides_cpu': (c1 - c0) * 1e3,
+                'ghosts_cloud_cpu': (c2 - c1) * 1e3, 'guides': (t1 - t0) * 1e3,
+                'ghosts_cloud': (t2 - t1) * 1e3, 'frame': (t2 - t0) * 1e3}
+
+
+def frame_times(sim, frames, warm=WARM_FRAMES):
+    """Per-frame times [ms] of ``sim`` following the bundled walk at 60 Hz for ``frames``
+    frames after ``warm`` untimed ones: lists of :meth:`FrameClock.frame`'s times, and
+    ``substeps_per_frame``."""
+    clock = FrameClock(sim)
+    n_frames = min(frames + warm, len(clock))
+    parts = {'guides': [], 'ghosts_cloud': [], 'frame': [], 'frame_cpu': [], 'guides_cpu': [],
+             'ghosts_cloud_cpu': []}
+    for k in range(n_frames):
+        times = clock.frame(k)
         if k >= warm:
-            parts['frame_cpu'].append((c2 - c0) * 1e3)
-            parts['guides_cpu'].append((c1 - c0) * 1e3)
-            parts['ghosts_cloud_cpu'].append((c2 - c1) * 1e3)
-            parts['guides'].append((t1 - t0) * 1e3)
-            parts['ghosts_cloud'].append((t2 - t1) * 1e3)
-            parts['frame'].append((t2 - t0) * 1e3)
+            for key, value in times.items():
+                parts[key].append(value)
     parts['substeps_per_frame'] = sim.counters.substeps / max(1, n_frames)
     return parts
 

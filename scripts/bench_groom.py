@@ -16,8 +16,11 @@ temporary folder, then:
 * **frame**: the default scene (blend tracker, FTL guides, one guide per 16 strands, 16 nodes)
   on the imported groom and on a procedural groom of the same strand and node counts, each
   following the bundled walk at 60 Hz as scripts/bench_frame.py does (push_pose, advance_to,
-  the cloud's bytes), ``--repeats`` times alternating; the median over the runs of each run's
-  median frame (wall clock and CPU time), their ratio, the same for the frame's two parts (CPU
+  the cloud's bytes), ``--repeats`` times, the two side by side a frame at a time (each first in
+  turn), so that load on a shared machine falls on both alike; the median over all frames of
+  each frame's CPU time on the imported groom over the same frame's on the procedural one
+  (``paired_ratio_cpu``, with its quartiles), the median over the runs of each run's median
+  frame (wall clock and CPU time) and their ratio, the same for the frame's two parts (CPU
   time: the guide substeps, ``advance_to``; the ghosts with the cloud's bytes) and the guides'
   head contacts a substep; then the same without the head collider (``collider.shape: none``),
   where the two grooms differ only in their shapes' lengths.
@@ -38,7 +41,7 @@ use_numba_cache()      # before numba loads: the cache make install fills
 import numba  # noqa: E402
 import numpy as np  # noqa: E402
 
-from bench_frame import frame_times  # noqa: E402
+from bench_frame import FrameClock, WARM_FRAMES  # noqa: E402
 import make_groom_file  # noqa: E402
 from hair_tracking.core.scene import Scene  # noqa: E402
 from hair_tracking.evaluation.provenance import command_line, provenance  # noqa: E402
@@ -46,7 +49,7 @@ from hair_tracking.grooms.build import build_groom, import_groom  # noqa: E402
 from hair_tracking.grooms.formats import read_strands  # noqa: E402
 from hair_tracking.simulator import HairSimulator, warm_up  # noqa: E402
 
-#: The parts of a frame timed on their own (:func:`bench_frame.frame_times`): the guide
+#: The parts of a frame timed on their own (:meth:`bench_frame.FrameClock.frame`): the guide
 #: substeps and the ghosts with the cloud's bytes.
 PARTS = ('guides', 'ghosts_cloud')
 
@@ -98,35 +101,51 @@ def main(argv=None):
             wall = {name: [] for name in scenes}
             cpu = {name: [] for name in scenes}
             part_cpu = {part: {name: [] for name in scenes} for part in PARTS}
+            pair_ratio = []
             contacts = {}
             for r in range(args.repeats):
-                for name, scene in scenes.items():
-                    sim = HairSimulator(scene)
-                    parts = frame_times(sim, args.frames)
-                    wall[name].append(float(np.median(parts['frame'])))
-                    cpu[name].append(float(np.median(parts['frame_cpu'])))
+                clocks = {name: FrameClock(HairSimulator(scene))
+                          for name, scene in scenes.items()}
+                names = list(clocks)
+                n_frames = min(args.frames + WARM_FRAMES, min(len(c) for c in clocks.values()))
+                times = {name: [] for name in names}
+                for k in range(n_frames):
+                    for name in (names if k % 2 else names[::-1]):    # each first in turn
+                        t = clocks[name].frame(k)
+                        if k >= WARM_FRAMES:
+                            times[name].append(t)
+                for name in names:
+                    wall[name].append(float(np.median([t['frame'] for t in times[name]])))
+                    cpu[name].append(float(np.median([t['frame_cpu'] for t in times[name]])))
                     for part in PARTS:
-                        part_cpu[part][name].append(float(np.median(parts[part + '_cpu'])))
-                    contacts[name] = sim.guide_solver.stats['contacts_total'] / max(
-                        1, sim.guide_solver.stats['substeps'])
-                    print(f'collider {collider}, run {r + 1}: {name:10s} '
-                          f'{sim.ghosts.count} strands x {sim.ghosts.nodes} nodes, '
-                          f'{sim.guides.count} guides: median frame {wall[name][-1]:.3f} ms '
-                          f'wall, {cpu[name][-1]:.3f} ms CPU (guides '
-                          f'{part_cpu["guides"][name][-1]:.3f}, ghosts + cloud '
-                          f'{part_cpu["ghosts_cloud"][name][-1]:.3f})', flush=True)
+                        part_cpu[part][name].append(
+                            float(np.median([t[part + '_cpu'] for t in times[name]])))
+                    stats = clocks[name].sim.guide_solver.stats
+                    contacts[name] = stats['contacts_total'] / max(1, stats['substeps'])
+                pair_ratio += [a['frame_cpu'] / b['frame_cpu']
+                               for a, b in zip(times['imported'], times['procedural'])]
+                print(f'collider {collider}, run {r + 1}: median frame CPU imported '
+                      f'{cpu["imported"][-1]:.3f} ms, procedural {cpu["procedural"][-1]:.3f} ms; '
+                      f'frame by frame imported / procedural median '
+                      f'{np.median(pair_ratio[-len(times["imported"]):]):.3f}', flush=True)
             row = {'wall_ms': {n: float(np.median(v)) for n, v in wall.items()},
                    'cpu_ms': {n: float(np.median(v)) for n, v in cpu.items()},
                    'runs_wall_ms': wall, 'runs_cpu_ms': cpu,
                    'guide_contacts_per_substep': contacts}
             row['ratio_wall'] = row['wall_ms']['imported'] / row['wall_ms']['procedural']
             row['ratio_cpu'] = row['cpu_ms']['imported'] / row['cpu_ms']['procedural']
+            row['paired_ratio_cpu'] = float(np.median(pair_ratio))
+            row['paired_ratio_cpu_quartiles'] = [float(q) for q in
+                                                 np.percentile(pair_ratio, [25, 75])]
             for part in PARTS:
                 med = {n: float(np.median(v)) for n, v in part_cpu[part].items()}
                 row[part + '_cpu_ms'] = med
                 row[part + '_ratio_cpu'] = med['imported'] / med['procedural']
             frame[collider] = row
-            print(f'collider {collider}: imported / procedural frame: {row["ratio_cpu"]:.3f} '
+            print(f'collider {collider}: imported / procedural frame: frame by frame '
+                  f'{row["paired_ratio_cpu"]:.3f} (quartiles '
+                  f'{row["paired_ratio_cpu_quartiles"][0]:.3f}-'
+                  f'{row["paired_ratio_cpu_quartiles"][1]:.3f}); {row["ratio_cpu"]:.3f} '
                   f'(CPU medians {row["cpu_ms"]["imported"]:.3f} / '
                   f'{row["cpu_ms"]["procedural"]:.3f} ms), {row["ratio_wall"]:.3f} (wall); '
                   f'guides {row["guides_ratio_cpu"]:.3f}, ghosts + cloud '
