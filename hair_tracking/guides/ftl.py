@@ -416,7 +416,7 @@ def ftl_block(model, state, motion, inner_steps, bend_stiffness, s_damp, corr, s
         if inner_steps > 1:
             place_roots_block(x, x_old, rest, rot, pos, (r + 1) / inner_steps, s0, s1)
         if r > 0:
-            inner_predict_block(x, v, x_old, inv_mass, corr, gravity, damp_h, h, s_damp, r == 1,
+            inner_predict_block(state, inv_mass, corr, gravity, (damp_h, h, s_damp), r == 1,
                                 s0, s1)
         if bend_stiffness > 0.0:
             jacobi_bend_block(x, bend_rest, bend_w, bend_stiffness, s0, s1)
@@ -438,7 +438,7 @@ def place_roots_block(x, x_old, rest, rot, pos, t, s0, s1):
 
 
 @njit(cache=True, fastmath=FASTMATH, error_model='numpy')
-def inner_predict_block(x, v, x_old, inv_mass, corr, gravity, damp, h, s_damp, first, s0, s1):
+def inner_predict_block(state, inv_mass, corr, gravity, step, first, s0, s1):
     """The prediction of an inner step ``h`` [s] after the first (see :func:`ftl_block`) of the
     free nodes of strands ``s0 <= s < s1``: each node's velocity over the inner step before,
     ``(x - x_start) / h - s_damp corr_{i+1} / h`` with that step's FTL correction (as
@@ -448,7 +448,10 @@ def inner_predict_block(x, v, x_old, inv_mass, corr, gravity, damp, h, s_damp, f
     ``v`` holds, between inner steps, ``-x_start / h + s_damp corr_{i+1} / h`` of the step to
     come (``corr`` the sum of the passes so far), so that no start positions are stored;
     ``first``: the step before was the first, whose start is ``x_old`` and whose correction is
-    all of ``corr``.  Finalize overwrites ``v``."""
+    all of ``corr``.  Finalize overwrites ``v``.  ``state``: the fields of
+    :data:`~hair_tracking.guides.integrate.GuideState`; ``step``: ``(damp, h, s_damp)``."""
+    x, v, x_old = state
+    damp, h, s_damp = step
     n = x.shape[1]
     inv_h = 1.0 / h
     gx, gy, gz = gravity[0] * h, gravity[1] * h, gravity[2] * h
