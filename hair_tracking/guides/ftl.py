@@ -546,7 +546,7 @@ def ftl_advance(model, state, drive, params, collide, collider, work, stop):
     return ``steps[0]`` holds every substep's largest squared node displacement [m^2] (NaN
     when one is NaN; not measured, and ``before`` not touched, when ``steps`` is (B, 0)).
     ``stop``: ``(rigid (K,), limit, gdt2)``, active when ``limit > 0`` and the displacements
-    are measured: substep ``k + 1`` is not taken when ``max(rigid[k + 1], speed dt) + gdt2 >
+    are measured: substep ``k + 1`` is not taken when ``rigid[k + 1] + speed dt + gdt2 >
     limit`` with ``speed`` the largest displacement of substep ``k`` over ``dt`` (the
     simulator's split estimate, :meth:`~hair_tracking.simulator.HairSimulator._split_count`).
     Returns the substeps taken, then the clamped and the collider-moved node counts of the
