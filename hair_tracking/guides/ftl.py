@@ -35,7 +35,8 @@ import numpy as np
 from numba import njit, prange
 
 from hair_tracking.colliders.bounds import near
-from hair_tracking.colliders.contact import ellipsoid_contact, outside_within, surface_point
+from hair_tracking.colliders.contact import (ellipsoid_contact, ellipsoid_level, local_of,
+                                             outside_within, surface_point)
 from hair_tracking.colliders.crease import escape
 from hair_tracking.guides.collision import placed, placed_shape, rotation_entries, to_head
 from hair_tracking.guides.integrate import (BLOCK, carry_rigid_block, FASTMATH, finalize_block,
@@ -75,11 +76,14 @@ def ftl_pass_block(x, rest, rest_length, rot, corr, s0, s1, add, collide):
     (``add``: added to what it holds, a later inner step of :func:`ftl_block`).
 
     ``rot`` (3, 3) is the head rotation (only used for collapsed segments).  ``collide``:
-    ``None``, or ``(x_ref, inv_mass, contact)`` for the collision-aware pass: node ``i`` of
-    the block's strands placed, every free one (``inv_mass > 0``) inside the head collider
-    (``contact``, :data:`~hair_tracking.guides.collision.Contact`) goes through
-    :func:`contact_node` before node ``i + 1`` is placed.  Returns the nodes the collider
-    moved.
+    ``None``, or ``(x_ref, inv_mass, contact)`` for the pass aware of the head collider: the
+    friction reference (S, N, 3), the inverse masses and the collider placed by the head pose
+    (:data:`~hair_tracking.guides.collision.Contact`).  Then, node ``i`` of the block's strands
+    placed, every free one (``inv_mass > 0``) inside the collider goes through
+    :func:`contact_node` before node ``i + 1`` is placed (the inside test of a node index in
+    the placement's loop, without branches; the contacts after it).  Returns the nodes the
+    collider moved.  (One function for both: numba compiles each variant with the other's
+    branches removed.)
     """
     n = x.shape[1]
     for s in range(s0, s1):
@@ -89,7 +93,12 @@ def ftl_pass_block(x, rest, rest_length, rot, corr, s0, s1, add, collide):
                 corr[s, i, 1] = 0.0
                 corr[s, i, 2] = 0.0
     pushed = 0
+    if collide is not None:
+        x_ref, inv_mass, contact = collide
+        rot9, cx, cy, cz, ax, ay, az, _, _ = contact
+        ix, iy, iz = 1.0 / (ax * ax), 1.0 / (ay * ay), 1.0 / (az * az)
     for i in range(2, n):
+        inside = 0
         for s in range(s0, s1):
             r = rest_length[s, i - 1]
             dx = x[s, i, 0] - x[s, i - 1, 0]
@@ -112,12 +121,18 @@ def ftl_pass_block(x, rest, rest_length, rot, corr, s0, s1, add, collide):
             x[s, i, 0] = nx
             x[s, i, 1] = ny
             x[s, i, 2] = nz
+            if collide is not None:
+                qx, qy, qz = local_of(nx, ny, nz, rot9, cx, cy, cz)
+                hit = inv_mass[s, i] > 0.0 and ellipsoid_level(qx, qy, qz, ix, iy, iz) < 1.0
+                inside |= (1 if hit else 0) << (s - s0)
         if collide is not None:
-            x_ref, inv_mass, contact = collide
-            for s in range(s0, s1):
-                if inv_mass[s, i] > 0.0:
-                    pushed += contact_node(x, x_ref, rest, rest_length, rot, corr, contact,
-                                           s, i)
+            while inside:
+                k = 0
+                while not (inside >> k) & 1:
+                    k += 1
+                inside &= inside - 1
+                pushed += contact_node(x, x_ref, rest, rest_length, rot, corr, contact, s0 + k,
+                                       i)
     return pushed
 
 
@@ -390,9 +405,12 @@ def ftl_block(model, state, motion, inner_steps, bend_stiffness, s_damp, corr, s
                                 s0, s1)
         if bend_stiffness > 0.0:
             jacobi_bend_block(x, bend_rest, bend_w, bend_stiffness, s0, s1)
-        last = r == inner_steps - 1
-        pushed = ftl_pass_block(x, rest, rest_length, motion[0], corr, s0, s1, r > 0,
-                                collide if last else None)
+        if collide is not None:
+            if r == inner_steps - 1:
+                pushed = ftl_pass_block(x, rest, rest_length, motion[0], corr, s0, s1, r > 0,
+                                        collide)
+                continue
+        ftl_pass_block(x, rest, rest_length, motion[0], corr, s0, s1, r > 0, None)
     return pushed
 
 
@@ -458,7 +476,7 @@ def inner_predict_block(state, inv_mass, corr, gravity, step, first, s0, s1):
 def ftl_collide_step(model, state, motion, params, work, collider):
     """Kernel: one FTL substep of all strands with the head collider, block by block (the
     block's strands stay in cache): :func:`ftl_step`'s predict and bending, then the FTL pass
-    aware of the collider (:func:`ftl_pass_block` with a collider: node by node from the root,
+    aware of the collider (:func:`ftl_pass_block` with ``collide``: node by node from the root,
     each node placed at its rest distance and, when inside, pushed out with friction and placed
     again, :func:`contact_node`; in the last inner step of a long substep), then finalize.
 
