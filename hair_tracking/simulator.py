@@ -436,11 +436,10 @@ class HairSimulator:
     def _split_count(self, dt: float, rigid: float, speed: float) -> int:
         """Parts to split a substep into so that no node moves farther than the split limit,
         with ``rigid`` [m] how far the head's motion carries the farthest node (:meth:`_rigid`)
-        and ``speed`` [m/s] the nodes' largest speed: their sum (a node moving against the head
-        meets it at both), plus gravity's ``|g| dt^2`` (the rule
+        and ``speed`` [m/s] the nodes' largest speed (the rule
         :func:`~hair_tracking.guides.integrate.split_due` applies inside a run)."""
         limit, floor = self._split_limit(dt)
-        motion = rigid + speed * dt + self._gravity_norm * dt * dt
+        motion = max(rigid, speed * dt) + self._gravity_norm * dt * dt
         if not motion > limit:          # also False for NaN: never split on bad numbers
             return 1
         return int(min(MAX_SPLIT, floor, math.ceil(motion / limit)))

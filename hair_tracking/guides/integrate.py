@@ -270,7 +270,7 @@ def split_due(far, dt, rigid, gdt2, limit):
     arithmetic as :meth:`~hair_tracking.simulator.HairSimulator._split_count` (compiled without
     fast-math flags, so the decision is the same to the last bit)."""
     step = math.sqrt(far) / dt * dt
-    motion = rigid + step + gdt2
+    motion = (step if step > rigid else rigid) + gdt2
     return motion > limit
 
 
