@@ -10,7 +10,7 @@ from hair_tracking.guides import ftl
 
 from hair_tracking import simulator
 
-from hair_tracking.colliders.contact import surface_point
+from hair_tracking.colliders.contact import SHALLOW_LEVEL, surface_point
 from hair_tracking.core.metrics import max_stretch
 from hair_tracking.core.model import StrandSet
 from hair_tracking.core.scene import Scene
@@ -187,7 +187,8 @@ def ref_ftl_collide_pass(x, x_ref, rest, rest_length, rot, pos, center, axes, re
     friction moves it back toward ``x_ref`` by ``friction`` of the tangential part, and it is put
     back at its rest distance while inside the ellipsoid scaled by ``1 - tolerance /
     max(axes)`` (at most ``iterations`` surface points).  ``corr`` receives the placements, not
-    the push."""
+    the push.  A node less than 1 % of the semi-axes deep goes one Newton step along the
+    gradient instead (:func:`contact.ellipsoid_contact_shallow`)."""
     x = x.copy()
     corr = corr.copy()
     c_world = rot @ center + pos
@@ -205,11 +206,18 @@ def ref_ftl_collide_pass(x, x_ref, rest, rest_length, rot, pos, center, axes, re
             p = place(x[s, i], s, i)
             corr[s, i] += p - x[s, i]
             q = rot.T @ (p - c_world)
-            if np.sum((q / axes) ** 2) < 1.0:
-                y = np.array(surface_point(q[0], q[1], q[2], axes[0], axes[1], axes[2], refine))
-                if friction > 0:
+            level = np.sum((q / axes) ** 2)
+            if level < 1.0:
+                if level > SHALLOW_LEVEL:   # one Newton step; friction about the gradient
+                    g = q / axes ** 2
+                    y = q - 0.5 * (level - 1.0) * g / (g @ g)
+                    normal = g
+                else:
+                    y = np.array(surface_point(q[0], q[1], q[2], axes[0], axes[1], axes[2],
+                                               refine))
                     normal = y / axes ** 2
-                    normal /= np.linalg.norm(normal)
+                if friction > 0:
+                    normal = normal / np.linalg.norm(normal)
                     m = y - rot.T @ (x_ref[s, i] - c_world)
                     y = y - friction * (m - (m @ normal) * normal)
                 pushed = rot @ y + c_world
