@@ -1,16 +1,16 @@
 #!/usr/bin/env python3
-"""How many placements the collision-aware FTL pass makes a node, on an imported groom and on a
-procedural groom of the same counts.
+"""How many placements the FTL pass makes a node the head collider pushed, on an imported groom
+and on a procedural groom of the same counts.
 
     python scripts/restore_placements.py [--strands 10000] [--vertices 100] [--substeps 10]
 
 Writes the synthetic ``.data`` groom of scripts/bench_groom.py (scripts/make_groom_file.py)
 into a temporary folder, runs the default scene (FTL guides, one guide per 16 strands) on it
 and on a procedural groom of the same strand count along the bundled walk at 60 Hz, and every
-fourth frame from the 20th on takes one more substep with the pass run in Python
-(:func:`~hair_tracking.guides.ftl.ftl_restore_block`'s ``py_func`` with a copy of
+fourth frame from the 20th on takes one more substep with the FTL pass run in Python
+(:func:`~hair_tracking.guides.ftl.ftl_pass_block`'s ``py_func`` with a copy of
 :func:`~hair_tracking.guides.ftl.restore_node` that counts), then puts the state back.  It
-prints, for each groom, the nodes the pass walked a substep and how many of them left
+prints, for each groom, the nodes the collider pushed a substep and how many of them left
 :func:`~hair_tracking.guides.ftl.restore_node` after 1, 2, ... placements.
 """
 import argparse
@@ -62,16 +62,20 @@ def counting_restore_node(hist):
 
 
 def placements(scene, substeps):
-    """``(walked nodes a substep, {placements: nodes})`` of ``scene`` along the bundled walk."""
+    """``(pushed nodes a substep, {placements: nodes})`` of ``scene`` along the bundled walk."""
     hist = collections.Counter()
     poses = bag_io.read_head_poses(bag_io.bundled_bag())
     sim = HairSimulator(scene)
-    names = ('restore_node', 'ftl_restore_block', 'ftl_collide_block', 'ftl_collide_step')
+    names = ('restore_node', 'contact_node', 'ftl_pass_block', 'ftl_block',
+             'ftl_collide_block', 'ftl_collide_step', 'ftl_collide_step_serial')
     compiled = {name: getattr(ftl, name) for name in names}
     python = {'restore_node': counting_restore_node(hist),
-              'ftl_restore_block': ftl.ftl_restore_block.py_func,
+              'contact_node': ftl.contact_node.py_func,
+              'ftl_pass_block': ftl.ftl_pass_block.py_func,
+              'ftl_block': ftl.ftl_block.py_func,
               'ftl_collide_block': ftl.ftl_collide_block.py_func,
-              'ftl_collide_step': ftl.ftl_collide_step_serial.py_func}
+              'ftl_collide_step': ftl.ftl_collide_step_serial.py_func,
+              'ftl_collide_step_serial': ftl.ftl_collide_step_serial.py_func}
     taken = 0
     for k in range(0, len(poses.t_ns) - 1, 2):
         t = int(poses.t_ns[k])
@@ -110,10 +114,10 @@ def main(argv=None):
                   'procedural': Scene().with_changes(groom__guides=guides,
                                                      groom__ghosts_per_guide=16)}
         for name, scene in scenes.items():
-            walked, hist = placements(scene, args.substeps)
+            pushed, hist = placements(scene, args.substeps)
             total = sum(hist.values())
             shares = ', '.join(f'{n}: {100.0 * c / total:.2f} %' for n, c in hist.items())
-            print(f'{name:10s} walked nodes a substep {walked:.0f}; placements: {shares}',
+            print(f'{name:10s} pushed nodes a substep {pushed:.0f}; placements: {shares}',
                   flush=True)
     return 0
 

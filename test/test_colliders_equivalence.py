@@ -339,3 +339,44 @@ def test_the_fitted_margin_is_the_guide_solvers_and_the_trackers():
         assert np.array_equal(axes, np.asarray(scene.collider.radii) + tracker)
     q = rng.normal(scale=0.1, size=(500, 3))
     assert math.isfinite(float(margin.outside_distance(q, RADII).max()))
+
+
+@pytest.mark.parametrize('radii', [RADII, (0.1, 0.1, 0.1)])
+@pytest.mark.parametrize('friction', [0.0, 0.3])
+def test_the_shallow_contact_is_the_contact_models_to_a_micrometre(radii, friction):
+    """contact.ellipsoid_contact_shallow (the FTL guides' pass): for nodes with F(q) above
+    SHALLOW_LEVEL (up to about half a per cent of the semi-axes deep), its Newton step and
+    friction about the gradient land within a few micrometres of ellipsoid_contact's refined
+    projection and friction about the surface normal (2.4 um at most here), on the surface to
+    10 um / a; deeper nodes are ellipsoid_contact's exactly; outside nodes stay."""
+    rng = np.random.default_rng(7 + int(friction * 10))
+    rot = quat_to_matrix(quat_normalize(rng.normal(size=4)))
+    pos = rng.normal(scale=0.2, size=3)
+    center = np.array([0.01, -0.02, 0.03])
+    axes = np.asarray(radii) + 0.004
+    placed = collision.placed((center, np.asarray(radii), 0.004, friction, 2), rot, pos)
+    shallow_f = contact.SHALLOW_LEVEL
+    seen = {'shallow': 0, 'deep': 0, 'out': 0}
+    for k in range(600):
+        u = rng.normal(size=3)
+        u /= np.linalg.norm(u / axes)
+        level = rng.choice([1.02, 0.9999, 0.999, 0.995, 0.9905, 0.9, 0.5])
+        q = u * math.sqrt(level)          # F(q) = level
+        x = rot @ (q + center) + pos
+        ref = x + rng.normal(scale=0.002, size=3)
+        new = contact.ellipsoid_contact_shallow(*x, *ref, placed)
+        old = contact.ellipsoid_contact(*x, *ref, placed)
+        assert new[0] == old[0]
+        if not old[0]:
+            seen['out'] += 1
+            assert new[1:] == tuple(x)
+        elif level > shallow_f:
+            seen['shallow'] += 1
+            assert np.linalg.norm(np.subtract(new[1:], old[1:])) < 5e-6
+            y = rot.T @ (np.array(new[1:]) - pos) - center
+            if friction == 0.0:
+                assert abs(np.sum((y / axes) ** 2) - 1.0) < 1e-5 / axes.min()
+        else:
+            seen['deep'] += 1
+            assert new == old
+    assert min(seen.values()) > 50

@@ -254,7 +254,7 @@ def test_ftl_pass_fallback_on_collapsed_segment():
     expected = p.copy()
     ref_ftl_pass(expected, c['rest'], c['rest_length'], c['rot'])
     corr = np.zeros_like(p)
-    ftl.ftl_pass_block(p, c['rest'], c['rest_length'], c['rot'], corr, 0, 3, False)
+    ftl.ftl_pass_block(p, c['rest'], c['rest_length'], c['rot'], corr, 0, 3, False, None)
     assert np.all(np.isfinite(p))
     assert np.allclose(p, expected, atol=ATOL)
     # the collapsed node went back to its rest-shape place relative to its predecessor

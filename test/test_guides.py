@@ -379,13 +379,12 @@ def test_serial_variants_run_small_problems_with_the_same_results(monkeypatch, k
 
 
 @pytest.mark.parametrize('friction', [0.0, 0.3])
-def test_ftl_collide_step_is_the_separate_kernels_in_one_block_loop(friction):
-    """The fused FTL substep with the head collider gives the hair, velocities, corrections and
-    counts of the kernels it fuses run one after another over all strands: FTL step without
-    finalize, the collider's projection (friction against the rigidly carried start), the
-    collision-aware second pass, finalize.  Each substep starts both from the same state; they
-    agree to rounding (the same block bodies, but LLVM may contract an inlined body
-    differently in each kernel)."""
+def test_ftl_collide_step_then_finalize_is_the_fused_step(friction):
+    """The FTL substep with the head collider stopped before finalize (as with a body, whose
+    contact comes between), then the finalize kernel, gives the hair, velocities, corrections
+    and counts of the fused substep.  Each substep starts both from the same state; they agree
+    to rounding (the same block bodies, but LLVM may contract an inlined body differently in
+    each kernel)."""
     sc = scene('ftl', collider__shape='ellipsoid', collider__friction=friction,
                solver__shock_propagation=0.5, solver__max_displacement=0.004)
     rest = np.zeros((40, 12, 3))
@@ -393,7 +392,6 @@ def test_ftl_collide_step_is_the_separate_kernels_in_one_block_loop(friction):
     rest[:, :, 2] = 0.11 - 0.02 * np.arange(12)[None, :]
     fused_st, split_st = StrandSet.from_rest(rest), StrandSet.from_rest(rest)
     fused, split = GuideSolver(fused_st, sc), GuideSolver(split_st, sc)
-    c = split.collider
     x_ref = np.empty_like(split_st.x)
     x_old = np.empty_like(split_st.x)
     corr = np.zeros_like(split_st.x)
@@ -410,23 +408,20 @@ def test_ftl_collide_step_is_the_separate_kernels_in_one_block_loop(friction):
         np.copyto(split_st.x, fused_st.x)
         np.copyto(split_st.v, fused_st.v)
         fused.step(dt, h_prev, head)
-        # the same substep as separate kernels
+        # the same substep stopped before finalize, then finalize
         st = split_st
         rot, pos = head.rotation, head.position
         rot_rel = np.empty((3, 3))
         integrate.head_motion(h_prev.rotation, h_prev.position, rot, pos, rot_rel)
-        integrate.carry_rigid(st.x, rot_rel, h_prev.position, pos, x_ref)
         motion = (rot, pos, rot_rel, h_prev.position, gravity, np.exp(-sc.damping * dt), dt,
                   shock)
         params = (guides.ftl_inner_steps(dt),
                   guides.ftl_bend_stiffness(sc.solver.bend_stiffness, dt),
                   float(sc.solver.ftl_damping), max_disp, False)
-        ftl.ftl_step(split.model, (st.x, st.v, x_old), motion, params, corr)
-        ref = x_ref if friction > 0 else x_old
-        pushed = c.project(st.x, ref, st.inv_mass, rot, pos)
-        if pushed:
-            ftl.ftl_restore(st.x, st.rest, st.rest_length, rot, pos, c.center, c.radii + c.margin,
-                            c.refine, corr)
+        none_clamped, pushed = ftl.ftl_collide_step(split.model, (st.x, st.v, x_old), motion,
+                                                    params, (corr, x_ref),
+                                                    split._collider_model())
+        assert none_clamped == 0
         clamped += integrate.finalize(st.x, st.v, x_old, st.inv_mass, corr, dt,
                                       max_disp * guides.ftl_inner_steps(dt),
                                       float(sc.solver.ftl_damping))

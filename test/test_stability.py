@@ -10,7 +10,7 @@ from hair_tracking.guides import ftl
 
 from hair_tracking import simulator
 
-from hair_tracking.colliders.contact import surface_point
+from hair_tracking.colliders.contact import SHALLOW_LEVEL, surface_point
 from hair_tracking.core.metrics import max_stretch
 from hair_tracking.core.model import StrandSet
 from hair_tracking.core.scene import Scene
@@ -18,7 +18,7 @@ from hair_tracking.core.transforms import quat_from_axis_angle, quat_to_matrix
 from hair_tracking.evaluation import stability
 from hair_tracking.evaluation.provenance import provenance
 from hair_tracking.evaluation import synthetic_motion as sm
-from hair_tracking.guides.collision import Collider, outside_distance
+from hair_tracking.guides.collision import Collider, outside_distance, placed
 from hair_tracking.guides.solver import (BEND_REFERENCE_DT, GuideSolver, ftl_inner_steps,
                                          ftl_bend_stiffness)
 from hair_tracking.simulator import HairSimulator
@@ -179,33 +179,60 @@ def test_outputs_written(tmp_path):
 
 
 # ------------------------------------------------------------------ the fixes
-def ref_ftl_restore(x, rest, rest_length, rot, pos, center, axes, refine, corr, iterations,
-                    tolerance):
-    """Plain numpy/python reference of :func:`ftl.ftl_restore`: placements stop once one lies
-    outside the ellipsoid scaled by ``1 - tolerance / max(axes)``."""
+def ref_ftl_collide_pass(x, x_ref, rest, rest_length, rot, pos, center, axes, refine,
+                         friction, corr, iterations, tolerance):
+    """Plain numpy/python reference of the FTL pass with the head collider
+    (:func:`ftl.ftl_pass_block` with ``collide``, corrections added): node by node, each put at
+    its rest distance from its predecessor; one inside the ellipsoid goes to its surface point,
+    friction moves it back toward ``x_ref`` by ``friction`` of the tangential part, and it is put
+    back at its rest distance while inside the ellipsoid scaled by ``1 - tolerance /
+    max(axes)`` (at most ``iterations`` surface points).  ``corr`` receives the placements, not
+    the push.  A node less than 1 % of the semi-axes deep goes one Newton step along the
+    gradient instead (:func:`contact.ellipsoid_contact_shallow`)."""
     x = x.copy()
     corr = corr.copy()
     c_world = rot @ center + pos
-    for s in range(x.shape[0]):
-        for i in range(2, x.shape[1]):
-            old = x[s, i].copy()
-            p = old.copy()
-            for k in range(iterations + 1):
-                d = p - x[s, i - 1]
-                n = np.linalg.norm(d)
-                if n > 1e-12:
-                    p = x[s, i - 1] + rest_length[s, i - 1] * d / n
+
+    def place(p, s, i):
+        d = p - x[s, i - 1]
+        n = np.linalg.norm(d)
+        if n > 1e-12:
+            return x[s, i - 1] + rest_length[s, i - 1] * d / n
+        e = rot @ (rest[s, i] - rest[s, i - 1])
+        return x[s, i - 1] + rest_length[s, i - 1] * e / np.linalg.norm(e)
+
+    for i in range(2, x.shape[1]):
+        for s in range(x.shape[0]):
+            p = place(x[s, i], s, i)
+            corr[s, i] += p - x[s, i]
+            q = rot.T @ (p - c_world)
+            level = np.sum((q / axes) ** 2)
+            if level < 1.0:
+                if level > SHALLOW_LEVEL:   # one Newton step; friction about the gradient
+                    g = q / axes ** 2
+                    y = q - 0.5 * (level - 1.0) * g / (g @ g)
+                    normal = g
                 else:
-                    e = rot @ (rest[s, i] - rest[s, i - 1])
-                    p = x[s, i - 1] + rest_length[s, i - 1] * e / np.linalg.norm(e)
-                if k == iterations:
-                    break
-                q = rot.T @ (p - c_world)
-                if np.sqrt(np.sum((q / axes) ** 2)) >= 1.0 - tolerance / axes.max():
-                    break
-                y = np.array(surface_point(q[0], q[1], q[2], axes[0], axes[1], axes[2], refine))
-                p = rot @ y + c_world
-            corr[s, i] += p - old
+                    y = np.array(surface_point(q[0], q[1], q[2], axes[0], axes[1], axes[2],
+                                               refine))
+                    normal = y / axes ** 2
+                if friction > 0:
+                    normal = normal / np.linalg.norm(normal)
+                    m = y - rot.T @ (x_ref[s, i] - c_world)
+                    y = y - friction * (m - (m @ normal) * normal)
+                pushed = rot @ y + c_world
+                p = pushed
+                for k in range(iterations + 1):
+                    p = place(p, s, i)
+                    if k == iterations:
+                        break
+                    q = rot.T @ (p - c_world)
+                    if np.sqrt(np.sum((q / axes) ** 2)) >= 1.0 - tolerance / axes.max():
+                        break
+                    y = np.array(surface_point(q[0], q[1], q[2], axes[0], axes[1], axes[2],
+                                               refine))
+                    p = rot @ y + c_world
+                corr[s, i] += p - pushed
             x[s, i] = p
     return x, corr
 
@@ -231,7 +258,8 @@ def _into_head(rest, rng):
     return x
 
 
-def test_ftl_restore_matches_reference_and_keeps_lengths():
+@pytest.mark.parametrize('friction', [0.0, 0.4])
+def test_ftl_collide_pass_matches_reference_and_keeps_lengths(friction):
     rng = np.random.default_rng(11)
     rest = _random_strands(rng)
     st = StrandSet.from_rest(rest)
@@ -241,12 +269,18 @@ def test_ftl_restore_matches_reference_and_keeps_lengths():
     axes = np.array([0.1, 0.09, 0.11])
     # world positions scattered around the head, many inside the ellipsoid
     x = _into_head(rest, rng) @ rot.T + pos
+    x_ref = x + rng.normal(scale=5e-3, size=x.shape)
     corr = rng.normal(scale=1e-3, size=x.shape)
-    x_ref, corr_ref = ref_ftl_restore(x, rest, st.rest_length, rot, pos, center, axes, 2, corr,
-                                      ftl.RESTORE_ITERATIONS, ftl.RESTORE_TOLERANCE)
+    x_want, corr_want = ref_ftl_collide_pass(x, x_ref, rest, st.rest_length, rot, pos, center,
+                                             axes, 2, friction, corr, ftl.RESTORE_ITERATIONS,
+                                             ftl.RESTORE_TOLERANCE)
     xk, ck = x.copy(), corr.copy()
-    ftl.ftl_restore(xk, rest, st.rest_length, rot, pos, center, axes, 2, ck)
-    assert np.allclose(xk, x_ref, atol=1e-12) and np.allclose(ck, corr_ref, atol=1e-12)
+    contact = placed((center, axes, 0.0, friction, 2), rot, pos)
+    pushed = ftl.ftl_pass_block(xk, rest, st.rest_length, rot, ck, 0, xk.shape[0], True,
+                                (x_ref, st.inv_mass, contact))
+    assert pushed >= 5
+    np.testing.assert_allclose(xk, x_want, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(ck, corr_want, rtol=0, atol=1e-12)
     assert max_stretch(xk, st.rest_length) < 1e-12          # exact lengths
     # the pass really moved nodes out of the ellipsoid (not a no-op on this input): from
     # centimetres inside to a fraction of a millimetre

@@ -108,7 +108,7 @@ def project_ellipsoid(x, x_prev, inv_mass, rot, pos, collider):
     for blk in prange((n + BLOCK - 1) // BLOCK):
         s0 = np.int64(blk) * BLOCK   # (as in the serial variant: one compiled block body)
         contact = (rotation_entries(rot), cx, cy, cz, ax, ay, az, fr, refine)
-        contacts += project_block(x, x_prev, inv_mass, contact, s0, min(s0 + BLOCK, n))[0]
+        contacts += project_block(x, x_prev, inv_mass, contact, s0, min(s0 + BLOCK, n))
     return contacts
 
 
@@ -119,7 +119,7 @@ def project_ellipsoid_serial(x, x_prev, inv_mass, rot, pos, collider):
     n = x.shape[0]
     contacts = 0
     for s0 in range(0, n, BLOCK):
-        contacts += project_block(x, x_prev, inv_mass, contact, s0, min(s0 + BLOCK, n))[0]
+        contacts += project_block(x, x_prev, inv_mass, contact, s0, min(s0 + BLOCK, n))
     return contacts
 
 
@@ -134,10 +134,7 @@ MAX_VECTOR_REFINE = 2
 @njit(cache=True, fastmath=FASTMATH, error_model='numpy')
 def project_block(x, x_prev, inv_mass, contact, s0, s1):
     """:func:`project_ellipsoid` of the strands ``s0 <= s < s1`` (``contact`` the fields of
-    :data:`Contact`): its loop body, and the collision of a kernel that runs a whole substep
-    block by block (:func:`~hair_tracking.guides.ftl.ftl_collide_step`).  Returns ``(contacts,
-    pushed)``: the nodes moved, and an integer with bit ``s - s0`` set for every strand with a
-    node moved (the first 64 strands).
+    :data:`Contact`): its loop body.  Returns the number of nodes moved.
 
     Every node's arithmetic is :func:`~hair_tracking.colliders.contact.ellipsoid_contact`'s,
     in passes over the pushed nodes only, laid out contiguously (as the ghosts' contact,
@@ -162,7 +159,7 @@ def project_block(x, x_prev, inv_mass, contact, s0, s1):
             w[_FLAG, (s - s0) * n + i] = 1.0 if inside else 0.0
             m += 1 if inside else 0
     if m == 0:
-        return 0, 0
+        return 0
     m = 0
     for c in range((s1 - s0) * n):
         w[_IDX, m] = c
@@ -202,16 +199,13 @@ def project_block(x, x_prev, inv_mass, contact, s0, s1):
                 yx, yy, yz = ellipsoid_friction(yx, yy, yz, px, py, pz, ix, iy, iz, mu)
             w[_PX, c], w[_PY, c], w[_PZ, c] = world_of(yx, yy, yz, rot, cx, cy, cz)
     # 4. scatter
-    pushed = 0
     for c in range(m):
         j = int(w[_IDX, c])
         s, i = s0 + j // n, j % n
         x[s, i, 0] = w[_PX, c]
         x[s, i, 1] = w[_PY, c]
         x[s, i, 2] = w[_PZ, c]
-        if s - s0 < 64:
-            pushed |= 1 << (s - s0)
-    return m, pushed
+    return m
 
 
 @njit(cache=True, nogil=True, parallel=True, fastmath=FASTMATH, error_model='numpy')

@@ -32,13 +32,13 @@ from collections import namedtuple
 import math
 
 import numpy as np
-from numba import int64, njit, prange
+from numba import njit, prange
 
 from hair_tracking.colliders.bounds import near
-from hair_tracking.colliders.contact import outside_within, surface_point
+from hair_tracking.colliders.contact import (ellipsoid_contact_shallow, ellipsoid_level,
+                                             local_of, outside_within, surface_point)
 from hair_tracking.colliders.crease import escape
-from hair_tracking.guides.collision import (placed, placed_shape, project_block,
-                                            rotation_entries, to_head, world_center)
+from hair_tracking.guides.collision import placed, placed_shape, rotation_entries, to_head
 from hair_tracking.guides.integrate import (BLOCK, carry_rigid_block, FASTMATH, finalize_block,
                                             max_step_sq_block, predict_block, split_due)
 from hair_tracking.guides.pbd_constraints import jacobi_bend_block
@@ -71,11 +71,19 @@ FTL_TINY_SQ = 1e-24
 
 
 @njit(cache=True, fastmath=FASTMATH, error_model='numpy')
-def ftl_pass_block(x, rest, rest_length, rot, corr, s0, s1, add):
+def ftl_pass_block(x, rest, rest_length, rot, corr, s0, s1, add, collide):
     """FTL pass over strands ``s0..s1-1`` in place; ``corr`` (S, N, 3) receives the ``d_i``
     (``add``: added to what it holds, a later inner step of :func:`ftl_block`).
 
-    ``rot`` (3, 3) is the head rotation (only used for collapsed segments).
+    ``rot`` (3, 3) is the head rotation (only used for collapsed segments).  ``collide``:
+    ``None``, or ``(x_ref, inv_mass, contact)`` for the pass aware of the head collider: the
+    friction reference (S, N, 3), the inverse masses and the collider placed by the head pose
+    (:data:`~hair_tracking.guides.collision.Contact`).  Then, node ``i`` of the block's strands
+    placed, every free one (``inv_mass > 0``) inside the collider goes through
+    :func:`contact_node` before node ``i + 1`` is placed (the inside test of a node index in
+    the placement's loop, without branches; the contacts after it).  Returns the nodes the
+    collider moved.  (One function for both: numba compiles each variant with the other's
+    branches removed.)
     """
     n = x.shape[1]
     for s in range(s0, s1):
@@ -84,7 +92,13 @@ def ftl_pass_block(x, rest, rest_length, rot, corr, s0, s1, add):
                 corr[s, i, 0] = 0.0
                 corr[s, i, 1] = 0.0
                 corr[s, i, 2] = 0.0
+    pushed = 0
+    if collide is not None:
+        x_ref, inv_mass, contact = collide
+        rot9, cx, cy, cz, ax, ay, az, _, _ = contact
+        ix, iy, iz = 1.0 / (ax * ax), 1.0 / (ay * ay), 1.0 / (az * az)
     for i in range(2, n):
+        inside = 0
         for s in range(s0, s1):
             r = rest_length[s, i - 1]
             dx = x[s, i, 0] - x[s, i - 1, 0]
@@ -107,6 +121,45 @@ def ftl_pass_block(x, rest, rest_length, rot, corr, s0, s1, add):
             x[s, i, 0] = nx
             x[s, i, 1] = ny
             x[s, i, 2] = nz
+            if collide is not None:
+                qx, qy, qz = local_of(nx, ny, nz, rot9, cx, cy, cz)
+                hit = inv_mass[s, i] > 0.0 and ellipsoid_level(qx, qy, qz, ix, iy, iz) < 1.0
+                inside |= (1 if hit else 0) << (s - s0)
+        if collide is not None:
+            while inside:
+                k = 0
+                while not (inside >> k) & 1:
+                    k += 1
+                inside &= inside - 1
+                pushed += contact_node(x, x_ref, rest, rest_length, rot, corr, contact, s0 + k,
+                                       i)
+    return pushed
+
+
+@njit(cache=True, inline='always', fastmath=FASTMATH, error_model='numpy')
+def contact_node(x, x_ref, rest, rest_length, rot, corr, contact, s, i):
+    """Node ``i`` of strand ``s``, just placed by the FTL pass, against the head collider
+    ``contact``: if inside, moved to the surface with friction relative to ``x_ref[s, i]``
+    (:func:`~hair_tracking.colliders.contact.ellipsoid_contact_shallow`: most contacts are
+    hair resting on the head, a fraction of a millimetre deep) and put back at its rest
+    distance from its predecessor outside the surface (:func:`restore_node`; that placement is
+    added to ``corr``, the push is not).  Returns 1 if the node was inside, else 0."""
+    moved, y0, y1, y2 = ellipsoid_contact_shallow(x[s, i, 0], x[s, i, 1], x[s, i, 2],
+                                                  x_ref[s, i, 0], x_ref[s, i, 1],
+                                                  x_ref[s, i, 2], contact)
+    if not moved:
+        return 0
+    px, py, pz = restore_node(
+        (y0, y1, y2), (x[s, i - 1, 0], x[s, i - 1, 1], x[s, i - 1, 2]), rest_length[s, i - 1],
+        (rest[s, i, 0] - rest[s, i - 1, 0], rest[s, i, 1] - rest[s, i - 1, 1],
+         rest[s, i, 2] - rest[s, i - 1, 2]), rot, ellipsoid_of(contact), 0)
+    corr[s, i, 0] += px - y0
+    corr[s, i, 1] += py - y1
+    corr[s, i, 2] += pz - y2
+    x[s, i, 0] = px
+    x[s, i, 1] = py
+    x[s, i, 2] = pz
+    return 1
 
 
 @njit(cache=True, inline='always', fastmath=FASTMATH, error_model='numpy')
@@ -126,7 +179,7 @@ def ftl_direction(dx, dy, dz, r, ex, ey, ez, rot):
     return 0.0, 0.0, -1.0, r
 
 
-#: Surface projections per node in :func:`ftl_restore` at most (the tolerance below ends most
+#: Surface projections per node in :func:`restore_node` at most (the tolerance below ends most
 #: contacts after one or two).  Long segments need more: with 10 cm segments (1.5 m strands,
 #: 'ftl segment 100 mm' of the quick stability matrix) and ghosts tracked once per pose, 4 left
 #: ghost nodes 6.2 mm inside the head (margin 4 mm); 8 leave none inside.
@@ -138,11 +191,11 @@ RESTORE_ITERATIONS = 8
 #: (then four) on sub-micrometre depths in most contacts (and still ended a few um inside).
 #: 10 um is 0.25 % of the default 4 mm margin.
 RESTORE_TOLERANCE = 1e-5
-#: A node of :func:`ftl_restore` whose squared distance from its predecessor is within this
-#: fraction of the rest length's square, and which lies outside (as :data:`RESTORE_TOLERANCE`
-#: accepts), is left where it is, and so is every node before the first that is not: the pass
-#: would put it back within about 1e-12 m of itself.  Only strands the collider pushed are walked
-#: again, from their first pushed node.
+#: A node of :func:`ftl_restore_shapes` whose squared distance from its predecessor is within
+#: this fraction of the rest length's square, and which lies outside (as
+#: :data:`RESTORE_TOLERANCE` accepts), is left where it is, and so is every node before the first
+#: that is not: the pass would put it back within about 1e-12 m of itself.  Only strands a shape
+#: pushed are walked again, from their first pushed node.
 RESTORE_LENGTH_TOLERANCE = 1e-10
 
 
@@ -168,7 +221,7 @@ def ellipsoid_of(contact):
 
 @njit(cache=True, inline='always', fastmath=FASTMATH, error_model='numpy')
 def restore_node(p, b, r, e, rot, ellipsoid, first):
-    """One node of the collision-aware FTL pass (see :func:`ftl_restore`): ``p`` put at the rest
+    """One node of the collision-aware FTL pass (:func:`contact_node`): ``p`` put at the rest
     distance ``r`` from its predecessor ``b`` and out of the ellipsoid (:data:`Ellipsoid`:
     semi-axes ``a``, world centre ``c``, turned by the head rotation ``rot`` (3, 3)), at most
     :data:`RESTORE_ITERATIONS` times: it stops as soon as a placement lies outside or less than
@@ -202,79 +255,10 @@ def restore_node(p, b, r, e, rot, ellipsoid, first):
 
 
 @njit(cache=True, nogil=True, parallel=True, fastmath=FASTMATH, error_model='numpy')
-def ftl_restore(x, rest, rest_length, rot, pos, center, axes, refine, corr):
-    """Kernel: a collision-aware FTL pass over all strands, run after the collider moved nodes.
-
-    The collider projects single nodes out of the head, which stretches their segments (by up to
-    ``margin / segment length``, and by tens of per cent in fast motion).  This pass walks every
-    strand the collider changed again, from its first node off its rest distance or inside
-    (:data:`RESTORE_LENGTH_TOLERANCE`), and puts each node at its rest distance from its
-    predecessor (as the FTL pass does); if that point lies inside the collision ellipsoid
-    (semi-axes ``axes`` = radii + margin, centre ``center``, head frame; head pose ``rot``,
-    ``pos``) it is moved to the surface (:func:`hair_tracking.colliders.contact.surface_point`,
-    ``refine`` refinements) and put back at the rest distance along the new direction, up to
-    :data:`RESTORE_ITERATIONS` times (see :func:`restore_node`).
-    For a predecessor outside the surface this converges to the point of the circle where the
-    sphere of radius ``rest_length`` around it meets the surface, so lengths stay exact and a node
-    ends at most a small fraction of a segment inside the margin layer.  The correction of every
-    node is *added* to ``corr`` (the velocity update damps it like the first pass's).  No
-    friction here: the collider applied it.
-    """
-    cx, cy, cz = world_center(rot, pos, center)
-    ellipsoid = (cx, cy, cz, axes[0], axes[1], axes[2], refine)
-    for s in prange(x.shape[0]):
-        i = int64(s)
-        ftl_restore_block(x, rest, rest_length, rot, ellipsoid, corr, i, i + 1, 1)
-
-
-@njit(cache=True, fastmath=FASTMATH, error_model='numpy')
-def ftl_restore_block(x, rest, rest_length, rot, ellipsoid, corr, s0, s1, walked):
-    """:func:`ftl_restore` on the strands ``s0 <= s < s1`` whose bit ``s - s0`` is set in
-    ``walked`` (an integer; at most 64 strands), ``rot`` the head rotation (3, 3),
-    ``ellipsoid`` the fields of :data:`Ellipsoid`.  The strands are walked side by side, node
-    by node (each node depends on its predecessor only, so the chains of independent strands
-    overlap in the processor); each strand's arithmetic is that of a walk of it alone.  A
-    function of its own, so every kernel that runs it runs the same compiled code (inlined into
-    each, LLVM may contract the arithmetic differently: the results would differ in the last
-    bits)."""
-    cx, cy, cz, ax, ay, az, _ = ellipsoid
-    ix, iy, iz = 1.0 / (ax * ax), 1.0 / (ay * ay), 1.0 / (az * az)
-    f_ok = restore_f_ok(ax, ay, az)
-    n = x.shape[1]
-    started = 0          # the strands past their first node the collider left off its rest
-    for i in range(2, n):  # distance or inside: the nodes before it are as the pass leaves them
-        for s in range(s0, s1):
-            bit = 1 << (s - s0)
-            if not walked & bit:
-                continue
-            if not started & bit:
-                dx, dy, dz = x[s, i, 0] - x[s, i - 1, 0], x[s, i, 1] - x[s, i - 1, 1], \
-                    x[s, i, 2] - x[s, i - 1, 2]
-                r2 = rest_length[s, i - 1] * rest_length[s, i - 1]
-                qx, qy, qz = to_head(x[s, i, 0], x[s, i, 1], x[s, i, 2], rot, cx, cy, cz)
-                if not (abs(dx * dx + dy * dy + dz * dz - r2) > RESTORE_LENGTH_TOLERANCE * r2
-                        or qx * qx * ix + qy * qy * iy + qz * qz * iz < f_ok):
-                    continue
-                started |= bit
-            ox, oy, oz = x[s, i, 0], x[s, i, 1], x[s, i, 2]
-            px, py, pz = restore_node(
-                (ox, oy, oz), (x[s, i - 1, 0], x[s, i - 1, 1], x[s, i - 1, 2]),
-                rest_length[s, i - 1],
-                (rest[s, i, 0] - rest[s, i - 1, 0], rest[s, i, 1] - rest[s, i - 1, 1],
-                 rest[s, i, 2] - rest[s, i - 1, 2]), rot, ellipsoid, 0)
-            corr[s, i, 0] += px - ox
-            corr[s, i, 1] += py - oy
-            corr[s, i, 2] += pz - oz
-            x[s, i, 0] = px
-            x[s, i, 1] = py
-            x[s, i, 2] = pz
-
-
-@njit(cache=True, nogil=True, parallel=True, fastmath=FASTMATH, error_model='numpy')
 def ftl_restore_shapes(x, x_old, rest, rest_length, rot, sh, corr, cap):
-    """Kernel: the collision-aware FTL pass of :func:`ftl_restore` against every shape of the
-    posed table ``sh`` (the body's bust), run after their contact
-    (:func:`~hair_tracking.colliders.kernels.collide`) moved nodes.
+    """Kernel: a collision-aware FTL pass against every shape of the posed table ``sh`` (the
+    body's bust), run after their contact (:func:`~hair_tracking.colliders.kernels.collide`)
+    moved nodes, which stretches their segments.
 
     Each strand is walked from its first node off its rest distance
     (:data:`RESTORE_LENGTH_TOLERANCE`) or more than :data:`RESTORE_TOLERANCE` inside a shape:
@@ -386,14 +370,15 @@ def ftl_step_block(model, state, motion, params, corr, blk):
     inner_steps, bend_stiffness, s_damp, max_disp, do_finalize = params     # FtlParams
     s0 = blk * BLOCK
     s1 = min(s0 + BLOCK, x.shape[0])
-    ftl_block(model, state, motion, inner_steps, bend_stiffness, s_damp, corr, s0, s1)
+    ftl_block(model, state, motion, inner_steps, bend_stiffness, s_damp, corr, s0, s1, None)
     if do_finalize:
         return finalize_block(x, v, x_old, model[1], corr, s0, s1, motion[6], max_disp, s_damp)
     return 0
 
 
 @njit(cache=True, fastmath=FASTMATH, error_model='numpy')
-def ftl_block(model, state, motion, inner_steps, bend_stiffness, s_damp, corr, s0, s1):
+def ftl_block(model, state, motion, inner_steps, bend_stiffness, s_damp, corr, s0, s1,
+              collide):
     """Predict, the bending sweep and the FTL pass of the strands ``s0 <= s < s1`` in
     ``inner_steps`` inner steps: a substep up to the collision and finalize (:func:`ftl_step`,
     :func:`ftl_collide_step`).
@@ -402,9 +387,10 @@ def ftl_block(model, state, motion, inner_steps, bend_stiffness, s_damp, corr, s
     gravity and the free nodes' own motion (:func:`inner_predict_block`), each followed by the
     sweep and the pass; the roots move a share of the head's motion in each
     (:func:`place_roots_block`, along the straight line: exact where the substep ends).  The
-    corrections of the passes are summed into ``corr``; the collider and finalize then act once
-    on the whole substep (finalize's velocity is the mean of the inner steps').  At rest the
-    hair so settles where substeps of ``h`` leave it."""
+    corrections of the passes are summed into ``corr``; ``collide`` (``None`` or
+    :func:`ftl_pass_block`'s) acts in the last inner step's pass, and finalize once on the
+    whole substep (finalize's velocity is the mean of the inner steps').  At rest the hair so
+    settles where substeps of ``h`` leave it.  Returns the nodes the collider moved."""
     x, v, x_old = state
     rest, inv_mass, rest_length, bend_rest, bend_w = model              # FtlModel
     rot, pos, rot_rel, pos_prev, gravity, damp, dt, shock = motion      # StepMotion
@@ -412,6 +398,7 @@ def ftl_block(model, state, motion, inner_steps, bend_stiffness, s_damp, corr, s
     damp_h = damp ** (1.0 / inner_steps) if inner_steps > 1 else damp
     predict_block(state, rest, inv_mass, (rot, pos, rot_rel, pos_prev, gravity, damp_h, h, shock),
                   s0, s1)
+    pushed = 0
     for r in range(inner_steps):
         if inner_steps > 1:
             place_roots_block(x, x_old, rest, rot, pos, (r + 1) / inner_steps, s0, s1)
@@ -420,7 +407,13 @@ def ftl_block(model, state, motion, inner_steps, bend_stiffness, s_damp, corr, s
                                 s0, s1)
         if bend_stiffness > 0.0:
             jacobi_bend_block(x, bend_rest, bend_w, bend_stiffness, s0, s1)
-        ftl_pass_block(x, rest, rest_length, motion[0], corr, s0, s1, r > 0)
+        if collide is not None:
+            if r == inner_steps - 1:
+                pushed = ftl_pass_block(x, rest, rest_length, motion[0], corr, s0, s1, r > 0,
+                                        collide)
+                continue
+        ftl_pass_block(x, rest, rest_length, motion[0], corr, s0, s1, r > 0, None)
+    return pushed
 
 
 @njit(cache=True, fastmath=FASTMATH, error_model='numpy')
@@ -484,14 +477,20 @@ def inner_predict_block(state, inv_mass, corr, gravity, step, first, s0, s1):
 @njit(cache=True, nogil=True, parallel=True, fastmath=FASTMATH, error_model='numpy')
 def ftl_collide_step(model, state, motion, params, work, collider):
     """Kernel: one FTL substep of all strands with the head collider, block by block (the
-    block's strands stay in cache): :func:`ftl_step`'s predict, bending and FTL pass, the
-    collider's projection with friction (:func:`~hair_tracking.guides.collision.project_block`),
-    on every strand of which it moved a node the collision-aware pass (:func:`ftl_restore_block`),
-    then finalize.  The same per-strand arithmetic as those kernels run one after another.
+    block's strands stay in cache): :func:`ftl_step`'s predict and bending, then the FTL pass
+    aware of the collider (:func:`ftl_pass_block` with ``collide``: node by node from the root,
+    each node placed at its rest distance and, when inside, pushed out with friction and placed
+    again, :func:`contact_node`; in the last inner step of a long substep), then finalize.
+
+    The ghosts' contact (:mod:`hair_tracking.ghosts.contacts`) follows the same rule.  A node
+    so never ends inside through a later node's push (as after a projection of single nodes,
+    which stretches their segments and needs a second pass), and only the nodes in contact
+    cost more than the plain pass.
 
     ``work``: ``(corr, x_ref)``, the first two fields of :data:`FtlWork`; ``collider``: the
-    fields of :data:`~hair_tracking.guides.collision.ColliderModel`.  ``params``'
-    ``do_finalize`` is ignored (always finalizes).  Returns ``(clamped, contacts)``.
+    fields of :data:`~hair_tracking.guides.collision.ColliderModel`.  Without ``params``'
+    ``do_finalize`` the substep stops before finalize (a body's contact comes next; the
+    clamped count is then 0).  Returns ``(clamped, contacts)``.
     """
     rot = motion[0]
     cx, cy, cz, ax, ay, az, fr, refine = placed_shape(collider, rot, motion[1])
@@ -535,17 +534,16 @@ def ftl_collide_block(model, state, motion, params, work, contact, s0, s1):
     x, v, x_old = state                                                 # GuideState
     rest, inv_mass, rest_length, bend_rest, bend_w = model              # FtlModel
     rot, pos, rot_rel, pos_prev, gravity, damp, dt, shock = motion      # StepMotion
-    inner_steps, bend_stiffness, s_damp, max_disp, _ = params          # FtlParams
+    inner_steps, bend_stiffness, s_damp, max_disp, do_finalize = params     # FtlParams
     corr, x_ref = work                                                  # FtlWork[:2]
     friction = contact[7]
     ref = x_ref if friction > 0.0 else x_old
     if friction > 0.0:
         carry_rigid_block(x, rot_rel, pos_prev, pos, x_ref, s0, s1)
-    ftl_block(model, state, motion, inner_steps, bend_stiffness, s_damp, corr, s0, s1)
-    pushed, walked = project_block(x, ref, inv_mass, contact, s0, s1)
-    if walked:                   # only the strands pushed are walked again
-        ftl_restore_block(x, rest, rest_length, rot, ellipsoid_of(contact), corr, s0, s1,
-                          walked)
+    pushed = ftl_block(model, state, motion, inner_steps, bend_stiffness, s_damp, corr, s0, s1,
+                       (ref, inv_mass, contact))
+    if not do_finalize:
+        return 0, pushed
     return finalize_block(x, v, x_old, inv_mass, corr, s0, s1, dt, max_disp, s_damp), pushed
 
 
@@ -562,7 +560,7 @@ def ftl_advance(model, state, drive, params, collide, collider, work, stop):
     ``drive``: the fields of :data:`RunDrive`: the head poses at the start and at the end of
     every substep, ``rels[k] = rots[k + 1] rots[k]^T``, and
     :data:`~hair_tracking.guides.integrate.StepMotion`'s constant fields; ``params``:
-    :data:`FtlParams` (``do_finalize`` ignored: always finalizes); ``collide``: whether the
+    :data:`FtlParams` (``do_finalize`` true: every substep finalizes); ``collide``: whether the
     head collider ``collider`` (:data:`~hair_tracking.guides.collision.ColliderModel`) acts;
     ``work``: the fields of :data:`FtlWork`, ``counts``, ``steps`` and ``before`` included: on
     return ``steps[0]`` holds every substep's largest squared node displacement [m^2] (NaN
@@ -701,7 +699,7 @@ def ftl_advance_block(model, state, drive, params, collide, collider, work, blk,
                                      placed(collider, rot, pos), s0, s1)
         else:
             ftl_block(model, state, motion, params[0], params[1], params[2], corr, s0,
-                      s1)
+                      s1, None)
             c = finalize_block(x, v, x_old, model[1], corr, s0, s1, dt, params[3], params[2])
             p = 0
         counts[blk, k, 0] = c

@@ -15,7 +15,8 @@ and their roots follow the head. One call of :meth:`GuideSolver.step` is one sub
    ``'pbd'`` classic Gauss–Seidel PBD, ``'xpbd'`` XPBD with compliance, ``'ftl'`` Follow-The-Leader
    (see :mod:`~hair_tracking.guides.pbd_constraints` and :mod:`~hair_tracking.guides.ftl`);
 5. head collision, only if the scene has a collider (:mod:`~hair_tracking.guides.collision`), with
-   friction measured against the start-of-substep positions carried rigidly with the head; then,
+   friction measured against the start-of-substep positions carried rigidly with the head (FTL:
+   within its pass, node by node, :func:`~hair_tracking.guides.ftl.contact_node`); then,
    only if the scene has a body (``body.bust``), the bust's capsules
    (:class:`~hair_tracking.colliders.scene_body.SceneBody`, the contact model's collision stage
    :func:`~hair_tracking.colliders.kernels.collide` with its push-out velocity bound; FTL
@@ -27,10 +28,9 @@ and their roots follow the head. One call of :meth:`GuideSolver.step` is one sub
 
 Without a collider steps 1–6 run in one fused numba kernel per block of strands (the strands stay
 in cache), and so do FTL's with a collider (:func:`~hair_tracking.guides.ftl.ftl_collide_step`:
-the collision and the collision-aware second pass join the block's substep); PBD and XPBD with a
-collider stop after step 4, the collision kernel runs, then the finalize kernel; so do all three
-with a body (FTL: the head's collision-aware second pass after the head's collision), one
-substep a call.
+the collision is part of the pass); PBD and XPBD with a collider stop after step 4, the
+collision kernel runs, then the finalize kernel; so do all three with a body (FTL: its pass
+with the head collider, then the bust), one substep a call.
 :meth:`GuideSolver.advance` takes a run of substeps in one call: for FTL one compiled call for
 all of them (:func:`~hair_tracking.guides.ftl.ftl_advance`). Kernels are
 looked up on their modules at call time, so only the ones the scene needs are ever called (and
@@ -92,11 +92,11 @@ class GuideSolver:
     :data:`~hair_tracking.guides.pbd_constraints.XpbdModel` as a plain tuple (XPBD's from
     the first substep on: its gains depend on ``dt``).
 
-    With FTL and a collider, a substep is predict, bend, FTL pass, collide and, when a node of
-    the strand was pushed, a collision-aware second FTL pass over it
-    (:func:`~hair_tracking.guides.ftl.ftl_restore_block`), then finalize, in one kernel: lengths
-    stay exact and nodes outside the bare collider (measured in the stability matrix,
-    ``docs/stability.md``).
+    With FTL and a collider, a substep is predict, bend, an FTL pass aware of the collider
+    (each node placed at its rest distance and, when inside, pushed out with friction and
+    placed again: :func:`~hair_tracking.guides.ftl.contact_node`), then finalize, in one
+    kernel: lengths stay exact and nodes outside the bare collider (measured in the stability
+    matrix, ``docs/stability.md``).
     """
 
     def __init__(self, strands: StrandSet, scene, parallel: Optional[bool] = None):
@@ -282,17 +282,20 @@ class GuideSolver:
         state = (st.x, st.v, self._x_old)
         motion = (rot, pos, rot_rel, pos_prev, self._gravity, damp, dt, self._shock)
         sv = self.scene.solver
-        if self.kind == 'ftl':
-            params = self._ftl_params(dt, fused)
-            if self.collider is not None and self.body is None:
-                # one kernel: friction reference, collision and second pass in the block loop
-                kernel = ftl.ftl_collide_step if parallel else ftl.ftl_collide_step_serial
-                work = (self._corr, self._friction_ref())
-                clamped, contacts = kernel(self.model, state, motion, params, work,
-                                           self._collider_model())
+        contacts = 0
+        ftl_head = self.kind == 'ftl' and self.collider is not None
+        if ftl_head:
+            # one kernel: friction reference and the collision-aware FTL pass in the block
+            # loop, finalize too without a body
+            kernel = ftl.ftl_collide_step if parallel else ftl.ftl_collide_step_serial
+            work = (self._corr, self._friction_ref())
+            clamped, contacts = kernel(self.model, state, motion,
+                                       self._ftl_params(dt, self.body is None), work,
+                                       self._collider_model())
+            if self.body is None:
                 self._count(clamped, contacts)
                 return
-        if self._x_ref is not None:
+        elif self._x_ref is not None:
             carry = integrate.carry_rigid if parallel else integrate.carry_rigid_serial
             carry(st.x, rot_rel, pos_prev, pos, self._x_ref)
         if self.kind == 'pbd':
@@ -305,18 +308,13 @@ class GuideSolver:
             kernel = pbd_constraints.xpbd_step if parallel else pbd_constraints.xpbd_step_serial
             params = (self._iterations, a_stretch, a_bend, self._max_disp, fused)
             clamped = kernel(self.model, state, motion, params, self._xpbd_work)
-        else:
+        elif not ftl_head:
             kernel = ftl.ftl_step if parallel else ftl.ftl_step_serial
-            clamped = kernel(self.model, state, motion, params, self._corr)
-        contacts = 0
+            clamped = kernel(self.model, state, motion, self._ftl_params(dt, fused), self._corr)
         if not fused:
-            if self.collider is not None:
+            if self.collider is not None and not ftl_head:
                 contacts = self.collider.project(st.x, self._friction_ref(), st.inv_mass, rot,
                                                  pos, parallel)
-                if contacts and self.kind == 'ftl':
-                    c = self.collider
-                    ftl.ftl_restore(st.x, st.rest, st.rest_length, rot, pos, c.center,
-                                    c.radii + c.margin, c.refine, self._corr)
             if self.body is not None:
                 # the start of the substep is the friction reference and, moved by the
                 # push-out bound, the velocity's
