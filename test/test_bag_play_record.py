@@ -23,6 +23,7 @@ DOMAIN_LOOP = 53
 DOMAIN_SIGINT = 81
 DOMAIN_PACING = 82
 DOMAIN_LATE_CLOCK = 83
+DOMAIN_OWN_TYPES = 84
 WAIT_S = 20.0
 
 
@@ -289,3 +290,34 @@ def test_recorder_under_sim_time_logs_nothing_before_the_first_clock(tmp_path, r
     assert [deserialize_message(b, String).data for _, b in got] == \
         ['early 0', 'early 1', 'early 2', 'late 0', 'late 1']
     assert '3 messages arrived before the first /clock: logged at its time' in summary
+
+
+def test_record_all_takes_the_packages_own_message_types(tmp_path, ros_context):
+    """hair_tracking_msgs/GuideState (what ghost shards read) is recorded by --all and reads
+    back through the typestore, field by field."""
+    from hair_tracking_msgs.msg import GuideState
+    ctx = ros_context(DOMAIN_OWN_TYPES)
+    pub_node = rclpy.create_node('guides', context=ctx)
+    rec_node = rclpy.create_node('recorder', context=ctx)
+    pub = pub_node.create_publisher(GuideState, '/hair/guides/state', 10)
+    out = tmp_path / 'own.mcap'
+    recorder = BagRecorder(rec_node, out, all_topics=True)
+    ex = SingleThreadedExecutor(context=ctx)
+    ex.add_node(rec_node)
+    try:
+        assert spin_until(ex, lambda: '/hair/guides/state' in recorder.subs and
+                          pub.get_subscription_count() >= 1, WAIT_S), recorder.skipped
+        for k in range(3):
+            pub.publish(GuideState(person_id=f'p{k}', sequence=k, guides=1, nodes=2,
+                                   positions=[0.5 * k] * 6))
+        assert spin_until(ex, lambda: recorder.counts.get('/hair/guides/state') == 3, WAIT_S)
+        path = recorder.close()
+    finally:
+        for n in (pub_node, rec_node):
+            n.destroy_node()
+    assert '/hair/guides/state' not in recorder.skipped
+    with bag_io.open_bag(path) as r:
+        conns = [c for c in r.connections if c.topic == '/hair/guides/state']
+        msgs = [bag_io.deserialize(r, raw, c.msgtype) for c, _, raw in bag_io.messages(r, conns)]
+    assert [(m.person_id, m.sequence, list(m.positions)) for m in msgs] == \
+        [(f'p{k}', k, [0.5 * k] * 6) for k in range(3)]

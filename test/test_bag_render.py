@@ -174,3 +174,5 @@ def test_render_of_a_bag_with_a_message_at_time_zero(tmp_path, capsys):
                     strands_to_pointcloud2_cdr(_strands(k, 0.0), frame_id='world', stamp_ns=t))
     assert main(['render', str(bag), '-o', str(tmp_path / 'pics'), '--fps', '10']) == 0
     assert 'rendered 8 pictures' in capsys.readouterr().out
+    (tmp_path / 'plain').mkdir()                        # the folder has the usual mode
+    assert (tmp_path / 'pics').stat().st_mode == (tmp_path / 'plain').stat().st_mode

@@ -20,8 +20,8 @@ Rendering uses matplotlib's Agg backend (no display needed) and Pillow for the G
 """
 import os
 from pathlib import Path
+import secrets
 import shutil
-import tempfile
 from typing import Dict, List, Optional, Tuple
 
 import numpy as np
@@ -377,7 +377,9 @@ def render(path, output, *, gif: bool = True, png: bool = False, fps: float = 10
 
     parent = out.parent if str(out.parent) else Path('.')
     parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f'.{out.name}.partial-', dir=parent))
+    # a folder of the usual mode (tempfile.mkdtemp's is 0700, and the rename keeps it)
+    tmp = parent / f'.{out.name}.partial-{secrets.token_hex(6)}'
+    tmp.mkdir()
     written: Dict[str, object] = {'topic': hair_topic, 'frames': len(drawn), 'notes': notes,
                                   'head_radii': tuple(float(r) for r in head_radii)}
     try:

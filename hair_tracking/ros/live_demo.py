@@ -33,8 +33,6 @@ from typing import Dict, List, Optional
 
 import numpy as np
 
-from msg_adapters.pointcloud import pointcloud2_to_strands
-
 from hair_tracking import executable
 from hair_tracking.bags import io as bag_io
 from hair_tracking.bags.io import BagError
@@ -106,6 +104,8 @@ def _last_diagnostics(path) -> Dict[str, str]:
 
 def _frames(path):
     """(distinct stamps [ns], messages, all finite) of /hair/points in a recording."""
+    # imported here: it loads numba, whose cache folder main() sets first
+    from msg_adapters.pointcloud import pointcloud2_to_strands
     stamps, n, finite, shape = [], 0, True, None
     for t, msg in bag_io.cloud_messages(path):
         n += 1
