@@ -81,3 +81,18 @@ def config_path(name: str) -> str:
 
 def data_path(name: str) -> str:
     return os.path.join(_HERE, 'data', name)
+
+
+def message_definition(package: str, name: str) -> Optional[str]:
+    """The text of ``<package>/msg/<name>.msg`` (an interface package this project builds:
+    ``interfaces/``), from the package's share folder in the ament index, ``sys.prefix``'s
+    share folder (the venv ``make install`` builds into) or the source tree; None when none
+    holds it."""
+    places = [_ament_share_dir(package), os.path.join(sys.prefix, 'share', package),
+              os.path.join(_SOURCE_ROOT, 'interfaces', package)]
+    for base in places:
+        path = os.path.join(base, 'msg', f'{name}.msg') if base else ''
+        if path and os.path.isfile(path):
+            with open(path, encoding='utf-8') as f:
+                return f.read()
+    return None

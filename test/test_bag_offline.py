@@ -313,3 +313,19 @@ def test_pose_stamped_bytes_match_the_rosbags_serializer(frame_id):
     assert back.header.frame_id == frame_id and back.pose.orientation.w == q[3]
     with pytest.raises(bag_io.BagError, match='int32'):
         pose_stamped_bytes(-1, p, q, frame_id)
+
+
+def test_a_run_stopped_early_counts_only_the_recording_it_ran(walk_bag, tmp_path):
+    calls = [0]
+
+    def stop_at_pose_30():
+        calls[0] += 1
+        return calls[0] > 30
+    summary = run_bag(str(walk_bag), str(tmp_path / 'stopped.mcap'), _settings(),
+                      should_stop=stop_at_pose_30)
+    hp = bag_io.read_head_poses(walk_bag)
+    assert summary.stopped_after == 30 and summary.bag_duration_s == pytest.approx(1.5, abs=0.02)
+    assert summary.run_duration_s == pytest.approx((hp.t_ns[29] - hp.t_ns[0]) * 1e-9)
+    assert f'({summary.run_duration_s:.2f} s of recording in' in summary.text()
+    full = run_bag(str(walk_bag), str(tmp_path / 'full.mcap'), _settings())
+    assert full.run_duration_s == pytest.approx(full.bag_duration_s)

@@ -22,6 +22,8 @@ DOMAIN_ROUNDTRIP = 51
 DOMAIN_LOOP = 53
 DOMAIN_SIGINT = 81
 DOMAIN_PACING = 82
+DOMAIN_LATE_CLOCK = 83
+DOMAIN_OWN_TYPES = 84
 WAIT_S = 20.0
 
 
@@ -243,3 +245,79 @@ def test_ctrl_c_stops_a_playing_bag_cleanly():
     assert proc.returncode == 0, err
     assert 'error' not in err and 'Traceback' not in err, err
     assert 'interrupted' in out, out
+
+
+def test_recorder_under_sim_time_logs_nothing_before_the_first_clock(tmp_path, ros_context):
+    """Messages that reach a use_sim_time recorder before any /clock are held and logged at the
+    first clock time, never at time 0 (which made a bag a billion seconds long)."""
+    from rosgraph_msgs.msg import Clock
+    from std_msgs.msg import String
+    ctx = ros_context(DOMAIN_LATE_CLOCK)
+    pub_node = rclpy.create_node('talker', context=ctx)
+    rec_node = rclpy.create_node('recorder', context=ctx, parameter_overrides=[
+        Parameter('use_sim_time', Parameter.Type.BOOL, True)])
+    talk = pub_node.create_publisher(String, '/talk', 10)
+    clock = pub_node.create_publisher(Clock, '/clock', 10)
+    out = tmp_path / 'late_clock.mcap'
+    recorder = BagRecorder(rec_node, out, ['/talk'])
+    ex = SingleThreadedExecutor(context=ctx)
+    ex.add_node(rec_node)
+    first_clock_ns = 5 * 10 ** 9
+    try:
+        assert spin_until(ex, lambda: not recorder.missing(), WAIT_S), recorder.missing()
+        assert spin_until(ex, lambda: talk.get_subscription_count() >= 1, WAIT_S)
+        for k in range(3):
+            talk.publish(String(data=f'early {k}'))
+        assert spin_until(ex, lambda: len(recorder.held) == 3, WAIT_S), recorder.held
+        assert recorder.messages == 0
+        msg = Clock()
+        msg.clock.sec = first_clock_ns // 10 ** 9
+        assert spin_until(ex, lambda: clock.get_subscription_count() >= 1, WAIT_S)
+        clock.publish(msg)
+        assert spin_until(
+            ex, lambda: rec_node.get_clock().now().nanoseconds == first_clock_ns, WAIT_S)
+        for k in range(2):
+            talk.publish(String(data=f'late {k}'))
+        assert spin_until(ex, lambda: recorder.messages == 5, WAIT_S), recorder.messages
+        summary = recorder.summary()
+        path = recorder.close()
+    finally:
+        for n in (pub_node, rec_node):
+            n.destroy_node()
+    got = _raw(path, '/talk')
+    assert [t for t, _ in got] == [first_clock_ns] * 5
+    from rclpy.serialization import deserialize_message
+    assert [deserialize_message(b, String).data for _, b in got] == \
+        ['early 0', 'early 1', 'early 2', 'late 0', 'late 1']
+    assert '3 messages arrived before the first /clock: logged at its time' in summary
+
+
+def test_record_all_takes_the_packages_own_message_types(tmp_path, ros_context):
+    """hair_tracking_msgs/GuideState (what ghost shards read) is recorded by --all and reads
+    back through the typestore, field by field."""
+    from hair_tracking_msgs.msg import GuideState
+    ctx = ros_context(DOMAIN_OWN_TYPES)
+    pub_node = rclpy.create_node('guides', context=ctx)
+    rec_node = rclpy.create_node('recorder', context=ctx)
+    pub = pub_node.create_publisher(GuideState, '/hair/guides/state', 10)
+    out = tmp_path / 'own.mcap'
+    recorder = BagRecorder(rec_node, out, all_topics=True)
+    ex = SingleThreadedExecutor(context=ctx)
+    ex.add_node(rec_node)
+    try:
+        assert spin_until(ex, lambda: '/hair/guides/state' in recorder.subs and
+                          pub.get_subscription_count() >= 1, WAIT_S), recorder.skipped
+        for k in range(3):
+            pub.publish(GuideState(person_id=f'p{k}', sequence=k, guides=1, nodes=2,
+                                   positions=[0.5 * k] * 6))
+        assert spin_until(ex, lambda: recorder.counts.get('/hair/guides/state') == 3, WAIT_S)
+        path = recorder.close()
+    finally:
+        for n in (pub_node, rec_node):
+            n.destroy_node()
+    assert '/hair/guides/state' not in recorder.skipped
+    with bag_io.open_bag(path) as r:
+        conns = [c for c in r.connections if c.topic == '/hair/guides/state']
+        msgs = [bag_io.deserialize(r, raw, c.msgtype) for c, _, raw in bag_io.messages(r, conns)]
+    assert [(m.person_id, m.sequence, list(m.positions)) for m in msgs] == \
+        [(f'p{k}', k, [0.5 * k] * 6) for k in range(3)]

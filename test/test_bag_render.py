@@ -144,3 +144,35 @@ def test_head_outline_comes_from_the_head_marker(tmp_path):
                                                                   frame_id='world', stamp_ns=t))
     got = render(with_head, tmp_path / 'head', gif=False)
     np.testing.assert_allclose(got['head_radii'], (0.11, 0.09, 0.12))
+
+
+def test_thinning_looks_only_at_grid_points_next_to_frames():
+    """A message logged at time 0 in a recording at 1e9 s (a recorder without a clock yet)
+    is a gap, not a billion seconds of grid points; thinning picks what the whole grid
+    would."""
+    from hair_tracking.bags.render import _thin
+    rng = np.random.default_rng(4)
+    for _ in range(50):
+        logs = np.sort(rng.integers(0, 3 * 10 ** 9, size=rng.integers(2, 40)))
+        step = 1e9 / 10.0
+        grid = logs[0] + np.arange(int((logs[-1] - logs[0]) / step) + 1) * step
+        right = np.clip(np.searchsorted(logs, grid), 1, len(logs) - 1)
+        whole = np.where(grid - logs[right - 1] <= logs[right] - grid, right - 1, right)
+        assert _thin(logs, None, 10.0) == set(int(i) for i in whole)
+    late = 10 ** 18 + np.arange(60, dtype=np.int64) * 33_333_333
+    logs = np.concatenate([[0, 0], late])
+    keep = _thin(logs, 120, 10.0)
+    assert 0 in keep and 1 not in keep and len(keep) == 1 + 20   # 0, 0.1 .. 1.9 s on
+
+
+def test_render_of_a_bag_with_a_message_at_time_zero(tmp_path, capsys):
+    bag = tmp_path / 'gap.mcap'
+    with bag_io.BagWriter(bag) as w:
+        w.add_topic('/hair/points', 'sensor_msgs/msg/PointCloud2')
+        for k, t in enumerate([0] + [10 ** 18 + k * 33_333_333 for k in range(20)]):
+            w.write('/hair/points', t,
+                    strands_to_pointcloud2_cdr(_strands(k, 0.0), frame_id='world', stamp_ns=t))
+    assert main(['render', str(bag), '-o', str(tmp_path / 'pics'), '--fps', '10']) == 0
+    assert 'rendered 8 pictures' in capsys.readouterr().out
+    (tmp_path / 'plain').mkdir()                        # the folder has the usual mode
+    assert (tmp_path / 'pics').stat().st_mode == (tmp_path / 'plain').stat().st_mode

@@ -63,6 +63,18 @@ def test_numba_loaded_before_the_cache_folder_is_set_is_said():
     assert 'numba was loaded before its cache folder was set' in out.stderr
 
 
+def test_make_demo_sets_the_cache_folder_before_numba_loads():
+    """``make demo`` runs ``python -m hair_tracking.ros.live_demo``: its module imports no
+    numba, so its ``main()`` sets the cache folder first and nothing warns."""
+    clean = {k: v for k, v in os.environ.items() if k != 'NUMBA_CACHE_DIR'}
+    code = ('import sys; import hair_tracking.ros.live_demo as d; loaded = "numba" in '
+            'sys.modules; d.executable.use_numba_cache(); print(loaded)')
+    out = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True,
+                         timeout=120, cwd=ROOT, env=clean)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == 'False' and out.stderr == ''
+
+
 def test_every_console_script_is_an_entry_point_of_this_module():
     """Each sets the cache folder and the stop request up before its executable's imports."""
     entries = console_scripts()

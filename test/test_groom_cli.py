@@ -129,3 +129,16 @@ def test_hair_sim_bag_refuses_a_bad_groom_file_with_exit_3(files, walk, tmp_path
     err = capsys.readouterr().err
     assert 'groom.file:' in err and 'bad.data: byte 0: expected a strand count' in err
     assert not (tmp_path / 'o.mcap').exists()
+
+
+def test_units_that_make_no_head_of_hair_are_refused_naming_the_guess(tmp_path, capsys):
+    mm = tmp_path / 'mm.data'
+    gf.write_data(mm, gf.to_file_frame(gf.synthetic_groom(40, 10, seed=3), unit=0.001))
+    assert main(['info', str(mm), '--units', 'cm']) == 3
+    err = capsys.readouterr().err.strip()
+    assert err.count('\n') == 0 and 'with units cm the roots span' in err
+    assert 'the strands suggest mm (guessed' in err
+    assert main(['info', str(mm)]) == 0 and 'mm (guessed' in capsys.readouterr().out
+    # right units, fitted with a scale: near 1
+    spec = Scene().with_changes(groom__file=str(mm), groom__fit='scale').groom
+    assert 'scaled by 1.0' in import_groom(spec).note

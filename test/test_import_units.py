@@ -137,3 +137,31 @@ def test_bvh_units_are_recognised_from_the_skeleton(tmp_path, capsys, unit):
     speed = np.linalg.norm(hp.position[-1] - hp.position[0]) / (hp.duration_s)
     assert speed == pytest.approx(1.2, rel=0.05)
     assert 1.2 < np.median(hp.position[:, 2]) < 1.8
+
+
+def test_a_unit_that_makes_no_person_is_refused_naming_the_unit_the_skeleton_suggests(
+        tmp_path, capsys):
+    bvh = write_bvh(tmp_path / 'walk_cm.bvh', mocap.BVH_UNITS['cm'])
+    out = tmp_path / 'walk.mcap'
+    assert main(['import', str(bvh), '--units', 'm', '-o', str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.count('\n') == 1 and 'Traceback' not in err
+    assert 'with units m the rest pose stands 170 m tall' in err
+    assert 'the skeleton suggests cm (auto' in err and not out.exists()
+    # a scale is the user's word: imported, with the warnings of height and head speed
+    assert main(['import', str(bvh), '--scale', '1', '-o', str(out)]) == 0
+    err = capsys.readouterr().err
+    assert 'the rest pose stands 170 m tall' in err and 'm/s' in err and out.exists()
+    assert main(['import', str(bvh), '--units', 'cm', '-o', str(tmp_path / 'ok.mcap')]) == 0
+    assert 'warning' not in capsys.readouterr().err
+
+
+def test_a_table_whose_head_outruns_a_person_is_warned_about(tmp_path, capsys):
+    stamps = [str(k / 60) for k in range(60)]
+    rows = ['t_s,x,y,z,qx,qy,qz,qw']
+    rows += [f'{s},{100.0 * k},0,160,0,0,0,1' for k, s in enumerate(stamps)]
+    table = tmp_path / 'mm.csv'
+    table.write_text('\n'.join(rows) + '\n')
+    assert main(['import', str(table), '-o', str(tmp_path / 'x.mcap')]) == 0
+    err = capsys.readouterr().err
+    assert 'the head moves at a median 6000 m/s' in err and 'another unit than metres' in err

@@ -193,3 +193,59 @@ def test_memory_is_flat_over_1000_people_coming_and_going():
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown(context=ctx)
+
+
+def test_nan_faces_are_refused_before_any_hair_and_clouds_carry_their_pose_time():
+    """A new id whose face is NaN at 30 Hz for 3 s: every pose refused and counted, no hair
+    built for any of them (building and settling one is what stalled the node), a
+    diagnostic.  Then faces in separate TF messages: a person's cloud carries the time of the
+    face pose its hair has followed, not the newest face's of anyone."""
+    ctx = Context()
+    rclpy.init(context=ctx, domain_id=114)
+    node = None
+    try:
+        node = Node('faces', context=ctx)
+        rclpy.logging.set_logger_level('faces', rclpy.logging.LoggingSeverity.ERROR)
+        settings = make_settings(dict(SMALL, **{'solver.settle_time': 0.0}))
+        now = [10 ** 9]
+        hook = FaceHair(node, lambda: settings, now_ns=lambda: now[0])
+        made = []
+        add = hook.roster.crowd.add
+        hook.roster.crowd.add = lambda pid, *a: made.append(pid) or add(pid, *a)
+        for k in range(90):
+            now[0] += 33_333_333
+            msg = faces_message(now[0], {'x': (0.0, 0.0)})
+            msg.transforms[0].transform.translation.x = float('nan')
+            hook.on_tf(msg)
+        assert made == [] and hook.people == {} and hook.roster.rejected == 90
+        problems, values = hook.diagnostics()
+        assert values['face_poses_refused'] == '90' and values['face_ids_without_hair'] == '1'
+        assert 'face x: position has non-finite values' in problems[0]
+        t0 = now[0]
+        hook.on_tf(faces_message(t0, {'a': (0.0, 0.0), 'b': (1.0, 0.0)}))
+        assert made == ['a', 'b']
+        stamps = {pid: hook.people[pid].stamp_ns for pid in 'ab'}
+        assert stamps == {'a': t0, 'b': t0}
+        t1 = t0 + 33_333_333
+        hook.on_tf(faces_message(t1, {'a': (0.0, 0.1)}))
+        # the hair advances on its substep grid, to the newest face stamp
+        assert t1 - DT_NS < hook.people['a'].stamp_ns <= t1 and hook.people['b'].stamp_ns == t0
+        hook.on_tf(faces_message(t1, {'b': (1.0, 0.1)}))         # not followed yet
+        assert hook.people['b'].stamp_ns == t0
+        t2 = t1 + 33_333_333
+        hook.on_tf(faces_message(t2, {'a': (0.0, 0.2), 'b': (1.0, 0.2)}))
+        stamps = {pid: hook.people[pid].stamp_ns for pid in 'ab'}
+        assert stamps['a'] == stamps['b'] and t2 - DT_NS < stamps['b'] <= t2
+        got = []
+        node.create_subscription(PointCloud2, hair_topic('b'), got.append,
+                                 QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE))
+        executor = SingleThreadedExecutor(context=ctx)
+        executor.add_node(node)
+        assert spin_until(executor, lambda: hook.people['b'].pub.get_subscription_count(), 10.0)
+        hook.publish()
+        assert spin_until(executor, lambda: got, 10.0)
+        assert time_to_ns(got[0].header.stamp) == stamps['b']
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown(context=ctx)

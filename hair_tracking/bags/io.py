@@ -80,12 +80,24 @@ class BagError(Exception):
 _TYPESTORE = None
 
 
+#: Message types of the interface packages this project builds (``interfaces/``), which the
+#: rosbags Jazzy typestore lacks: registered from their definitions where these are found.
+OWN_MESSAGE_TYPES = (('hair_tracking_msgs', 'GuideState'), ('hri_msgs', 'IdsList'))
+
+
 def typestore():
-    """The ROS 2 Jazzy typestore of rosbags (built once)."""
+    """The ROS 2 Jazzy typestore of rosbags with :data:`OWN_MESSAGE_TYPES` (built once)."""
     global _TYPESTORE
     if _TYPESTORE is None:
-        from rosbags.typesys import get_typestore, Stores
-        _TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
+        from rosbags.typesys import get_types_from_msg, get_typestore, Stores
+        from hair_tracking.resources import message_definition
+        store = get_typestore(Stores.ROS2_JAZZY)
+        for package, name in OWN_MESSAGE_TYPES:
+            msgtype = f'{package}/msg/{name}'
+            text = message_definition(package, name)
+            if msgtype not in store.types and text is not None:
+                store.register(get_types_from_msg(text, msgtype))
+        _TYPESTORE = store
     return _TYPESTORE
 
 

@@ -218,6 +218,7 @@ class RunSummary:
     finite: bool = True
     groom: str = ''              # an imported groom's report line ('' for the procedural one)
     stopped_after: Optional[int] = None   # poses run when a stop was asked for (else None)
+    run_duration_s: float = 0.0  # the stamps' span of the poses run (all but after a stop)
 
     @property
     def ms_per_pose(self) -> float:
@@ -225,7 +226,8 @@ class RunSummary:
 
     @property
     def realtime_factor(self) -> float:
-        return self.bag_duration_s / self.loop_s if self.loop_s > 0 else math.inf
+        """Seconds of recording run (:attr:`run_duration_s`) per second of the loop."""
+        return self.run_duration_s / self.loop_s if self.loop_s > 0 else math.inf
 
     def text(self) -> str:
         sim = np.asarray(self.sim_ms) if self.sim_ms else np.zeros(1)
@@ -242,7 +244,7 @@ class RunSummary:
             f'{self.ms_per_pose:.2f} ms per pose (simulation median {np.median(sim):.2f} ms, '
             f'p95 {np.percentile(sim, 95):.2f} ms)',
             f'real-time factor: {self.realtime_factor:.1f}x '
-            f'({self.bag_duration_s:.2f} s of recording in {self.loop_s:.2f} s)',
+            f'({self.run_duration_s:.2f} s of recording in {self.loop_s:.2f} s)',
             f'max stretch: {self.max_stretch * 100:.4f} %; deepest head penetration: '
             f'{self.max_penetration_m * 1e3:.3f} mm',
             f'poses rejected: {self.rejected}; resets: {self.resets}; substeps: {self.substeps} '
@@ -433,6 +435,9 @@ def run_bag(input_path: str, output_path: str, settings: Settings,
             if progress is not None:
                 progress(i + 1, total)
         summary.loop_s = time.perf_counter() - t_loop
+        run = total if summary.stopped_after is None else summary.stopped_after
+        if run > 1:
+            summary.run_duration_s = float(poses.t_ns[run - 1] - poses.t_ns[0]) * 1e-9
         summary.max_stretch = worst_stretch
         summary.max_penetration_m = worst_depth
         summary.rejected = poses.invalid + sim.track.counters['rejected']

@@ -97,7 +97,10 @@ def recording_format(path: str, fmt: str = 'auto') -> str:
     return 'bag' if bag_io.looks_like_bag(path) else 'table'
 
 
-def _bvh(path, args):
+def _bvh(path, args, warn: Callable[[str], None]):
+    """A BVH capture; a unit that ``--units`` names is refused, and a ``--scale`` warned
+    about, when it makes the skeleton no person's height
+    (:func:`hair_tracking.motion.bvh.units_problem`)."""
     from hair_tracking.motion import bvh as mocap
     if args.scale is not None:
         if not (math.isfinite(args.scale) and args.scale > 0):
@@ -107,6 +110,13 @@ def _bvh(path, args):
         scale, words = mocap.BVH_UNITS[args.units], args.units
     else:
         scale, words = mocap.recognise_units(mocap.read_bvh(path))
+    if args.scale is not None or args.units != 'auto':
+        problem = mocap.units_problem(mocap.read_bvh(path), scale, words)
+        if problem and args.scale is None:
+            raise BagError(f'{problem}: give that --units (or --scale to force a scale)',
+                           EXIT_USAGE)
+        if problem:
+            warn(f'warning: {problem}')
     axes = mocap.CMU_HEAD_AXES
     if args.axes == 'infer':
         axes = mocap.infer_head_axes(mocap.read_bvh(path), args.joint, scale=scale)
@@ -172,12 +182,14 @@ def load_recording(path: str, args, warn: Optional[Callable[[str], None]] = None
     units must be named, EXIT_INPUT when the file is missing or malformed (bags: the codes of
     :mod:`hair_tracking.bags.io`).  A timing no head-pose stream has, with units the options
     named, is reported through ``warn`` (default: a line on stderr)."""
-    from hair_tracking.motion.head_motion import HeadMotionError, timing_problem, UnitsError
+    from hair_tracking.motion.head_motion import (HeadMotionError, speed_problem,
+                                                  timing_problem, UnitsError)
     path = str(path)
+    warn = warn or (lambda text: print(text, file=sys.stderr))
     fmt = recording_format(path, args.format)
     try:
         if fmt == 'bvh':
-            motion, note = _bvh(path, args)
+            motion, note = _bvh(path, args, warn)
         elif fmt == 'table':
             motion, note = _table(path, args)
         else:
@@ -192,6 +204,10 @@ def load_recording(path: str, args, warn: Optional[Callable[[str], None]] = None
     if problem:
         fix = {'table': '; a wrong --time-unit / --time-scale?',
                'bvh': '; check its Frame Time'}.get(fmt, '')
-        (warn or (lambda text: print(text, file=sys.stderr)))(
-            f'warning: {path}: {problem}{fix}')
+        warn(f'warning: {path}: {problem}{fix}')
+    problem = speed_problem(motion.position, motion.t_ns)
+    if problem:
+        fix = {'table': '; positions in another unit than metres?',
+               'bvh': '; a wrong --units / --scale?'}.get(fmt, '')
+        warn(f'warning: {path}: {problem}{fix}')
     return motion, note

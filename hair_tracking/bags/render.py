@@ -20,8 +20,8 @@ Rendering uses matplotlib's Agg backend (no display needed) and Pillow for the G
 """
 import os
 from pathlib import Path
+import secrets
 import shutil
-import tempfile
 from typing import Dict, List, Optional, Tuple
 
 import numpy as np
@@ -127,11 +127,18 @@ def load_hair(path, topic: Optional[str] = None, max_frames: Optional[int] = Non
 
 def _thin(log_ns: np.ndarray, max_frames: Optional[int], fps: Optional[float]) -> set:
     """Indices of the frames nearest to a grid of ``fps`` per second (then at most
-    ``max_frames`` of them, evenly spread)."""
+    ``max_frames`` of them, evenly spread).
+
+    Only the grid points next to a frame are looked at (the nearest frame of any grid point
+    is the nearest of the grid point next to it on the way to that frame), so the work and
+    the memory are those of the frames, whatever gaps their times have."""
     idx = np.arange(len(log_ns))
     if fps and len(log_ns) > 1:
         step_ns = 1e9 / fps
-        grid = log_ns[0] + np.arange(int((log_ns[-1] - log_ns[0]) / step_ns) + 1) * step_ns
+        last = int((log_ns[-1] - log_ns[0]) / step_ns)
+        at = (log_ns - log_ns[0]) / step_ns
+        near = np.unique(np.clip(np.concatenate([np.floor(at), np.ceil(at)]), 0, last))
+        grid = log_ns[0] + near * step_ns
         right = np.clip(np.searchsorted(log_ns, grid), 1, len(log_ns) - 1)
         left = right - 1
         nearest = np.where(grid - log_ns[left] <= log_ns[right] - grid, left, right)
@@ -370,7 +377,9 @@ def render(path, output, *, gif: bool = True, png: bool = False, fps: float = 10
 
     parent = out.parent if str(out.parent) else Path('.')
     parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f'.{out.name}.partial-', dir=parent))
+    # a folder of the usual mode (tempfile.mkdtemp's is 0700, and the rename keeps it)
+    tmp = parent / f'.{out.name}.partial-{secrets.token_hex(6)}'
+    tmp.mkdir()
     written: Dict[str, object] = {'topic': hair_topic, 'frames': len(drawn), 'notes': notes,
                                   'head_radii': tuple(float(r) for r in head_radii)}
     try:

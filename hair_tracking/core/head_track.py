@@ -17,6 +17,7 @@ the orientation.  What it checks, and what the simulator does about it:
 from collections import deque
 import enum
 import math
+from typing import Optional
 
 import numpy as np
 
@@ -163,3 +164,10 @@ def _parse_pose(t_ns, position, quaternion):
     if n < 1e-6:
         return f'quaternion has (near) zero norm {n:.3g}'
     return tuple(p), tuple(c / n for c in q)
+
+
+def pose_problem(t_ns, position, quaternion) -> Optional[str]:
+    """Why :meth:`HeadTrack.push` would reject this pose (None when it is usable): checked
+    before anything is built for it."""
+    pose = _parse_pose(t_ns, position, quaternion)
+    return pose if isinstance(pose, str) else None

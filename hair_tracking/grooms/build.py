@@ -79,6 +79,9 @@ def survey(path: str, units: str = 'auto', up_axis: str = 'auto') -> Tuple[Surve
     tips = poly.points[starts + poly.counts - 1]
     if units != 'auto':
         unit, unit_words = GROOM_UNITS[units], units
+        problem = fit.units_problem(roots, poly.points, unit, units)
+        if problem:
+            raise GroomFileError(path, '', '', problem)
     elif poly.meters_per_unit is not None:
         unit = poly.meters_per_unit
         unit_words = f'{unit:g} m (stated by the file)'

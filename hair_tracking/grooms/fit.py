@@ -36,6 +36,9 @@ from hair_tracking.core.scene_params import GROOM_UNITS
 ROOT_SPAN = 0.18
 #: ... and of a whole groom's, when the roots all coincide (a single strand).
 GROOM_SPAN = 0.4
+#: Units given for a groom are refused when they make its span this many times larger or
+#: smaller than :data:`ROOT_SPAN` (a fringe alone passes; mm read as cm, or cm as m, not).
+IMPLAUSIBLE_SPAN_FACTOR = 5.0
 #: Head-frame coordinates of a file's x, y, z per up axis (rows: head x, y, z).
 AXES = {'y': np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]),
         'z': np.eye(3)}
@@ -58,6 +61,23 @@ def guess_units(roots: np.ndarray, points: np.ndarray) -> Tuple[str, str]:
     name = min(GROOM_UNITS, key=lambda k: abs(math.log(GROOM_UNITS[k] * span / target)))
     return name, (f'{name} (guessed: {what} {span:.4g} units, {span * GROOM_UNITS[name]:.3g} m '
                   f'in {name})')
+
+
+def units_problem(roots: np.ndarray, points: np.ndarray, unit: float, words: str) -> str:
+    """Why ``unit`` [m per file unit] (named ``words``) cannot be a groom's: its roots span
+    more than :data:`IMPLAUSIBLE_SPAN_FACTOR` times more or less than a head of hair's
+    (:data:`ROOT_SPAN`; a whole groom's, :data:`GROOM_SPAN`, when the roots coincide), naming
+    the unit the strands suggest (:func:`guess_units`); '' when it can."""
+    span = float(np.ptp(roots, axis=0).max()) if roots.shape[0] else 0.0
+    target, what = ROOT_SPAN, 'the roots span'
+    if not span > 0.0:
+        span = float(np.ptp(points, axis=0).max()) if points.shape[0] else 0.0
+        target, what = GROOM_SPAN, 'the groom spans'
+    if not span > 0.0 or abs(math.log(span * unit / target)) <= \
+            math.log(IMPLAUSIBLE_SPAN_FACTOR):
+        return ''
+    return (f'with units {words} {what} {span * unit:.3g} m, which no head of hair does; the '
+            f'strands suggest {guess_units(roots, points)[1]}')
 
 
 def guess_up(roots: np.ndarray, tips: np.ndarray, lengths: np.ndarray) -> Tuple[str, str]:

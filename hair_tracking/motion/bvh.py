@@ -48,6 +48,10 @@ BVH_UNITS = {'cmu': CMU_SCALE_M, 'm': 1.0, 'cm': 0.01, 'mm': 0.001, 'in': 0.0254
 
 #: How tall a skeleton's rest pose is taken to be when its unit is recognised [m] (an adult).
 REST_HEIGHT_M = 1.7
+#: A unit given for a BVH file is refused when it makes the rest pose this many times shorter
+#: or taller than :data:`REST_HEIGHT_M` (0.57 m to 5.1 m: children and partial skeletons
+#: pass, a centimetre file read in metres or millimetres does not).
+IMPLAUSIBLE_HEIGHT_FACTOR = 3.0
 
 #: BVH (y up) world coordinates -> project world coordinates (z up, REP-103): ``p = M @ p_bvh``.
 #: BVH +z -> world +x, BVH +x -> world +y, BVH +y -> world +z (a proper rotation, det = +1).
@@ -343,9 +347,7 @@ def recognise_units(bvh: Bvh):
     up; the unit of :data:`BVH_UNITS` nearest to the height that implies (by ratio) is chosen
     when it is within a factor 1.35, otherwise UnitsError asks for ``--units`` or ``--scale``.
     """
-    rest = Bvh(joints=bvh.joints, motion=np.zeros((1, bvh.motion.shape[1])),
-               frame_time=bvh.frame_time, path=bvh.path)
-    height = float(np.ptp(rest.all_positions()[0][:, 1]))
+    height = rest_height(bvh)
     if not height > 0:
         raise UnitsError(f'{bvh.path}: cannot recognise the units (the rest pose has no '
                          f'height); give --units or --scale')
@@ -357,6 +359,29 @@ def recognise_units(bvh: Bvh):
                          f'{", ".join(BVH_UNITS)}; give --units or --scale')
     return BVH_UNITS[name], (f'{name} (auto: rest pose {height:.4g} units tall = '
                              f'{height * BVH_UNITS[name]:.2f} m)')
+
+
+def rest_height(bvh: Bvh) -> float:
+    """How tall the rest pose (every channel 0) stands [BVH units], BVH being y up."""
+    rest = Bvh(joints=bvh.joints, motion=np.zeros((1, bvh.motion.shape[1])),
+               frame_time=bvh.frame_time, path=bvh.path)
+    return float(np.ptp(rest.all_positions()[0][:, 1]))
+
+
+def units_problem(bvh: Bvh, scale: float, words: str) -> str:
+    """Why ``scale`` [m per unit] (named ``words``) cannot be the unit of ``bvh``: a rest pose
+    more than :data:`IMPLAUSIBLE_HEIGHT_FACTOR` times shorter or taller than a person
+    (:data:`REST_HEIGHT_M`), naming the unit the skeleton suggests; '' when it can."""
+    height = rest_height(bvh) * scale
+    if not height > 0 or abs(math.log(height / REST_HEIGHT_M)) <= \
+            math.log(IMPLAUSIBLE_HEIGHT_FACTOR):
+        return ''
+    try:
+        suggested = f'; the skeleton suggests {recognise_units(bvh)[1]}'
+    except UnitsError:
+        suggested = ''
+    return (f'{bvh.path}: with units {words} the rest pose stands {height:.4g} m tall, which '
+            f'no person does{suggested}')
 
 
 def infer_head_axes(bvh: Bvh, joint: str = 'Head', bvh_to_world=BVH_TO_WORLD,

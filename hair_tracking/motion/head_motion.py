@@ -30,6 +30,8 @@ class UnitsError(HeadMotionError):
 #: and a stream outside them is reported (see :func:`timing_problem`).
 PLAUSIBLE_RATE_HZ = (1.0, 10_000.0)
 PLAUSIBLE_DURATION_S = 86_400.0
+#: Fastest median head speed [m/s] taken from a recording without a warning (a sprint is 10).
+PLAUSIBLE_HEAD_SPEED = 10.0
 
 
 def timing_problem(rate_hz: float, duration_s: float) -> str:
@@ -43,6 +45,21 @@ def timing_problem(rate_hz: float, duration_s: float) -> str:
     if duration_s > PLAUSIBLE_DURATION_S:
         return (f'a duration of {duration_s:.4g} s (more than a day) at a median rate of '
                 f'{rate_hz:.3g} Hz')
+    return ''
+
+
+def speed_problem(position: np.ndarray, t_ns: np.ndarray) -> str:
+    """Why a head moving through ``position`` [m] (F, 3) at ``t_ns`` cannot be a person's (its
+    median speed over :data:`PLAUSIBLE_HEAD_SPEED` m/s: lengths read in the wrong unit, most
+    likely), or '' when it can."""
+    if len(t_ns) < 2:
+        return ''
+    dt = np.diff(np.asarray(t_ns, dtype=np.int64)) * 1e-9
+    step = np.linalg.norm(np.diff(np.asarray(position, dtype=np.float64), axis=0), axis=1)
+    speed = float(np.median(step[dt > 0] / dt[dt > 0])) if np.any(dt > 0) else 0.0
+    if speed > PLAUSIBLE_HEAD_SPEED:
+        return (f'the head moves at a median {speed:.4g} m/s (a person\'s head: below '
+                f'{PLAUSIBLE_HEAD_SPEED:g} m/s)')
     return ''
 
 

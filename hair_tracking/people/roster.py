@@ -16,7 +16,7 @@ from typing import Dict, Iterable, List, Optional
 
 import numpy as np
 
-from hair_tracking.core.head_track import PoseResult
+from hair_tracking.core.head_track import pose_problem, PoseResult
 from hair_tracking.core.scene import Scene
 from hair_tracking.core.transforms import quat_to_matrix
 from hair_tracking.people.crowd import Crowd
@@ -58,6 +58,8 @@ class Roster:
         self.appeared: List[str] = []
         self.removed: List[str] = []
         self.waiting = 0            # face poses of people without a place
+        self.rejected = 0           # face poses refused (non-finite, zero quaternion ...)
+        self.last_rejection = ''
 
     def listed(self, ids: Iterable[str], now_ns: int) -> None:
         """An id list (``/humans/faces/tracked``) arrived at ``now_ns``."""
@@ -68,13 +70,18 @@ class Roster:
              ) -> Optional[PoseResult]:
         """Person ``pid``'s face (the sellion frame, in the fixed frame) at stamp ``t_ns``,
         arrived at ``now_ns``; hair made when new and a place is free.  Returns what happened to
-        the pose (None: no place)."""
+        the pose (None: no place).  A pose the head track would refuse is refused first,
+        before any hair is made for it (:attr:`rejected`, :attr:`last_rejection`); the person
+        still counts as seen."""
         self._seen[pid] = int(now_ns)
-        q = np.asarray(quaternion, dtype=np.float64)
-        n = float(np.linalg.norm(q))
-        p = np.asarray(position, dtype=np.float64)
-        if np.isfinite(n) and n > 0.0:
-            p = p + quat_to_matrix(q / n) @ self.offset
+        problem = pose_problem(t_ns, position, quaternion)
+        if problem is not None:
+            self.rejected += 1
+            self.last_rejection = f'face {pid}: {problem}'
+            return PoseResult.REJECTED
+        q = np.asarray(quaternion, dtype=np.float64).reshape(4)
+        p = np.asarray(position, dtype=np.float64).reshape(3) + \
+            quat_to_matrix(q / np.linalg.norm(q)) @ self.offset
         crowd = self.crowd
         if pid in crowd.people:
             return crowd.push_pose(pid, t_ns, p, q)
@@ -85,6 +92,11 @@ class Roster:
         if result is not PoseResult.REJECTED:
             self.appeared.append(pid)
         return result
+
+    def without_pose(self) -> List[str]:
+        """Ids seen (listed) that have no hair: no usable face pose has come for them yet,
+        or no place was free."""
+        return sorted(pid for pid in self._seen if pid not in self.crowd.people)
 
     def expire(self, now_ns: int) -> List[str]:
         """Remove everyone not seen for the lost timeout by ``now_ns``; their ids."""

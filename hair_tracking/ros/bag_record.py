@@ -6,7 +6,10 @@ go into the bag untouched.  The subscription QoS adapts to the publishers, as ``
 record`` does: reliable only if every publisher is reliable, transient-local only if every
 publisher is; the publishers' QoS is stored as the topic's ``offered_qos_profiles`` so a later
 ``ros2 bag play`` offers the same.  Messages are logged at the node clock's time on arrival
-(``use_sim_time``: the ``/clock`` time).
+(``use_sim_time``: the ``/clock`` time).  Under ``use_sim_time`` nothing is logged before the
+first ``/clock`` message: messages that arrive earlier are held (at most
+:data:`MAX_HELD_BEFORE_CLOCK`) and logged at the first clock time, in their order, and the
+summary says how many (a time-0 message would make a bag a billion seconds long).
 
 The bag is written under a temporary name and moved into place when recording stops (duration,
 message count, idle timeout, Ctrl-C or SIGTERM); nothing is left at the output path if
@@ -16,7 +19,7 @@ demo record in-process.
 """
 import sys
 import time
-from typing import Callable, Dict, List, Optional, Sequence
+from typing import Callable, Dict, List, Optional, Sequence, Tuple
 
 from hair_tracking.bags import io as bag_io
 from hair_tracking.bags.cli import finish_parser
@@ -26,6 +29,9 @@ from hair_tracking.ros.bag_play import check_topic_name, message_class
 
 #: never recorded with --all (rosout is noise; parameter events are per node)
 _SKIP_ALL = ('/rosout', '/parameter_events')
+#: Messages held, under ``use_sim_time``, until the first ``/clock`` gives them a time; later
+#: ones are dropped (and counted) until it comes.
+MAX_HELD_BEFORE_CLOCK = 1000
 
 
 def _subscription_qos(infos):
@@ -69,6 +75,10 @@ class BagRecorder(Recording):
         self.node = node
         self.all_topics = all_topics
         self.subs: Dict[str, object] = {}
+        #: messages that arrived before the first /clock (use_sim_time), waiting for a time
+        self.held: List[Tuple[str, bytes]] = []
+        self.held_total = 0           # messages logged at the first clock time
+        self.dropped_before_clock = 0
         from rclpy.clock import Clock, ClockType
         # steady clock: with use_sim_time a ROS-time timer would not run before /clock does
         self._timer = node.create_timer(discover_period_s, self.discover,
@@ -110,8 +120,35 @@ class BagRecorder(Recording):
 
     def _callback(self, topic: str):
         def on_message(data: bytes) -> None:
-            self.write(topic, self.node.get_clock().now().nanoseconds, data)
+            self.arrived(topic, self.node.get_clock().now().nanoseconds, data)
         return on_message
+
+    def arrived(self, topic: str, t_ns: int, data: bytes) -> None:
+        """Log a message that arrived at the node clock's ``t_ns``; a clock at 0 under
+        ``use_sim_time`` has not started (no ``/clock`` yet): the message is held for it."""
+        if t_ns <= 0 and self.node.get_clock().ros_time_is_active:
+            if len(self.held) < MAX_HELD_BEFORE_CLOCK:
+                self.held.append((topic, data))
+            else:
+                self.dropped_before_clock += 1
+            return
+        if self.held:
+            held, self.held = self.held, []
+            self.held_total += len(held)
+            for t, d in held:
+                self.write(t, t_ns, d)
+        self.write(topic, t_ns, data)
+
+    def summary(self) -> str:
+        lines = [super().summary()]
+        if self.held_total:
+            lines.append(f'  {self.held_total} messages arrived before the first /clock: '
+                         f'logged at its time')
+        if self.held or self.dropped_before_clock:
+            lines.append(f'  {len(self.held) + self.dropped_before_clock} messages arrived '
+                         f'before any /clock and were not logged (use_sim_time: is /clock '
+                         f'published?)')
+        return '\n'.join(lines)
 
     def _teardown(self) -> None:
         for sub in self.subs.values():

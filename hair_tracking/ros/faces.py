@@ -8,8 +8,8 @@ root of its tree, the frame the person's hair is simulated and published in).  T
 
 Outputs, per person, as ROS4HRI's own nodes publish per id: ``/humans/faces/<id>/hair/points``
 (PointCloud2, the node's ``cloud_fields``, one row per strand, in the root frame of the face's
-TF tree, stamped with the stream's time), created when the person's hair is made and destroyed
-when they are removed.
+TF tree, stamped with the time of the face pose the hair has followed), created when the
+person's hair is made and destroyed when they are removed.
 
 Who is in view, the hair's lifetime and the sellion offset: :mod:`hair_tracking.people.roster`;
 the people's guides advance in one call: :mod:`hair_tracking.people.crowd`.  A TF message steps
@@ -29,6 +29,7 @@ from msg_adapters.pointcloud import CloudBuffer, pack_rgb_u32
 from msg_adapters.tf import transforms
 from msg_adapters.tf_tree import compose as tf_compose, TfTree
 
+from hair_tracking.core.head_track import PoseResult
 from hair_tracking.output.strand_colors import StrandColorCache
 from hair_tracking.people import crowd as crowd_module
 from hair_tracking.people.roster import face_id, id_problem, Roster
@@ -64,6 +65,7 @@ class _Person:
             callback_group=MutuallyExclusiveCallbackGroup())
         self.cloud = CloudBuffer()
         self.frame_id = 'world'
+        self.stamp_ns = 0                # the face pose time the hair has followed
         self.published = 0
 
 
@@ -139,17 +141,33 @@ class FaceHair:
             position, quaternion = tf_compose((tp, qp), (np.asarray(t, dtype=np.float64),
                                                          np.asarray(q, dtype=np.float64)))
             t_ns = stamp if stamp > 0 else now
-            if self.roster.face(pid, t_ns, position, quaternion, now) is None:
+            result = self.roster.face(pid, t_ns, position, quaternion, now)
+            if result is None:
                 self._node.get_logger().warn(
                     f'face {pid}: all people.max = {self.roster.crowd.places} places taken, '
                     'waiting for one', throttle_duration_sec=WARN_THROTTLE_S)
+                continue
+            if result is PoseResult.REJECTED:
+                self._node.get_logger().warn(
+                    f'face pose dropped ({self.roster.rejected} so far): '
+                    f'{self.roster.last_rejection}', throttle_duration_sec=WARN_THROTTLE_S)
                 continue
             self._sync()
             if pid in self.people:
                 self.people[pid].frame_id = root
             newest = t_ns if newest is None else max(newest, t_ns)
-        if newest is not None:
-            self.roster.advance_to(newest)
+        if newest is not None and self.roster.advance_to(newest):
+            self._stamp_people()
+
+    def _stamp_people(self) -> None:
+        """Each person's cloud stamp after the people's hair advanced: the time of the newest
+        face pose its hair has followed.  The hair advances to the newest face stamp of any
+        person; one whose face came in an older message (or not yet in this one) had its head
+        held at that pose, so its cloud carries that pose's time."""
+        crowd = self.roster.crowd
+        for pid, person in self.people.items():
+            sim = crowd.people[pid]
+            person.stamp_ns = max(0, min(sim.time_ns or 0, sim.track.last_time))
 
     def _usable(self, pid: str) -> bool:
         problem = id_problem(pid)
@@ -171,6 +189,7 @@ class FaceHair:
         log = self._node.get_logger()
         for pid in self.roster.appeared:
             self.people[pid] = _Person(self._node, pid, depth)
+            self.people[pid].stamp_ns = self.roster.crowd.people[pid].track.last_time
             log.info(f'face {pid}: hair on {hair_topic(pid)}')
         for pid in self.roster.removed:
             person = self.people.pop(pid, None)
@@ -192,6 +211,24 @@ class FaceHair:
             self._period = s.publish_period
         self.publish(only_wanted=True)
 
+    def diagnostics(self):
+        """``(problems, values)`` of the people for the node's diagnostics: poses refused,
+        ids seen without hair."""
+        roster = self.roster
+        problems, waiting = [], roster.without_pose()
+        if roster.rejected:
+            problems.append(f'{roster.rejected} face poses refused, last: '
+                            f'{roster.last_rejection}')
+        if waiting:
+            problems.append(f'{len(waiting)} face ids without hair (no usable face_<id> pose '
+                            f'on TF yet, or no place): {", ".join(waiting[:5])}'
+                            + (' ...' if len(waiting) > 5 else ''))
+        values = {'people': str(len(roster.crowd.people)),
+                  'people_places': str(roster.crowd.places),
+                  'face_poses_refused': str(roster.rejected),
+                  'face_ids_without_hair': str(len(waiting))}
+        return problems, values
+
     def publish(self, only_wanted: bool = True) -> None:
         """Each person's cloud (those somebody subscribes to, with ``only_wanted``)."""
         s = self._settings()
@@ -202,7 +239,7 @@ class FaceHair:
             n_strands, n_points, write = sim.record_writer()
             rgb = self._colors.get('hair', n_strands, s.marker_color) if s.cloud_rgb else None
             data = person.cloud.encode(n_strands, n_points, write, frame_id=person.frame_id,
-                                       stamp_ns=max(0, sim.time_ns or 0), packed_rgb=rgb,
+                                       stamp_ns=person.stamp_ns, packed_rgb=rgb,
                                        strand_field=s.cloud_strand)
             person.pub.publish(bytes(data))
             person.published += 1

@@ -33,8 +33,6 @@ from typing import Dict, List, Optional
 
 import numpy as np
 
-from msg_adapters.pointcloud import pointcloud2_to_strands
-
 from hair_tracking import executable
 from hair_tracking.bags import io as bag_io
 from hair_tracking.bags.io import BagError
@@ -67,21 +65,27 @@ def start_node(domain: int, log_path: Path, params: List[str], threads: Optional
     return proc, log
 
 
-def stop_node(proc, timeout: float = STOP_WAIT_S, log=_log) -> int:
+def _wait(proc, sig, timeout: float) -> None:
+    """Wait up to ``timeout`` seconds for ``proc`` to end after ``sig``."""
+    try:
+        proc.wait(timeout)
+    except subprocess.TimeoutExpired:
+        pass
+
+
+def stop_node(proc, timeout: float = STOP_WAIT_S, log=_log, wait=_wait) -> int:
     """Stop the node as a user would: SIGINT (Ctrl-C; the node stops at once however it waits,
     :mod:`hair_tracking.shutdown`).  Fallbacks for a process that does not stop within
-    ``timeout`` seconds: SIGTERM, then SIGKILL as the last resort; each escalation is logged.
-    Returns the node's exit code."""
+    ``timeout`` seconds (``wait(proc, signal, timeout)`` waits; a test injects its own):
+    SIGTERM, then SIGKILL as the last resort; each escalation is logged.  Returns the node's
+    exit code."""
     for sig in (signal.SIGINT, signal.SIGTERM):
         if proc.poll() is not None:
             break
         if sig != signal.SIGINT:
             log(f'the node did not stop within {timeout:g} s of SIGINT: sending SIGTERM')
         proc.send_signal(sig)
-        try:
-            proc.wait(timeout)
-        except subprocess.TimeoutExpired:
-            pass
+        wait(proc, sig, timeout)
     if proc.poll() is None:
         log(f'the node did not stop within {timeout:g} s of SIGTERM either: killing it (SIGKILL)')
         proc.kill()
@@ -106,6 +110,8 @@ def _last_diagnostics(path) -> Dict[str, str]:
 
 def _frames(path):
     """(distinct stamps [ns], messages, all finite) of /hair/points in a recording."""
+    # imported here: it loads numba, whose cache folder main() sets first
+    from msg_adapters.pointcloud import pointcloud2_to_strands
     stamps, n, finite, shape = [], 0, True, None
     for t, msg in bag_io.cloud_messages(path):
         n += 1
