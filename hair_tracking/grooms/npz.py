@@ -2,7 +2,7 @@
 
 Either ``strands`` (S, N, 3): every strand with N vertices, or ``points`` (P, 3) with ``counts``
 (S,): the vertices of all strands one after the other and each strand's vertex count.
-Optional ``meters_per_unit`` (a number) and ``up_axis`` (``'y'`` or ``'z'``) say the units and
+Optional ``meters_per_unit`` (a number) and ``up_axis`` (``'y'``, ``'-x'``, ...) say the units and
 axes, as a USD stage does; without them they are guessed like any file's.
 """
 import os
@@ -10,6 +10,7 @@ import zipfile
 
 import numpy as np
 
+from hair_tracking.grooms.fit import UP_AXES
 from hair_tracking.grooms.polylines import GroomFileError, Polylines, strand_of
 
 FORMAT = 'NPZ'
@@ -97,8 +98,9 @@ def read_npz(path: str) -> Polylines:
                                 np.isfinite(mpu) and mpu > 0):
         raise GroomFileError(path, "array 'meters_per_unit'", 'a positive number',
                              f'{mpu!r}')
-    if up is not None and str(up) not in ('y', 'z'):
-        raise GroomFileError(path, "array 'up_axis'", "'y' or 'z'", f'{up!r}')
+    if up is not None and str(up) not in UP_AXES:
+        raise GroomFileError(path, "array 'up_axis'", f'one of {", ".join(UP_AXES)}',
+                             f'{up!r}')
     return Polylines(points, counts, FORMAT,
                      meters_per_unit=None if mpu is None else float(mpu),
                      up_axis=None if up is None else str(up))
