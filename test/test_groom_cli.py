@@ -46,7 +46,18 @@ def test_convert_writes_the_strands_as_read_or_as_on_the_head(files, tmp_path, c
     assert main(['convert', str(files['.data']), '-o', str(out)]) == 0
     raw, src = read_strands(str(out)), read_strands(str(files['.data']))
     assert np.array_equal(raw.counts, src.counts) and np.array_equal(raw.points, src.points)
-    assert raw.meters_per_unit == pytest.approx(0.01) and raw.up_axis == 'y'
+    assert raw.meters_per_unit is None and raw.up_axis is None     # guesses stay guesses
+    stated = tmp_path / 'stated.npz'
+    assert main(['convert', str(files['.data']), '-o', str(stated), '--units', 'cm',
+                 '--up-axis', 'y']) == 0
+    said = read_strands(str(stated))
+    assert said.meters_per_unit == pytest.approx(0.01) and said.up_axis == 'y'
+    capsys.readouterr()
+    for extra in (['--rotation', '0,0,90'], ['--max-strands', '10']):
+        assert main(['convert', str(files['.data']), '-o', str(tmp_path / 'no.npz')]
+                    + extra) == 2
+        assert 'add --imported' in capsys.readouterr().err
+    assert not (tmp_path / 'no.npz').exists()
     head = tmp_path / 'head.npz'
     assert main(['convert', str(files['.data']), '-o', str(head), '--imported',
                  '--nodes', '12']) == 0

@@ -309,3 +309,31 @@ def test_the_procedural_groom_is_untouched():
     spec = Scene().groom
     a, b = build_groom(spec), make_groom(spec)
     assert np.array_equal(a.ghost_rest, b.ghost_rest) and a.guide_index is None
+
+
+@pytest.mark.parametrize('up', ['x', '-x', 'y', '-y', 'z', '-z'])
+def test_a_groom_with_any_axis_up_lands_upright(tmp_path, up):
+    """A groom written in cm with each file axis (either way) up, facing that axis's forward
+    (:data:`fit.FORWARD`), the head 1.6 m up: the up axis is guessed and the strands land as
+    the z-up file's do."""
+    head = gf.synthetic_groom(60, 12, seed=5)
+    for name, m in (('ref', fit.AXES['z']), (up, fit.AXES[up])):     # head = m @ file
+        gf.write_data(tmp_path / f'{name}.data', [(h + [0.0, 0.0, 1.6]) @ m / 0.01
+                                                  for h in head])
+    info, _ = survey(str(tmp_path / f'{up}.data'))
+    assert info.up == up and info.up_words.startswith(f'{up} (guessed: the tips hang')
+    assert 'turn the rest' not in info.up_words
+    got = import_groom(Scene().with_changes(groom__file=str(tmp_path / f'{up}.data')).groom)
+    ref = import_groom(Scene().with_changes(groom__file=str(tmp_path / 'ref.data'),
+                                            groom__up_axis='z').groom)
+    np.testing.assert_allclose(got.strands, ref.strands, atol=1e-6)
+    assert np.mean(got.strands[:, 0, 2]) > np.mean(got.strands[:, -1, 2])   # roots above tips
+
+
+def test_hair_hanging_between_axes_is_reported_with_how_far_off():
+    rng = np.random.default_rng(0)
+    roots = rng.normal(size=(50, 3)) * 0.05
+    a = np.radians(40.0)                               # hanging 40 deg from -z toward +x
+    tips = roots + 0.3 * np.array([np.sin(a), 0.0, -np.cos(a)])
+    up, words = fit.guess_up(roots, tips, np.full(50, 0.3))
+    assert up == 'z' and '40 deg from it' in words and 'file_rotation_deg' in words

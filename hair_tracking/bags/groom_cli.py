@@ -120,11 +120,22 @@ def cmd_convert(args) -> int:
         print(f'wrote {out}: {s.shape[0]} strands x {s.shape[1]} nodes on the head '
               f'(metres, head frame); {imported.note}')
         return EXIT_OK
+    options = (('--rotation', args.rotation), ('--offset', args.offset),
+               ('--max-strands', args.max_strands), ('--fit', args.fit != 'translate'),
+               ('--scene', args.scene))
+    placing = [name for name, given in options if given]
+    if placing:
+        raise BagError(f'{", ".join(placing)}: how the strands are put on the head, which a '
+                       'conversion as read does not do; add --imported', EXIT_USAGE)
     info, poly = survey(args.file, args.units, args.up_axis)
+    # only what the file stated or the command line said is recorded: a guess stays a guess
+    unit = info.unit if args.units != 'auto' or poly.meters_per_unit is not None else None
+    up = info.up if args.up_axis != 'auto' or poly.up_axis is not None else None
     with _whole(out) as tmp:
-        write_npz(tmp, poly.points, poly.counts, info.unit, info.up)
+        write_npz(tmp, poly.points, poly.counts, unit, up)
     print(f'wrote {out}: {poly.count} strands, {poly.points.shape[0]} vertices as read '
-          f'(units {info.units_words}; up {info.up_words})')
+          f'(units {info.units_words}; up {info.up_words}; recorded: units '
+          f'{"-" if unit is None else f"{unit:g} m"}, up {up or "-"})')
     return EXIT_OK
 
 
@@ -159,7 +170,8 @@ def build_parser() -> argparse.ArgumentParser:
                        help='length unit of the file (default auto: stated by the file, else '
                             'guessed from the span of the roots)')
         p.add_argument('--up-axis', choices=GROOM_UP_AXES, default='auto',
-                       help='y (face toward +z) or z (face toward +x) (default auto)')
+                       help='the file axis pointing up: x, -x, y (face toward +z), -y, z (face '
+                            'toward +x), -z (default auto: stated by the file, else guessed)')
         p.add_argument('--fit', choices=GROOM_FITS, default='translate',
                        help='how the roots are put on the scalp (default translate)')
         p.add_argument('--rotation', metavar='RX,RY,RZ',

@@ -34,9 +34,10 @@ PEOPLE_SOURCES = ('pose', 'hri')
 #: Length units of a groom file: metres per unit (``tenth_in``: tenths of an inch, Cem Yuksel's
 #: models); ``auto`` guesses from the span of the roots (docs/grooms.md).
 GROOM_UNITS = {'m': 1.0, 'cm': 0.01, 'mm': 0.001, 'in': 0.0254, 'tenth_in': 0.00254}
-#: Up axis of a groom file: ``y`` (y up, the face toward +z) or ``z`` (z up, the face toward +x:
-#: the head frame's axes); ``auto`` guesses it (docs/grooms.md).
-GROOM_UP_AXES = ('auto', 'y', 'z')
+#: Up axis of a groom file: one of its axes either way (``y``: y up, the face toward +z; ``z``:
+#: z up, the face toward +x, the head frame's axes; ``x``: x up, the face toward +y); ``auto``
+#: guesses it (docs/grooms.md).
+GROOM_UP_AXES = ('auto', 'x', '-x', 'y', '-y', 'z', '-z')
 #: How an imported groom is put on the head: ``translate`` (roots fitted onto the scalp
 #: ellipsoid by a translation), ``scale`` (a translation and a uniform scale), ``none`` (the
 #: file's coordinates, in metres and REP-103 axes, are the head frame).
@@ -115,9 +116,10 @@ SCENE_PARAMS: Tuple[Param, ...] = (
          'the file states, else guessed from the span of the roots',
          choices=('auto',) + tuple(GROOM_UNITS), rebuild=True),
     _row('groom.up_axis', 'string', 'auto',
-         'imported groom: y (y up, face toward +z) or z (z up, face toward +x, the head '
-         'frame\'s axes); auto: the one the file states, else the axis along which the tips '
-         'hang below the roots', choices=GROOM_UP_AXES, rebuild=True),
+         'imported groom: the file axis pointing up, either way (y: face toward +z; z: face '
+         'toward +x, the head frame\'s axes; x: face toward +y); auto: the one the file '
+         'states, else the axis along which the tips hang below the roots',
+         choices=GROOM_UP_AXES, rebuild=True),
     _row('groom.fit', 'string', 'translate',
          'imported groom: translate (roots fitted onto the scalp ellipsoid), scale (and a '
          'uniform scale) or none (the file, in metres, is already in the head frame); the roots '

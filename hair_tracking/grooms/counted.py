@@ -68,7 +68,8 @@ def read_counted(path: str, k: int, fmt: str) -> Polylines:
     keep[0] = False
     keep[heads] = False
     cols = floats[keep].reshape(-1, k)
-    xyz = cols[:, :3].astype(np.float64)
+    with np.errstate(invalid='ignore'):        # a signalling NaN in the file: checked below
+        xyz = cols[:, :3].astype(np.float64)
     # vertex i sits after the counts of its strand and those before it
     strand_of_vertex = np.repeat(np.arange(strands), counts)
     check_finite(path, xyz, lambda i: 4 * (1 + int(strand_of_vertex[i]) + 1 + k * i))

@@ -40,7 +40,13 @@ def read_hair(path: str) -> Polylines:
         pos += 2 * hairs
         where = f'byte {HEADER.itemsize}'
     else:
-        counts = np.full(hairs, int(h['d_segments']) + 1, dtype=np.int64)
+        # checked before anything of the declared sizes is allocated
+        per_strand = int(h['d_segments']) + 1
+        if hairs * per_strand != points:
+            raise GroomFileError(path, 'byte 16', f'a default segment count that makes the '
+                                 f'header\'s {points} points', f'{hairs * per_strand} points')
+        need(path, size, pos, 12 * points, f'{points} f32 x y z points')
+        counts = np.full(hairs, per_strand, dtype=np.int64)
         where = 'byte 16'
     if int(counts.sum()) != points:
         raise GroomFileError(path, where, f'segment counts that make the header\'s {points} '

@@ -6,13 +6,13 @@ the head frame, the fit of the roots onto the scalp and the rest shape kept outs
   GROOM_UNITS` that makes the roots' largest bounding-box side closest to it (in ratio) is
   taken.  A file that states its units (a USD stage's ``metersPerUnit``, an NPZ's
   ``meters_per_unit``) is believed.
-* **Up axis** (``groom.up_axis: auto``): hair hangs, so the up axis is the one (y or z) along
-  which the roots lie farthest above the tips, on average over the strands in strand lengths; a
-  groom in which neither lies above (hair standing up) is taken as z up.  A file that states
-  its up axis is believed.  The axes then become REP-103's (x forward, y left, z up): a y-up
-  file faces +z (Maya, Houdini, Cem Yuksel's and USC-HairSalon's models), a z-up file is taken
-  as already facing +x; ``groom.file_rotation_deg`` turns anything else (Blender faces -y:
-  ``[0, 0, 90]``).
+* **Up axis** (``groom.up_axis: auto``): hair hangs, so the up axis is the one of the six
+  (+-x, +-y, +-z) along which the roots lie farthest above the tips, on average over the strands
+  in strand lengths; a groom in which none lies above (hair standing up) is taken as z up.  A
+  file that states its up axis is believed.  The axes then become REP-103's (x forward, y left,
+  z up): a y-up file faces +z (Maya, Houdini, Cem Yuksel's and USC-HairSalon's models), a z-up
+  file is taken as already facing +x, an x-up file as facing +y (:data:`FORWARD`: the next
+  axis); ``groom.file_rotation_deg`` turns anything else (Blender faces -y: ``[0, 0, 90]``).
 * **Fit** (``groom.fit``): the translation (``translate``), or translation and uniform scale
   (``scale``), that puts the roots on the scalp ellipsoid (``groom.scalp``) in the least-squares
   sense of the normalised radial distance ``|(p - c) / a| - 1`` (Levenberg-Marquardt from the
@@ -39,9 +39,27 @@ GROOM_SPAN = 0.4
 #: Units given for a groom are refused when they make its span this many times larger or
 #: smaller than :data:`ROOT_SPAN` (a fringe alone passes; mm read as cm, or cm as m, not).
 IMPLAUSIBLE_SPAN_FACTOR = 5.0
+#: The file axis taken as forward for each up axis: the one after it in x, y, z order (y up
+#: faces +z, z up faces +x, x up faces +y), whatever the up axis's sign.
+FORWARD = {'x': 1, 'y': 2, 'z': 0}
+#: The up axes a groom may have: each axis of the file, either way.
+UP_AXES = ('x', '-x', 'y', '-y', 'z', '-z')
+
+
+def _axes(up: str) -> np.ndarray:
+    """Head-frame coordinates of a file's x, y, z for up axis ``up`` (rows: head x = the
+    forward axis, :data:`FORWARD`; head z = ``up``; head y = z cross x)."""
+    u = np.zeros(3)
+    u['xyz'.index(up[-1])] = -1.0 if up.startswith('-') else 1.0
+    f = np.zeros(3)
+    f[FORWARD[up[-1]]] = 1.0
+    return np.array([f, np.cross(u, f), u])
+
+
 #: Head-frame coordinates of a file's x, y, z per up axis (rows: head x, y, z).
-AXES = {'y': np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]),
-        'z': np.eye(3)}
+AXES = {up: _axes(up) for up in UP_AXES}
+#: How far [deg] the hair may hang from the up axis chosen before the report says to turn it.
+OFF_AXIS_DEG = 25.0
 #: The up axis is guessed only when the roots lie at least this far (strand lengths, on
 #: average) above the tips.
 MIN_DROP = 0.05
@@ -81,17 +99,24 @@ def units_problem(roots: np.ndarray, points: np.ndarray, unit: float, words: str
 
 
 def guess_up(roots: np.ndarray, tips: np.ndarray, lengths: np.ndarray) -> Tuple[str, str]:
-    """``(axis, words)``: y or z, the axis along which the roots lie farthest above the tips
-    (mean of the difference over the strand lengths); z when neither does by MIN_DROP."""
-    drop = {a: float(np.mean((roots[:, k] - tips[:, k]) / np.maximum(lengths, 1e-300)))
-            for a, k in (('y', 1), ('z', 2))}
+    """``(axis, words)``: of the six axes of :data:`UP_AXES`, the one along which the roots lie
+    farthest above the tips (mean of the difference over the strand lengths: hair hangs); z
+    when none does by MIN_DROP.  The words say how far the tips hang along it and, when the
+    mean hang is more than :data:`OFF_AXIS_DEG` from it (a groom turned by no right angle),
+    by how much, so that ``groom.file_rotation_deg`` can turn the rest."""
+    hang = np.mean((roots - tips) / np.maximum(lengths, 1e-300)[:, None], axis=0)
+    drop = {up: float(AXES[up][2] @ hang) for up in UP_AXES}
     best = max(drop, key=drop.get)
     if drop[best] < MIN_DROP:
-        return 'z', (f'z (guessed: the roots lie above the tips along neither y ({drop["y"]:.2f}'
-                     f' strand lengths) nor z ({drop["z"]:.2f}))')
-    other = 'z' if best == 'y' else 'y'
-    return best, (f'{best} (guessed: the tips hang {drop[best]:.2f} strand lengths below the '
-                  f'roots along {best}, {drop[other]:.2f} along {other})')
+        return 'z', ('z (guessed: the roots lie above the tips along no axis by '
+                     f'{MIN_DROP} strand lengths; the most is {drop[best]:.2f} along {best})')
+    norm = float(np.linalg.norm(hang))
+    off = math.degrees(math.acos(min(1.0, drop[best] / norm)))
+    words = (f'{best} (guessed: the tips hang {drop[best]:.2f} strand lengths below the roots '
+             f'along {best}, the hair {off:.0f} deg from it')
+    if off > OFF_AXIS_DEG:
+        words += '; turn the rest with groom.file_rotation_deg'
+    return best, words + ')'
 
 
 def rotation(degrees) -> np.ndarray:

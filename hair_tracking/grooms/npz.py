@@ -2,23 +2,62 @@
 
 Either ``strands`` (S, N, 3): every strand with N vertices, or ``points`` (P, 3) with ``counts``
 (S,): the vertices of all strands one after the other and each strand's vertex count.
-Optional ``meters_per_unit`` (a number) and ``up_axis`` (``'y'`` or ``'z'``) say the units and
+Optional ``meters_per_unit`` (a number) and ``up_axis`` (``'y'``, ``'-x'``, ...) say the units and
 axes, as a USD stage does; without them they are guessed like any file's.
 """
+import os
 import zipfile
 
 import numpy as np
 
+from hair_tracking.grooms.fit import UP_AXES
 from hair_tracking.grooms.polylines import GroomFileError, Polylines, strand_of
 
 FORMAT = 'NPZ'
 
 
+#: The arrays of an archive may hold at most this many bytes more than the file ...
+NPZ_SLACK_BYTES = 64 << 20
+#: ... plus this many times the file's size (what compression may gain on strands).
+NPZ_MAX_RATIO = 20
+
+
+def _check_members(path: str) -> None:
+    """Every array's header against what its member holds, and the members' sizes against the
+    file's, before numpy allocates an array of the declared shape (it does so before reading
+    the data): GroomFileError naming the array."""
+    size = os.path.getsize(path)
+    with zipfile.ZipFile(path) as zf:
+        total = 0
+        for info in zf.infolist():
+            total += info.file_size
+            if total > NPZ_SLACK_BYTES + NPZ_MAX_RATIO * size:
+                raise GroomFileError(path, f'member {info.filename!r}', f'arrays of at most '
+                                     f'{NPZ_MAX_RATIO}x the file\'s {size} bytes',
+                                     f'{total} bytes declared')
+            if not info.filename.endswith('.npy'):
+                continue
+            with zf.open(info) as f:
+                version = np.lib.format.read_magic(f)
+                read = np.lib.format.read_array_header_1_0 if version == (1, 0) else \
+                    np.lib.format.read_array_header_2_0
+                shape, _, dtype = read(f)
+                start = f.tell()
+            nbytes = int(np.prod(shape, dtype=object)) * dtype.itemsize
+            if start + nbytes != info.file_size:
+                raise GroomFileError(path, f'array {info.filename[:-4]!r}', f'a shape that '
+                                     f'fits its {info.file_size - start} bytes',
+                                     f'{dtype} {shape}')
+
+
 def read_npz(path: str) -> Polylines:
     """The strands of an ``.npz`` file (see the module docstring)."""
     try:
+        _check_members(path)
         with np.load(path, allow_pickle=False) as z:
             arrays = {k: z[k] for k in z.files}
+    except GroomFileError:
+        raise
     except FileNotFoundError:
         raise GroomFileError(path, '', '', 'file not found') from None
     except (OSError, ValueError, zipfile.BadZipFile, EOFError) as e:
@@ -59,8 +98,9 @@ def read_npz(path: str) -> Polylines:
                                 np.isfinite(mpu) and mpu > 0):
         raise GroomFileError(path, "array 'meters_per_unit'", 'a positive number',
                              f'{mpu!r}')
-    if up is not None and str(up) not in ('y', 'z'):
-        raise GroomFileError(path, "array 'up_axis'", "'y' or 'z'", f'{up!r}')
+    if up is not None and str(up) not in UP_AXES:
+        raise GroomFileError(path, "array 'up_axis'", f'one of {", ".join(UP_AXES)}',
+                             f'{up!r}')
     return Polylines(points, counts, FORMAT,
                      meters_per_unit=None if mpu is None else float(mpu),
                      up_axis=None if up is None else str(up))
