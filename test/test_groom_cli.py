@@ -153,3 +153,49 @@ def test_units_that_make_no_head_of_hair_are_refused_naming_the_guess(tmp_path, 
     # right units, fitted with a scale: near 1
     spec = Scene().with_changes(groom__file=str(mm), groom__fit='scale').groom
     assert 'scaled by 1.0' in import_groom(spec).note
+
+
+@pytest.mark.parametrize('ext', ['.hair', '.data', '.ply', '.npz', '.usda', '.usdc'])
+def test_convert_writes_every_format_and_it_reads_back(files, tmp_path, ext):
+    out = tmp_path / ('out' + ext)
+    assert main(['convert', str(files['.data']), '-o', str(out), '--units', 'cm',
+                 '--up-axis', 'y']) == 0
+    src, back = read_strands(str(files['.data'])), read_strands(str(out))
+    assert np.array_equal(back.counts, src.counts)
+    np.testing.assert_array_equal(back.points.astype(np.float32), src.points.astype(np.float32))
+    if ext in ('.npz', '.usda', '.usdc'):                  # the layouts that carry them
+        assert back.meters_per_unit == pytest.approx(0.01) and back.up_axis == 'y'
+    head = tmp_path / ('head' + ext)
+    assert main(['convert', str(files['.data']), '-o', str(head), '--imported',
+                 '--nodes', '10']) == 0
+    on_head = import_groom(Scene().with_changes(groom__file=str(files['.data']),
+                                                groom__ghost_nodes=10).groom).strands
+    np.testing.assert_allclose(read_strands(str(head)).points.reshape(on_head.shape), on_head,
+                               atol=1e-6)
+
+
+def test_export_writes_a_run_as_an_animated_usd_file(walk, tmp_path, capsys):
+    from pxr import Usd, UsdGeom
+    from msg_adapters.pointcloud import pointcloud2_to_strands
+    run = tmp_path / 'run.mcap'
+    assert bag_main(['run', str(walk), '-o', str(run), '-q', '--set', 'groom.guides=6',
+                     '--set', 'groom.ghosts_per_guide=3', '--set', 'groom.ghost_nodes=8',
+                     '--set', 'solver.settle_time=0.1']) == 0
+    usd = tmp_path / 'hair.usda'
+    assert bag_main(['export', str(run), '-o', str(usd)]) == 0
+    assert 'frames of 18 strands x 8 points' in capsys.readouterr().out
+    with bag_io.open_bag(run) as r:
+        conns = [c for c in r.connections if c.topic == '/hair/points']
+        clouds = [pointcloud2_to_strands(bag_io.deserialize(r, raw, c.msgtype))[0]
+                  for c, _, raw in bag_io.messages(r, conns)]
+    stage = Usd.Stage.Open(str(usd))
+    curves = UsdGeom.BasisCurves(stage.GetPrimAtPath('/groom/hair'))
+    times = curves.GetPointsAttr().GetTimeSamples()
+    assert times == list(range(len(clouds))) and len(clouds) > 5
+    assert stage.GetEndTimeCode() == len(clouds) - 1 and 25 < stage.GetTimeCodesPerSecond() < 35
+    for k in (0, len(clouds) - 1):
+        got = np.asarray(curves.GetPointsAttr().Get(k))
+        np.testing.assert_array_equal(got, clouds[k].reshape(-1, 3).astype(np.float32))
+    assert list(curves.GetCurveVertexCountsAttr().Get(0)) == [8] * 18
+    assert UsdGeom.GetStageUpAxis(stage) == 'Z' and UsdGeom.GetStageMetersPerUnit(stage) == 1.0
+    assert read_strands(str(usd)).count == 18            # a still groom: the first frame

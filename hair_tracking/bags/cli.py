@@ -9,16 +9,17 @@ Sub-commands (``hair_sim_bag <command> --help`` for every option; guide: docs/ba
     play    [BAG]                 publish a bag live with /clock (like ros2 bag play --clock)
     record  TOPIC... -o OUT       subscribe (raw) and write a bag (like ros2 bag record)
     render  BAG -o DIR            PNG frames / animated GIF of the hair + a diagnostics plot
+    export  BAG -o OUT.usda       the hair as an animated USD BasisCurves file (usd-core)
 
 ``BAG`` defaults to the bundled sample (CMU 131_01 walk head poses).  Bags are rosbag2
 directories or single ``.mcap``/``.db3`` files (ROS 1 ``.bag`` too, for reading); no ROS
-installation is needed for info/import/run/recover/render.  This module holds those five and
-the parser; ``play`` and ``record`` join a ROS graph and live in :mod:`hair_tracking.ros.bag_play`
-and :mod:`hair_tracking.ros.bag_record`, which the executable (:mod:`hair_tracking.ros.bag_cli`)
-adds.
+installation is needed for info/import/run/recover/render/export.  This module holds those and
+the parser (export: :mod:`hair_tracking.bags.export`); ``play`` and ``record`` join a ROS graph
+and live in :mod:`hair_tracking.ros.bag_play` and :mod:`hair_tracking.ros.bag_record`, which the
+executable (:mod:`hair_tracking.ros.bag_cli`) adds.
 
 Exit codes: 0 success, or stopped by SIGINT (Ctrl-C) or SIGTERM (run and record close their
-output bag as it is, a complete bag; import, recover and render leave nothing); 1 the run
+output bag as it is, a complete bag; import, recover, render and export leave nothing); 1 the run
 failed, 2 bad command line, 3 input missing/not a bag/corrupt, 4 the bag lacks what was asked
 for (no head-pose topic, unknown frame), 5 output exists or cannot be written.  Errors are one
 line on stderr, never a traceback.
@@ -32,7 +33,7 @@ from typing import Callable, List, Optional, Sequence
 import numpy as np
 
 from hair_tracking import executable
-from hair_tracking.bags import recording
+from hair_tracking.bags import export, recording
 from hair_tracking.bags.io import (BagError, EXIT_CONTENT, EXIT_FAILURE, EXIT_INPUT, EXIT_OK,
                                    EXIT_OUTPUT, EXIT_USAGE, POSE_KIND_TOPICS, POSE_KINDS,
                                    STORAGES)
@@ -321,12 +322,15 @@ def build_parser(live: Sequence[Callable] = ()) -> argparse.ArgumentParser:
     p.add_argument('--topic', help='hair topic (default /hair/points, else /hair/markers)')
     p.add_argument('--overwrite', action='store_true', help='replace an existing output')
     p.set_defaults(func=cmd_render)
+
+    # ---- export
+    export.add_command(sub, finish_parser)
     return ap
 
 
 #: Commands that run plain Python and numba, writing their output under a temporary name: a
 #: stop request interrupts them anywhere (the others check it between messages or poses)
-INTERRUPTIBLE = ('info', 'import', 'recover', 'render')
+INTERRUPTIBLE = ('info', 'import', 'recover', 'render', 'export')
 
 
 def run_command(prog: str, args, interruptible: bool) -> int:

@@ -3,7 +3,8 @@
 Sub-commands::
 
     info     FILE               strands, vertices, lengths, bounding box, units and up axis
-    convert  FILE -o OUT.npz    the strands as a numpy archive (as read, or as put on the head)
+    convert  FILE -o OUT        the strands as .hair, .data, .ply, .npz or USD (as read, or as put
+                                on the head)
     preview  FILE -o OUT.png    a picture of the groom on the head, front and side
 
 Every command reads the file as ``groom.file`` does (formats and options: docs/grooms.md); the
@@ -34,7 +35,7 @@ from hair_tracking.bags.io import BagError, check_output_path, EXIT_OK, EXIT_USA
 from hair_tracking.core.scene import Scene, SceneError
 from hair_tracking.core.scene_params import GROOM_FITS, GROOM_UNITS, GROOM_UP_AXES
 from hair_tracking.grooms.build import import_groom, survey
-from hair_tracking.grooms.npz import write_npz
+from hair_tracking.grooms.writers import WRITERS, write_strands
 
 PROG = 'hair_sim_groom'
 
@@ -105,8 +106,9 @@ def cmd_info(args) -> int:
 
 def cmd_convert(args) -> int:
     out = check_output_path(args.output, args.overwrite)
-    if out.suffix.lower() != '.npz':
-        raise BagError(f'{args.output}: the output must be a .npz file', EXIT_USAGE)
+    if out.suffix.lower() not in WRITERS:
+        raise BagError(f'{args.output}: the output must be one of '
+                       f'{", ".join(WRITERS)}', EXIT_USAGE)
     if args.imported:
         spec = groom_spec(args)
         if args.nodes is not None:
@@ -116,7 +118,7 @@ def cmd_convert(args) -> int:
         imported = import_groom(spec)
         s = imported.strands
         with _whole(out) as tmp:
-            write_npz(tmp, s.reshape(-1, 3), np.full(s.shape[0], s.shape[1]), 1.0, 'z')
+            write_strands(tmp, s.reshape(-1, 3), np.full(s.shape[0], s.shape[1]), 1.0, 'z')
         print(f'wrote {out}: {s.shape[0]} strands x {s.shape[1]} nodes on the head '
               f'(metres, head frame); {imported.note}')
         return EXIT_OK
@@ -132,7 +134,7 @@ def cmd_convert(args) -> int:
     unit = info.unit if args.units != 'auto' or poly.meters_per_unit is not None else None
     up = info.up if args.up_axis != 'auto' or poly.up_axis is not None else None
     with _whole(out) as tmp:
-        write_npz(tmp, poly.points, poly.counts, unit, up)
+        write_strands(tmp, poly.points, poly.counts, unit, up)
     print(f'wrote {out}: {poly.count} strands, {poly.points.shape[0]} vertices as read '
           f'(units {info.units_words}; up {info.up_words}; recorded: units '
           f'{"-" if unit is None else f"{unit:g} m"}, up {up or "-"})')
@@ -184,9 +186,10 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser('info', help='counts, lengths, box, units and up axis of a groom file')
     common(p)
     p.set_defaults(func=cmd_info)
-    p = sub.add_parser('convert', help='a groom file as a .npz of strands')
+    p = sub.add_parser('convert', help='a groom file as .hair, .data, .ply, .npz or USD')
     common(p)
-    p.add_argument('-o', '--output', required=True, help='the .npz file to write')
+    p.add_argument('-o', '--output', required=True,
+                   help='the file to write: .hair, .data, .ply, .npz, .usd, .usda or .usdc')
     p.add_argument('--imported', action='store_true',
                    help='the strands as put on the head (metres, head frame, resampled to '
                         '--nodes) instead of as read')
