@@ -31,6 +31,7 @@ def main(argv=None):
     if ext not in groom_files.WRITERS:
         ap.error(f'unknown extension {ext!r}: one of {", ".join(groom_files.WRITERS)}')
     strands = groom_files.synthetic_groom(args.strands, args.vertices, seed=args.seed)
+    os.makedirs(os.path.dirname(os.path.abspath(args.output)), exist_ok=True)
     groom_files.WRITERS[ext](args.output, groom_files.to_file_frame(strands))
     print(f'wrote {args.output}: {args.strands} strands of about {args.vertices} vertices')
     return 0
