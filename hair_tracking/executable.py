@@ -58,15 +58,21 @@ def source_hash() -> str:
     return h.hexdigest()[:12]
 
 
-def numba_cache_dir() -> str:
-    """``hair_tracking/__pycache__/numba-<source hash>`` when that is writable, else
-    ``$XDG_CACHE_HOME`` (or ``~/.cache``) ``/hair_tracking/numba-<source hash>``."""
-    name = f'numba-{source_hash()}'
+def cache_dir(kind: str) -> str:
+    """``hair_tracking/__pycache__/<kind>-<source hash>`` when that is writable, else
+    ``$XDG_CACHE_HOME`` (or ``~/.cache``) ``/hair_tracking/<kind>-<source hash>``: a folder of
+    things made from the sources as they are (not created here)."""
+    name = f'{kind}-{source_hash()}'
     local = os.path.join(_PACKAGE, '__pycache__')
     if os.access(local if os.path.isdir(local) else _PACKAGE, os.W_OK):
         return os.path.join(local, name)
     base = os.environ.get('XDG_CACHE_HOME') or os.path.join(os.path.expanduser('~'), '.cache')
     return os.path.join(base, 'hair_tracking', name)
+
+
+def numba_cache_dir() -> str:
+    """numba's cache folder: :func:`cache_dir` ``numba``."""
+    return cache_dir('numba')
 
 
 def use_numba_cache() -> str:

@@ -1,6 +1,8 @@
 """Groom files: every format read back from the tests' own writers (test/groom_files.py), bad
 files refused in one line that names the byte, resampling, subsets, units and up-axis guesses,
 the fit onto the scalp and the guides chosen among the imported strands."""
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -337,3 +339,34 @@ def test_hair_hanging_between_axes_is_reported_with_how_far_off():
     tips = roots + 0.3 * np.array([np.sin(a), 0.0, -np.cos(a)])
     up, words = fit.guess_up(roots, tips, np.full(50, 0.3))
     assert up == 'z' and '40 deg from it' in words and 'file_rotation_deg' in words
+
+
+def test_an_imported_groom_is_built_once_and_again_when_its_file_or_options_change(
+        tmp_path, monkeypatch):
+    from hair_tracking.grooms import build, cache
+    monkeypatch.setattr(cache, 'folder', lambda: str(tmp_path / 'cache'))
+    built = []
+    real = build._imported_groom
+    monkeypatch.setattr(build, '_imported_groom', lambda spec: built.append(1) or real(spec))
+    path = tmp_path / 'g.data'
+    gf.write_data(path, gf.to_file_frame(gf.synthetic_groom(40, 10, seed=1)))
+    spec = Scene().with_changes(groom__file=str(path), groom__guides=8).groom
+    first, again = build_groom(spec), build_groom(spec)
+    assert len(built) == 1
+    for a, b in ((first.ghost_rest, again.ghost_rest), (first.guide_rest, again.guide_rest),
+                 (first.guide_index, again.guide_index)):
+        assert np.array_equal(a, b)
+    assert first.note == again.note
+    gf.write_data(path, gf.to_file_frame(gf.synthetic_groom(40, 10, seed=2)))   # same size
+    other = build_groom(spec)
+    assert len(built) == 2 and not np.array_equal(other.ghost_rest, first.ghost_rest)
+    build_groom(replace(spec, guides=9))
+    assert len(built) == 3
+    lean = build_groom(replace(spec, ghosts_per_guide=0))
+    assert lean.guide_index is None and build_groom(replace(spec, ghosts_per_guide=0)) \
+        .guide_index is None and len(built) == 4
+    for k in range(cache.ENTRIES + 3):
+        build_groom(replace(spec, guides=10 + k))
+    assert len(list((tmp_path / 'cache').iterdir())) == cache.ENTRIES
+    monkeypatch.setattr(cache, 'folder', lambda: str(path / 'not a folder'))
+    assert np.array_equal(build_groom(spec).ghost_rest, other.ghost_rest)    # no cache: built

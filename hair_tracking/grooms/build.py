@@ -150,11 +150,24 @@ def _onto_scalp(poly: Polylines, center, radii) -> Polylines:
     return poly
 
 
-def build_groom(spec: GroomSpec) -> Groom:
+def build_groom(spec: GroomSpec, cache: bool = True) -> Groom:
     """The groom of ``spec``: procedural, or imported from ``spec.file`` (see the module
-    docstring)."""
+    docstring), with ``cache`` through :mod:`hair_tracking.grooms.cache` (an unchanged file
+    with the same options is read and placed once)."""
     if not spec.file:
         return make_groom(spec)
+    if not cache:
+        return _imported_groom(spec)
+    from hair_tracking.grooms import cache as groom_cache
+    groom = groom_cache.load(spec)
+    if groom is None:
+        groom = _imported_groom(spec)
+        groom_cache.store(spec, groom)
+    return groom
+
+
+def _imported_groom(spec: GroomSpec) -> Groom:
+    """The groom of ``spec.file``: imported, its guides chosen."""
     imported = import_groom(spec)
     strands = imported.strands
     count = min(spec.guides, strands.shape[0])
