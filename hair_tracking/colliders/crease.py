@@ -116,6 +116,17 @@ def outside_all(x0, x1, x2, sh, tol):
     return True
 
 
+@njit(cache=True, inline='always')
+def _nearer(found, y0, y1, y2, x0, x1, x2, sh, tol, best, z0, z1, z2):
+    """``(best, z0, z1, z2)``, with the candidate ``y`` taken instead when it was found, lies
+    outside every shape and is nearer to ``x`` (squared distance ``best``)."""
+    if found and outside_all(y0, y1, y2, sh, tol):
+        d = (y0 - x0) ** 2 + (y1 - x1) ** 2 + (y2 - x2) ** 2
+        if d < best:
+            return d, y0, y1, y2
+    return best, z0, z1, z2
+
+
 @njit(cache=True)
 def escape(x0, x1, x2, sh, tol):
     """The closest point to ``x`` outside every shape of the posed table ``sh`` (within ``tol``
@@ -130,11 +141,7 @@ def escape(x0, x1, x2, sh, tol):
         if not near(x0, x1, x2, sh, k):
             continue
         moved, y0, y1, y2 = project(x0, x1, x2, sh, k)
-        if not moved or not outside_all(y0, y1, y2, sh, tol):
-            continue
-        d = (y0 - x0) ** 2 + (y1 - x1) ** 2 + (y2 - x2) ** 2
-        if d < best:
-            best, z0, z1, z2 = d, y0, y1, y2
+        best, z0, z1, z2 = _nearer(moved, y0, y1, y2, x0, x1, x2, sh, tol, best, z0, z1, z2)
     for a in range(shapes):
         if sh[a, KIND] == ELLIPSOID:
             continue
@@ -144,11 +151,8 @@ def escape(x0, x1, x2, sh, tol):
             if not (near(x0, x1, x2, sh, a) or near(x0, x1, x2, sh, b)):
                 continue
             found, y0, y1, y2 = crease_point(x0, x1, x2, sh, a, b)
-            if not found or not outside_all(y0, y1, y2, sh, tol):
-                continue
-            d = (y0 - x0) ** 2 + (y1 - x1) ** 2 + (y2 - x2) ** 2
-            if d < best:
-                best, z0, z1, z2 = d, y0, y1, y2
+            best, z0, z1, z2 = _nearer(found, y0, y1, y2, x0, x1, x2, sh, tol, best,
+                                       z0, z1, z2)
     if best < math.inf:
         return True, z0, z1, z2
     for a in range(shapes):
@@ -161,11 +165,8 @@ def escape(x0, x1, x2, sh, tol):
                         or near(x0, x1, x2, sh, c)):
                     continue
                 found, y0, y1, y2 = corner_point(x0, x1, x2, sh, a, b, c)
-                if not found or not outside_all(y0, y1, y2, sh, tol):
-                    continue
-                d = (y0 - x0) ** 2 + (y1 - x1) ** 2 + (y2 - x2) ** 2
-                if d < best:
-                    best, z0, z1, z2 = d, y0, y1, y2
+                best, z0, z1, z2 = _nearer(found, y0, y1, y2, x0, x1, x2, sh, tol, best,
+                                           z0, z1, z2)
     if best < math.inf:
         return True, z0, z1, z2
     y0, y1, y2 = x0, x1, x2
