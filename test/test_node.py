@@ -206,7 +206,7 @@ def test_first_markers_clear_old_ones_and_colours_reach_the_cloud(harness):
     raw = np.frombuffer(bytes(cloud.data), dtype=np.uint8)
     raw = raw.reshape(cloud.height, cloud.width, cloud.point_step)
     rgb = raw[:, :, 16:20].copy().view('<u4')[..., 0]
-    want = np.rint(strand_colors(12, h.node._settings.marker_color)[:, :3] * 255).astype(int)
+    want = np.rint(strand_colors(12, h.node.settings.marker_color)[:, :3] * 255).astype(int)
     got = np.stack([(rgb >> 16) & 255, (rgb >> 8) & 255, rgb & 255], axis=-1)
     assert (got == got[:, :1]).all()                           # one colour per strand
     np.testing.assert_array_equal(got[:, 0], want)
@@ -386,7 +386,7 @@ def test_publish_on_pose_timer_does_not_repeat_the_poses_frames(harness):
     h.send(pub, pose_stamped_msg(t, [0.0, 0.0, 0.0], yaw_quat(0.0), 'world'))
     h.cloud_at(t)
     node, out = h.node, h.node.outputs['points']
-    period = node._settings.publish_period
+    period = node.settings.publish_period
     sent = out.published
     # the timer's tick 0.6 periods after the pose's frame: not repeated
     node._last_publish = node._pose_publish_at = time.monotonic() - 0.6 * period

@@ -32,9 +32,10 @@ time has passed, for the lowest latency.
 
 Service ``~/reset`` (std_srvs/Trigger): hair back to its rest shape at the current head pose.
 
-Parameters: one per row of the parameter table (:func:`hair_tracking.output.settings.table`: the
+Parameters: one per row of the parameter table (:func:`hair_tracking.core.param_table.table`: the
 node's settings plus every scene field), each declared with a descriptor built from its row
-(:func:`descriptor`: description, range, read-only); changes are validated in the on-set callback
+(:mod:`hair_tracking.ros.parameters`: description, range, read-only); changes are validated in
+the on-set callback
 (a rejection names the parameter and the allowed values and changes nothing) and stored by the
 post-set callback as a frozen :class:`~hair_tracking.output.settings.Settings` snapshot that the
 next step applies (a groom change rebuilds the hair at the current head pose; a ``groom.file``
@@ -54,8 +55,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PoseStamped, TransformStamped
 import numba
 import numpy as np
-from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
-from rclpy.exceptions import InvalidParameterTypeException, ParameterException
+from rclpy.exceptions import ParameterException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -77,23 +77,21 @@ from msg_adapters.tf_tree import compose as tf_compose, TfTree
 from hair_tracking import executable
 from hair_tracking.bags.warmup import warm_up
 from hair_tracking.core.head_track import PoseResult
-from hair_tracking.core.params import Param, ParamError
-from hair_tracking.core.scene import Scene, SceneError
+from hair_tracking.core.params import ParamError
+from hair_tracking.core.scene import SceneError
 from hair_tracking.grooms.polylines import GroomFileError
 from hair_tracking.colliders.shapes import A0, A1, CAPSULE, CX, CZ, KIND, R00, R22, SPHERE
 from hair_tracking.core.transforms import matrix_to_quat, quat_to_matrix
-from hair_tracking.output.params_check import params_files_problem, rcl_arguments_problem, \
-    unknown_parameters
-from hair_tracking.output.settings import apply_changes, make_settings, NODE_NAME, \
-    NODE_ROWS, table
+from hair_tracking.output.params_check import params_files_problem, rcl_arguments_problem
+from hair_tracking.core.param_table import NODE_NAME
 from hair_tracking.output.diagnostics import HairHealth, HARDWARE_ID, make_status, \
     status_name, WARN
 from hair_tracking.output.frame_encoder import FrameEncoder
 from hair_tracking.output.shards import fingerprint, guide_state_bytes, settings_text, \
     SHARDABLE
-from hair_tracking.resources import config_path
 from hair_tracking.ros.faces import FaceHair
 from hair_tracking.ros.load_shedding import LoadShedder
+from hair_tracking.ros.parameters import NodeParameters
 from hair_tracking.ros.spin_node import spin_node
 from hair_tracking.simulator import HairSimulator
 
@@ -102,13 +100,6 @@ try:                                    # optional: /tf input
 except ImportError:                     # pragma: no cover - depends on the installation
     TFMessage = None
 
-_PARAM_TYPES = {
-    'bool': Parameter.Type.BOOL,
-    'int': Parameter.Type.INTEGER,
-    'double': Parameter.Type.DOUBLE,
-    'string': Parameter.Type.STRING,
-    'double_array': Parameter.Type.DOUBLE_ARRAY,
-}
 WARN_THROTTLE_S = 5.0
 #: Ghost strands whose stretch and head penetration one diagnostics report checks; a larger hair
 #: is checked a part per report, in turn.  A whole-hair check of 100 k ghosts takes about 30 ms
@@ -137,36 +128,11 @@ def output_qos(depth: int) -> QoSProfile:
                       durability=DurabilityPolicy.VOLATILE)
 
 
-def descriptor(p: Param) -> ParameterDescriptor:
-    """The ROS ParameterDescriptor of a table entry: description, the allowed values as text
-    (``additional_constraints``, e.g. ``[1, 100000]``), read-only.
-
-    No ``integer_range`` / ``floating_point_range``: rclpy checks those before the node's own
-    validation and answers in its own words ("Parameter groom.guides out of range. Min: 1,
-    ..."); without them every refusal, at start and live, is the node's (:func:`make_settings`,
-    :meth:`HairSimNode._on_set`): ``groom.guides: 0 is outside the allowed range [1, 100000]``.
-    """
-    return ParameterDescriptor(name=p.name, type=_PARAM_TYPES[p.kind].value,
-                               description=p.full_description(),
-                               additional_constraints=p.range_text(), read_only=p.read_only)
-
-
 def diagnostic_status(name: str, status) -> DiagnosticStatus:
     """The DiagnosticStatus of a :class:`hair_tracking.output.diagnostics.Status`."""
     return DiagnosticStatus(level=bytes([status.level]), name=name, message=status.message,
                             hardware_id=HARDWARE_ID,
                             values=[KeyValue(key=k, value=v) for k, v in status.values.items()])
-
-
-def load_base_scene(scene_file: str) -> Scene:
-    """The scene named by ``scene_file`` (a path or a preset name); ``Scene()`` if empty."""
-    if not scene_file:
-        return Scene()
-    try:
-        path = config_path(scene_file)
-    except FileNotFoundError as e:
-        raise SceneError('scene_file', str(e)) from None
-    return Scene.from_yaml(path)
 
 
 class _Output:
@@ -200,8 +166,8 @@ class HairSimNode(Node):
                  work_clock: Callable[[], float] = time.perf_counter):
         super().__init__(node_name, context=context, cli_args=cli_args, namespace=namespace,
                          parameter_overrides=parameter_overrides)
-        self._declare_all()
-        settings = self._settings
+        self.parameters = NodeParameters(self, self._on_params_changed)
+        settings = self._settings = self.parameters.pending
         self._apply_threads(settings.numba_threads)
         self.shedder = LoadShedder(settings.load_shedding_budget)
         self._work_clock = work_clock    # times the step and publish work (load shedding)
@@ -286,7 +252,7 @@ class HairSimNode(Node):
         self._subscribe_tf()
         scene = settings.scene
         #: people.source hri: every tracked face's hair (ros/faces.py); None for one head
-        self.faces = FaceHair(self, lambda: self._pending) \
+        self.faces = FaceHair(self, lambda: self.parameters.pending) \
             if scene.people.source == 'hri' else None
         ghosts = self.sim.ghosts.count if self.sim.ghosts is not None else 0
         self.get_logger().info(
@@ -324,70 +290,9 @@ class HairSimNode(Node):
         :class:`~hair_tracking.output.settings.Settings`)."""
         return self._settings
 
-    def _declare_all(self) -> None:
-        sf = NODE_ROWS['scene_file']
-        self.declare_parameter(sf.name, sf.default, descriptor(sf))
-        scene_file = self.get_parameter('scene_file').value
-        self._base = load_base_scene(scene_file)
-        rows = table(self._base)
-        for p in rows:
-            if p.name != 'scene_file':
-                self._declare(p)
-        values = {p.name: _plain(self.get_parameter(p.name).value) for p in rows}
-        self._settings = make_settings(values, self._base)    # ParamError if invalid
-        self._pending = self._settings
-        self._table = {p.name: p for p in rows}
-        self.add_pre_set_parameters_callback(self._pre_set)
-        self.add_on_set_parameters_callback(self._on_set)
-        self.add_post_set_parameters_callback(self._post_set)
-
-    def _declare(self, p: Param) -> None:
-        """Declare ``p``, taking an integer given for a double (``-p damping:=2``) as the double
-        it means: rclpy refuses the declaration; the value as given is read through a
-        dynamically typed declaration, which is then undeclared, and ``p`` is declared with
-        that value as a double (public rclpy API only)."""
-        try:
-            self.declare_parameter(p.name, p.default, descriptor(p))
-        except InvalidParameterTypeException as refused:
-            given = self.declare_parameter(p.name, None,
-                                           ParameterDescriptor(dynamic_typing=True))
-            self.undeclare_parameter(p.name)
-            fixed = _coerce_parameter(p, given)
-            if fixed is None:
-                raise refused
-            self.declare_parameter(p.name, fixed.value, descriptor(p), ignore_override=True)
-
-    def _pre_set(self, parameters: List[Parameter]) -> List[Parameter]:
-        """Integers given for doubles become doubles (``ros2 param set ... damping 2``)."""
-        out = []
-        for prm in parameters:
-            p = self._table.get(prm.name)
-            fixed = _coerce_parameter(p, prm) if p is not None else None
-            out.append(fixed if fixed is not None else prm)
-        return out
-
-    def _changes(self, parameters: List[Parameter]) -> Dict[str, object]:
-        return {prm.name: _plain(prm.value) for prm in parameters if prm.name in self._table}
-
-    def _on_set(self, parameters: List[Parameter]) -> SetParametersResult:
-        """Validate a candidate change against the pending snapshot; change nothing."""
-        changes = self._changes(parameters)
-        if not changes:
-            return SetParametersResult(successful=True)
-        try:
-            apply_changes(self._pending, changes, self._base)
-        except ParamError as e:
-            return SetParametersResult(successful=False, reason=str(e))
-        return SetParametersResult(successful=True)
-
-    def _post_set(self, parameters: List[Parameter]) -> None:
-        """Store the accepted change as the snapshot the next step applies."""
-        changes = self._changes(parameters)
-        if not changes:
-            return
-        old = self._pending
-        new = self._pending = apply_changes(old, changes, self._base)[0]
-        # timers and threads are not part of a step: they follow at once
+    def _on_params_changed(self, old, new) -> None:
+        """An accepted change: timers and threads are not part of a step, they follow at
+        once (the rest waits for the next step, :meth:`_apply_pending`)."""
         if new.publish_rate_hz != old.publish_rate_hz:
             period_ns = int(round(1e9 / new.publish_rate_hz))
             self._publish_timer.timer_period_ns = period_ns
@@ -409,7 +314,7 @@ class HairSimNode(Node):
 
     def _apply_pending(self) -> None:
         """Adopt the pending snapshot (start of every step/publication); rebuild if needed."""
-        new = self._pending
+        new = self.parameters.pending
         if new is self._settings:
             return
         old, self._settings = self._settings, new
@@ -418,7 +323,8 @@ class HairSimNode(Node):
                 rebuilt = self.sim.update_scene(new.scene)
             except GroomFileError as e:      # the file changed since the change was checked
                 self.get_logger().error(f'groom.file: {e}; the hair is kept')
-                self._settings = self._pending = old
+                self._settings = old
+                self.parameters.keep(old)
                 return
             if rebuilt:
                 self.shedder.reset()
@@ -968,38 +874,11 @@ class HairSimNode(Node):
 
     # ================================================================ parameters files
     def warn_unknown_parameters(self, argv: List[str]) -> Dict[str, List[str]]:
-        """Warn about every parameter that the params files or ``-p`` of ``argv`` (the
-        process's ``--ros-args``) set for this node but that the node does not have (ROS 2
-        itself ignores them silently); returns ``{source: [names]}``."""
-        fqn = self.get_fully_qualified_name()
-        found = unknown_parameters(argv, fqn, self._table, self.get_name())
-        for source, names in found.items():
-            self.get_logger().warn(
-                f'{source}: unknown parameter{"s" if len(names) > 1 else ""} for {fqn}, '
-                f'ignored: {", ".join(names)} (the node\'s parameters: config/hair_sim.yaml, '
-                f'docs/node.md)')
-        return found
+        """:meth:`~hair_tracking.ros.parameters.NodeParameters.warn_unknown`."""
+        return self.parameters.warn_unknown(argv)
 
 
 # ==================================================================== helpers
-def _plain(value):
-    """A parameter value as plain Python (arrays as lists)."""
-    if isinstance(value, (list, tuple)) or hasattr(value, 'tolist'):
-        return list(value)
-    return value
-
-
-def _coerce_parameter(p: Optional[Param], prm: Parameter) -> Optional[Parameter]:
-    """``prm`` with integers turned into doubles where ``p`` is a double (else None)."""
-    if p is None:
-        return None
-    if p.kind == 'double' and prm.type_ == Parameter.Type.INTEGER:
-        return Parameter(prm.name, Parameter.Type.DOUBLE, float(prm.value))
-    if p.kind == 'double_array' and prm.type_ == Parameter.Type.INTEGER_ARRAY:
-        return Parameter(prm.name, Parameter.Type.DOUBLE_ARRAY, [float(v) for v in prm.value])
-    return None
-
-
 def make_parser() -> argparse.ArgumentParser:
     """The command line of ``hair_sim_node`` in front of ``--ros-args``."""
     parser = argparse.ArgumentParser(
