@@ -1,5 +1,6 @@
 """The topic tables of README.md and docs/node.md, and ``hair_sim_node --help``, name every topic
-the node publishes: a real node (in-process, over DDS, domain 96) is asked for its publishers.
+the node publishes: a real node (in-process, over DDS, domains 96 and 99) is asked for its
+publishers, with every feature on; a node with the defaults advertises only what it feeds.
 """
 import os
 import re
@@ -10,6 +11,12 @@ from test_node import Harness
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 DOMAIN = 96
+DOMAIN_DEFAULTS = 99
+#: Every feature that has a topic of its own on.
+EVERYTHING = {'publish_guides': True, 'publish_guide_state': True, 'body.bust': True}
+#: What a node with the default parameters feeds: the hair, the head marker, the head pose on
+#: /tf and the diagnostics.
+FED_BY_DEFAULT = {'/hair/points', '/hair/markers', '/hair/head', '/tf', '/diagnostics'}
 #: What rclpy publishes for every node.
 RCLPY_OWN = {'/rosout', '/parameter_events'}
 
@@ -37,8 +44,8 @@ def _outgoing(rows, direction_column):
     return names
 
 
-def _published():
-    h = Harness(domain_id=DOMAIN)
+def _published(overrides=None, domain=DOMAIN):
+    h = Harness(overrides, domain_id=domain)
     try:
         node = h.node
         found = set()
@@ -55,10 +62,15 @@ def _published():
 
 
 def test_tables_and_help_name_every_topic_the_node_publishes():
-    published = _published()
+    published = _published(EVERYTHING)
     assert {'/hair/points', '/hair/head', '/tf', '/diagnostics'} <= published
     assert _outgoing(_table('README.md', '## The node'), 2) == published
     assert _outgoing(_table('docs/node.md', '## Topics'), 2) == published
     described = make_parser().description
     for name in published:
         assert (name if name in ('/tf', '/diagnostics') else name.lstrip('/')) in described, name
+
+
+def test_a_default_node_advertises_only_the_topics_it_feeds():
+    """No publisher for a feature that is off (guides, guide state, scene, colliders)."""
+    assert _published(domain=DOMAIN_DEFAULTS) == FED_BY_DEFAULT
