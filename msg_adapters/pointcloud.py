@@ -5,8 +5,10 @@ Layout: ``height = S`` rows (one per strand), ``width = N`` points, little-endia
 the ids given), and, when colours are given, ``rgb`` float32 (offset 16) holding the packed
 ``0x00RRGGBB`` bits as rviz/PCL expect. ``point_step`` 16 or 20, ``row_step = N * point_step``,
 ``is_dense`` true when every coordinate is finite (NaN points are allowed in clouds).
-Built through a numpy structured array (or straight into the CDR bytes) by one compiled pass
-(:mod:`msg_adapters.point_fill`), no per-point Python.  :class:`CloudBuffer` can also leave the
+Built through a numpy structured array (or straight into the CDR bytes): the coordinates by the
+package's one compiled record writer (:func:`hair_tracking.core.point_records.points_to_records`,
+which also says whether every coordinate is a finite float32), the ids and colours by numpy, no
+per-point Python.  :class:`CloudBuffer` can also leave the
 ``strand`` field out (the row is the strand; ``point_step`` 12, or 16 with ``rgb`` at offset
 12): the bytes every frame copies through the middleware then shrink by a quarter or more.
 """
@@ -20,8 +22,9 @@ from std_msgs.msg import Header
 from msg_adapters.arrays import as_colors, as_strands
 from msg_adapters.cdr import CdrWriter, ENCAPSULATION_LE, MessageBuffer, put_pieces
 from msg_adapters.marker_spec import check_frame_id
-from msg_adapters.point_fill import fill_records
 from msg_adapters.stamps import split_ns, time_msg
+
+from hair_tracking.core.point_records import points_to_records
 
 _NP_OF_DATATYPE = {PointField.INT8: 'i1', PointField.UINT8: 'u1', PointField.INT16: 'i2',
                    PointField.UINT16: 'u2', PointField.INT32: 'i4', PointField.UINT32: 'u4',
@@ -77,6 +80,29 @@ def as_packed_rgb(packed, n_strands, n_points):
                          f'{n_points}), got {a.dtype} {a.shape}')
     words = np.ascontiguousarray(a, dtype='<u4').view('<f4')
     return words.reshape(a.shape if a.ndim == 2 else (n_strands, 1))
+
+
+def fill_records(words, x, rgb, ids):
+    """Write points into ``words``, the (S, N, 4|5+) little-endian float32 view of a cloud's
+    data: x y z of ``x`` (S, N, 3) through
+    :func:`~hair_tracking.core.point_records.points_to_records`, ``ids`` (S,) uint32 as the
+    strand word, ``rgb`` (S, 1|N) packed float32 (or None) as the fifth word.  Returns
+    ``is_dense`` (every coordinate a finite float32).  Words past those are left alone."""
+    n_strands, n_points, stride = words.shape
+    if rgb is not None and rgb.shape != (n_strands, 1) and rgb.shape != (n_strands, n_points):
+        raise ValueError(f'rgb must be shaped ({n_strands}, 1 or {n_points}), got {rgb.shape}')
+    if rgb is not None and stride < 5:
+        raise ValueError(f'records with rgb are 5 words (x y z strand rgb), got {stride}')
+    words[..., 3:4].view('<u4')[..., 0] = ids[:, None]
+    if rgb is not None:
+        words[..., 4] = rgb
+    flat = words.reshape(-1)
+    if words.flags.c_contiguous and flat.flags.aligned and flat.dtype == np.float32:
+        return points_to_records(flat, stride, x)
+    out = np.empty(flat.shape, dtype=np.float32)     # not 4-byte aligned: numba's copy
+    dense = points_to_records(out, stride, x)
+    words[..., :3] = out.reshape(words.shape)[..., :3]
+    return dense
 
 
 def _check_inputs(strands, colors, strand_ids, packed_rgb=None):
