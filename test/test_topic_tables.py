@@ -5,6 +5,8 @@ publishers, with every feature on; a node with the defaults advertises only what
 import os
 import re
 
+from rclpy.parameter import Parameter
+
 from hair_tracking.ros.node import make_parser
 
 from test_node import Harness
@@ -12,6 +14,7 @@ from test_node import Harness
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 DOMAIN = 96
 DOMAIN_DEFAULTS = 99
+DOMAIN_LIVE = 101
 #: Every feature that has a topic of its own on.
 EVERYTHING = {'publish_guides': True, 'publish_guide_state': True, 'body.bust': True}
 #: What a node with the default parameters feeds: the hair, the head marker, the head pose on
@@ -44,19 +47,25 @@ def _outgoing(rows, direction_column):
     return names
 
 
+def _advertised(h, ready='/hair/points'):
+    """The topics ``h``'s node publishes (rclpy's own left out), once ``ready`` is among
+    them."""
+    node = h.node
+    found = set()
+
+    def listed():
+        found.clear()
+        found.update(name for name, _ in node.get_publisher_names_and_types_by_node(
+            node.get_name(), node.get_namespace()))
+        return ready in found
+    h.spin_until(listed, what=f'{ready} in the node\'s own graph')
+    return found - RCLPY_OWN
+
+
 def _published(overrides=None, domain=DOMAIN):
     h = Harness(overrides, domain_id=domain)
     try:
-        node = h.node
-        found = set()
-
-        def listed():
-            found.clear()
-            found.update(name for name, _ in node.get_publisher_names_and_types_by_node(
-                node.get_name(), node.get_namespace()))
-            return '/hair/points' in found
-        h.spin_until(listed, what='the node in its own graph')
-        return found - RCLPY_OWN
+        return _advertised(h)
     finally:
         h.close()
 
@@ -74,3 +83,25 @@ def test_tables_and_help_name_every_topic_the_node_publishes():
 def test_a_default_node_advertises_only_the_topics_it_feeds():
     """No publisher for a feature that is off (guides, guide state, scene, colliders)."""
     assert _published(domain=DOMAIN_DEFAULTS) == FED_BY_DEFAULT
+
+
+def test_publishers_follow_their_features_live():
+    """Turning a feature on advertises its topic, turning it off withdraws it."""
+    h = Harness(domain_id=DOMAIN_LIVE)
+    try:
+        def set_(**values):
+            for name, value in values.items():
+                assert h.node.set_parameters([Parameter(name.replace('__', '.'),
+                                                        value=value)])[0].successful
+        set_(publish_guides=True)
+        assert _advertised(h, '/hair/guides/points') == FED_BY_DEFAULT | {
+            '/hair/guides/points', '/hair/guides/markers'}
+        set_(publish_guides=False, head_marker=False, publish_tf=False)
+        assert _advertised(h) == {'/hair/points', '/hair/markers', '/diagnostics'}
+        set_(body__bust=True)
+        assert _advertised(h) == {'/hair/points', '/hair/markers', '/diagnostics'}
+        set_(head_marker=True)
+        assert _advertised(h, '/hair/colliders') == {
+            '/hair/points', '/hair/markers', '/diagnostics', '/hair/head', '/hair/colliders'}
+    finally:
+        h.close()
