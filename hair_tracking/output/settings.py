@@ -63,15 +63,15 @@ class _Derived:
         return self.marker_lifetime_periods * self.publish_period
 
 
-#: Frozen snapshot of every parameter: the validated scene plus one attribute per node row of
-#: the table (same name, default and type), in the table's order.  The node builds a new one
-#: for each accepted change (:func:`apply_changes`); a simulation step reads the one current at
-#: its start, so a change never shows up half-applied.
 Settings = make_dataclass(
     'Settings',
     [('scene', Scene, field(default_factory=Scene))] +
     [(p.name, _TYPES[p.kind], field(default=p.default)) for p in NODE_PARAMS],
-    bases=(_Derived,), frozen=True, namespace={'__module__': __name__})
+    bases=(_Derived,), frozen=True, namespace={'__module__': __name__, '__doc__': """Frozen
+    snapshot of every parameter: the validated scene plus one attribute per node row of the
+    table (same name, default and type), in the table's order.  The node builds a new one for
+    each accepted change (:func:`apply_changes`); a simulation step reads the one current at
+    its start, so a change never shows up half-applied."""})
 
 
 def _nest(flat: Mapping[str, Any]) -> Dict[str, Any]:

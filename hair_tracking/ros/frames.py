@@ -58,8 +58,8 @@ class Frames:
             return
         self.subscribed = True
         if TFMessage is None:
-            self._node.get_logger().warn(f'{who} needs /tf but tf2_msgs is not installed: /tf '
-                                         'is not subscribed')
+            self._node.get_logger().warn(f'{who}: /tf is needed but tf2_msgs is not '
+                                         'installed, it is not subscribed')
             return
         self._node.create_subscription(TFMessage, '/tf', self.on_tf, best_effort_qos())
         self._node.create_subscription(TFMessage, '/tf_static', self.on_tf_static,

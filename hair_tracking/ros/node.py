@@ -169,7 +169,7 @@ class HairSimNode(Node):
         start or when a parameter change sets one)."""
         if self._settings.use_tf or self.scene_frames.needs_tf():
             self.frames.subscribe('use_tf, gravity_frame, body.frame or a collider on a TF '
-                                  'frame (head_pose and head_transform are still subscribed)')
+                                  'frame (head_pose and head_transform are subscribed)')
 
     def _on_tf(self, msg, static: bool) -> None:
         """A message stored in the tree: gravity follows ``gravity_frame``, the head comes
