@@ -294,8 +294,7 @@ def test_compiled_fill_has_one_specialisation_for_read_only_and_writable_inputs(
     """Read-only inputs (the node's frames are read-only views) and writable ones (warm-up
     data) use the same compiled code: a second specialisation would be compiled in the middle
     of the first published frame."""
-    from msg_adapters.pointcloud import fill_records
-    from hair_tracking.core import point_records
+    from msg_adapters import pointcloud
     rng = np.random.default_rng(10)
     s, n = 6, 4
     words = np.zeros((s, n, 5), dtype='<f4')
@@ -306,8 +305,8 @@ def test_compiled_fill_has_one_specialisation_for_read_only_and_writable_inputs(
         rgb = rng.random((s, 1)).astype('<f4')
         for a in (x, rgb, ids):
             a.flags.writeable = writable
-        assert fill_records(words, x, rgb, ids)
-        seen.add(len(point_records._points_to_records.signatures))
+        assert pointcloud.fill_records(words, x, rgb, ids)
+        seen.add(len(pointcloud._fill_records.signatures))
     assert len(seen) == 1
 
 
