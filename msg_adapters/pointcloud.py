@@ -5,14 +5,17 @@ Layout: ``height = S`` rows (one per strand), ``width = N`` points, little-endia
 the ids given), and, when colours are given, ``rgb`` float32 (offset 16) holding the packed
 ``0x00RRGGBB`` bits as rviz/PCL expect. ``point_step`` 16 or 20, ``row_step = N * point_step``,
 ``is_dense`` true when every coordinate is finite (NaN points are allowed in clouds).
-Built through a numpy structured array (or straight into the CDR bytes) by one compiled pass
-(:mod:`msg_adapters.point_fill`), no per-point Python.  :class:`CloudBuffer` can also leave the
+Built through a numpy structured array (or straight into the CDR bytes) in one compiled pass
+whose coordinates go through the package's one record writer
+(:func:`hair_tracking.core.point_records.put_record`, which also says whether every coordinate
+is a finite float32), no per-point Python.  :class:`CloudBuffer` can also leave the
 ``strand`` field out (the row is the strand; ``point_step`` 12, or 16 with ``rgb`` at offset
 12): the bytes every frame copies through the middleware then shrink by a quarter or more.
 """
 import array
 import struct
 
+from numba import njit
 import numpy as np
 from sensor_msgs.msg import PointCloud2, PointField
 from std_msgs.msg import Header
@@ -20,8 +23,9 @@ from std_msgs.msg import Header
 from msg_adapters.arrays import as_colors, as_strands
 from msg_adapters.cdr import CdrWriter, ENCAPSULATION_LE, MessageBuffer, put_pieces
 from msg_adapters.marker_spec import check_frame_id
-from msg_adapters.point_fill import fill_records
 from msg_adapters.stamps import split_ns, time_msg
+
+from hair_tracking.core.point_records import put_record
 
 _NP_OF_DATATYPE = {PointField.INT8: 'i1', PointField.UINT8: 'u1', PointField.INT16: 'i2',
                    PointField.UINT16: 'u2', PointField.INT32: 'i4', PointField.UINT32: 'u4',
@@ -77,6 +81,64 @@ def as_packed_rgb(packed, n_strands, n_points):
                          f'{n_points}), got {a.dtype} {a.shape}')
     words = np.ascontiguousarray(a, dtype='<u4').view('<f4')
     return words.reshape(a.shape if a.ndim == 2 else (n_strands, 1))
+
+
+@njit(cache=True, nogil=True)
+def _fill_records(records, x, ids, rgb, per_point, rot, origin):
+    """One pass over the points: x y z through :func:`put_record` (the package's one record
+    writer and finiteness rule), the strand id and colour words beside them.  ``records``
+    (S, N, stride) float32, ``x`` (S, N, 3), ``ids`` (S,) the uint32 ids viewed as float32,
+    ``rgb`` (S, 1|N) float32 packed colours or (0, 1) for none: ids and colours are bit
+    patterns copied as float32 words, unchanged.  Returns True when every coordinate is
+    finite."""
+    bad = 0
+    with_rgb = rgb.shape[0] > 0
+    for s in range(records.shape[0]):
+        sid = ids[s]
+        for j in range(records.shape[1]):
+            bad += put_record(records, s, j, x[s, j, 0], x[s, j, 1], x[s, j, 2], rot, origin,
+                              False)
+            records[s, j, 3] = sid
+            if with_rgb:
+                records[s, j, 4] = rgb[s, j if per_point else 0]
+    return bad == 0
+
+
+def fill_records(words, x, rgb, ids):
+    """Write points into ``words``, the (S, N, 4|5+) little-endian float32 view of a cloud's
+    data: x y z of ``x`` (S, N, 3) as :func:`~hair_tracking.core.point_records.put_record`
+    writes them, ``ids`` (S,) uint32 as the strand word, ``rgb`` (S, 1|N) packed float32 (or
+    None) as the fifth word.  Returns ``is_dense`` (every coordinate a finite float32).  Words
+    past those are left alone; memory that is not 4-byte aligned is written through a copy."""
+    n_strands, n_points, stride = words.shape
+    if rgb is not None and rgb.shape != (n_strands, 1) and rgb.shape != (n_strands, n_points):
+        raise ValueError(f'rgb must be shaped ({n_strands}, 1 or {n_points}), got {rgb.shape}')
+    if rgb is not None and stride < 5:
+        raise ValueError(f'records with rgb are 5 words (x y z strand rgb), got {stride}')
+    direct = words.flags.c_contiguous and words.flags.aligned and \
+        words.dtype == np.float32 and words.flags.writeable
+    records = words if direct else np.array(words, dtype=np.float32, order='C')
+    per_point = rgb is not None and rgb.shape[1] == n_points and n_points > 1
+    rgb = _NO_RGB if rgb is None else _read_only(np.ascontiguousarray(rgb, dtype=np.float32))
+    x = _read_only(np.ascontiguousarray(x, dtype=np.float64))
+    ids = _read_only(np.ascontiguousarray(ids, dtype='<u4').view('<f4'))
+    dense = bool(_fill_records(records, x, ids, rgb, per_point, _EYE, _ZERO))
+    if not direct:
+        words[...] = records
+    return dense
+
+
+def _read_only(a):
+    """``a`` read-only: numba compiles one specialisation per argument type and read-only is
+    part of the type, so the inputs always go in read-only (the node's frames are read-only
+    views, warm-up data is not)."""
+    a = a.view()
+    a.flags.writeable = False
+    return a
+
+
+_NO_RGB = _read_only(np.zeros((0, 1), dtype=np.float32))
+_EYE, _ZERO = np.eye(3), np.zeros(3)
 
 
 def _check_inputs(strands, colors, strand_ids, packed_rgb=None):

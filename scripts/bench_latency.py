@@ -65,7 +65,7 @@ from hair_tracking import executable  # noqa: E402
 
 executable.use_numba_cache()    # before numba loads: the cache make install fills
 
-from hair_tracking.output.settings import by_name  # noqa: E402
+from hair_tracking.core.param_table import by_name  # noqa: E402
 from hair_tracking.evaluation.provenance import command_line, provenance  # noqa: E402
 from cpu_steal import format_share, StealMeter  # noqa: E402  (scripts/cpu_steal.py)
 from hair_tracking.ros.node import HairSimNode  # noqa: E402

@@ -35,9 +35,9 @@ from hair_tracking import executable  # noqa: E402
 executable.use_numba_cache()    # before numba loads: the cache make install fills
 
 from bench_latency import copy_ms, stamp_of, stats  # noqa: E402  (scripts/bench_latency.py)
-from hair_tracking.output.settings import CLOUD_FIELDS  # noqa: E402
+from hair_tracking.core.param_table import CLOUD_FIELDS  # noqa: E402
 from hair_tracking.evaluation.provenance import command_line, provenance  # noqa: E402
-from hair_tracking.ros.node import output_qos  # noqa: E402
+from hair_tracking.ros.topics import output_qos  # noqa: E402
 from msg_adapters.pointcloud import CloudBuffer, pack_rgb_u32  # noqa: E402
 from msg_adapters.rcl_serialized import SerializedPublisher, unusable_reason  # noqa: E402
 from rcl_take import SerializedTaker, SerializedWaiter  # noqa: E402  (scripts/rcl_take.py)

@@ -4,7 +4,7 @@ import math
 import numpy as np
 import pytest
 
-from hair_tracking.core.head_track import HeadTrack, PoseResult
+from hair_tracking.core.head_track import HeadTrack, PoseResult, StreamClock
 from hair_tracking.core.scene import HeadTrackSpec
 from hair_tracking.core.transforms import quat_angle, quat_from_axis_angle, quat_to_matrix
 
@@ -91,3 +91,25 @@ def test_sampled_orientation_is_the_slerp_of_its_neighbours():
             u = rng.random()
             np.testing.assert_allclose(slerp_floats(tuple(a), tuple(b), u), slerp(a, b, u),
                                        rtol=0, atol=1e-14)
+
+
+def test_stream_clock_maps_stamps_onto_the_simulator_time():
+    """Stamps are the simulator's time, except after a stale stretch the hair settled past the
+    newest stamp: the stream then continues one substep after the hair (the outputs are
+    stamped back in the stream's time); time going back drops the offset."""
+    clock = StreamClock()
+    dt = 10
+    assert clock.stamp(None) == 0
+    assert clock.sim_time(1000, None, dt) == (1000, 0)
+    clock.accept(1000, 0)
+    assert clock.sim_time(1020, 1000, dt) == (1020, 0)      # a fresh pose: as stamped
+    clock.accept(1020, 0)
+    # the hair settled to 1500 while no pose came; the stream resumes at 1040
+    sim_t, offset = clock.sim_time(1040, 1500, dt)
+    assert (sim_t, offset) == (1510, 470)
+    assert clock.offset_ns == 0                               # nothing kept before accept
+    clock.accept(1040, offset)
+    assert clock.stamp(1510) == 1040
+    assert clock.sim_time(1060, 1510, dt) == (1530, 470)     # and keeps going from there
+    clock.accept(1060, 470)
+    assert clock.sim_time(500, 1530, dt) == (500, 0)         # backwards: the hair resets

@@ -10,8 +10,8 @@ import os
 import yaml
 
 from console_scripts import console_scripts
-from hair_tracking.output import settings as params
-from hair_tracking.ros.node import HEAD_MARKER_TOPIC
+from hair_tracking.core import param_table as params
+from hair_tracking.ros.topics import HEAD_MARKER_TOPIC
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 LAUNCH = os.path.join(ROOT, 'launch', 'hair_sim.launch.py')

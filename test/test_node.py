@@ -28,7 +28,7 @@ from visualization_msgs.msg import Marker, MarkerArray
 
 from hair_tracking.core.transforms import quat_to_matrix
 from hair_tracking.output.strand_colors import strand_colors
-from hair_tracking.ros import node as node_module
+from hair_tracking.ros import health as health_module
 from hair_tracking.ros.node import HairSimNode
 from hair_tracking.simulator import HairSimulator
 from msg_adapters.pointcloud import pointcloud2_to_strands
@@ -206,7 +206,7 @@ def test_first_markers_clear_old_ones_and_colours_reach_the_cloud(harness):
     raw = np.frombuffer(bytes(cloud.data), dtype=np.uint8)
     raw = raw.reshape(cloud.height, cloud.width, cloud.point_step)
     rgb = raw[:, :, 16:20].copy().view('<u4')[..., 0]
-    want = np.rint(strand_colors(12, h.node._settings.marker_color)[:, :3] * 255).astype(int)
+    want = np.rint(strand_colors(12, h.node.settings.marker_color)[:, :3] * 255).astype(int)
     got = np.stack([(rgb >> 16) & 255, (rgb >> 8) & 255, rgb & 255], axis=-1)
     assert (got == got[:, :1]).all()                           # one colour per strand
     np.testing.assert_array_equal(got[:, 0], want)
@@ -371,7 +371,7 @@ def test_publish_on_pose_counts_stream_time_not_the_wall_clock(harness):
     due = []
     for step_ms in (0, 5, 5, 9, 1, 20, -100):       # handled back to back, microseconds apart
         sim.time_ns = (sim.time_ns or 10 ** 9) + step_ms * 1_000_000
-        due.append(h.node._pose_frame_due())
+        due.append(h.node.intake.pose_frame_due())
     # 9 ms of stamps is the 0.9-period threshold at 100 Hz
     assert due == [True, False, True, True, False, True, True]
 
@@ -386,20 +386,21 @@ def test_publish_on_pose_timer_does_not_repeat_the_poses_frames(harness):
     h.send(pub, pose_stamped_msg(t, [0.0, 0.0, 0.0], yaw_quat(0.0), 'world'))
     h.cloud_at(t)
     node, out = h.node, h.node.outputs['points']
-    period = node._settings.publish_period
+    publishing = node.publishing
+    period = node.settings.publish_period
     sent = out.published
     # the timer's tick 0.6 periods after the pose's frame: not repeated
-    node._last_publish = node._pose_publish_at = time.monotonic() - 0.6 * period
-    node._on_publish_timer()
+    publishing.last_publish = publishing.pose_publish_at = time.monotonic() - 0.6 * period
+    publishing.on_timer()
     assert out.published == sent
     # no pose frame for 1.1 periods: the timer resends the frame (from the cache)
-    node._last_publish = node._pose_publish_at = time.monotonic() - 1.1 * period
-    node._on_publish_timer()
+    publishing.last_publish = publishing.pose_publish_at = time.monotonic() - 1.1 * period
+    publishing.on_timer()
     assert out.published == sent + 1 and out.encoded == 1
     # without publish_on_pose the timer keeps the rate itself, 0.6 periods after a frame
     node.set_parameters([Parameter('publish_on_pose', value=False)])
-    node._last_publish = node._pose_publish_at = time.monotonic() - 0.6 * period
-    node._on_publish_timer()
+    publishing.last_publish = publishing.pose_publish_at = time.monotonic() - 0.6 * period
+    publishing.on_timer()
     assert out.published == sent + 2
 
 
@@ -441,7 +442,7 @@ def test_stamp_zero_means_now_and_time_going_backwards_resets(harness):
     np.testing.assert_allclose(roots_in_head(pts, [0.2, 0.0, 0.0], yaw_quat(0.5)),
                                h.node.sim.ghosts.rest[:, 0], atol=2e-5)
     h.send(pub, pose_stamped_msg(back, [0.2, 0.0, 0.0], yaw_quat(0.5), 'world'))  # repeated
-    assert h.node.sim.time_ns == back and h.node._offset_ns == 0
+    assert h.node.sim.time_ns == back and h.node.intake.clock.offset_ns == 0
 
 
 def test_stale_stream_holds_the_last_pose_and_the_hair_settles(harness):
@@ -533,30 +534,31 @@ def test_reset_service_puts_the_hair_back_at_rest_at_the_current_head(harness):
 
 
 def test_tf_input_selects_the_head_by_name_or_prefix(harness):
-    h = harness()
+    h = harness(use_tf=True)
     t0, t1, t2, t3 = grid_times(h, 4)
 
     def tf(t, child, x):
         return transform_stamped_msg(t, [x, 0.0, 0.0], yaw_quat(0.0), 'camera', child)
     node = h.node
-    node._on_tf(SimpleNamespace(transforms=[tf(t0, 'torso', 9.0), tf(t0, 'head', 0.1)]))
+    node.frames.on_tf(SimpleNamespace(transforms=[tf(t0, 'torso', 9.0), tf(t0, 'head', 0.1)]))
     assert node.sim.track.last_time == t0 and node.sim.head.position[0] == pytest.approx(0.1)
     node.set_parameters([Parameter('head_frame_prefix', value='face_')])
-    node._on_tf(SimpleNamespace(transforms=[tf(t1, 'head', 5.0), tf(t1, 'face_42', 0.12)]))
-    assert node._tf_child == 'face_42'
+    node.frames.on_tf(SimpleNamespace(transforms=[tf(t1, 'head', 5.0), tf(t1, 'face_42', 0.12)]))
+    assert node.intake.tf_child == 'face_42'
     assert node.sim.head.position[0] == pytest.approx(0.12)
-    node._on_tf(SimpleNamespace(transforms=[tf(t2, 'face_7', 3.0), tf(t2, 'face_42', 0.14)]))
-    assert node._tf_child == 'face_42'                   # locked on while it is fresh
+    node.frames.on_tf(SimpleNamespace(transforms=[tf(t2, 'face_7', 3.0), tf(t2, 'face_42', 0.14)]))
+    assert node.intake.tf_child == 'face_42'                   # locked on while it is fresh
     assert node.sim.head.position[0] == pytest.approx(0.14)
-    node._tf_seen_ns -= 10**11                            # face_42 went stale
-    node._on_tf(SimpleNamespace(transforms=[tf(t3, 'face_7', 0.16)]))
-    assert node._tf_child == 'face_7'
+    node.intake.tf_seen_ns -= 10**11                            # face_42 went stale
+    node.frames.on_tf(SimpleNamespace(transforms=[tf(t3, 'face_7', 0.16)]))
+    assert node.intake.tf_child == 'face_7'
     assert node.sim.head.position[0] == pytest.approx(0.16)
     assert node.output_frame_id() == 'camera'
     node.set_parameters([Parameter('head_frame_prefix', value='person_')])
     t4 = t3 + 4 * node.sim.dt_ns
-    node._on_tf(SimpleNamespace(transforms=[tf(t4, 'face_7', 3.0), tf(t4, 'person_1', 0.18)]))
-    assert node._tf_child == 'person_1'                  # a new prefix chooses again
+    node.frames.on_tf(SimpleNamespace(transforms=[tf(t4, 'face_7', 3.0),
+                                                  tf(t4, 'person_1', 0.18)]))
+    assert node.intake.tf_child == 'person_1'                  # a new prefix chooses again
     assert node.sim.head.position[0] == pytest.approx(0.18)
 
 
@@ -660,7 +662,7 @@ def test_diagnostics_check_a_large_hair_a_part_per_report_in_turn(harness, monke
     """Each report checks the stretch and head penetration of at most DIAG_AUDIT_STRANDS ghosts,
     the next part in turn, so reports stay cheap at any hair size and every ghost is checked
     once per round; the worst value of a round is the whole hair's."""
-    monkeypatch.setattr(node_module, 'DIAG_AUDIT_STRANDS', 5)
+    monkeypatch.setattr(health_module, 'DIAG_AUDIT_STRANDS', 5)
     h = harness(**{'groom.guides': 4, 'groom.ghosts_per_guide': 3})
     pub = h.pose_publisher()
     for k, t in enumerate(grid_times(h, 3)):

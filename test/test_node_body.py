@@ -43,7 +43,7 @@ def harness():
 def torso(h, t, x):
     """The torso frame ``x`` metres in front of its place under the head (world)."""
     tr = transform_stamped_msg(t, [x, 0.0, -0.2], yaw_quat(0.0), 'world', 'torso_1')
-    h.node._on_tf_dynamic(SimpleNamespace(transforms=[tr]))
+    h.node.frames.on_tf(SimpleNamespace(transforms=[tr]))
 
 
 def test_a_shoulder_moving_into_the_hair_pushes_it_out_without_adding_energy(harness):
@@ -89,7 +89,7 @@ def test_the_bust_is_shown_on_hair_colliders(harness):
     h = harness(**{'body.frame': ''})
     got = []
     h.probe.create_subscription(MarkerArray, 'hair/colliders', got.append, 10)
-    h.spin_until(lambda: h.node._colliders_pub.get_subscription_count() > 0,
+    h.spin_until(lambda: h.node.publishing.colliders_pub.get_subscription_count() > 0,
                  what='hair/colliders match')
     pub = h.pose_publisher()
     t = grid_times(h, 1)[0]
@@ -116,8 +116,8 @@ def test_a_frame_that_never_arrives_or_stops_is_said_in_diagnostics(harness):
     d = h.node.diagnostics()
     assert 'body.frame' not in d.message
     assert float({kv.key: kv.value for kv in d.values}['body_frame_age_s']) >= 0.0
-    seen, static = h.node._body_seen
-    h.node._body_seen = (seen - 10**11, static)                 # 100 s ago
+    seen, static = h.node.frames.seen['torso_1']
+    h.node.frames.seen['torso_1'] = (seen - 10**11, static)               # 100 s ago
     d = h.node.diagnostics()
     assert d.level == DiagnosticStatus.WARN and "body.frame 'torso_1' stale" in d.message
     # the bust keeps its last pose
@@ -142,7 +142,7 @@ def test_a_collider_on_a_tf_frame_set_live_subscribes_tf_and_is_said_in_diagnost
     h = Harness({'groom.length': 0.3, 'groom.guide_nodes': 8, 'groom.ghost_nodes': 8})
     try:
         node = h.node
-        assert not node._tf_subscribed
+        assert not node.frames.subscribed
         pub = h.pose_publisher()
         t0, t1, t2 = grid_times(h, 3)
         h.send(pub, pose_stamped_msg(t0, [0.0, 0.0, 0.0], yaw_quat(0.0), 'world'))
@@ -153,22 +153,22 @@ def test_a_collider_on_a_tf_frame_set_live_subscribes_tf_and_is_said_in_diagnost
                                     Parameter('colliders.extra_1.radius', value=0.04)])
         assert all(r.successful for r in done)
         h.send(pub, pose_stamped_msg(t1, [0.0, 0.0, 0.0], yaw_quat(0.0), 'world'))
-        assert node._tf_subscribed and node.sim.collider_frames() == ('hand_1',)
+        assert node.frames.subscribed and node.sim.collider_frames() == ('hand_1',)
         assert node.sim.colliders_waiting() == ['extra_1 (hand_1)']
         d = node.diagnostics()
         assert d.level == DiagnosticStatus.WARN
         assert "colliders.extra_1: TF frame 'hand_1' not received" in d.message
         # the hand arrives, 12 cm behind the head centre: inside the hair at the back
         tr = transform_stamped_msg(t2, [-0.12, 0.0, -0.05], yaw_quat(0.0), 'world', 'hand_1')
-        node._on_tf_dynamic(SimpleNamespace(transforms=[tr]))
+        node.frames.on_tf(SimpleNamespace(transforms=[tr]))
         h.send(pub, pose_stamped_msg(t2, [0.0, 0.0, 0.0], yaw_quat(0.0), 'world'))
         sim = node.sim
         assert sim.colliders_waiting() == []
         sh = sim.guide_solver.body.posed_bare(sim.head)
         assert np.allclose(sh[0, 1:4], [-0.12, 0.0, -0.05])
         assert 'colliders.extra_1' not in node.diagnostics().message
-        seen, static = node._frames_seen['hand_1']
-        node._frames_seen['hand_1'] = (seen - 10**11, static)      # 100 s ago
+        seen, static = node.frames.seen['hand_1']
+        node.frames.seen['hand_1'] = (seen - 10**11, static)      # 100 s ago
         d = node.diagnostics()
         assert d.level == DiagnosticStatus.WARN
         assert "colliders.extra_1: TF frame 'hand_1' stale" in d.message

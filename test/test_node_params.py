@@ -15,7 +15,9 @@ from rclpy.parameter import Parameter
 from rclpy.parameter_client import AsyncParameterClient
 import yaml
 
-from hair_tracking.output import settings as P
+from hair_tracking.core import param_table as P
+from hair_tracking.core.params import ParamError
+from hair_tracking.core.scene import Scene
 from msg_adapters.pointcloud import pointcloud2_to_strands
 from msg_adapters.pose import pose_stamped_msg
 from visualization_msgs.msg import Marker
@@ -77,8 +79,12 @@ def test_list_and_describe_show_every_parameter_with_its_range(rig):
     assert d['solver.stiffness'].type == ParameterType.PARAMETER_DOUBLE
     assert d['solver.stiffness'].additional_constraints == '(0.0, 1.0]'
     assert d['groom.guides'].additional_constraints == '[1, 100000]'
-    # no rclpy range: rclpy would check it first and refuse in its own words
-    assert not d['groom.guides'].integer_range and not d['solver.stiffness'].floating_point_range
+    # rclpy ranges (rqt sliders), bounds included; the open bound is refused by the node
+    r = d['groom.guides'].integer_range[0]
+    assert (r.from_value, r.to_value, r.step) == (1, 100000, 1)
+    r = d['solver.stiffness'].floating_point_range[0]
+    assert (r.from_value, r.to_value, r.step) == (0.0, 1.0, 0.0)
+    assert not d['gravity'].floating_point_range
     assert 'rebuilds the hair' in d['groom.guides'].description
     assert d['warmup'].read_only and not d['groom.guides'].read_only
     assert d['solver.type'].additional_constraints == 'one of: ftl, pbd, xpbd'
@@ -127,14 +133,18 @@ def test_integer_for_a_double_is_taken_as_a_double(rig):
     assert res[0].successful, res[0].reason
     value = call(rig, rig.client.get_parameters(['damping']), 'get').values[0]
     assert value.type == ParameterType.PARAMETER_DOUBLE and value.double_value == 2.0
-    assert rig.node._pending.scene.damping == 2.0
+    assert rig.node.parameters.pending.scene.damping == 2.0
     res = set_(rig, gravity=[0, 0, -3])                              # an all-integer list too
     assert res[0].successful, res[0].reason
-    assert rig.node._pending.scene.gravity == (0.0, 0.0, -3.0)
+    assert rig.node.parameters.pending.scene.gravity == (0.0, 0.0, -3.0)
 
 
 @pytest.mark.parametrize('name, value, reason', [
     ('groom.guides', 0, 'groom.guides: 0 is outside the allowed range [1, 100000]'),
+    ('groom.guides', 100001, 'groom.guides: 100001 is outside the allowed range [1, 100000]'),
+    ('publish_rate_hz', 0.1, 'publish_rate_hz: 0.1 is outside the allowed range [0.5, 1000.0]'),
+    ('publish_rate_hz', float('nan'),
+     'publish_rate_hz: nan is outside the allowed range [0.5, 1000.0]'),
     ('solver.stiffness', 0.0, 'solver.stiffness: 0.0 is outside the allowed range (0.0, 1.0]'),
     ('damping', -1, 'damping: -1.0 is outside the allowed range [0.0, 1000.0]'),
 ])
@@ -154,8 +164,8 @@ def test_integer_overrides_of_doubles_at_start_are_taken_as_doubles():
         gravity = h.node.get_parameter('gravity')
         assert gravity.type_ == Parameter.Type.DOUBLE_ARRAY
         assert list(gravity.value) == [0.0, 0.0, -3.0]
-        assert h.node._settings.scene.damping == 2.0
-        assert h.node._settings.scene.gravity == (0.0, 0.0, -3.0)
+        assert h.node.settings.scene.damping == 2.0
+        assert h.node.settings.scene.gravity == (0.0, 0.0, -3.0)
         assert h.node.describe_parameter('damping').additional_constraints == '[0.0, 1000.0]'
     finally:
         h.close()
@@ -181,16 +191,18 @@ def test_integer_overrides_of_doubles_at_start_are_taken_as_doubles():
                                                 'groom.scalp.max_polar_deg']),
     ('warmup', False, ['read-only', 'warmup']),
     ('gravity', '[0.0, 0.0, -3]', ['Wrong parameter type']),
+    ('gravity', [0.0, 0.0, 1e4], ['gravity', 'magnitude below 1e4']),
+    ('head_track.max_gap', 0.0, ['head_track.max_gap', '(0.0, 3600.0]']),
 ])
 def test_invalid_change_is_rejected_with_its_reason_and_changes_nothing(
         rig, name, value, words):
-    before = rig.node._pending
+    before = rig.node.parameters.pending
     before_value = call(rig, rig.client.get_parameters([name]), 'get').values[0]
     res = call(rig, rig.client.set_parameters([Parameter(name, value=value)]), 'set').results
     assert not res[0].successful
     for w in words:
         assert w in res[0].reason, (w, res[0].reason)
-    assert rig.node._pending is before
+    assert rig.node.parameters.pending is before
     after_value = call(rig, rig.client.get_parameters([name]), 'get').values[0]
     assert after_value == before_value
 
@@ -225,9 +237,9 @@ def test_load_sets_what_a_params_file_holds(rig, tmp_path):
     assert sorted(r.successful for r in res) == [False, True, True, True]
     bad = [r for r in res if not r.successful][0]
     assert 'tracking.candidates' in bad.reason
-    s = rig.node._pending
+    s = rig.node.parameters.pending
     assert (s.marker_width, s.scene.solver.type, s.scene.solver.iterations) == (0.004, 'pbd', 8)
-    assert s.scene.tracking.candidates == P.Scene().tracking.candidates
+    assert s.scene.tracking.candidates == Scene().tracking.candidates
     pose_loop(rig, [0])
     assert rig.node.sim.scene.solver.type == 'pbd'
 
@@ -280,9 +292,64 @@ def test_a_node_started_with_a_bad_groom_file_names_it(tmp_path):
     ctx = Context()
     rclpy.init(context=ctx, domain_id=next(_DOMAINS))
     try:
-        with pytest.raises(P.ParamError, match=r'groom.file: .*bad.data: byte 0: expected'):
+        with pytest.raises(ParamError, match=r'groom.file: .*bad.data: byte 0: expected'):
             HairSimNode(context=ctx, parameter_overrides=[
                 Parameter(k, value=v) for k, v in dict(SMALL, **{
                     'groom.file': str(bad)}).items()])
     finally:
         rclpy.shutdown(context=ctx)
+
+
+def test_an_independent_client_finds_sliders_and_the_node_s_refusal():
+    """As a new ROS user's tool (rqt's parameter editor) sees the node: a client node of its
+    own, in its own context, over DDS through the standard parameter services, finds a
+    writable double with a FloatingPointRange and an integer with an IntegerRange, and an
+    out-of-range set is refused with the node's one-line message."""
+    from rcl_interfaces.msg import ParameterType as T
+    from rcl_interfaces.srv import DescribeParameters, ListParameters, SetParameters
+    from rclpy.context import Context
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.node import Node
+
+    domain = next(_DOMAINS)
+    h = Harness(domain_id=domain)
+    ctx = Context()
+    rclpy.init(context=ctx, domain_id=domain)
+    try:
+        client_node = Node('rqt_like', context=ctx)
+        executor = SingleThreadedExecutor(context=ctx)
+        executor.add_node(client_node)
+
+        def call(srv_type, name, request):
+            cli = client_node.create_client(srv_type, f'/hair_sim/{name}')
+            future = {}
+
+            def ready():
+                executor.spin_once(timeout_sec=0.0)
+                if 'f' not in future and cli.service_is_ready():
+                    future['f'] = cli.call_async(request)
+                return 'f' in future and future['f'].done()
+            h.spin_until(ready, what=name)
+            return future['f'].result()
+
+        names = call(ListParameters, 'list_parameters', ListParameters.Request()).result.names
+        described = call(DescribeParameters, 'describe_parameters',
+                         DescribeParameters.Request(names=list(names))).descriptors
+        double = next(d for d in described if d.type == T.PARAMETER_DOUBLE and
+                      not d.read_only and d.floating_point_range)
+        integer = next(d for d in described if d.type == T.PARAMETER_INTEGER and
+                       not d.read_only and d.integer_range)
+        for d, over in ((double, double.floating_point_range[0].to_value * 2 + 1.0),
+                        (integer, integer.integer_range[0].to_value + 1)):
+            value = Parameter(d.name, value=over).to_parameter_msg()
+            result = call(SetParameters, 'set_parameters',
+                          SetParameters.Request(parameters=[value])).results[0]
+            assert not result.successful
+            assert result.reason == f'{d.name}: {over!r} is outside the allowed range ' \
+                f'{d.additional_constraints}', result.reason
+            assert '\n' not in result.reason
+        executor.shutdown()
+        client_node.destroy_node()
+    finally:
+        rclpy.try_shutdown(context=ctx)
+        h.close()

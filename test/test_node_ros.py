@@ -19,7 +19,7 @@ from tf2_msgs.msg import TFMessage
 from visualization_msgs.msg import Marker
 
 from hair_tracking.core.transforms import quat_multiply, quat_to_matrix
-from hair_tracking.ros.node import HEAD_MARKER_TOPIC
+from hair_tracking.ros.topics import HEAD_MARKER_TOPIC
 from msg_adapters.pose import pose_stamped_msg, transform_stamped_msg
 from msg_adapters.stamps import time_to_ns
 
@@ -57,7 +57,7 @@ def test_pose_stamped_with_head_output_is_broadcast_on_tf(rig):
     got = _tf_listener(h)
     h.listen(markers=False)
     pub = h.pose_publisher()
-    h.spin_until(lambda: h.node._tf_pub.get_subscription_count() > 0, what='/tf match')
+    h.spin_until(lambda: h.node.frames.publisher.get_subscription_count() > 0, what='/tf match')
     t = grid_times(h, 1)[0]
     p, q = [0.1, -0.2, 1.5], yaw_quat(0.4)
     h.send(pub, pose_stamped_msg(t, p, q, 'world'))
@@ -73,9 +73,9 @@ def test_pose_stamped_with_head_output_is_broadcast_on_tf(rig):
     # publish_tf off: nothing more is sent
     from rclpy.parameter import Parameter
     h.node.set_parameters([Parameter('publish_tf', value=False)])
-    sent = h.node.tf_sent
+    sent = h.node.frames.sent
     h.send(pub, pose_stamped_msg(t + 4 * h.node.sim.dt_ns, p, q, 'world'))
-    assert h.node.tf_sent == sent
+    assert h.node.frames.sent == sent
 
 
 def test_tf_head_is_composed_with_tf_static_parents_over_dds(rig):
@@ -91,7 +91,7 @@ def test_tf_head_is_composed_with_tf_static_parents_over_dds(rig):
     static.publish(TFMessage(transforms=[
         transform_stamped_msg(0, cam_p, cam_q, 'world', 'camera_link'),
         transform_stamped_msg(0, [0.0, 0.0, 0.0], OPTICAL, 'camera_link', 'camera_optical')]))
-    h.spin_until(lambda: len(h.node._tf) >= 2, what='the static transforms')
+    h.spin_until(lambda: len(h.node.frames.tree) >= 2, what='the static transforms')
     t = grid_times(h, 1)[0]
     face_p, face_q = np.array([0.05, -0.1, 0.8]), np.array([0.0, 0.0, 0.0, 1.0])
     track = h.node.sim.track.counters
@@ -106,7 +106,7 @@ def test_tf_head_is_composed_with_tf_static_parents_over_dds(rig):
     np.testing.assert_allclose(quat_to_matrix(head.quaternion), quat_to_matrix(want_q),
                                atol=1e-9)
     assert h.node.output_frame_id() == 'world'
-    assert h.node.tf_sent == 0
+    assert h.node.frames.sent == 0
 
 
 def test_gravity_frame_rotates_gravity_into_an_optical_pose_frame(rig):
@@ -118,7 +118,7 @@ def test_gravity_frame_rotates_gravity_into_an_optical_pose_frame(rig):
     static.publish(TFMessage(transforms=[
         transform_stamped_msg(0, [0.0, 0.0, 1.2], [0.0, 0.0, 0.0, 1.0], 'world', 'camera_link'),
         transform_stamped_msg(0, [0.0, 0.0, 0.0], OPTICAL, 'camera_link', 'camera_optical')]))
-    h.spin_until(lambda: len(h.node._tf) >= 2, what='the static transforms')
+    h.spin_until(lambda: len(h.node.frames.tree) >= 2, what='the static transforms')
     pub = h.pose_publisher()
     t = grid_times(h, 1)[0]
     h.send(pub, pose_stamped_msg(t, [0.0, 0.0, 0.8], [0.0, 0.0, 0.0, 1.0], 'camera_optical'))
@@ -139,7 +139,8 @@ def test_head_marker_is_the_collider_in_the_frame_of_the_hair(rig, output_frame)
     got = []
     h.probe.create_subscription(Marker, HEAD_MARKER_TOPIC, got.append, 10)
     h.listen(markers=False)
-    h.spin_until(lambda: h.node._head_pub.get_subscription_count() > 0, what='head match')
+    head_pub = h.node.publishing.head_pub
+    h.spin_until(lambda: head_pub.get_subscription_count() > 0, what='head match')
     pub = h.pose_publisher()
     t = grid_times(h, 1)[0]
     p, q = [0.3, 0.0, 1.0], yaw_quat(np.pi / 2)
@@ -165,8 +166,8 @@ def test_head_marker_is_the_collider_in_the_frame_of_the_hair(rig, output_frame)
 
 def test_diagnostics_are_sent_at_their_rate_with_nobody_listening(rig):
     h = rig(diagnostics_rate_hz=50.0)
-    assert h.node._diag_pub.get_subscription_count() == 0
-    h.spin_until(lambda: h.node.diagnostics_sent >= 3, timeout=30.0,
+    assert h.node.health.pub.get_subscription_count() == 0
+    h.spin_until(lambda: h.node.health.sent >= 3, timeout=30.0,
                  what='diagnostics without a subscriber')
 
 

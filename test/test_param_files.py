@@ -7,7 +7,8 @@ import yaml
 
 from hair_tracking.core.scene import Scene
 from hair_tracking.output import param_files
-from hair_tracking.output.settings import by_name, make_settings
+from hair_tracking.core.param_table import by_name
+from hair_tracking.output.settings import make_settings
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 

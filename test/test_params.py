@@ -9,8 +9,9 @@ import pytest
 from hair_tracking.core.params import KINDS, ParamError
 from hair_tracking.core.scene import Scene, scene_fields, scene_params, SceneError
 from hair_tracking.core.scene_params import SCENE_PARAMS
-from hair_tracking.output import settings as params
-from hair_tracking.output.settings import apply_changes, make_settings, NODE_PARAMS, Settings
+from hair_tracking.core import param_table as params
+from hair_tracking.core.param_table import NODE_PARAMS
+from hair_tracking.output.settings import apply_changes, make_settings, Settings
 
 #: The Python type a row's kind reads as.
 TYPES = {'bool': bool, 'int': int, 'double': float, 'string': str, 'double_array': tuple}

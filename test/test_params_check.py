@@ -2,7 +2,7 @@
 arguments, matched to the node as rcl does."""
 import pytest
 
-from hair_tracking.output import settings as params
+from hair_tracking.core import param_table as params
 from hair_tracking.output.params_check import node_key_matches, param_assignments, params_files, \
     unknown_parameters
 

@@ -19,9 +19,11 @@ from sensor_msgs.msg import PointCloud2
 from tf2_msgs.msg import TFMessage
 
 from hair_tracking.core.transforms import quat_to_matrix
+from hair_tracking.output.frame_encoder import FrameEncoder
 from hair_tracking.output.settings import make_settings
 from hair_tracking.people import crowd
 from hair_tracking.ros.faces import FaceHair, hair_topic
+from hair_tracking.ros.frames import Frames
 from hair_tracking.ros.node import HairSimNode
 from msg_adapters.pointcloud import pointcloud2_to_strands
 from msg_adapters.stamps import time_to_ns
@@ -76,6 +78,10 @@ def test_two_faces_then_one_each_hair_following_its_own_head():
         assert spin_until(executor, lambda: tf_pub.get_subscription_count() > 0 and
                           ids_pub.get_subscription_count() > 0, 10.0), 'no match'
         faces = node.faces
+        # one TF tree: /tf and /tf_static subscribed once, the people's and the node's
+        tf_topics = sorted(sub.topic_name for sub in node.subscriptions
+                           if sub.topic_name in ('/tf', '/tf_static'))
+        assert tf_topics == ['/tf', '/tf_static']
         stamp = [probe.get_clock().now().nanoseconds]
 
         def send(heads, k):
@@ -104,6 +110,8 @@ def test_two_faces_then_one_each_hair_following_its_own_head():
             t = send({'a': (0.0, 0.05 * k), 'b': (1.0, -0.05 * k)}, k)
         t = send({'a': (0.0, 0.35), 'b': (1.0, -0.35)}, 8)     # held: the head is there
         assert spin_until(executor, lambda: sorted(faces.people) == ['a', 'b'], 10.0)
+        said = {kv.key: kv.value for kv in node.diagnostics().values}
+        assert (said['people'], said['face_poses_refused']) == ('2', '0')
         roots = faces.roster.crowd.people['a'].ghosts.rest[:, 0].mean(axis=0)   # head frame
 
         def expected(x, a):
@@ -156,7 +164,9 @@ def test_memory_is_flat_over_1000_people_coming_and_going():
         settings = make_settings(dict(SMALL, **{'people.lost_timeout_s': 0.5,
                                                 'solver.settle_time': 0.0}))
         now = [0]
-        hook = FaceHair(node, lambda: settings, now_ns=lambda: now[0])
+        frames = Frames(node)
+        hook = FaceHair(node, lambda: settings, frames, FrameEncoder(settings),
+                        now_ns=lambda: now[0])
         publishers = len(list(node.publishers))
 
         def cycle(k):
@@ -164,7 +174,7 @@ def test_memory_is_flat_over_1000_people_coming_and_going():
             hook.on_ids(IdsList(ids=[pid]))
             for j in range(3):
                 now[0] += 20_000_000
-                hook.on_tf(faces_message(now[0], {pid: (0.01 * j, 0.1 * j)}))
+                frames.on_tf(faces_message(now[0], {pid: (0.01 * j, 0.1 * j)}))
             assert list(hook.people) == [pid]
             hook.publish(only_wanted=False)
             now[0] += 600_000_000

@@ -181,13 +181,22 @@ def test_publish_cloud_bytes_over_dds():
     np.testing.assert_array_equal(ids, np.arange(1000))
 
 
+def _fill_numpy(words, x, rgb, ids):
+    """The records of :func:`msg_adapters.pointcloud.fill_records` with numpy alone."""
+    words[..., :3] = x
+    words[..., 3:4].view('<u4')[..., 0] = ids[:, None]
+    if rgb is not None:
+        words[..., 4] = rgb
+    return bool(np.isfinite(words[..., :3]).all())
+
+
 @pytest.mark.parametrize('rgb_mode', ['none', 'strand', 'point'])
 def test_compiled_fill_matches_numpy_fill(rgb_mode):
-    """The compiled record writer and the plain numpy one write the same bytes and the same
-    ``is_dense``, with NaN, Inf, per-strand and per-point colours and ids beyond 2^23 (their
-    bits go through float32 words unchanged); memory that is not 4-byte aligned takes the
-    numpy path."""
-    from msg_adapters import point_fill
+    """The record writer and plain numpy write the same bytes and the same ``is_dense``, with
+    NaN, Inf, a coordinate too large for float32 (finite as float64, Inf once written),
+    per-strand and per-point colours and ids beyond 2^23 (their bits go through float32 words
+    unchanged); memory that is not 4-byte aligned gets the same bytes."""
+    from msg_adapters.pointcloud import fill_records
     rng = np.random.default_rng(7)
     s, n = 37, 5
     x = rng.normal(size=(s, n, 3))
@@ -195,30 +204,47 @@ def test_compiled_fill_matches_numpy_fill(rgb_mode):
     rgb = None if rgb_mode == 'none' else pack_rgb(
         rng.random((s, 1 if rgb_mode == 'strand' else n, 3)))
     record = 4 if rgb is None else 5
-    for bad in (None, (3, 2, 1, np.nan), (0, 0, 0, np.inf)):
+    for bad in (None, (3, 2, 1, np.nan), (0, 0, 0, np.inf), (5, 4, 2, -1e39)):
         xx = x.copy()
         if bad is not None:
             xx[bad[:3]] = bad[3]
         fast = np.full((s, n, record), -1.0, dtype='<f4')
         slow = np.full((s, n, record), -2.0, dtype='<f4')
-        dense = point_fill.fill_records(fast, xx, rgb, ids)
-        assert dense == point_fill._fill_numpy(slow, xx, rgb, ids) == (bad is None)
+        with np.errstate(over='ignore'):
+            dense = fill_records(fast, xx, rgb, ids)
+            assert dense == _fill_numpy(slow, xx, rgb, ids) == (bad is None)
         assert fast.tobytes() == slow.tobytes()
     raw = np.zeros(s * n * record * 4 + 1, dtype=np.uint8)
     odd = raw[1:].view('<f4').reshape(s, n, record)       # not 4-byte aligned
     assert not odd.flags.aligned
-    assert point_fill.fill_records(odd, x, rgb, ids)
+    assert fill_records(odd, x, rgb, ids)
     ref = np.empty_like(fast)
-    point_fill._fill_numpy(ref, x, rgb, ids)
+    _fill_numpy(ref, x, rgb, ids)
     assert odd.tobytes() == ref.tobytes()
     with pytest.raises(ValueError, match='rgb must be shaped'):
-        point_fill.fill_records(fast, x, np.zeros((s, n + 1), dtype='<f4'), ids)
+        fill_records(fast, x, np.zeros((s, n + 1), dtype='<f4'), ids)
+
+
+def test_one_finiteness_rule_for_every_cloud():
+    """A coordinate finite as float64 but beyond float32 is not dense, whether the cloud is
+    written from strands (``strands_to_pointcloud2_cdr``) or through a writer into a
+    :class:`CloudBuffer` (the node's path): one record writer."""
+    from hair_tracking.core.point_records import points_to_records
+    x = np.zeros((2, 3, 3))
+    x[1, 2, 0] = 1e39
+    msg = deserialize_message(strands_to_pointcloud2_cdr(x, frame_id='m'), PointCloud2)
+    buf = CloudBuffer().encode(2, 3, lambda words, stride: points_to_records(words, stride, x),
+                               frame_id='m')
+    assert not msg.is_dense
+    assert not deserialize_message(bytes(buf), PointCloud2).is_dense
+    x[1, 2, 0] = 1e38
+    assert deserialize_message(strands_to_pointcloud2_cdr(x, frame_id='m'), PointCloud2).is_dense
 
 
 def test_compiled_fill_other_record_sizes():
-    """Records wider than the cloud's own (written by the numpy writer) get the same words as
-    ever and keep the extra words; colours need 5-word records."""
-    from msg_adapters import point_fill
+    """Records wider than the cloud's own get the same words and keep the extra words;
+    colours need 5-word records."""
+    from msg_adapters.pointcloud import fill_records
     rng = np.random.default_rng(8)
     s, n = 11, 3
     x = rng.normal(size=(s, n, 3))
@@ -227,13 +253,12 @@ def test_compiled_fill_other_record_sizes():
     for record in (5, 7):
         fast = np.full((s, n, record), 9.0, dtype='<f4')
         slow = fast.copy()
-        assert not point_fill.fill_records(fast, x, None, ids)
-        assert not point_fill._fill_numpy(slow, x, None, ids)
+        assert not fill_records(fast, x, None, ids)
+        assert not _fill_numpy(slow, x, None, ids)
         assert fast.tobytes() == slow.tobytes()
         assert np.all(fast[..., 4:] == 9.0)
     with pytest.raises(ValueError, match='5 words'):
-        point_fill.fill_records(np.zeros((s, n, 4), dtype='<f4'), x,
-                                np.zeros((s, 1), dtype='<f4'), ids)
+        fill_records(np.zeros((s, n, 4), dtype='<f4'), x, np.zeros((s, 1), dtype='<f4'), ids)
 
 
 @pytest.mark.parametrize('per_point', [False, True])
@@ -266,10 +291,10 @@ def test_packed_rgb_gives_the_same_cloud_as_colors(per_point):
 
 
 def test_compiled_fill_has_one_specialisation_for_read_only_and_writable_inputs():
-    """Read-only inputs (the node's frames are read-only views, its cached colours too) and
-    writable ones (warm-up data) use the same compiled code: a second specialisation would be
-    compiled in the middle of the first published frame."""
-    from msg_adapters import point_fill
+    """Read-only inputs (the node's frames are read-only views) and writable ones (warm-up
+    data) use the same compiled code: a second specialisation would be compiled in the middle
+    of the first published frame."""
+    from msg_adapters import pointcloud
     rng = np.random.default_rng(10)
     s, n = 6, 4
     words = np.zeros((s, n, 5), dtype='<f4')
@@ -280,8 +305,8 @@ def test_compiled_fill_has_one_specialisation_for_read_only_and_writable_inputs(
         rgb = rng.random((s, 1)).astype('<f4')
         for a in (x, rgb, ids):
             a.flags.writeable = writable
-        assert point_fill.fill_records(words, x, rgb, ids)
-        seen.add(len(point_fill._fill_records.signatures))
+        assert pointcloud.fill_records(words, x, rgb, ids)
+        seen.add(len(pointcloud._fill_records.signatures))
     assert len(seen) == 1
 
 

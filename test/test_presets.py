@@ -33,7 +33,7 @@ from hair_tracking.core.scene import Scene
 from hair_tracking.evaluation import stability
 from hair_tracking.evaluation import synthetic_motion as sm
 from hair_tracking.motion.pose_table import load_bundled_walk
-from hair_tracking.ros.node import load_base_scene
+from hair_tracking.ros.parameters import load_base_scene
 from hair_tracking.simulator import HairSimulator
 
 from recordings import write_walk_bag

@@ -139,7 +139,7 @@ def test_the_sequence_gate_drops_late_repeated_and_out_of_order_messages():
 
 def test_the_viewer_joins_the_shards_newest_clouds_and_leaves_out_a_stopped_one():
     from msg_adapters.pointcloud import strands_to_pointcloud2
-    from hair_tracking.ros.view import ShardClouds
+    from hair_tracking.ros.view_geometry import ShardClouds
 
     def cloud(first, count, t_ns):
         x = np.arange(count * 2 * 3, dtype=np.float64).reshape(count, 2, 3) + 100 * first

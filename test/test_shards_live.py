@@ -28,7 +28,7 @@ from hair_tracking.output.settings import make_settings  # noqa: E402
 from hair_tracking.output.shards import fingerprint, guide_state_bytes, \
     settings_text, shard_rows  # noqa: E402
 from hair_tracking.ros.ghosts import GhostShardNode, shard_topic  # noqa: E402
-from hair_tracking.ros.node import latched_qos, output_qos, SCENE_TOPIC  # noqa: E402
+from hair_tracking.ros.topics import latched_qos, output_qos, SCENE_TOPIC  # noqa: E402
 from hair_tracking.simulator import HairSimulator  # noqa: E402
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))

@@ -27,7 +27,7 @@ from sensor_msgs.msg import PointCloud2, PointField
 from std_msgs.msg import Header
 from visualization_msgs.msg import Marker, MarkerArray
 
-from hair_tracking.ros import view
+from hair_tracking.ros import view_geometry
 from msg_adapters.pointcloud import strands_to_pointcloud2
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -64,18 +64,18 @@ def test_cloud_segments_join_each_strands_points_in_its_colour():
     x[1, 2] = np.nan                           # strand 1 loses the two segments at point 2
     packed = np.array([0x102030, 0x405060, 0x708090], dtype=np.uint32)
     msg = strands_to_pointcloud2(x, frame_id='world', packed_rgb=packed)
-    seg, col = view.cloud_segments(msg)
+    seg, col = view_geometry.cloud_segments(msg)
     assert seg.shape == (3 * 3 - 2, 2, 3) and seg.dtype == np.float32
     np.testing.assert_allclose(seg[0], [[0, 0, 0], [0, 0, 0.1]], atol=1e-7)
     np.testing.assert_array_equal(col[0], [[0x10, 0x20, 0x30]] * 2)
     np.testing.assert_array_equal(col[-1], [[0x70, 0x80, 0x90]] * 2)
     assert np.isfinite(seg).all()
-    seg, col = view.cloud_segments(msg, max_strands=2)       # every 2nd strand: 0 and 2
+    seg, col = view_geometry.cloud_segments(msg, max_strands=2)       # every 2nd strand: 0 and 2
     assert seg.shape[0] == 6 and set(seg[:, 0, 0]) == {0.0, 2.0}
     no_rgb = strands_to_pointcloud2(x[:, :1], frame_id='world')
-    assert view.cloud_segments(no_rgb)[0].shape == (0, 2, 3)
-    assert view.cloud_colors(no_rgb) is None
-    assert view.strand_stride(10, 0) == 1 and view.strand_stride(10, 3) == 4
+    assert view_geometry.cloud_segments(no_rgb)[0].shape == (0, 2, 3)
+    assert view_geometry.cloud_colors(no_rgb) is None
+    assert view_geometry.strand_stride(10, 0) == 1 and view_geometry.strand_stride(10, 3) == 4
 
 
 def test_cloud_colors_read_the_rgb_field_by_its_offset():
@@ -88,13 +88,13 @@ def test_cloud_colors_read_the_rgb_field_by_its_offset():
     rec['rgb'] = [[0xFF0000, 0x00FF00, 0x0000FF], [1, 2, 3]]
     msg = PointCloud2(header=Header(frame_id='w'), height=2, width=3, fields=fields,
                       point_step=step, row_step=3 * step, data=rec.tobytes())
-    c = view.cloud_colors(msg)
+    c = view_geometry.cloud_colors(msg)
     np.testing.assert_array_equal(c[0], [[255, 0, 0], [0, 255, 0], [0, 0, 255]])
     np.testing.assert_array_equal(c[1, :, 2], [1, 2, 3])
 
 
 def test_srgb_colours_are_linearised_for_the_vertex_colours():
-    lin = view.srgb_to_linear_u8(np.array([0, 38, 77, 115, 128, 255], dtype=np.uint8))
+    lin = view_geometry.srgb_to_linear_u8(np.array([0, 38, 77, 115, 128, 255], dtype=np.uint8))
     assert lin.tolist() == [0, 5, 19, 44, 55, 255]
 
 
@@ -103,14 +103,15 @@ def test_head_shape_of_the_nodes_marker():
     m = collider_marker('ellipsoid', (0.0, 0.0, 0.02), 0.1, (0.09, 0.075, 0.11),
                         frame_id='world', stamp_ns=0, color=(0.85, 0.7, 0.6, 0.5),
                         head_position=(1.0, 2.0, 1.5), head_quaternion=(0.0, 0.0, 0.0, 1.0))
-    s = view.head_shape(m)
+    s = view_geometry.head_shape(m)
     np.testing.assert_allclose(s.position, (1.0, 2.0, 1.52))
     np.testing.assert_allclose(s.semi_axes, (0.09, 0.075, 0.11))
     assert s.wxyz == (1.0, 0.0, 0.0, 0.0) and s.rgb == (217, 178, 153)
-    assert view.head_shape(collider_marker('none', (0, 0, 0), 0.1, (0.1,) * 3,
-                                           frame_id='w', stamp_ns=0, color=(1,) * 4)) is None
-    assert view.head_shape(Marker(type=Marker.CUBE)) is None
-    look_at, eye = view.framing(np.zeros((0, 2, 3)), s)
+    assert view_geometry.head_shape(collider_marker('none', (0, 0, 0), 0.1, (0.1,) * 3,
+                                                    frame_id='w', stamp_ns=0,
+                                                    color=(1,) * 4)) is None
+    assert view_geometry.head_shape(Marker(type=Marker.CUBE)) is None
+    look_at, eye = view_geometry.framing(np.zeros((0, 2, 3)), s)
     np.testing.assert_allclose(look_at, s.position)
     assert (eye - look_at)[0] > 0 and (eye - look_at)[2] > 0
 
@@ -120,8 +121,8 @@ def test_collider_solids_of_the_nodes_capsules():
     q = (0.0, np.sin(0.25), 0.0, np.cos(0.25))             # x y z w: 0.5 rad about y
     markers = capsule_markers([(0.1, 0.2, 1.3)], [q], [0.05], [0.12], frame_id='world',
                               stamp_ns=0, color=(0.1, 0.3, 0.9, 1.0))
-    solids = view.collider_solids(MarkerArray(markers=markers + [Marker(type=Marker.CUBE),
-                                                                 Marker(action=Marker.DELETEALL)]))
+    solids = view_geometry.collider_solids(MarkerArray(
+        markers=markers + [Marker(type=Marker.CUBE), Marker(action=Marker.DELETEALL)]))
     assert [s.kind for s in solids] == ['cylinder', 'sphere', 'sphere']
     cyl, end0, end1 = solids
     np.testing.assert_allclose(cyl.position, (0.1, 0.2, 1.3))
@@ -132,14 +133,14 @@ def test_collider_solids_of_the_nodes_capsules():
     np.testing.assert_allclose(end1.position, np.array(cyl.position) + 0.12 * axis, atol=1e-12)
     np.testing.assert_allclose(end0.size, (0.05,) * 3)
     assert cyl.rgb == (26, 76, 230)
-    latest = view.Latest()
+    latest = view_geometry.Latest()
     latest.add_colliders(MarkerArray(markers=markers))
     assert latest and latest.take_colliders().markers == markers
     assert not latest and latest.take_colliders() is None
 
 
 def test_latest_pairs_the_cloud_with_the_head_of_its_stamp():
-    latest = view.Latest()
+    latest = view_geometry.Latest()
     assert not latest and latest.take() == (None, None)
 
     def stamped(msg, ns):
@@ -284,7 +285,7 @@ def _feed_a_pose_until_a_cloud():
         assert got, 'no cloud from the node'
         ex.shutdown(timeout_sec=1.0)
         node.destroy_node()
-        return np.unique(view.cloud_colors(got[-1]).reshape(-1, 3), axis=0)
+        return np.unique(view_geometry.cloud_colors(got[-1]).reshape(-1, 3), axis=0)
     finally:
         rclpy.try_shutdown(context=ctx)
 

@@ -30,10 +30,11 @@ import yaml
 
 from hair_tracking.bags import io as bag_io
 from hair_tracking.bags.io import BagError, EXIT_CONTENT, EXIT_FAILURE, EXIT_INPUT, EXIT_USAGE
+from hair_tracking.core.param_table import NODE_NAME
 from hair_tracking.core.params import ParamError
 from hair_tracking.core.scene import Scene, SceneError
 from hair_tracking.output.params_check import load_params_file, node_parameters, ParamsFileError
-from hair_tracking.output.settings import check_groom_file, make_settings, NODE_NAME, Settings
+from hair_tracking.output.settings import check_groom_file, make_settings, Settings
 from hair_tracking.output.diagnostics import HairHealth, HARDWARE_ID, make_status, status_name
 from hair_tracking.output.frame_encoder import FrameEncoder
 

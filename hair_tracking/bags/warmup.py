@@ -25,7 +25,7 @@ import numpy as np
 
 from hair_tracking import executable
 from hair_tracking.core.scene import Scene
-from hair_tracking.output.settings import MARKER_STYLES
+from hair_tracking.core.param_table import MARKER_STYLES
 
 
 def warm_up(scene: Scene) -> float:

@@ -13,6 +13,10 @@ the orientation.  What it checks, and what the simulator does about it:
 * a jump farther than ``teleport_distance`` or turning more than ``teleport_angle_deg`` between two
   samples, or a gap longer than ``max_gap`` -> ``RESET_TELEPORT``, handled the same way.
 * times after the newest sample hold the newest pose (a stale stream lets the hair settle).
+
+``StreamClock`` maps a live stream's stamps onto the simulator's time: the same, except after a
+stale stretch in which the hair settled past the stream's newest stamp (stamps slower than the
+node clock), where the stream continues one substep after the hair instead of freezing it.
 """
 from collections import deque
 import enum
@@ -125,6 +129,39 @@ class HeadTrack:
         a, b = self._p[i - 1], self._p[i]
         return head_pose(tuple((1.0 - u) * a[k] + u * b[k] for k in range(3)),
                          slerp_floats(self._q[i - 1], self._q[i], u))
+
+
+class StreamClock:
+    """Stream stamps -> simulator time (see the module doc).
+
+    ``offset_ns`` is added to a stream stamp to give the simulator's time (and subtracted from
+    the simulator's time to stamp an output); :meth:`sim_time` proposes it for a pose, and
+    :meth:`accept` keeps it once the pose was taken.
+    """
+
+    def __init__(self):
+        self.offset_ns = 0
+        self.last_stamp_ns = None       # the newest accepted stream stamp
+
+    def sim_time(self, t_ns: int, sim_time_ns, dt_ns: int):
+        """``(simulator time, offset)`` for a pose stamped ``t_ns`` when the simulator is at
+        ``sim_time_ns`` (None before the first pose) with substeps of ``dt_ns``."""
+        offset, last = self.offset_ns, self.last_stamp_ns
+        if last is not None and t_ns < last:
+            offset = 0                   # backwards: the simulator resets to this stamp
+        elif last is not None and sim_time_ns > last + offset and \
+                t_ns + offset <= sim_time_ns:
+            offset = sim_time_ns + dt_ns - t_ns
+        return t_ns + offset, offset
+
+    def accept(self, t_ns: int, offset: int) -> None:
+        """The pose stamped ``t_ns`` was taken at ``t_ns + offset``."""
+        self.offset_ns = offset
+        self.last_stamp_ns = t_ns
+
+    def stamp(self, sim_time_ns) -> int:
+        """The stream stamp of the simulator time ``sim_time_ns`` (0 before the first)."""
+        return max(0, (sim_time_ns or 0) - self.offset_ns)
 
 
 def head_pose(p, q) -> HeadPose:

@@ -1,9 +1,9 @@
 """One row of the parameter table: a parameter's name, type, default, range, words and change
 policy, and the checks and texts derived from it.
 
-The table itself is rows of :class:`Param`: the scene's rows in
-:mod:`hair_tracking.core.scene_params` (from which the scene dataclasses take their defaults and
-their validation), the node's own rows in :mod:`hair_tracking.output.settings`.  Everything else
+The table itself is rows of :class:`Param` (:mod:`hair_tracking.core.param_table`): the scene's
+rows in :mod:`hair_tracking.core.scene_params` (from which the scene dataclasses take their
+defaults and their validation), then the node's own.  Everything else
 is derived from the rows: the node's ROS parameter descriptors, ``config/hair_sim.yaml``,
 ``config/scene_default.yaml`` and the table in ``docs/node.md``
 (:mod:`hair_tracking.output.param_files`).  This module imports no ROS package.

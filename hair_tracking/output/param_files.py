@@ -12,9 +12,9 @@ rewrites, under the repository root ``DIR`` (default: the current folder),
 * the table of every parameter in ``docs/node.md``, between the markers
   :data:`DOCS_BEGIN` and :data:`DOCS_END` (:func:`render_markdown`).
 
-The rows are the node's (:mod:`hair_tracking.output.settings`) and the scene's
-(:mod:`hair_tracking.core.scene_params`); a test regenerates the three files and compares them
-with the committed ones.
+The rows are those of the one table (:mod:`hair_tracking.core.param_table`: the node's and
+the scene's, :mod:`hair_tracking.core.scene_params`); a test regenerates the three files and
+compares them with the committed ones.
 """
 import argparse
 import os
@@ -24,9 +24,9 @@ from typing import Any, Dict, Iterable, List, Optional, Tuple
 
 import yaml
 
+from hair_tracking.core.param_table import NODE_NAME, table
 from hair_tracking.core.params import Param
 from hair_tracking.core.scene import Scene, scene_params
-from hair_tracking.output.settings import NODE_NAME, table
 
 COMMAND = 'python -m hair_tracking.output.param_files'
 NODE_YAML = os.path.join('config', 'hair_sim.yaml')
@@ -48,7 +48,7 @@ def render_yaml(node_name: str = NODE_NAME, base: Optional[Scene] = None,
     """
     lines = [
         f'# Parameters of the {node_name} node (hair_tracking).  Generated from the parameter',
-        '# table (hair_tracking/output/settings.py, hair_tracking/core/scene_params.py) by',
+        '# table (hair_tracking/core/param_table.py, hair_tracking/core/scene_params.py) by',
         f'#   {COMMAND}',
         '# Use it as:',
         '#   ros2 run hair_tracking hair_sim_node --ros-args --params-file config/hair_sim.yaml',

@@ -44,7 +44,7 @@ from msg_adapters.rcl_serialized import SerializedPublisher
 from hair_tracking import executable
 from hair_tracking.output.diagnostics import make_status, WARN
 from hair_tracking.output.shards import fingerprint, GhostShard, SequenceGate, ShardError
-from hair_tracking.ros.node import diagnostic_status, GUIDE_STATE_TOPIC, latched_qos, \
+from hair_tracking.ros.topics import diagnostic_status, GUIDE_STATE_TOPIC, latched_qos, \
     output_qos, SCENE_TOPIC, WARN_THROTTLE_S
 from hair_tracking.ros.spin_node import spin_node
 
