@@ -218,7 +218,9 @@ def test_nan_faces_are_refused_before_any_hair_and_clouds_carry_their_pose_time(
         rclpy.logging.set_logger_level('faces', rclpy.logging.LoggingSeverity.ERROR)
         settings = make_settings(dict(SMALL, **{'solver.settle_time': 0.0}))
         now = [10 ** 9]
-        hook = FaceHair(node, lambda: settings, now_ns=lambda: now[0])
+        frames = Frames(node)
+        hook = FaceHair(node, lambda: settings, frames, FrameEncoder(settings),
+                        now_ns=lambda: now[0])
         made = []
         add = hook.roster.crowd.add
         hook.roster.crowd.add = lambda pid, *a: made.append(pid) or add(pid, *a)
@@ -226,24 +228,24 @@ def test_nan_faces_are_refused_before_any_hair_and_clouds_carry_their_pose_time(
             now[0] += 33_333_333
             msg = faces_message(now[0], {'x': (0.0, 0.0)})
             msg.transforms[0].transform.translation.x = float('nan')
-            hook.on_tf(msg)
+            frames.on_tf(msg)
         assert made == [] and hook.people == {} and hook.roster.rejected == 90
         problems, values = hook.diagnostics()
         assert values['face_poses_refused'] == '90' and values['face_ids_without_hair'] == '1'
         assert 'face x: position has non-finite values' in problems[0]
         t0 = now[0]
-        hook.on_tf(faces_message(t0, {'a': (0.0, 0.0), 'b': (1.0, 0.0)}))
+        frames.on_tf(faces_message(t0, {'a': (0.0, 0.0), 'b': (1.0, 0.0)}))
         assert made == ['a', 'b']
         stamps = {pid: hook.people[pid].stamp_ns for pid in 'ab'}
         assert stamps == {'a': t0, 'b': t0}
         t1 = t0 + 33_333_333
-        hook.on_tf(faces_message(t1, {'a': (0.0, 0.1)}))
+        frames.on_tf(faces_message(t1, {'a': (0.0, 0.1)}))
         # the hair advances on its substep grid, to the newest face stamp
         assert t1 - DT_NS < hook.people['a'].stamp_ns <= t1 and hook.people['b'].stamp_ns == t0
-        hook.on_tf(faces_message(t1, {'b': (1.0, 0.1)}))         # not followed yet
+        frames.on_tf(faces_message(t1, {'b': (1.0, 0.1)}))         # not followed yet
         assert hook.people['b'].stamp_ns == t0
         t2 = t1 + 33_333_333
-        hook.on_tf(faces_message(t2, {'a': (0.0, 0.2), 'b': (1.0, 0.2)}))
+        frames.on_tf(faces_message(t2, {'a': (0.0, 0.2), 'b': (1.0, 0.2)}))
         stamps = {pid: hook.people[pid].stamp_ns for pid in 'ab'}
         assert stamps['a'] == stamps['b'] and t2 - DT_NS < stamps['b'] <= t2
         got = []
