@@ -213,4 +213,5 @@ def test_executable_in_a_namespace_takes_the_wildcard_params_file_and_warns(tmp_
     text = ''.join(lines)
     assert proc.returncode == 0, text
     assert 'ready: 3 guides' in text and '6 ghosts' in text, text
-    assert 'unknown parameter for /left/hair_left, ignored: groom.gost_nodes' in text, text
+    assert ("unknown parameter for /left/hair_left, ignored: groom.gost_nodes (did you mean "
+            "'groom.ghost_nodes'?)") in text, text

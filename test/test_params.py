@@ -2,6 +2,7 @@
 validation, snapshots."""
 import dataclasses
 import math
+import re
 import typing
 
 import pytest
@@ -199,6 +200,8 @@ def test_shape_changes_ask_for_a_rebuild_only_when_the_value_changes():
                                                                 '2,000,000']),
     ({'warmup': False}, ['warmup', 'read-only']),
     ({'no.such': 1}, ['no.such', 'unknown']),
+    ({'groom.gost_nodes': 8}, ['groom.gost_nodes', "unknown parameter; did you mean "
+                                                   "'groom.ghost_nodes'?"]),
 ])
 def test_invalid_change_is_rejected_with_its_reason_and_changes_nothing(change, words):
     old = make_settings({})
@@ -228,3 +231,12 @@ def test_base_scene_supplies_the_scene_defaults():
     assert s.scene.damping == 3.0
     s2 = make_settings({'groom.guides': 9}, base)
     assert s2.scene.groom.guides == 9
+
+
+def test_a_typo_is_answered_alike_at_start_live_and_on_the_command_line(tmp_path, capsys):
+    from hair_tracking.bags.cli import main
+    hint = "groom.gost_nodes: unknown parameter; did you mean 'groom.ghost_nodes'?"
+    with pytest.raises(ParamError, match=re.escape(hint)):
+        make_settings({'groom.gost_nodes': 8})
+    assert main(['run', '-o', str(tmp_path / 'out.mcap'), '--set', 'groom.gost_nodes=8']) == 2
+    assert hint in capsys.readouterr().err

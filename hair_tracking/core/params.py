@@ -11,6 +11,7 @@ is derived from the rows: the node's ROS parameter descriptors, ``config/hair_si
 Units are SI (metres, seconds, radians unless a name says ``_deg``); frames follow REP-103.
 """
 from dataclasses import dataclass
+import difflib
 import math
 from typing import Any, Iterable, Optional, Tuple
 
@@ -23,6 +24,14 @@ class ParamError(ValueError):
     def __init__(self, name: str, message: str):
         super().__init__(f'{name}: {message}')
         self.name = name
+
+
+def did_you_mean(name: str, names: Iterable[str]) -> str:
+    """``"; did you mean 'x'?"`` with the known name closest to the unknown ``name``
+    (:func:`difflib.get_close_matches`), or '' when none is close: what every tool that
+    refuses or ignores an unknown parameter adds to its words."""
+    close = difflib.get_close_matches(name, list(names), n=1)
+    return f"; did you mean '{close[0]}'?" if close else ''
 
 
 @dataclass(frozen=True)

@@ -16,7 +16,7 @@ from dataclasses import field, make_dataclass
 from typing import Any, Dict, Mapping, Optional, Tuple
 
 from hair_tracking.core.param_table import by_name, NODE_PARAMS
-from hair_tracking.core.params import ParamError
+from hair_tracking.core.params import did_you_mean, ParamError
 from hair_tracking.core.scene import Scene, scene_fields, SceneError
 from hair_tracking.grooms.build import import_groom
 from hair_tracking.grooms.polylines import GroomFileError
@@ -95,7 +95,8 @@ def make_settings(values: Mapping[str, Any], base: Optional[Scene] = None) -> Se
     params = by_name(base)
     unknown = sorted(set(values) - set(params))
     if unknown:
-        raise ParamError(unknown[0], 'unknown parameter (see config/hair_sim.yaml for the list)')
+        raise ParamError(unknown[0], 'unknown parameter' + (
+            did_you_mean(unknown[0], params) or ' (see config/hair_sim.yaml for the list)'))
     node, scene_flat = {}, {}
     for name, p in params.items():
         value = p.coerce(values[name]) if name in values else p.default
@@ -131,7 +132,7 @@ def apply_changes(settings: Settings, changes: Mapping[str, Any],
     params = by_name(base)
     for name in changes:
         if name not in params:
-            raise ParamError(name, 'unknown parameter')
+            raise ParamError(name, 'unknown parameter' + did_you_mean(name, params))
         if params[name].read_only and not allow_read_only:
             raise ParamError(name, 'is read-only (set it at start: params file, launch file '
                                    'or -p name:=value)')

@@ -15,7 +15,6 @@ Exit codes: 0 done (or stopped by SIGINT / SIGTERM), 1 the node refused or did n
 2 bad command line (a parameter the node does not have is named with the closest one it has).
 """
 import argparse
-import difflib
 import sys
 import time
 from typing import List, Optional
@@ -23,6 +22,7 @@ from typing import List, Optional
 import yaml
 
 from hair_tracking import executable, shutdown
+from hair_tracking.core.params import did_you_mean
 
 TIMEOUT_S = 10.0
 
@@ -66,13 +66,11 @@ def _value(p):
 
 def _unknown_name(name: str, target: str, names) -> Optional[str]:
     """``None`` when ``target`` has a parameter ``name``, else one line saying so, with the
-    closest name it has if one is close (:func:`difflib.get_close_matches`)."""
+    closest name it has if one is close (:func:`~hair_tracking.core.params.did_you_mean`)."""
     names = list(names)
     if name in names:
         return None
-    close = difflib.get_close_matches(name, names, n=1)
-    hint = f"; did you mean '{close[0]}'?" if close else \
-        f' (hair_sim_ctl param list {target} lists them)'
+    hint = did_you_mean(name, names) or f' (hair_sim_ctl param list {target} lists them)'
     return f"unknown parameter '{name}' of {target}{hint}"
 
 

@@ -29,7 +29,7 @@ from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValu
 from rclpy.parameter import Parameter
 
 from hair_tracking.core.param_table import NODE_ROWS, table
-from hair_tracking.core.params import Param, ParamError
+from hair_tracking.core.params import did_you_mean, Param, ParamError
 from hair_tracking.core.scene import Scene, SceneError
 from hair_tracking.output.params_check import unknown_parameters
 from hair_tracking.output.settings import apply_changes, make_settings, Settings
@@ -197,8 +197,10 @@ class NodeParameters:
         fqn = node.get_fully_qualified_name()
         found = unknown_parameters(argv, fqn, self.table, node.get_name())
         for source, names in found.items():
+            hints = [did_you_mean(n, self.table) for n in names]      # '; did you mean ...'
+            said = ', '.join(f'{n} ({h[2:]})' if h else n for n, h in zip(names, hints))
             node.get_logger().warn(
                 f'{source}: unknown parameter{"s" if len(names) > 1 else ""} for {fqn}, '
-                f'ignored: {", ".join(names)} (the node\'s parameters: config/hair_sim.yaml, '
+                f'ignored: {said} (the node\'s parameters: config/hair_sim.yaml, '
                 f'docs/node.md)')
         return found
