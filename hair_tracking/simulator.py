@@ -31,8 +31,10 @@ Time handling
   the hair is that of the substeps taken one by one; ``counters.extra['split_substeps']``
   counts the extra substeps.
 
-Public loop (what the node, the crowd and the tools drive): :meth:`HairSimulator.push_pose`,
-:meth:`~HairSimulator.advance_to`, :meth:`~HairSimulator.frame`, :meth:`~HairSimulator.reset`;
+Public loop (what the node, the crowd and the tools drive): the simulator built from a
+:class:`~hair_tracking.core.scene.Scene`, :meth:`HairSimulator.push_pose`,
+:meth:`~HairSimulator.advance_to` (or one substep: :meth:`~HairSimulator.step`),
+:meth:`~HairSimulator.frame`, :meth:`~HairSimulator.reset`, :meth:`~HairSimulator.settle`;
 and, for a driver that schedules the guide substeps itself (the crowd,
 :mod:`hair_tracking.people.crowd`), :meth:`~HairSimulator.begin_tracking`,
 :meth:`~HairSimulator.run_substeps` and :meth:`~HairSimulator.finish_tracking`, the three parts
@@ -54,7 +56,7 @@ from hair_tracking.core.metrics import max_stretch
 from hair_tracking.core.model import carry_rigidly, HeadPose, StrandSet
 from hair_tracking.core.point_records import points_to_records
 from hair_tracking.core.scene import GUIDES_AMONG_STRANDS, Scene
-from hair_tracking.core.settle import settle
+from hair_tracking.core.settle import settle as settle_until_still
 from hair_tracking.ghosts.blend import BlendTracker
 from hair_tracking.ghosts.interface import GhostTracking, TrackStep
 from hair_tracking.ghosts.stateless import choose_guides
@@ -313,6 +315,37 @@ class HairSimulator:
         self._rest_at(self.head)
         self.counters.resets += 1
 
+    def settle(self) -> float:
+        """Let the hair come to rest where it is, the head still at its current pose:
+        ``solver.settle_time``, then, with ``solver.settle_speed``, on until no node moves
+        faster than that (:func:`hair_tracking.core.settle.settle`), the ghosts tracked as the
+        scene says; the simulator's time and head track are kept.  The velocities are then zero
+        (FTL's stored velocities do not vanish at rest, :mod:`hair_tracking.guides.ftl`:
+        zeroing them sets still FTL hair moving by a few millimetres, which settles again).
+        Returns the time simulated [s], also kept as ``settled_s``."""
+        head = self.head
+        once, self.track_once_per_call = self.track_once_per_call, False   # the scene's rest
+        sv = self.scene.solver
+        try:
+            self.settled_s = settle_until_still(lambda steps: self._settle(head, steps),
+                                                self._settling_nodes, sv.dt, sv.settle_time,
+                                                sv.settle_speed)
+        finally:
+            self.track_once_per_call = once
+        self.guides.v[...] = 0.0
+        if self.ghost_tracker is not None:
+            self.ghost_tracker.zero_velocities()
+        self.speed = 0.0
+        return self.settled_s
+
+    def step(self) -> int:
+        """One substep (``solver.dt``) on from the simulator's time, the head sampled from its
+        track as :meth:`advance_to` samples it; returns the substeps run (0 before the first
+        pose)."""
+        if self.time_ns is None:
+            return 0
+        return self.advance_to(self.time_ns + self.dt_ns)
+
     # -------------------------------------------------------------- substeps
     def run_substeps(self, dt: float, head_prev: HeadPose, heads: List[HeadPose]) -> None:
         """The guide substeps ``dt`` from ``head_prev`` through ``heads`` under the split rule
@@ -495,27 +528,13 @@ class HairSimulator:
         self.counters.last_track_ms += (self.clock() - start) * 1e3
 
     def _rest_at(self, head: HeadPose) -> None:
-        """The rest shape at ``head`` (out of the body's bust), settled: ``solver.settle_time``
-        with the head still, then, with ``solver.settle_speed``, on until no node moves faster
-        than that (:func:`hair_tracking.core.settle.settle`).
-        ``settled_s`` is the time simulated.  The velocities are then zero (FTL's stored
-        velocities do not vanish at rest, :mod:`hair_tracking.guides.ftl`: zeroing them sets
-        still FTL hair moving by a few millimetres, which settles again)."""
+        """The rest shape at ``head`` (the current head pose; out of the body's bust), then
+        :meth:`settle`."""
         self.guide_solver.reset(head)
         self.guide_solver.leave_body(head)
         if self.ghost_tracker is not None:
             self.ghost_tracker.reset(head)
-        once, self.track_once_per_call = self.track_once_per_call, False   # the scene's rest
-        sv = self.scene.solver
-        try:
-            self.settled_s = settle(lambda steps: self._settle(head, steps),
-                                    self._settling_nodes, sv.dt, sv.settle_time, sv.settle_speed)
-        finally:
-            self.track_once_per_call = once
-        self.guides.v[...] = 0.0
-        if self.ghost_tracker is not None:
-            self.ghost_tracker.zero_velocities()
-        self.speed = 0.0
+        self.settle()
 
     def _settle(self, head: HeadPose, steps: int) -> None:
         """``steps`` substeps with the head still at ``head``, the ghosts tracked as the scene

@@ -421,7 +421,7 @@ def test_ftl_collide_step_then_finalize_is_the_fused_step(friction):
                   float(sc.solver.ftl_damping), max_disp, False)
         none_clamped, pushed = ftl.ftl_collide_step(split.model, (st.x, st.v, x_old), motion,
                                                     params, (corr, x_ref),
-                                                    split._collider_model())
+                                                    split.collider_model())
         assert none_clamped == 0
         clamped += integrate.finalize(st.x, st.v, x_old, st.inv_mass, corr, dt,
                                       max_disp * guides.ftl_inner_steps(dt),
@@ -431,7 +431,7 @@ def test_ftl_collide_step_then_finalize_is_the_fused_step(friction):
         assert fused.stats['contacts'] == pushed
         np.testing.assert_allclose(fused_st.x, split_st.x, rtol=0, atol=1e-12)
         np.testing.assert_allclose(fused_st.v, split_st.v, rtol=0, atol=1e-9)
-        np.testing.assert_allclose(fused._corr, corr, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(fused.corrections, corr, rtol=0, atol=1e-12)
     assert contacts > 0 and fused.stats['contacts_total'] == contacts
     assert fused.stats['clamped_total'] == clamped
 

@@ -74,7 +74,7 @@ def test_check_catches_non_finite_state(monkeypatch):
 
     def poisoned(self, dt, head_prev, heads, **kw):
         out = real(self, dt, head_prev, heads, **kw)
-        if self._counters['substeps'] > 200:
+        if self.stats['substeps'] > 200:
             self.strands.x[0, 5, 0] = np.nan
         return out
     monkeypatch.setattr(GuideSolver, 'advance', poisoned)

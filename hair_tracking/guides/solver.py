@@ -11,9 +11,12 @@ and their roots follow the head. One call of :meth:`GuideSolver.step` is one sub
    before integrating (TressFX; keeps fast head turns from stretching the hair);
 3. explicit Euler of gravity (``scene.gravity``, world frame) and damping
    (``v *= exp(-scene.damping dt)``), prediction ``p = x + v dt``;
-4. constraint projection by the solver chosen in ``scene.solver.type``:
-   ``'pbd'`` classic Gauss–Seidel PBD, ``'xpbd'`` XPBD with compliance, ``'ftl'`` Follow-The-Leader
-   (see :mod:`~hair_tracking.guides.pbd_constraints` and :mod:`~hair_tracking.guides.ftl`);
+4. constraint projection by the solver chosen in ``scene.solver.type`` (:func:`make_solver`,
+   the one place that reads it): ``'pbd'`` classic Gauss–Seidel PBD (:class:`PbdSolver`),
+   ``'xpbd'`` XPBD with compliance (:class:`XpbdSolver`), ``'ftl'`` Follow-The-Leader
+   (:class:`FtlSolver`; see :mod:`~hair_tracking.guides.pbd_constraints` and
+   :mod:`~hair_tracking.guides.ftl`); the rest of the substep is their base class's,
+   :class:`GuideSolver`;
 5. head collision, only if the scene has a collider (:mod:`~hair_tracking.guides.collision`), with
    friction measured against the start-of-substep positions carried rigidly with the head (FTL:
    within its pass, node by node, :func:`~hair_tracking.guides.ftl.contact_node`); then,
@@ -32,7 +35,8 @@ the collision is part of the pass); PBD and XPBD with a collider stop after step
 collision kernel runs, then the finalize kernel; so do all three with a body (FTL: its pass
 with the head collider, then the bust), one substep a call.
 :meth:`GuideSolver.advance` takes a run of substeps in one call: for FTL one compiled call for
-all of them (:func:`~hair_tracking.guides.ftl.ftl_advance`). Kernels are
+all of them (:func:`~hair_tracking.guides.ftl.ftl_advance`), and the guides of several heads
+in one call too (:class:`HeadBatch`). Kernels are
 looked up on their modules at call time, so only the ones the scene needs are ever called (and
 compiled), and tests can spy on them.
 
@@ -282,11 +286,6 @@ class GuideSolver:
             clamped = finalize(st.x, st.v, self._x_old, st.inv_mass, corr, dt, max_disp, s_damp)
         self._count(clamped, contacts)
 
-    def _collider_model(self) -> tuple:
-        """The collider as the FTL kernels take it
-        (:data:`~hair_tracking.guides.collision.ColliderModel`; a stand-in without one)."""
-        return self.collider.model if self.collider is not None else NO_COLLIDER
-
     def _friction_ref(self) -> np.ndarray:
         """The collider's friction reference: the start-of-substep positions carried with the
         head (``_x_ref``) when there is friction, else ``x_old`` (not read)."""
@@ -380,7 +379,7 @@ class FtlSolver(GuideSolver):
             work = (self._corr, self._friction_ref())
             clamped, contacts = kernel(self.model, state, motion,
                                        self.params(dt, self.body is None), work,
-                                       self._collider_model())
+                                       self.collider_model())
             return clamped, contacts, self.body is None
         kernel = ftl.ftl_step if parallel else ftl.ftl_step_serial
         return kernel(self.model, state, motion, self.params(dt, fused), self._corr), 0, fused
@@ -395,6 +394,17 @@ class FtlSolver(GuideSolver):
 
     def _finalize_args(self, dt):
         return self._corr, self._ftl_clamp(dt), float(self.scene.solver.ftl_damping)
+
+    def collider_model(self) -> tuple:
+        """The collider as the FTL kernels take it
+        (:data:`~hair_tracking.guides.collision.ColliderModel`; a stand-in without one)."""
+        return self.collider.model if self.collider is not None else NO_COLLIDER
+
+    @property
+    def corrections(self) -> np.ndarray:
+        """FTL's corrections ``d`` (S, N, 3) [m] of the last substep, which finalize's
+        velocity correction ``s_damp d_{i+1} / dt`` reads (:mod:`~hair_tracking.guides.ftl`)."""
+        return self._corr
 
     def _ftl_clamp(self, dt: float) -> float:
         """FTL's displacement clamp over a substep ``dt`` [m]: ``solver.max_displacement`` an
@@ -426,7 +436,7 @@ class FtlSolver(GuideSolver):
                 self._x_before if measure else self._x_before[:0])
         done, clamped, clamped_total, contacts, contacts_total = kernel(
             self.model, (st.x, st.v, self._x_old), self.drive(rots, poss, rels, dt),
-            self.params(dt, True), self.collider is not None, self._collider_model(), work,
+            self.params(dt, True), self.collider is not None, self.collider_model(), work,
             rule_args)
         cn = self._counters
         cn['substeps'] += int(done)
@@ -491,7 +501,7 @@ class HeadBatch:
             many_heads.ftl_advance_heads_serial
         done = kernel(solver.model, (self.x, self.v, self._x_old),
                       solver.drive(rots, poss, rels, dt), solver.params(dt, True),
-                      solver.collider is not None, solver._collider_model(),
+                      solver.collider is not None, solver.collider_model(),
                       (self._corr, self._x_ref, counts, steps, self._before), rule, slots)
         return steps[:, 0, :done], int(done)
 
