@@ -69,7 +69,6 @@ class Crowd:
         #: velocities (a person's ``guides.x`` and ``.v`` are views of its place)
         self.x, self.v = (self.batch.x, self.batch.v) if self.batched else \
             (np.zeros((places,) + g.x.shape), np.zeros((places,) + g.x.shape))
-        self._places = places
         self.people: Dict[str, HairSimulator] = {}
         self._place: Dict[str, int] = {}
         self.time_ns: Optional[int] = None
@@ -79,7 +78,7 @@ class Crowd:
 
     @property
     def places(self) -> int:
-        return self._places
+        return self.x.shape[0]
 
     # ---------------------------------------------------------------- people
     def add(self, key: str, t_ns: int, position, quaternion) -> PoseResult:
