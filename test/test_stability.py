@@ -395,6 +395,21 @@ def test_split_never_below_min_dt():
     assert rule.parts(0.1, rule.rigid(head0, far), 0.0) == split.MAX_SPLIT
 
 
+@pytest.mark.parametrize('max_disp', [0.004, 0.0])
+def test_the_split_rule_between_runs_and_inside_them_agree(max_disp):
+    """A substep is split between runs (SplitRule.parts) exactly when the compiled runs' stop
+    rule (split_due, where SplitRule.stop applies it) names it, NaN speeds included."""
+    rule = split.SplitRule(max_disp, 9.81, 0.4)
+    rng = np.random.default_rng(5)
+    for dt in (1 / 240, 1 / 60, 1 / 30, 1 / 1000):
+        _, limit, gdt2 = rule.stop(dt, None)
+        far = np.append(rng.uniform(0.0, 2.0 * rule.limit(dt)[0], 300) ** 2, np.nan)
+        rigid = np.append(rng.uniform(0.0, 2.0 * rule.limit(dt)[0], 300), 0.0)
+        for f, r in zip(far.tolist(), rigid.tolist()):
+            due = limit > 0.0 and split.split_due(f, dt, r, gdt2, limit)
+            assert (rule.parts(dt, r, math.sqrt(f) / dt) > 1) == due, (dt, f, r)
+
+
 @pytest.mark.parametrize('mode,stretch', [('paper', 1e-9), ('blend', 1e-7), ('turn', 1e-6)])
 def test_ghost_collision_keeps_lengths(mode, stretch):
     # the blend and the turn keep their rest lengths or segments, and their positions, in
