@@ -25,18 +25,22 @@ Time handling
   only then: once per output frame however many head poses came in between.
 * The guide solver takes the substeps of a pose (or of a whole settle) in one call
   (:meth:`~hair_tracking.guides.solver.GuideSolver.advance`), up to the first that needs
-  splitting (below): it applies the split rule after every substep, so the hair is that of
-  the substeps taken one by one.
-* A substep in which a hair node would move farther than half the per-substep displacement clamp
-  (``solver.max_displacement``; 2.5 cm when the clamp is off) is *split* into equal shorter
-  substeps, at most :data:`MAX_SPLIT` and none shorter than :data:`MIN_SPLIT_DT`, with the head
-  interpolated between its two poses (lerp, slerp).  The estimate is the larger of the head's
-  rigid motion at the farthest hair node and the largest node speed of the previous substep
-  times ``dt``, plus ``|g| dt^2``.  Without this the clamp, a safety net, would become the
-  dynamics in fast motion (a 20 m/s head moves a root 8 cm per 1/240 s substep; a 1/10 s
-  substep lets hair fall 5 cm) and tear the strands apart: measured in the stability matrix
-  (docs/stability.md), up to 1500 % stretch.  The split count depends only on the state, so runs
-  stay deterministic; ``counters.extra['split_substeps']`` counts the extra substeps.
+  splitting: a substep in which a hair node would move too far is split into equal shorter
+  substeps, the head interpolated between its two poses (the split rule,
+  :mod:`hair_tracking.guides.split`, which the solver applies after every substep of a run), so
+  the hair is that of the substeps taken one by one; ``counters.extra['split_substeps']``
+  counts the extra substeps.
+
+Public loop (what the node, the crowd and the tools drive): the simulator built from a
+:class:`~hair_tracking.core.scene.Scene`, :meth:`HairSimulator.push_pose`,
+:meth:`~HairSimulator.advance_to` (or one substep: :meth:`~HairSimulator.step`),
+:meth:`~HairSimulator.frame`, :meth:`~HairSimulator.reset`, :meth:`~HairSimulator.settle`;
+and, for a driver that schedules the guide substeps itself (the crowd,
+:mod:`hair_tracking.people.crowd`), :meth:`~HairSimulator.begin_tracking`,
+:meth:`~HairSimulator.run_substeps` and :meth:`~HairSimulator.finish_tracking`, the three parts
+of one :meth:`~HairSimulator.advance_to`, with :attr:`~HairSimulator.split_rule`,
+:attr:`~HairSimulator.speed` and :meth:`~HairSimulator.note_split` for guides it advances in a
+batch.
 """
 from dataclasses import dataclass, field
 import math
@@ -52,8 +56,7 @@ from hair_tracking.core.metrics import max_stretch
 from hair_tracking.core.model import carry_rigidly, HeadPose, StrandSet
 from hair_tracking.core.point_records import points_to_records
 from hair_tracking.core.scene import GUIDES_AMONG_STRANDS, Scene
-from hair_tracking.core.settle import settle
-from hair_tracking.core.transforms import quat_angle, quat_to_matrix, slerp
+from hair_tracking.core.settle import settle as settle_until_still
 from hair_tracking.ghosts.blend import BlendTracker
 from hair_tracking.ghosts.interface import GhostTracking, TrackStep
 from hair_tracking.ghosts.stateless import choose_guides
@@ -62,17 +65,8 @@ from hair_tracking.ghosts.tracker import GhostTracker
 from hair_tracking.grooms.build import build_groom
 from hair_tracking.guides.collision import make_collider
 from hair_tracking.guides.integrate import runs_parallel
-from hair_tracking.guides.solver import GuideSolver
-
-#: Most parts one substep is split into when the hair moves fast (see the module docstring).
-MAX_SPLIT = 16
-#: Parts are never shorter than this [s]: FTL's velocity correction injects energy into long
-#: strands at very short substeps (docs/stability.md), so splitting must not drive dt there.
-MIN_SPLIT_DT = 1.0 / 960.0
-#: Split when the estimated node motion of a substep exceeds this fraction of the clamp ...
-SPLIT_FRACTION = 0.5
-#: ... or this distance [m] when the clamp is off (``solver.max_displacement = 0``).
-SPLIT_DISTANCE = 0.025
+from hair_tracking.guides.solver import make_solver
+from hair_tracking.guides.split import run_split, split_heads, SplitRule
 
 
 @dataclass
@@ -176,7 +170,7 @@ class HairSimulator:
         else:
             self.guides = StrandSet.from_rest(groom.guide_rest)
         self.collider = make_collider(scene.collider)
-        self.guide_solver = GuideSolver(self.guides, scene, self.parallel.guides)
+        self.guide_solver = make_solver(self.guides, scene, self.parallel.guides)
         self.ghosts = None             # the ghost strands' rest data (state: the tracker's)
         self.ghost_tracker: Optional[GhostTracking] = None
         if groom.ghost_rest.shape[0] > 0:
@@ -190,8 +184,11 @@ class HairSimulator:
             reach.append(np.linalg.norm(self.ghosts.rest[:, 0], axis=1) +
                          self.ghosts.strand_length)
         self._reach = float(max(r.max() for r in reach))
-        self._last_speed = 0.0
-        self._gravity_norm = float(np.linalg.norm(scene.gravity))
+        #: the split rule (:class:`~hair_tracking.guides.split.SplitRule`) of this hair
+        self.split_rule = self._split_rule(scene)
+        #: the largest node speed of the last guide substep [m/s] (the split rule's estimate;
+        #: a driver that advances the guides in a batch sets it after each run)
+        self.speed = 0.0
         self.dt_ns = max(1, int(round(scene.solver.dt * 1e9)))
         self.head = head
         self._rest_at(head)
@@ -214,7 +211,7 @@ class HairSimulator:
             self._build(self.head, groom)
             return True
         self.collider = make_collider(scene.collider)
-        self.guide_solver = GuideSolver(self.guides, scene, self.parallel.guides)
+        self.guide_solver = make_solver(self.guides, scene, self.parallel.guides)
         if self.ghosts is not None:
             if scene.tracking != old.tracking or scene.collider != old.collider or \
                     scene.body != old.body or scene.colliders != old.colliders:
@@ -223,8 +220,12 @@ class HairSimulator:
                 np.copyto(self.ghosts.v, self.ghost_tracker.velocities())
                 self.ghost_tracker = self._make_tracker(scene)
         self.dt_ns = max(1, int(round(scene.solver.dt * 1e9)))
-        self._gravity_norm = float(np.linalg.norm(scene.gravity))
+        self.split_rule = self._split_rule(scene)
         return False
+
+    def _split_rule(self, scene: Scene) -> SplitRule:
+        return SplitRule(scene.solver.max_displacement, float(np.linalg.norm(scene.gravity)),
+                         self._reach)
 
     @staticmethod
     def _stateless(scene: Scene) -> bool:
@@ -270,12 +271,12 @@ class HairSimulator:
         self.counters.substeps_dropped += dropped
         dt = self.scene.solver.dt
         self.counters.last_track_ms = 0.0
-        self._begin_ghosts()
+        self.begin_tracking()
         heads = [self.track.sample(t) for t in times]
         if heads:
-            self._run(dt, self.head, heads)
+            self.run_substeps(dt, self.head, heads)
             self.head = heads[-1]
-        self._track_ghosts(dt * len(times), len(times))
+        self.finish_tracking(dt * len(times), len(times))
         self.counters.substeps += len(times)
         self.counters.last_substeps = len(times)
         self.counters.last_advance_ms = (self.clock() - start) * 1e3
@@ -313,6 +314,70 @@ class HairSimulator:
         """Rest shape at the current head pose, settled; the head track is kept."""
         self._rest_at(self.head)
         self.counters.resets += 1
+
+    def settle(self) -> float:
+        """Let the hair come to rest where it is, the head still at its current pose:
+        ``solver.settle_time``, then, with ``solver.settle_speed``, on until no node moves
+        faster than that (:func:`hair_tracking.core.settle.settle`), the ghosts tracked as the
+        scene says; the simulator's time and head track are kept.  The velocities are then zero
+        (FTL's stored velocities do not vanish at rest, :mod:`hair_tracking.guides.ftl`:
+        zeroing them sets still FTL hair moving by a few millimetres, which settles again).
+        Returns the time simulated [s], also kept as ``settled_s``."""
+        head = self.head
+        once, self.track_once_per_call = self.track_once_per_call, False   # the scene's rest
+        sv = self.scene.solver
+        try:
+            self.settled_s = settle_until_still(lambda steps: self._settle(head, steps),
+                                                self._settling_nodes, sv.dt, sv.settle_time,
+                                                sv.settle_speed)
+        finally:
+            self.track_once_per_call = once
+        self.guides.v[...] = 0.0
+        if self.ghost_tracker is not None:
+            self.ghost_tracker.zero_velocities()
+        self.speed = 0.0
+        return self.settled_s
+
+    def step(self) -> int:
+        """One substep (``solver.dt``) on from the simulator's time, the head sampled from its
+        track as :meth:`advance_to` samples it; returns the substeps run (0 before the first
+        pose)."""
+        if self.time_ns is None:
+            return 0
+        return self.advance_to(self.time_ns + self.dt_ns)
+
+    # -------------------------------------------------------------- substeps
+    def run_substeps(self, dt: float, head_prev: HeadPose, heads: List[HeadPose]) -> None:
+        """The guide substeps ``dt`` from ``head_prev`` through ``heads`` under the split rule
+        (:func:`~hair_tracking.guides.split.run_split`), the ghosts tracked after each when
+        :attr:`tracks_every_substep`: the guide solver takes them in one call up to the first
+        that needs splitting (it applies the rule after every substep:
+        :meth:`~hair_tracking.guides.solver.GuideSolver.advance`'s ``stop``), so exactly as if
+        they were taken one by one.  Between :meth:`begin_tracking` and
+        :meth:`finish_tracking`."""
+        every = self.tracks_every_substep
+        rule = self.split_rule
+        rigid = rule.rigid_run(head_prev, heads)
+
+        def prev(k):
+            return heads[k - 1] if k else head_prev
+
+        def run(k):
+            if every:
+                self._substep(dt, prev(k), heads[k], 1)
+                return 1
+            steps = self.guide_solver.advance(dt, prev(k), heads[k:], measure=True,
+                                              stop=rule.stop(dt, rigid[k:]))
+            self.speed = math.sqrt(steps[-1]) / dt
+            return len(steps)
+
+        run_split(len(heads), lambda k: rule.parts(dt, rigid[k], self.speed),
+                  lambda k, parts: self._substep(dt, prev(k), heads[k], parts), run)
+
+    def note_split(self, parts: int) -> None:
+        """Count a substep split into ``parts`` parts (``counters.extra['split_substeps']``)."""
+        self.counters.extra['split_substeps'] = \
+            self.counters.extra.get('split_substeps', 0) + parts - 1
 
     # --------------------------------------------------------------- output
     def frame(self, head_frame: bool = False, copy: bool = True) -> Frame:
@@ -402,67 +467,18 @@ class HairSimulator:
             return None
         return self.ghost_tracker.positions()
 
-    def _run(self, dt: float, head_prev: HeadPose, heads) -> None:
-        """Substeps ``dt`` from ``head_prev`` through ``heads``: the guide solver takes them in
-        one call up to the first that needs splitting (it applies the split rule after every
-        substep: :meth:`~hair_tracking.guides.solver.GuideSolver.advance`'s ``stop``), which
-        :meth:`_substep` splits; so exactly as if they were taken one by one."""
-        prev, k = head_prev, 0
-        every = self.ghost_tracker is not None and self._every_substep()
-        rigid = [self._rigid(a, b) for a, b in zip([head_prev] + heads[:-1], heads)]
-        limit, floor = self._split_limit(dt)
-        while k < len(heads):
-            if every or self._split_count(dt, rigid[k], self._last_speed) > 1:
-                self._substep(dt, prev, heads[k], rigid[k])
-                prev, k = heads[k], k + 1
-                continue
-            steps = self.guide_solver.advance(
-                dt, prev, heads[k:], measure=True,
-                stop=(rigid[k:], limit if floor > 1 else 0.0, self._gravity_norm * dt * dt))
-            self._last_speed = math.sqrt(steps[-1]) / dt
-            prev, k = heads[k + len(steps) - 1], k + len(steps)
-
-    def _substep(self, dt: float, head_prev: HeadPose, head: HeadPose, rigid: float) -> None:
-        """One substep, split into parts when the head's motion (``rigid``, :meth:`_rigid`) or
-        the hair's speed would carry a node past the split limit."""
-        parts = self._split_count(dt, rigid, self._last_speed)
+    def _substep(self, dt: float, head_prev: HeadPose, head: HeadPose, parts: int) -> None:
+        """One substep split into ``parts`` parts (the split rule's, at least one)."""
         if parts == 1:
             self._step(dt, head_prev, (head,))
             return
-        self.counters.extra['split_substeps'] = \
-            self.counters.extra.get('split_substeps', 0) + parts - 1
+        self.note_split(parts)
         self._step(dt / parts, head_prev, split_heads(head_prev, head, parts))
-
-    def _split_count(self, dt: float, rigid: float, speed: float) -> int:
-        """Parts to split a substep into so that no node moves farther than the split limit,
-        with ``rigid`` [m] how far the head's motion carries the farthest node (:meth:`_rigid`)
-        and ``speed`` [m/s] the nodes' largest speed (the rule
-        :func:`~hair_tracking.guides.integrate.split_due` applies inside a run)."""
-        limit, floor = self._split_limit(dt)
-        motion = max(rigid, speed * dt) + self._gravity_norm * dt * dt
-        if not motion > limit:          # also False for NaN: never split on bad numbers
-            return 1
-        return int(min(MAX_SPLIT, floor, math.ceil(motion / limit)))
-
-    def _split_limit(self, dt: float):
-        """``(limit, floor)``: the node motion [m] above which a substep ``dt`` is split, and
-        the most parts it may be split into without going below :data:`MIN_SPLIT_DT`."""
-        sv = self.scene.solver
-        limit = SPLIT_FRACTION * sv.max_displacement if sv.max_displacement > 0 else \
-            SPLIT_DISTANCE
-        return limit, max(1, int(dt / MIN_SPLIT_DT + 1e-9))
-
-    def _rigid(self, head_prev: HeadPose, head: HeadPose) -> float:
-        """How far [m] the head's motion from ``head_prev`` to ``head`` carries the farthest
-        hair node."""
-        angle = quat_angle(head_prev.quaternion, head.quaternion)
-        dx, dy, dz = (head.position - head_prev.position).tolist()
-        return math.sqrt(dx * dx + dy * dy + dz * dz) + 2.0 * math.sin(0.5 * angle) * self._reach
 
     def _step(self, dt: float, head_prev: HeadPose, heads) -> None:
         """Substeps ``dt`` through ``heads`` (the parts of one split substep, or one), each
         followed by the ghosts when they are tracked every substep."""
-        if self.ghost_tracker is None or not self._every_substep():
+        if not self.tracks_every_substep:
             steps = self.guide_solver.advance(dt, head_prev, heads, measure=True)
         else:
             for head in heads:
@@ -472,7 +488,7 @@ class HairSimulator:
                 self.ghost_tracker.step(TrackStep(dt, 1, self._x_old, self.guides.x, head))
                 self.counters.last_track_ms += (self.clock() - start) * 1e3
                 head_prev = head
-        self._last_speed = math.sqrt(steps[-1]) / dt
+        self.speed = math.sqrt(steps[-1]) / dt
 
     # Ghost tracking schedule.  With ``tracking.every_substep: false`` the ghosts are tracked
     # once per advance_to() call (one head pose), over all the guide substeps of that call, with
@@ -483,14 +499,24 @@ class HairSimulator:
         return self.scene.tracking.every_substep and not self.track_once_per_call \
             and not self._stateless(self.scene)
 
-    def _begin_ghosts(self) -> None:
-        """Keep the guides where the paper's once-per-call tracking step starts from (the blend
-        and turn trackers place the ghosts from the guides at the end alone)."""
+    @property
+    def tracks_every_substep(self) -> bool:
+        """Whether the ghosts are tracked after every guide substep (by :meth:`run_substeps`)
+        rather than once a pose (by :meth:`finish_tracking`)."""
+        return self.ghost_tracker is not None and self._every_substep()
+
+    def begin_tracking(self) -> None:
+        """Start a pose's ghost tracking: keep the guides where the paper's once-per-call
+        tracking step starts from (the blend and turn trackers place the ghosts from the guides
+        at the end alone).  Before the pose's :meth:`run_substeps`."""
         if self.ghost_tracker is not None and not self._every_substep() and \
                 not self._stateless(self.scene):
             np.copyto(self._ghost_guide_x, self.guides.x)
 
-    def _track_ghosts(self, dt: float, substeps: int) -> None:
+    def finish_tracking(self, dt: float, substeps: int) -> None:
+        """End a pose's ghost tracking: ``substeps`` guide substeps over ``dt`` [s] were taken
+        since :meth:`begin_tracking`; the ghosts tracked once over all of them (nothing when
+        they were tracked every substep)."""
         if self.ghost_tracker is None or self._every_substep() or substeps == 0:
             return
         start = self.clock()
@@ -502,34 +528,20 @@ class HairSimulator:
         self.counters.last_track_ms += (self.clock() - start) * 1e3
 
     def _rest_at(self, head: HeadPose) -> None:
-        """The rest shape at ``head`` (out of the body's bust), settled: ``solver.settle_time``
-        with the head still, then, with ``solver.settle_speed``, on until no node moves faster
-        than that (:func:`hair_tracking.core.settle.settle`).
-        ``settled_s`` is the time simulated.  The velocities are then zero (FTL's stored
-        velocities do not vanish at rest, :mod:`hair_tracking.guides.ftl`: zeroing them sets
-        still FTL hair moving by a few millimetres, which settles again)."""
+        """The rest shape at ``head`` (the current head pose; out of the body's bust), then
+        :meth:`settle`."""
         self.guide_solver.reset(head)
         self.guide_solver.leave_body(head)
         if self.ghost_tracker is not None:
             self.ghost_tracker.reset(head)
-        once, self.track_once_per_call = self.track_once_per_call, False   # the scene's rest
-        sv = self.scene.solver
-        try:
-            self.settled_s = settle(lambda steps: self._settle(head, steps),
-                                    self._settling_nodes, sv.dt, sv.settle_time, sv.settle_speed)
-        finally:
-            self.track_once_per_call = once
-        self.guides.v[...] = 0.0
-        if self.ghost_tracker is not None:
-            self.ghost_tracker.zero_velocities()
-        self._last_speed = 0.0
+        self.settle()
 
     def _settle(self, head: HeadPose, steps: int) -> None:
         """``steps`` substeps with the head still at ``head``, the ghosts tracked as the scene
         says."""
-        self._begin_ghosts()
-        self._run(self.scene.solver.dt, head, [head] * steps)
-        self._track_ghosts(self.scene.solver.dt * steps, steps)
+        self.begin_tracking()
+        self.run_substeps(self.scene.solver.dt, head, [head] * steps)
+        self.finish_tracking(self.scene.solver.dt * steps, steps)
 
     def _settling_nodes(self):
         """The positions that settle: the guides, and the paper tracker's ghosts (the blend and
@@ -547,7 +559,7 @@ class HairSimulator:
         self.guides.v[...] = 0.0
         if self.ghost_tracker is not None:
             self.ghost_tracker.carry(old, new)
-        self._last_speed = 0.0
+        self.speed = 0.0
 
 
 def substep_times(time_ns: int, t_ns: int, dt_ns: int, cap: int):
@@ -559,18 +571,6 @@ def substep_times(time_ns: int, t_ns: int, dt_ns: int, cap: int):
         span = int(t_ns) - time_ns
         return [time_ns + (span * (k + 1)) // cap for k in range(cap)], int(t_ns), int(due - cap)
     return [time_ns + dt_ns * (k + 1) for k in range(due)], time_ns + dt_ns * int(due), 0
-
-
-def split_heads(head_prev: HeadPose, head: HeadPose, parts: int):
-    """The ends of ``parts`` equal parts of a substep from ``head_prev`` to ``head``: the
-    positions interpolated linearly, the rotations by slerp, ``head`` last."""
-    heads = []
-    for k in range(1, parts):
-        u = k / parts
-        q = slerp(head_prev.quaternion, head.quaternion, u)
-        heads.append(HeadPose((1.0 - u) * head_prev.position + u * head.position, q,
-                              quat_to_matrix(q)))
-    return heads + [head]
 
 
 def _worst(a: float, b: float) -> float:

@@ -54,7 +54,7 @@ from hair_tracking.evaluation.provenance import command_line, provenance  # noqa
 from cpu_steal import format_share, StealMeter  # noqa: E402  (scripts/cpu_steal.py)
 from hair_tracking.ghosts.interface import TrackStep  # noqa: E402
 from hair_tracking.ghosts.tracker import GhostTracker  # noqa: E402
-from hair_tracking.guides.solver import GuideSolver  # noqa: E402
+from hair_tracking.guides.solver import make_solver  # noqa: E402
 
 NODES = 16
 ITERATIONS = 4
@@ -122,7 +122,7 @@ def ours_step(solver, strands):
                                  solver__dt=DT, collider__shape='none',
                                  solver__shock_propagation=0.0, solver__bend_stiffness=0.3)
     s = StrandSet.from_rest(hanging_rest(strands))
-    gs = GuideSolver(s, scene)
+    gs = make_solver(s, scene)
     gs.reset(IDENTITY)
     return lambda: gs.step(DT, IDENTITY, IDENTITY)
 

@@ -29,7 +29,7 @@ from hair_tracking.ghosts import contacts as ghost_contacts
 from hair_tracking.ghosts.kernels import TRACK_FASTMATH
 from hair_tracking.guides import collision, ftl, integrate
 from hair_tracking.guides.integrate import FASTMATH
-from hair_tracking.guides.solver import GuideSolver
+from hair_tracking.guides.solver import make_solver
 
 RADII = (0.095, 0.08, 0.105)
 
@@ -327,7 +327,7 @@ def test_the_fitted_margin_is_the_guide_solvers_and_the_trackers():
         rest[:, :, 2] = 0.106 + np.arange(8) * length / 8 + rng.uniform(0, 0.01, size=(5, 1))
         rest[:, :2, 2] = (0.09, 0.1)
         strands = StrandSet.from_rest(rest)
-        solver = GuideSolver(strands, scene)
+        solver = make_solver(strands, scene)
         shape = Shape('ellipsoid', center=scene.collider.center, radii=scene.collider.radii,
                       margin=margin_)
         free = strands.inv_mass > 0

@@ -13,7 +13,7 @@ from hair_tracking.core.scene import ColliderSpec, Scene
 from hair_tracking.core.transforms import quat_from_axis_angle, quat_normalize, quat_to_matrix
 from hair_tracking.guides import integrate
 from hair_tracking.guides.collision import Collider, make_collider
-from hair_tracking.guides.solver import GuideSolver
+from hair_tracking.guides.solver import make_solver
 
 RADII = np.array([0.095, 0.08, 0.105])
 
@@ -254,7 +254,7 @@ def test_no_collider_never_calls_collision_kernel(monkeypatch, kind):
     fin = counting_spy(monkeypatch, integrate, 'finalize')
     carry = counting_spy(monkeypatch, integrate, 'carry_rigid')
     scene = Scene().with_changes(collider__shape='none', solver__type=kind)
-    g = GuideSolver(hanging_strands(), scene)
+    g = make_solver(hanging_strands(), scene)
     assert g.collider is None
     head = pose([0, 0, 0], [0, 0, 0, 1])
     g.reset(head)
@@ -273,7 +273,7 @@ def test_collider_scene_calls_kernel_and_keeps_hair_outside(monkeypatch, shape):
                                  else [0.1, 0.09, 0.11],
                                  solver__type='xpbd', solver__iterations=8)
     strands = hanging_strands()
-    g = GuideSolver(strands, scene)
+    g = make_solver(strands, scene)
     assert isinstance(g.collider, Collider)
     dt = scene.solver.dt
     steps = 240

@@ -22,7 +22,8 @@ from hair_tracking.core.model import HeadPose, StrandSet
 from hair_tracking.core.scene import Scene
 from hair_tracking.core.transforms import quat_from_axis_angle, quat_multiply, quat_to_matrix
 from hair_tracking.guides import pbd_constraints
-from hair_tracking.guides.solver import GuideSolver, max_stretch
+from hair_tracking.guides.solver import make_solver, max_stretch
+from hair_tracking.guides.split import split_due
 
 SOLVERS = ('pbd', 'xpbd', 'ftl')
 
@@ -52,7 +53,7 @@ def run_oscillation(kind, iterations, **changes):
     sc = scene(kind, solver__iterations=iterations, solver__max_displacement=0.0,
                solver__shock_propagation=0.0, **changes)
     st = down_strands()
-    g = GuideSolver(st, sc)
+    g = make_solver(st, sc)
     dt = sc.solver.dt
     h_prev = pose([0, 0, 0])
     g.reset(h_prev)
@@ -68,7 +69,7 @@ def run_oscillation(kind, iterations, **changes):
 def settle(kind, seconds=3.0, **changes):
     sc = scene(kind, damping=5.0, **changes)
     st = down_strands()
-    g = GuideSolver(st, sc)
+    g = make_solver(st, sc)
     head = pose([0.2, -0.1, 1.5])
     g.reset(head)
     for _ in range(int(seconds / sc.solver.dt)):
@@ -83,7 +84,7 @@ def test_hanging_strand_settles_straight_down(kind):
     and damping settle the strand: it must hang straight below its root, lengths kept."""
     sc = scene(kind, damping=5.0, solver__iterations=8)
     st = down_strands()
-    g = GuideSolver(st, sc)
+    g = make_solver(st, sc)
     head = pose([0.2, -0.1, 1.5])
     g.reset(head)
     root = st.x[:, 1:2].copy()
@@ -162,7 +163,7 @@ def test_ftl_damping_correction_damps():
         sc = scene('ftl', solver__ftl_damping=s_damp, damping=0.0,
                    solver__max_displacement=0.0)
         st = down_strands()
-        g = GuideSolver(st, sc)
+        g = make_solver(st, sc)
         dt = sc.solver.dt
         h_prev = pose([0, 0, 0])
         g.reset(h_prev)
@@ -195,7 +196,7 @@ def test_roots_stay_attached_to_moving_head(kind, collider):
     u /= np.linalg.norm(u, axis=1)[:, None]
     rest = u[:, None, :] * (0.1 + 0.015 * np.arange(12))[None, :, None]
     st = StrandSet.from_rest(rest)
-    g = GuideSolver(st, sc)
+    g = make_solver(st, sc)
     dt = sc.solver.dt
     h_prev = moving_head(0, dt)
     g.reset(h_prev)
@@ -216,7 +217,7 @@ def test_full_shock_propagation_carries_strands_rigidly(kind):
         sc = scene(kind, solver__shock_propagation=shock, gravity=[0.0, 0.0, 0.0],
                    damping=0.0, solver__max_displacement=0.0)
         st = down_strands()
-        g = GuideSolver(st, sc)
+        g = make_solver(st, sc)
         dt = sc.solver.dt
         h_prev = moving_head(0, dt)
         g.reset(h_prev)
@@ -247,7 +248,7 @@ def test_no_nan_with_extreme_inputs(kind):
     assert np.sum(st.rest_length == 0) >= 5
     sc = scene(kind, gravity=[0.0, 0.0, -98.1], collider__shape='ellipsoid',
                solver__compliance=0.0, solver__max_displacement=0.05, solver__iterations=6)
-    g = GuideSolver(st, sc)
+    g = make_solver(st, sc)
     dt = sc.solver.dt
     h_prev = pose([0, 0, 0])
     g.reset(h_prev)
@@ -275,7 +276,7 @@ def test_ftl_clamp_bounds_motion_too():
     """FTL with the clamp: a free node's per-substep displacement never exceeds the clamp."""
     st = down_strands(s=2, n=10)
     sc = scene('ftl', solver__max_displacement=0.02)
-    g = GuideSolver(st, sc)
+    g = make_solver(st, sc)
     h_prev = pose([0, 0, 0])
     g.reset(h_prev)
     for k in range(1, 60):
@@ -292,7 +293,7 @@ def test_deterministic():
     def run():
         st = down_strands(s=17)
         sc = scene('xpbd', collider__shape='sphere', solver__shock_propagation=0.5)
-        g = GuideSolver(st, sc)
+        g = make_solver(st, sc)
         h_prev = moving_head(0, sc.solver.dt)
         g.reset(h_prev)
         for k in range(1, 50):
@@ -326,7 +327,7 @@ def test_only_the_chosen_solver_kernel_runs(monkeypatch, kind, kernel):
     spy_on(monkeypatch, pbd_constraints, 'xpbd_step', calls)
     spy_on(monkeypatch, ftl, 'ftl_step', calls)
     spy_on(monkeypatch, integrate, 'finalize', calls)
-    g = GuideSolver(down_strands(), scene(kind))
+    g = make_solver(down_strands(), scene(kind))
     head = pose([0, 0, 0])
     g.reset(head)
     for _ in range(3):
@@ -358,7 +359,7 @@ def test_serial_variants_run_small_problems_with_the_same_results(monkeypatch, k
         rest[:, :, 0] = np.linspace(-0.05, 0.05, 6)[:, None]
         rest[:, :, 2] = 0.11 - 0.02 * np.arange(12)[None, :]
         st = StrandSet.from_rest(rest)
-        g = GuideSolver(st, sc, parallel=label == 'parallel' or None)
+        g = make_solver(st, sc, parallel=label == 'parallel' or None)
         assert g.parallel == (label == 'parallel')      # 72 nodes: serial unless asked
         h_prev = pose([0, 0, 0])
         g.reset(h_prev)
@@ -391,7 +392,7 @@ def test_ftl_collide_step_then_finalize_is_the_fused_step(friction):
     rest[:, :, 0] = np.linspace(-0.06, 0.06, 40)[:, None]
     rest[:, :, 2] = 0.11 - 0.02 * np.arange(12)[None, :]
     fused_st, split_st = StrandSet.from_rest(rest), StrandSet.from_rest(rest)
-    fused, split = GuideSolver(fused_st, sc), GuideSolver(split_st, sc)
+    fused, split = make_solver(fused_st, sc), make_solver(split_st, sc)
     x_ref = np.empty_like(split_st.x)
     x_old = np.empty_like(split_st.x)
     corr = np.zeros_like(split_st.x)
@@ -420,7 +421,7 @@ def test_ftl_collide_step_then_finalize_is_the_fused_step(friction):
                   float(sc.solver.ftl_damping), max_disp, False)
         none_clamped, pushed = ftl.ftl_collide_step(split.model, (st.x, st.v, x_old), motion,
                                                     params, (corr, x_ref),
-                                                    split._collider_model())
+                                                    split.collider_model())
         assert none_clamped == 0
         clamped += integrate.finalize(st.x, st.v, x_old, st.inv_mass, corr, dt,
                                       max_disp * guides.ftl_inner_steps(dt),
@@ -430,7 +431,7 @@ def test_ftl_collide_step_then_finalize_is_the_fused_step(friction):
         assert fused.stats['contacts'] == pushed
         np.testing.assert_allclose(fused_st.x, split_st.x, rtol=0, atol=1e-12)
         np.testing.assert_allclose(fused_st.v, split_st.v, rtol=0, atol=1e-9)
-        np.testing.assert_allclose(fused._corr, corr, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(fused.corrections, corr, rtol=0, atol=1e-12)
     assert contacts > 0 and fused.stats['contacts_total'] == contacts
     assert fused.stats['clamped_total'] == clamped
 
@@ -460,7 +461,7 @@ def test_advance_is_its_substeps_one_after_another(kind, changes, strands):
     rest[:, :, 0] = np.linspace(-0.06, 0.06, strands)[:, None]
     rest[:, :, 2] = 0.11 - 0.02 * np.arange(12)[None, :]
     one_st, run_st = StrandSet.from_rest(rest), StrandSet.from_rest(rest)
-    one, run = GuideSolver(one_st, sc), GuideSolver(run_st, sc)
+    one, run = make_solver(one_st, sc), make_solver(run_st, sc)
     dt = 1.0 / 120.0
     prev = pose([0, 0, 0])
     one.reset(prev)
@@ -499,16 +500,16 @@ def test_advance_stops_before_the_substep_the_split_rule_names(kind, strands):
     rest[:, :, 0] = np.linspace(-0.06, 0.06, strands)[:, None]
     rest[:, :, 2] = 0.11 - 0.02 * np.arange(12)[None, :]
     st = StrandSet.from_rest(rest)
-    g = GuideSolver(st, sc)
+    g = make_solver(st, sc)
     head = pose([0, 0, 0])
     g.reset(head)
     heads = turning_heads(5)
     steps = g.advance(0.01, head, heads, measure=True, stop=([0.0, 0.0, 0.3, 0.0, 0.0], 0.2, 0.0))
     assert len(steps) == 2 and g.stats['substeps'] == 2
-    assert integrate.split_due(steps[1], 0.01, 0.3, 0.0, 0.2)
+    assert split_due(steps[1], 0.01, 0.3, 0.0, 0.2)
     steps = g.advance(0.01, heads[1], heads[2:], measure=True, stop=([0.0] * 3, 1e-9, 0.0))
     assert len(steps) == 1 and g.stats['substeps'] == 3         # the speed names the next
-    assert integrate.split_due(steps[0], 0.01, 0.0, 0.0, 1e-9)
+    assert split_due(steps[0], 0.01, 0.0, 0.0, 1e-9)
     steps = g.advance(0.01, heads[2], heads[3:], measure=True, stop=([0.0] * 2, 0.0, 0.0))
     assert len(steps) == 2 and g.stats['substeps'] == 5         # a limit of 0: no rule
 
@@ -516,7 +517,7 @@ def test_advance_stops_before_the_substep_the_split_rule_names(kind, strands):
 def test_advance_rejects_a_bad_pose_before_moving_anything():
     sc = scene('ftl', collider__shape='ellipsoid')
     st = down_strands()
-    g = GuideSolver(st, sc)
+    g = make_solver(st, sc)
     head = pose([0, 0, 0])
     g.reset(head)
     g.advance(0.01, head, [head] * 3)
@@ -555,7 +556,7 @@ def test_every_serial_variant_is_a_function_of_its_own_with_the_kernels_options(
 def test_reset_and_stats():
     st = down_strands()
     sc = scene('pbd', solver__iterations=1)
-    g = GuideSolver(st, sc)
+    g = make_solver(st, sc)
     head = pose([1.0, 2.0, 3.0], quat_from_axis_angle([0, 1, 0], 0.4))
     g.reset(head)
     assert np.allclose(st.x, head.to_world(st.rest)) and not np.any(st.v)
@@ -576,28 +577,28 @@ def test_bad_inputs_are_named():
     st = down_strands()
     st.inv_mass[0, 1] = 1.0
     with pytest.raises(ValueError, match='nodes 0 and 1'):
-        GuideSolver(st, sc)
+        make_solver(st, sc)
     st = down_strands()
     st.inv_mass[0, 5] = 0.0
     with pytest.raises(ValueError, match="'ftl' solver"):
-        GuideSolver(st, sc)
-    GuideSolver(st, scene('pbd'))                   # a static free node is fine for PBD
+        make_solver(st, sc)
+    make_solver(st, scene('pbd'))                   # a static free node is fine for PBD
     st = down_strands(n=2)
     with pytest.raises(ValueError, match='at least 3 nodes'):
-        GuideSolver(st, sc)
+        make_solver(st, sc)
     st = down_strands()
     st.x = np.asfortranarray(st.x)
     with pytest.raises(ValueError, match='strands.x'):
-        GuideSolver(st, sc)
+        make_solver(st, sc)
     st = down_strands()
     st.rest_length = st.rest_length[:, :-1].copy()
     with pytest.raises(ValueError, match='strands.rest_length'):
-        GuideSolver(st, sc)
+        make_solver(st, sc)
     st = down_strands()
     st.v[0, 3, 1] = np.nan
     with pytest.raises(ValueError, match='strands.v'):
-        GuideSolver(st, sc)
-    g = GuideSolver(down_strands(), sc)
+        make_solver(st, sc)
+    g = make_solver(down_strands(), sc)
     head = pose([0, 0, 0])
     with pytest.raises(ValueError, match='dt'):
         g.step(0.0, head, head)

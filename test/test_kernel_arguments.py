@@ -20,7 +20,7 @@ from hair_tracking.ghosts.interface import TrackStep
 from hair_tracking.ghosts.tracker import GhostTracker
 from hair_tracking.grooms import guides as groom_guides
 from hair_tracking.guides import collision, ftl, integrate, pbd_constraints
-from hair_tracking.guides.solver import GuideSolver
+from hair_tracking.guides.solver import make_solver
 
 #: The modules whose compiled functions the default scene runs (FTL guides with the ellipsoid
 #: collider, the blend tracker and its guides chosen among the strands by farthest-point
@@ -88,7 +88,7 @@ def test_solver_models_hold_the_named_fields_in_order():
     for kind, fields in (('ftl', ftl.FtlModel._fields), ('pbd', pbd_constraints.PbdModel._fields),
                          ('xpbd', pbd_constraints.XpbdModel._fields)):
         strands = StrandSet.from_rest(hanging(3))
-        solver = GuideSolver(strands, Scene().with_changes(solver__type=kind))
+        solver = make_solver(strands, Scene().with_changes(solver__type=kind))
         solver.step(1.0 / 240.0, head, head)          # XPBD builds its model for the dt
         model = solver.model
         assert type(model) is tuple and len(model) == len(fields), kind

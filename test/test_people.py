@@ -98,7 +98,7 @@ def test_a_person_is_placed_and_freed():
     crowd.remove('a')
     crowd.add('c', T0, [2, 0, 0], yaw(0))
     assert sorted(crowd.people) == ['b', 'c']
-    assert np.shares_memory(crowd.people['c'].guides.x, crowd._x)
+    assert np.shares_memory(crowd.people['c'].guides.x, crowd.x)
 
 
 def test_face_frames_and_ids():

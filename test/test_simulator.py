@@ -173,6 +173,42 @@ def test_reset_restores_the_settled_rest_shape_at_the_head():
     assert np.allclose(f.guides, fresh.frame(head_frame=True).guides, atol=1e-9)
 
 
+@pytest.mark.parametrize('mode', ['paper', 'blend'])
+def test_step_is_one_substep_of_advance_to(mode):
+    """step() before the first pose does nothing; then each step is advance_to one dt on,
+    bit for bit (the head held at its newest pose)."""
+    stepped, advanced = HairSimulator(scene(tracking__mode=mode)), \
+        HairSimulator(scene(tracking__mode=mode))
+    assert stepped.step() == 0 and stepped.time_ns is None
+    for sim in (stepped, advanced):
+        drive(sim, 20)
+    t, p, q = motion(25)
+    for sim in (stepped, advanced):
+        sim.push_pose(t, p, q)
+    t0 = stepped.time_ns
+    assert [stepped.step() for _ in range(5)] == [1] * 5
+    for k in range(1, 6):
+        advanced.advance_to(t0 + k * advanced.dt_ns)
+    assert stepped.time_ns == advanced.time_ns == t0 + 5 * stepped.dt_ns
+    assert np.array_equal(stepped.guides.x, advanced.guides.x)
+    assert np.array_equal(stepped.frame().strands, advanced.frame().strands)
+
+
+def test_settle_brings_the_hair_to_rest_where_it_is():
+    """settle() runs solver.settle_time with the head still at its pose, keeps the time and
+    the head track, and leaves the hair at rest; a moving hair moves on settling."""
+    sim = HairSimulator(scene(tracking__mode='paper', solver__settle_time=0.1))
+    drive(sim, 30)
+    time_ns, head, x = sim.time_ns, sim.head, sim.guides.x.copy()
+    assert np.abs(sim.guides.v).max() > 0.01
+    assert sim.settle() == pytest.approx(0.1) == sim.settled_s
+    assert sim.time_ns == time_ns and sim.head is head
+    assert np.all(sim.guides.v == 0.0) and sim.speed == 0.0
+    assert np.abs(sim.guides.x - x).max() > 1e-4
+    drive(sim, 5, start=30)                         # the track goes on from there
+    assert 0 <= motion(34)[0] - sim.time_ns < sim.dt_ns
+
+
 def test_update_scene_rebuilds_only_for_groom_changes():
     sim = HairSimulator(scene())
     drive(sim, 10)

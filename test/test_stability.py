@@ -8,7 +8,7 @@ import pytest
 
 from hair_tracking.guides import ftl
 
-from hair_tracking import simulator
+from hair_tracking.guides import split
 
 from hair_tracking.colliders.contact import SHALLOW_LEVEL, surface_point
 from hair_tracking.core.metrics import max_stretch
@@ -74,7 +74,7 @@ def test_check_catches_non_finite_state(monkeypatch):
 
     def poisoned(self, dt, head_prev, heads, **kw):
         out = real(self, dt, head_prev, heads, **kw)
-        if self._counters['substeps'] > 200:
+        if self.stats['substeps'] > 200:
             self.strands.x[0, 5, 0] = np.nan
         return out
     monkeypatch.setattr(GuideSolver, 'advance', poisoned)
@@ -352,7 +352,7 @@ def test_guide_margin_fits_short_segments_only():
 
 def _translate(sim_scene, speed, monkeypatch=None, max_split=None):
     if max_split is not None:
-        monkeypatch.setattr(simulator, 'MAX_SPLIT', max_split)
+        monkeypatch.setattr(split, 'MAX_SPLIT', max_split)
     sim = HairSimulator(sim_scene)
     motion = sm.oscillate(speed, 0.5, duration_s=0.6)
     worst = 0.0
@@ -389,9 +389,25 @@ def test_split_never_below_min_dt():
     from hair_tracking.core.model import HeadPose
     far = HeadPose(np.array([0.5, 0.0, 0.0]), q, quat_to_matrix(q))
     dt = sim.scene.solver.dt
-    n = sim._split_count(dt, sim._rigid(head0, far), 0.0)
-    assert n == int(dt / simulator.MIN_SPLIT_DT + 1e-9) and n > 1
-    assert sim._split_count(0.1, sim._rigid(head0, far), 0.0) == simulator.MAX_SPLIT
+    rule = sim.split_rule
+    n = rule.parts(dt, rule.rigid(head0, far), 0.0)
+    assert n == int(dt / split.MIN_SPLIT_DT + 1e-9) and n > 1
+    assert rule.parts(0.1, rule.rigid(head0, far), 0.0) == split.MAX_SPLIT
+
+
+@pytest.mark.parametrize('max_disp', [0.004, 0.0])
+def test_the_split_rule_between_runs_and_inside_them_agree(max_disp):
+    """A substep is split between runs (SplitRule.parts) exactly when the compiled runs' stop
+    rule (split_due, where SplitRule.stop applies it) names it, NaN speeds included."""
+    rule = split.SplitRule(max_disp, 9.81, 0.4)
+    rng = np.random.default_rng(5)
+    for dt in (1 / 240, 1 / 60, 1 / 30, 1 / 1000):
+        _, limit, gdt2 = rule.stop(dt, None)
+        far = np.append(rng.uniform(0.0, 2.0 * rule.limit(dt)[0], 300) ** 2, np.nan)
+        rigid = np.append(rng.uniform(0.0, 2.0 * rule.limit(dt)[0], 300), 0.0)
+        for f, r in zip(far.tolist(), rigid.tolist()):
+            due = limit > 0.0 and split.split_due(f, dt, r, gdt2, limit)
+            assert (rule.parts(dt, r, math.sqrt(f) / dt) > 1) == due, (dt, f, r)
 
 
 @pytest.mark.parametrize('mode,stretch', [('paper', 1e-9), ('blend', 1e-7), ('turn', 1e-6)])
@@ -423,12 +439,15 @@ def test_the_matrix_runs_with_any_tracker():
 
 
 def _one_by_one(sim):
-    """``sim`` taking every substep in a call of its own (no runs)."""
-    def run(dt, head_prev, heads):
-        for head in heads:
-            sim._substep(dt, head_prev, head, sim._rigid(head_prev, head))
-            head_prev = head
-    sim._run = run
+    """``sim`` taking every substep in a call of its own (no runs: a run the split rule
+    applies to is cut to its first substep; a split substep's parts still go in one call)."""
+    real = sim.guide_solver.advance
+
+    def advance(dt, head_prev, heads, measure=False, stop=None):
+        if stop is not None:
+            heads, stop = list(heads)[:1], None
+        return real(dt, head_prev, heads, measure=measure, stop=stop)
+    sim.guide_solver.advance = advance
     return sim
 
 

@@ -53,7 +53,7 @@ from hair_tracking.ghosts.correspondence import assign_guides, node_corresponden
 from hair_tracking.ghosts.interface import TrackStep
 from hair_tracking.ghosts.tracker import GhostTracker
 from hair_tracking.guides.collision import make_collider
-from hair_tracking.guides.solver import GuideSolver
+from hair_tracking.guides.solver import make_solver
 
 #: Ghosts per guide of the fixed grouping used for the spread metric (the default groom's ratio
 #: is 1:8; 1:16 groups are large enough for a meaningful variance).
@@ -168,7 +168,7 @@ class FullSim(_Solved):
     def __init__(self, name, workload, scene, knobs=None):
         super().__init__(name, workload, scene, knobs or {})
         self.strands = StrandSet.from_rest(workload.ghost_rest)
-        self.solver = GuideSolver(self.strands, scene)
+        self.solver = make_solver(self.strands, scene)
 
     def output(self, head):
         return self.strands.x
@@ -184,7 +184,7 @@ class _GuidedMethod(_Solved):
         super().__init__(name, workload, scene, knobs)
         self.ratio = int(ratio)
         self.guides = StrandSet.from_rest(workload.guide_rest(self.ratio))
-        self.solver = GuideSolver(self.guides, scene)
+        self.solver = make_solver(self.guides, scene)
 
 
 class GhostTracking(_GuidedMethod):
@@ -261,7 +261,7 @@ class BlendTracking(_Solved):
             raise ValueError(f'ratio: 1:{ratio} leaves no guide for {workload.count} strands')
         self.guide_index = choose_guides(workload.ghost_rest[:, 0], count)
         self.guides = StrandSet.from_rest(workload.ghost_rest[self.guide_index])
-        self.solver = GuideSolver(self.guides, scene)
+        self.solver = make_solver(self.guides, scene)
         self.ghosts = StrandSet.from_rest(workload.ghost_rest)
         collider = make_collider(scene.collider) if scene.tracking.collide else None
         self.tracker = self._tracker(scene, collider, k)

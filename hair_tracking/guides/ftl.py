@@ -40,8 +40,9 @@ from hair_tracking.colliders.contact import (ellipsoid_contact_shallow, ellipsoi
 from hair_tracking.colliders.crease import escape
 from hair_tracking.guides.collision import placed, placed_shape, rotation_entries, to_head
 from hair_tracking.guides.integrate import (BLOCK, carry_rigid_block, FASTMATH, finalize_block,
-                                            max_step_sq_block, predict_block, split_due)
+                                            max_step_sq_block, predict_block)
 from hair_tracking.guides.pbd_constraints import jacobi_bend_block
+from hair_tracking.guides.split import split_due
 
 #: Static data of :func:`ftl_step`: ``rest`` (S, N, 3) head frame [m], ``inv_mass`` (S, N),
 #: ``rest_length`` (S, N-1), ``bend_rest`` (S, N-2) second-neighbour rest distances [m],
@@ -568,7 +569,7 @@ def ftl_advance(model, state, drive, params, collide, collider, work, stop):
     ``stop``: ``(rigid (K,), limit, gdt2)``, active when ``limit > 0`` and the displacements
     are measured: substep ``k + 1`` is not taken when ``max(rigid[k + 1], speed dt) + gdt2 >
     limit`` with ``speed`` the largest displacement of substep ``k`` over ``dt`` (the
-    simulator's split estimate, :meth:`~hair_tracking.simulator.HairSimulator._split_count`).
+    split rule, :func:`~hair_tracking.guides.split.split_due`).
     Returns the substeps taken, then the clamped and the collider-moved node counts of the
     last of them and of all: ``(done, clamped, clamped_total, contacts, contacts_total)``.
     """

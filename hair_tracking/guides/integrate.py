@@ -263,17 +263,6 @@ def max_step_sq_block(x, x_old, s0, s1):
     return best
 
 
-@njit(cache=True)
-def split_due(far, dt, rigid, gdt2, limit):
-    """Whether the simulator splits a substep ``dt`` whose head moves hair nodes by ``rigid``
-    [m] after one whose largest squared node displacement was ``far`` [m^2]: the same
-    arithmetic as :meth:`~hair_tracking.simulator.HairSimulator._split_count` (compiled without
-    fast-math flags, so the decision is the same to the last bit)."""
-    step = math.sqrt(far) / dt * dt
-    motion = (step if step > rigid else rigid) + gdt2
-    return motion > limit
-
-
 @njit(cache=True, nogil=True, parallel=True, fastmath=FASTMATH, error_model='numpy')
 def finalize(x, v, x_old, inv_mass, corr, dt, max_disp, s_damp):
     """Kernel: :func:`finalize_block` over all strands (used when a collider runs in between)."""

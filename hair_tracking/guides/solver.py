@@ -11,9 +11,12 @@ and their roots follow the head. One call of :meth:`GuideSolver.step` is one sub
    before integrating (TressFX; keeps fast head turns from stretching the hair);
 3. explicit Euler of gravity (``scene.gravity``, world frame) and damping
    (``v *= exp(-scene.damping dt)``), prediction ``p = x + v dt``;
-4. constraint projection by the solver chosen in ``scene.solver.type``:
-   ``'pbd'`` classic Gauss–Seidel PBD, ``'xpbd'`` XPBD with compliance, ``'ftl'`` Follow-The-Leader
-   (see :mod:`~hair_tracking.guides.pbd_constraints` and :mod:`~hair_tracking.guides.ftl`);
+4. constraint projection by the solver chosen in ``scene.solver.type`` (:func:`make_solver`,
+   the one place that reads it): ``'pbd'`` classic Gauss–Seidel PBD (:class:`PbdSolver`),
+   ``'xpbd'`` XPBD with compliance (:class:`XpbdSolver`), ``'ftl'`` Follow-The-Leader
+   (:class:`FtlSolver`; see :mod:`~hair_tracking.guides.pbd_constraints` and
+   :mod:`~hair_tracking.guides.ftl`); the rest of the substep is their base class's,
+   :class:`GuideSolver`;
 5. head collision, only if the scene has a collider (:mod:`~hair_tracking.guides.collision`), with
    friction measured against the start-of-substep positions carried rigidly with the head (FTL:
    within its pass, node by node, :func:`~hair_tracking.guides.ftl.contact_node`); then,
@@ -32,7 +35,8 @@ the collision is part of the pass); PBD and XPBD with a collider stop after step
 collision kernel runs, then the finalize kernel; so do all three with a body (FTL: its pass
 with the head collider, then the bust), one substep a call.
 :meth:`GuideSolver.advance` takes a run of substeps in one call: for FTL one compiled call for
-all of them (:func:`~hair_tracking.guides.ftl.ftl_advance`). Kernels are
+all of them (:func:`~hair_tracking.guides.ftl.ftl_advance`), and the guides of several heads
+in one call too (:class:`HeadBatch`). Kernels are
 looked up on their modules at call time, so only the ones the scene needs are ever called (and
 compiled), and tests can spy on them.
 
@@ -55,7 +59,8 @@ from hair_tracking.guides import integrate
 
 from hair_tracking.core.metrics import max_stretch
 from hair_tracking.core.model import HeadPose, StrandSet
-from hair_tracking.guides import pbd_constraints
+from hair_tracking.guides import many_heads, pbd_constraints
+from hair_tracking.guides.split import split_due
 
 #: Substep [s] at which ``solver.bend_stiffness`` applies as given to FTL (the default dt), and
 #: the longest inner step of an FTL substep; see :func:`ftl_bend_stiffness` and
@@ -73,7 +78,11 @@ NO_STOP = (np.zeros(1), 0.0, 0.0)
 
 
 class GuideSolver:
-    """Advances ``strands.x`` / ``strands.v`` (world frame) one substep at a time.
+    """Advances ``strands.x`` / ``strands.v`` (world frame) one substep at a time: the part
+    every solver shares (the head's poses, the head collider where a solver's pass does not
+    meet it, the bust, finalize, the counters); the constraint projection is the subclass's
+    (:class:`FtlSolver`, :class:`PbdSolver`, :class:`XpbdSolver`), built from the scene by
+    :func:`make_solver`.
 
     ``strands``: a :class:`~hair_tracking.core.model.StrandSet` (changed in place; its ``x`` and
     ``v`` must be C-contiguous float64 ``(S, N, 3)``, ``N >= 3``); ``scene``: a
@@ -83,27 +92,20 @@ class GuideSolver:
     for the whole scene).
 
     Attributes: ``collider`` (``None`` when the scene has none; the simulator may hand it to the
-    ghost tracker), ``kind`` (``'pbd'``, ``'xpbd'`` or ``'ftl'``), ``margin`` the collider margin
-    in use [m]: ``scene.collider.margin``, but at most the rest clearance of the closest free node
-    and half the shortest segment (see ``_fit_margin``); ``parallel`` the kernel variant;
-    ``model`` the kernels' static data, the fields of
-    :data:`~hair_tracking.guides.ftl.FtlModel`,
+    ghost tracker), ``kind`` (the solver's name in ``scene.solver.type``, reported in
+    :attr:`stats`), ``margin`` the collider margin in use [m]: ``scene.collider.margin``, but at
+    most the rest clearance of the closest free node and half the shortest segment (see
+    ``_fit_margin``); ``parallel`` the kernel variant; ``model`` the kernels' static data, the
+    fields of :data:`~hair_tracking.guides.ftl.FtlModel`,
     :data:`~hair_tracking.guides.pbd_constraints.PbdModel` or
     :data:`~hair_tracking.guides.pbd_constraints.XpbdModel` as a plain tuple (XPBD's from
     the first substep on: its gains depend on ``dt``).
-
-    With FTL and a collider, a substep is predict, bend, an FTL pass aware of the collider
-    (each node placed at its rest distance and, when inside, pushed out with friction and
-    placed again: :func:`~hair_tracking.guides.ftl.contact_node`), then finalize, in one
-    kernel: lengths stay exact and nodes outside the bare collider (measured in the stability
-    matrix, ``docs/stability.md``).
     """
 
+    kind = ''
+
     def __init__(self, strands: StrandSet, scene, parallel: Optional[bool] = None):
-        self.kind = scene.solver.type
-        if self.kind not in ('pbd', 'xpbd', 'ftl'):
-            raise ValueError(f'solver.type: {self.kind!r} is not one of ftl, pbd, xpbd')
-        _check_strands(strands, self.kind)
+        self._check_strands(strands)
         self.strands = strands
         self.scene = scene
         self.parallel = bool(integrate.runs_parallel(strands.count * strands.nodes)
@@ -120,39 +122,12 @@ class GuideSolver:
         self._shock = float(sv.shock_propagation)
         self._max_disp = float(sv.max_displacement)
         self._iterations = int(sv.iterations)
-        im = strands.inv_mass
         self._x_old = np.empty_like(strands.x)
         self._rot_rel = np.empty((3, 3))
         self._bend_rest = pbd_constraints.second_neighbour_rest(strands.rest)
-        if self.kind == 'ftl':
-            self._bend_w = pbd_constraints.pair_weights(im, 2)
-            self._corr = np.zeros_like(strands.x)
-            self.model = tuple(ftl.FtlModel(strands.rest, im, strands.rest_length,
-                                            self._bend_rest, self._bend_w))
-        else:
-            # the PBD and XPBD kernels read their per-constraint data block by block, strands
-            # side by side (pbd_constraints.lane_major), and project in a work space
-            lanes = pbd_constraints.lane_major
-            s, n = im.shape
-            self._work = pbd_constraints.lane_work(s, n)
-            self._rest_length_l = lanes(strands.rest_length)
-            self._bend_rest_l = lanes(self._bend_rest)
-            if self.kind == 'pbd':
-                self._stretch_w = lanes(pbd_constraints.pair_weights(im, 1))
-                self._bend_w = lanes(pbd_constraints.pair_weights(im, 2))
-                self.model = tuple(pbd_constraints.PbdModel(
-                    strands.rest, im, self._rest_length_l, self._bend_rest_l, self._stretch_w,
-                    self._bend_w))
-            else:
-                self._inv_mass_l = lanes(im)
-                self._lam_stretch = lanes(np.zeros((s, n - 1)))
-                self._lam_bend = lanes(np.zeros((s, n - 2)))
-                self._xpbd_work = tuple(pbd_constraints.XpbdWork(self._work, self._lam_stretch,
-                                                                 self._lam_bend))
-                self._xpbd_dt = None          # the model, with its dt-dependent gains: later
+        self._build_model()
         need_ref = self.collider is not None and self.collider.friction > 0.0
         self._x_ref = np.empty_like(strands.x) if need_ref else None
-        self._spaces: Dict[Tuple[int, bool], tuple] = {}
         self._x_before = np.empty_like(strands.x)      # advance(measure=True)'s work space
         self._counters = {'substeps': 0, 'clamped': 0, 'clamped_total': 0,
                           'contacts': 0, 'contacts_total': 0}
@@ -169,9 +144,10 @@ class GuideSolver:
         after the hair was placed or carried rigidly with the head, which the bust does not
         follow (it stays upright on the neck frame, or rides on its own TF frame), so a head
         tilted by 10 degrees swings 55 cm hair 9 cm into the trunk.  The contact stage with
-        the bust still (no motion, no push-out bound) and, for FTL, the collision-aware pass
-        that puts the lengths back; the velocities are not touched (the caller places hair at
-        rest).  Returns the number of nodes the contact moved (0 without a body)."""
+        the bust still (no motion, no push-out bound) and the solver's repair of the pushed
+        strands (FTL: the collision-aware pass that puts the lengths back); the velocities are
+        not touched (the caller places hair at rest).  Returns the number of nodes the contact
+        moved (0 without a body)."""
         if self.body is None:
             return 0
         st = self.strands
@@ -179,9 +155,8 @@ class GuideSolver:
         bust = self.body.posed(head, head, self.scene.solver.dt)
         start = st.x.copy()
         pushed = contact_kernels.collide(st.x, start, st.inv_mass, bust, -1.0, start)
-        if pushed and self.kind == 'ftl':
-            ftl.ftl_restore_shapes(st.x, start, st.rest, st.rest_length, rot, bust,
-                                   np.zeros_like(st.x), -1.0)
+        if pushed:
+            self._after_push(start, rot, bust, -1.0, still=True)
         return int(pushed)
 
     def step(self, dt: float, head_prev: HeadPose, head: HeadPose) -> None:
@@ -191,176 +166,28 @@ class GuideSolver:
     def advance(self, dt: float, head_prev: HeadPose, heads: Sequence[HeadPose],
                 measure: bool = False, stop=None) -> Optional[np.ndarray]:
         """Advance ``len(heads)`` substeps ``dt`` [s], the head moving from ``head_prev`` to
-        ``heads[0]``, then on to each next pose: the same as :meth:`step` for each pose in turn.
-        FTL runs them in one compiled call (:func:`~hair_tracking.guides.ftl.ftl_advance`);
-        PBD and XPBD take one :meth:`step` a substep, and so does a single substep not
-        measured.  With ``measure``, returns every substep's largest squared node displacement
-        [m^2] (the simulator's speed estimate).  ``stop`` (with ``measure``): ``(rigid, limit,
-        gdt2)``, the simulator's split rule (:func:`~hair_tracking.guides.integrate.split_due`,
-        ``rigid`` one value a substep): the run stops before the first substep after the first
-        that the rule would split, and the displacements returned are those of the substeps
-        taken."""
+        ``heads[0]``, then on to each next pose: the same as :meth:`step` for each pose in turn
+        (FTL without a body in one compiled call, :meth:`FtlSolver._run`; a single substep not
+        measured takes the one-substep kernels).  With ``measure``, returns every substep's
+        largest squared node displacement [m^2] (the simulator's speed estimate).  ``stop``
+        (with ``measure``): ``(rigid, limit, gdt2)``, the split rule
+        (:meth:`~hair_tracking.guides.split.SplitRule.stop`, ``rigid`` one value a substep): the
+        run stops before the first substep after the first that the rule would split
+        (:func:`~hair_tracking.guides.split.split_due`), and the displacements returned are
+        those of the substeps taken."""
         heads = list(heads)
         if not heads:
             return np.zeros(0) if measure else None
         if len(heads) == 1 and not measure:
             self.step(dt, head_prev, heads[0])      # one substep: the one-substep kernels
             return None
-        parallel = self.parallel
         rule = stop is not None and measure and stop[1] > 0.0
-        if self.kind != 'ftl' or self.body is not None:
-            out = []
-            prev, x0 = head_prev, self._x_before
-            for k, head in enumerate(heads):
-                if measure:
-                    np.copyto(x0, self.strands.x)
-                self._step(dt, prev, head, parallel)
-                if measure:
-                    out.append(integrate.max_step_sq(self.strands.x, x0))
-                    if rule and k + 1 < len(heads) and \
-                            integrate.split_due(out[-1], dt, stop[0][k + 1], stop[2], stop[1]):
-                        break
-                prev = head
-            return np.array(out) if measure else None
-        dt = _check_dt(dt)
-        n_sub = len(heads)
-        rots, poss, rels, counts, steps = self._advance_space(n_sub, measure)
-        rots[0], poss[0] = _pose('head_prev', head_prev)
-        for k, head in enumerate(heads, 1):
-            rots[k], poss[k] = _pose('head', head)
-        if not integrate.head_motions(rots, poss, rels):
-            bad = int(np.flatnonzero(~(np.isfinite(rots).all(axis=(1, 2))
-                                       & np.isfinite(poss).all(axis=1)))[0])
-            raise ValueError(f'{"head_prev" if bad == 0 else "head"}: pose must be finite, '
-                             f'got position {poss[bad]}')
-        st = self.strands
-        drive = (rots, poss, rels, self._gravity, math.exp(-self._damping * dt), dt, self._shock)
-        rule_args = (np.ascontiguousarray(stop[0], dtype=np.float64), float(stop[1]),
-                     float(stop[2])) if rule else NO_STOP
-        kernel = ftl.ftl_advance if parallel else ftl.ftl_advance_serial
-        # plain tuples in the fields' order of ftl.FtlWork and collision.ColliderModel
-        work = (self._corr, self._friction_ref(), counts, steps,
-                self._x_before if measure else self._x_before[:0])
-        done, clamped, clamped_total, contacts, contacts_total = kernel(
-            self.model, (st.x, st.v, self._x_old), drive, self._ftl_params(dt, True),
-            self.collider is not None, self._collider_model(), work, rule_args)
-        cn = self._counters
-        cn['substeps'] += int(done)
-        cn['clamped'], cn['contacts'] = int(clamped), int(contacts)
-        cn['clamped_total'] += int(clamped_total)
-        cn['contacts_total'] += int(contacts_total)
-        return steps[0, :done].copy() if measure else None
+        return self._run(dt, head_prev, heads, measure, stop if rule else None)
 
-    def _advance_space(self, n_sub: int, measure: bool):
-        """:meth:`advance`'s work arrays for ``n_sub`` substeps (kept for the next call)."""
-        key = (n_sub, measure)
-        space = self._spaces.get(key)
-        if space is None:
-            blocks = integrate.block_count(self.strands.x.shape[0])
-            space = self._spaces[key] = (
-                np.empty((n_sub + 1, 3, 3)), np.empty((n_sub + 1, 3)), np.empty((n_sub, 3, 3)),
-                np.empty((blocks, n_sub, 2), dtype=np.int64),
-                np.empty((blocks, n_sub if measure else 0)))
-        return space
-
-    def _step(self, dt: float, head_prev: HeadPose, head: HeadPose, parallel: bool) -> None:
-        dt = _check_dt(dt)
-        rot_prev, pos_prev = _pose('head_prev', head_prev)
-        rot, pos = _pose('head', head)
-        rot_rel = self._rot_rel
-        if not integrate.head_motion(rot_prev, pos_prev, rot, pos, rot_rel):
-            bad = 'head_prev' if not (np.all(np.isfinite(rot_prev))
-                                      and np.all(np.isfinite(pos_prev))) else 'head'
-            raise ValueError(f'{bad}: pose must be finite, got position '
-                             f'{pos_prev if bad == "head_prev" else pos}')
-        st = self.strands
-        damp = math.exp(-self._damping * dt)
-        fused = self.collider is None and self.body is None
-        # the kernels' arguments, plain tuples in the fields' order of integrate.GuideState,
-        # integrate.StepMotion and the solver's Params (built here each substep; the models in
-        # __init__ / _xpbd_factors)
-        state = (st.x, st.v, self._x_old)
-        motion = (rot, pos, rot_rel, pos_prev, self._gravity, damp, dt, self._shock)
-        sv = self.scene.solver
-        contacts = 0
-        ftl_head = self.kind == 'ftl' and self.collider is not None
-        if ftl_head:
-            # one kernel: friction reference and the collision-aware FTL pass in the block
-            # loop, finalize too without a body
-            kernel = ftl.ftl_collide_step if parallel else ftl.ftl_collide_step_serial
-            work = (self._corr, self._friction_ref())
-            clamped, contacts = kernel(self.model, state, motion,
-                                       self._ftl_params(dt, self.body is None), work,
-                                       self._collider_model())
-            if self.body is None:
-                self._count(clamped, contacts)
-                return
-        elif self._x_ref is not None:
-            carry = integrate.carry_rigid if parallel else integrate.carry_rigid_serial
-            carry(st.x, rot_rel, pos_prev, pos, self._x_ref)
-        if self.kind == 'pbd':
-            kernel = pbd_constraints.pbd_step if parallel else pbd_constraints.pbd_step_serial
-            params = (self._iterations, float(sv.stiffness), float(sv.bend_stiffness),
-                      self._max_disp, fused)
-            clamped = kernel(self.model, state, motion, params, self._work)
-        elif self.kind == 'xpbd':
-            a_stretch, a_bend = self._xpbd_factors(dt)
-            kernel = pbd_constraints.xpbd_step if parallel else pbd_constraints.xpbd_step_serial
-            params = (self._iterations, a_stretch, a_bend, self._max_disp, fused)
-            clamped = kernel(self.model, state, motion, params, self._xpbd_work)
-        elif not ftl_head:
-            kernel = ftl.ftl_step if parallel else ftl.ftl_step_serial
-            clamped = kernel(self.model, state, motion, self._ftl_params(dt, fused), self._corr)
-        if not fused:
-            if self.collider is not None and not ftl_head:
-                contacts = self.collider.project(st.x, self._friction_ref(), st.inv_mass, rot,
-                                                 pos, parallel)
-            if self.body is not None:
-                # the start of the substep is the friction reference and, moved by the
-                # push-out bound, the velocity's
-                bust = self.body.posed(head_prev, head, dt)
-                pushed = contact_kernels.collide(st.x, self._x_old, st.inv_mass, bust,
-                                                 self.body.push_cap(dt), self._x_old)
-                if pushed and self.kind == 'ftl':
-                    ftl.ftl_restore_shapes(st.x, self._x_old, st.rest, st.rest_length, rot,
-                                           bust, self._corr, self.body.push_cap(dt))
-                contacts += pushed
-            finalize = integrate.finalize if parallel else integrate.finalize_serial
-            ftl_ = self.kind == 'ftl'
-            clamped = finalize(st.x, st.v, self._x_old, st.inv_mass,
-                               self._corr if ftl_ else self._x_old, dt,
-                               self._ftl_clamp(dt) if ftl_ else self._max_disp,
-                               float(sv.ftl_damping) if ftl_ else 0.0)
-        self._count(clamped, contacts)
-
-    def _ftl_params(self, dt: float, finalize: bool) -> tuple:
-        """The FTL kernels' :data:`~hair_tracking.guides.ftl.FtlParams` for a substep ``dt``."""
-        sv = self.scene.solver
-        return (ftl_inner_steps(dt), ftl_bend_stiffness(sv.bend_stiffness, dt),
-                float(sv.ftl_damping), self._ftl_clamp(dt), finalize)
-
-    def _ftl_clamp(self, dt: float) -> float:
-        """FTL's displacement clamp over a substep ``dt`` [m]: ``solver.max_displacement`` an
-        inner step (:func:`ftl_inner_steps`), so it bounds the same speed at any ``dt``."""
-        return self._max_disp * ftl_inner_steps(dt)
-
-    def _collider_model(self) -> tuple:
-        """The collider as the FTL kernels take it
-        (:data:`~hair_tracking.guides.collision.ColliderModel`; a stand-in without one)."""
-        return self.collider.model if self.collider is not None else NO_COLLIDER
-
-    def _friction_ref(self) -> np.ndarray:
-        """The collider's friction reference: the start-of-substep positions carried with the
-        head (``_x_ref``) when there is friction, else ``x_old`` (not read)."""
-        return self._x_ref if self._x_ref is not None else self._x_old
-
-    def _count(self, clamped, contacts) -> None:
-        c = self._counters
-        c['substeps'] += 1
-        c['clamped'] = int(clamped)
-        c['clamped_total'] += int(clamped)
-        c['contacts'] = int(contacts)
-        c['contacts_total'] += int(contacts)
+    def head_batch(self, places: int) -> Optional['HeadBatch']:
+        """Room for the guides of ``places`` heads advanced together in one compiled call
+        (:class:`HeadBatch`), or None where this solver takes one call a head."""
+        return None
 
     @property
     def stats(self) -> Dict[str, Any]:
@@ -379,7 +206,99 @@ class GuideSolver:
         out['max_stretch'] = max_stretch(self.strands.x, self.strands.rest_length)
         return out
 
+    # ------------------------------------------------------- solver's parts
+    def _build_model(self) -> None:
+        """The kernels' static data (``self.model``) and work space."""
+        raise NotImplementedError
+
+    def _project(self, state, motion, dt: float, parallel: bool, fused: bool):
+        """The constraint projection of a substep (after the predict stage, in the same
+        kernel): ``(clamped, contacts, finished)``, ``finished`` when the kernel also ran the
+        collision and finalize (``fused``: without a collider or a body)."""
+        raise NotImplementedError
+
+    def _head_contacts(self, rot, pos, parallel: bool) -> int:
+        """The head collider's stage after the projection (none without a collider)."""
+        if self.collider is None:
+            return 0
+        st = self.strands
+        return self.collider.project(st.x, self._friction_ref(), st.inv_mass, rot, pos,
+                                     parallel)
+
+    def _after_push(self, start, rot, bust, cap: float, still: bool = False) -> None:
+        """Repair the strands the bust ``bust`` pushed from ``start`` (push-out bound ``cap``;
+        ``still``: outside a substep, :meth:`leave_body`); nothing here."""
+
+    def _finalize_args(self, dt: float):
+        """``(corr, max_disp, s_damp)`` of finalize (:func:`~hair_tracking.guides.integrate.
+        finalize`) after a substep ``dt``."""
+        return self._x_old, self._max_disp, 0.0
+
     # ------------------------------------------------------------ internals
+    def _run(self, dt: float, head_prev: HeadPose, heads, measure: bool, stop):
+        """:meth:`advance` one :meth:`_step` a substep (``stop``: the split rule or None)."""
+        out = []
+        prev, x0 = head_prev, self._x_before
+        for k, head in enumerate(heads):
+            if measure:
+                np.copyto(x0, self.strands.x)
+            self._step(dt, prev, head, self.parallel)
+            if measure:
+                out.append(integrate.max_step_sq(self.strands.x, x0))
+                if stop is not None and k + 1 < len(heads) and \
+                        split_due(out[-1], dt, stop[0][k + 1], stop[2], stop[1]):
+                    break
+            prev = head
+        return np.array(out) if measure else None
+
+    def _step(self, dt: float, head_prev: HeadPose, head: HeadPose, parallel: bool) -> None:
+        dt = _check_dt(dt)
+        rot_prev, pos_prev = _pose('head_prev', head_prev)
+        rot, pos = _pose('head', head)
+        rot_rel = self._rot_rel
+        if not integrate.head_motion(rot_prev, pos_prev, rot, pos, rot_rel):
+            bad = 'head_prev' if not (np.all(np.isfinite(rot_prev))
+                                      and np.all(np.isfinite(pos_prev))) else 'head'
+            raise ValueError(f'{bad}: pose must be finite, got position '
+                             f'{pos_prev if bad == "head_prev" else pos}')
+        st = self.strands
+        damp = math.exp(-self._damping * dt)
+        fused = self.collider is None and self.body is None
+        # the kernels' arguments, plain tuples in the fields' order of integrate.GuideState,
+        # integrate.StepMotion and the solver's Params (built here each substep; the models in
+        # _build_model / _xpbd_factors)
+        state = (st.x, st.v, self._x_old)
+        motion = (rot, pos, rot_rel, pos_prev, self._gravity, damp, dt, self._shock)
+        clamped, contacts, finished = self._project(state, motion, dt, parallel, fused)
+        if not finished:
+            contacts += self._head_contacts(rot, pos, parallel)
+            if self.body is not None:
+                # the start of the substep is the friction reference and, moved by the
+                # push-out bound, the velocity's
+                bust = self.body.posed(head_prev, head, dt)
+                pushed = contact_kernels.collide(st.x, self._x_old, st.inv_mass, bust,
+                                                 self.body.push_cap(dt), self._x_old)
+                if pushed:
+                    self._after_push(self._x_old, rot, bust, self.body.push_cap(dt))
+                contacts += pushed
+            finalize = integrate.finalize if parallel else integrate.finalize_serial
+            corr, max_disp, s_damp = self._finalize_args(dt)
+            clamped = finalize(st.x, st.v, self._x_old, st.inv_mass, corr, dt, max_disp, s_damp)
+        self._count(clamped, contacts)
+
+    def _friction_ref(self) -> np.ndarray:
+        """The collider's friction reference: the start-of-substep positions carried with the
+        head (``_x_ref``) when there is friction, else ``x_old`` (not read)."""
+        return self._x_ref if self._x_ref is not None else self._x_old
+
+    def _count(self, clamped, contacts) -> None:
+        c = self._counters
+        c['substeps'] += 1
+        c['clamped'] = int(clamped)
+        c['clamped_total'] += int(clamped)
+        c['contacts'] = int(contacts)
+        c['contacts_total'] += int(contacts)
+
     def _fit_margin(self) -> float:
         """Collider margin actually used [m]: the scene's, but no more than the rest clearance of
         the closest free node (the collider must never push a strand out of its own rest shape)
@@ -398,6 +317,267 @@ class GuideSolver:
             c.margin = float(min(c.margin, clearance.min(), half_segment))
         return c.margin
 
+    @staticmethod
+    def _check_strands(st: StrandSet) -> None:
+        _check_strands(st)
+
+
+class FtlSolver(GuideSolver):
+    """Follow-The-Leader (:mod:`~hair_tracking.guides.ftl`).
+
+    With a collider, a substep is predict, bend, an FTL pass aware of the collider (each node
+    placed at its rest distance and, when inside, pushed out with friction and placed again:
+    :func:`~hair_tracking.guides.ftl.contact_node`), then finalize, in one kernel: lengths stay
+    exact and nodes outside the bare collider (measured in the stability matrix,
+    ``docs/stability.md``).  A run of substeps without a body is one compiled call
+    (:func:`~hair_tracking.guides.ftl.ftl_advance`); the guides of several heads too
+    (:meth:`head_batch`).
+    """
+
+    kind = 'ftl'
+
+    def _build_model(self) -> None:
+        st = self.strands
+        im = st.inv_mass
+        self._bend_w = pbd_constraints.pair_weights(im, 2)
+        self._corr = np.zeros_like(st.x)
+        self.model = tuple(ftl.FtlModel(st.rest, im, st.rest_length, self._bend_rest,
+                                        self._bend_w))
+        self._spaces: Dict[Tuple[int, bool], tuple] = {}
+
+    @staticmethod
+    def _check_strands(st: StrandSet) -> None:
+        _check_strands(st)
+        if np.any(st.inv_mass[:, 2:] <= 0):
+            raise ValueError("strands.inv_mass: the 'ftl' solver moves every free node; nodes "
+                             '2.. must have inverse mass > 0')
+
+    def params(self, dt: float, finalize: bool) -> tuple:
+        """The FTL kernels' :data:`~hair_tracking.guides.ftl.FtlParams` for a substep ``dt``."""
+        sv = self.scene.solver
+        return (ftl_inner_steps(dt), ftl_bend_stiffness(sv.bend_stiffness, dt),
+                float(sv.ftl_damping), self._ftl_clamp(dt), finalize)
+
+    def drive(self, rots, poss, rels, dt: float) -> tuple:
+        """What drives a run of substeps ``dt`` (the fields of
+        :data:`~hair_tracking.guides.ftl.FtlDrive`): the head's poses ``rots``, ``poss`` and
+        motions ``rels`` (:func:`~hair_tracking.guides.integrate.head_motions`), gravity,
+        damping and shock propagation."""
+        return (rots, poss, rels, self._gravity, math.exp(-self._damping * dt), dt,
+                self._shock)
+
+    def head_batch(self, places: int) -> Optional['HeadBatch']:
+        """Room for ``places`` heads' guides (:class:`HeadBatch`); None with a body, whose
+        contact stage takes one call a substep."""
+        return HeadBatch(self, places) if self.body is None else None
+
+    def _project(self, state, motion, dt, parallel, fused):
+        if self.collider is not None:
+            # one kernel: friction reference and the collision-aware FTL pass in the block
+            # loop, finalize too without a body
+            kernel = ftl.ftl_collide_step if parallel else ftl.ftl_collide_step_serial
+            work = (self._corr, self._friction_ref())
+            clamped, contacts = kernel(self.model, state, motion,
+                                       self.params(dt, self.body is None), work,
+                                       self.collider_model())
+            return clamped, contacts, self.body is None
+        kernel = ftl.ftl_step if parallel else ftl.ftl_step_serial
+        return kernel(self.model, state, motion, self.params(dt, fused), self._corr), 0, fused
+
+    def _head_contacts(self, rot, pos, parallel):
+        return 0                        # the pass meets the head collider
+
+    def _after_push(self, start, rot, bust, cap, still=False):
+        st = self.strands
+        ftl.ftl_restore_shapes(st.x, start, st.rest, st.rest_length, rot, bust,
+                               np.zeros_like(st.x) if still else self._corr, cap)
+
+    def _finalize_args(self, dt):
+        return self._corr, self._ftl_clamp(dt), float(self.scene.solver.ftl_damping)
+
+    def collider_model(self) -> tuple:
+        """The collider as the FTL kernels take it
+        (:data:`~hair_tracking.guides.collision.ColliderModel`; a stand-in without one)."""
+        return self.collider.model if self.collider is not None else NO_COLLIDER
+
+    @property
+    def corrections(self) -> np.ndarray:
+        """FTL's corrections ``d`` (S, N, 3) [m] of the last substep, which finalize's
+        velocity correction ``s_damp d_{i+1} / dt`` reads (:mod:`~hair_tracking.guides.ftl`)."""
+        return self._corr
+
+    def _ftl_clamp(self, dt: float) -> float:
+        """FTL's displacement clamp over a substep ``dt`` [m]: ``solver.max_displacement`` an
+        inner step (:func:`ftl_inner_steps`), so it bounds the same speed at any ``dt``."""
+        return self._max_disp * ftl_inner_steps(dt)
+
+    def _run(self, dt, head_prev, heads, measure, stop):
+        """Without a body, all substeps in one compiled call
+        (:func:`~hair_tracking.guides.ftl.ftl_advance`)."""
+        if self.body is not None:
+            return super()._run(dt, head_prev, heads, measure, stop)
+        dt = _check_dt(dt)
+        n_sub = len(heads)
+        rots, poss, rels, counts, steps = self._advance_space(n_sub, measure)
+        rots[0], poss[0] = _pose('head_prev', head_prev)
+        for k, head in enumerate(heads, 1):
+            rots[k], poss[k] = _pose('head', head)
+        if not integrate.head_motions(rots, poss, rels):
+            bad = int(np.flatnonzero(~(np.isfinite(rots).all(axis=(1, 2))
+                                       & np.isfinite(poss).all(axis=1)))[0])
+            raise ValueError(f'{"head_prev" if bad == 0 else "head"}: pose must be finite, '
+                             f'got position {poss[bad]}')
+        st = self.strands
+        rule_args = (np.ascontiguousarray(stop[0], dtype=np.float64), float(stop[1]),
+                     float(stop[2])) if stop is not None else NO_STOP
+        kernel = ftl.ftl_advance if self.parallel else ftl.ftl_advance_serial
+        # plain tuples in the fields' order of ftl.FtlWork and collision.ColliderModel
+        work = (self._corr, self._friction_ref(), counts, steps,
+                self._x_before if measure else self._x_before[:0])
+        done, clamped, clamped_total, contacts, contacts_total = kernel(
+            self.model, (st.x, st.v, self._x_old), self.drive(rots, poss, rels, dt),
+            self.params(dt, True), self.collider is not None, self.collider_model(), work,
+            rule_args)
+        cn = self._counters
+        cn['substeps'] += int(done)
+        cn['clamped'], cn['contacts'] = int(clamped), int(contacts)
+        cn['clamped_total'] += int(clamped_total)
+        cn['contacts_total'] += int(contacts_total)
+        return steps[0, :done].copy() if measure else None
+
+    def _advance_space(self, n_sub: int, measure: bool):
+        """:meth:`_run`'s work arrays for ``n_sub`` substeps (kept for the next call)."""
+        key = (n_sub, measure)
+        space = self._spaces.get(key)
+        if space is None:
+            blocks = integrate.block_count(self.strands.x.shape[0])
+            space = self._spaces[key] = (
+                np.empty((n_sub + 1, 3, 3)), np.empty((n_sub + 1, 3)), np.empty((n_sub, 3, 3)),
+                np.empty((blocks, n_sub, 2), dtype=np.int64),
+                np.empty((blocks, n_sub if measure else 0)))
+        return space
+
+
+class HeadBatch:
+    """The guides of several heads wearing one groom, advanced in one compiled call
+    (:func:`~hair_tracking.guides.many_heads.ftl_advance_heads`): ``x``, ``v`` shaped
+    ``(places, G, N, 3)``, head ``h``'s guides at place ``slots[h]``; ``solver`` the
+    :class:`FtlSolver` of one of them (its model, collider and parameters serve all)."""
+
+    def __init__(self, solver: FtlSolver, places: int):
+        self.solver = solver
+        shape = (places,) + solver.strands.x.shape
+        self.x, self.v = np.zeros(shape), np.zeros(shape)
+        self._x_old, self._corr = np.zeros(shape), np.zeros(shape)
+        self._x_ref, self._before = np.zeros(shape), np.zeros(shape)
+
+    @property
+    def places(self) -> int:
+        return self.x.shape[0]
+
+    def advance(self, dt: float, slots: np.ndarray, prev: Sequence[HeadPose], runs, stop,
+                parallel: bool):
+        """Every head ``i`` (at place ``slots[i]``) from ``prev[i]`` through its run of poses
+        ``runs[i]`` (all runs the same length), substeps ``dt``; ``stop`` the split rule
+        (``(rigid (P, K), limit, gdt2)``, :meth:`~hair_tracking.guides.split.SplitRule.stop`)
+        or None.  Returns ``(steps (P, K), substeps taken)``, ``steps`` the largest squared
+        node displacement of each head's substeps."""
+        people, n_sub = len(prev), len(runs[0])
+        rots = np.empty((people, n_sub + 1, 3, 3))
+        poss = np.empty((people, n_sub + 1, 3))
+        rels = np.empty((people, n_sub, 3, 3))
+        for i, (p, run) in enumerate(zip(prev, runs)):
+            for j, head in enumerate([p] + list(run)):
+                rots[i, j], poss[i, j] = head.rotation, head.position
+            if not integrate.head_motions(rots[i], poss[i], rels[i]):
+                raise ValueError('head pose must be finite')
+        solver = self.solver
+        blocks = integrate.block_count(self.x.shape[1])
+        counts = np.empty((people, blocks, n_sub, 2), dtype=np.int64)
+        steps = np.empty((people, blocks, n_sub))
+        rule = (np.zeros((people, 1)), 0.0, 0.0) if stop is None else \
+            (np.ascontiguousarray(stop[0]), float(stop[1]), float(stop[2]))
+        kernel = many_heads.ftl_advance_heads if parallel else \
+            many_heads.ftl_advance_heads_serial
+        done = kernel(solver.model, (self.x, self.v, self._x_old),
+                      solver.drive(rots, poss, rels, dt), solver.params(dt, True),
+                      solver.collider is not None, solver.collider_model(),
+                      (self._corr, self._x_ref, counts, steps, self._before), rule, slots)
+        return steps[:, 0, :done], int(done)
+
+
+class _LaneSolver(GuideSolver):
+    """Shared by PBD and XPBD: the kernels read their per-constraint data block by block,
+    strands side by side (:func:`~hair_tracking.guides.pbd_constraints.lane_major`), and
+    project in a work space; the friction reference carried with the head before the
+    projection."""
+
+    def _build_model(self) -> None:
+        lanes = pbd_constraints.lane_major
+        st = self.strands
+        s, n = st.inv_mass.shape
+        self._work = pbd_constraints.lane_work(s, n)
+        self._rest_length_l = lanes(st.rest_length)
+        self._bend_rest_l = lanes(self._bend_rest)
+
+    def _project(self, state, motion, dt, parallel, fused):
+        if self._x_ref is not None:
+            carry = integrate.carry_rigid if parallel else integrate.carry_rigid_serial
+            carry(self.strands.x, motion[2], motion[3], motion[1], self._x_ref)
+        return self._constraints(state, motion, dt, parallel, fused), 0, fused
+
+    def _constraints(self, state, motion, dt, parallel, fused) -> int:
+        """The projection kernel (predict, constraints, finalize when ``fused``): clamped."""
+        raise NotImplementedError
+
+
+class PbdSolver(_LaneSolver):
+    """Classic Gauss-Seidel PBD (Müller et al. 2007; :mod:`~hair_tracking.guides.
+    pbd_constraints`)."""
+
+    kind = 'pbd'
+
+    def _build_model(self) -> None:
+        super()._build_model()
+        lanes = pbd_constraints.lane_major
+        st = self.strands
+        im = st.inv_mass
+        self._stretch_w = lanes(pbd_constraints.pair_weights(im, 1))
+        self._bend_w = lanes(pbd_constraints.pair_weights(im, 2))
+        self.model = tuple(pbd_constraints.PbdModel(
+            st.rest, im, self._rest_length_l, self._bend_rest_l, self._stretch_w, self._bend_w))
+
+    def _constraints(self, state, motion, dt, parallel, fused):
+        sv = self.scene.solver
+        kernel = pbd_constraints.pbd_step if parallel else pbd_constraints.pbd_step_serial
+        params = (self._iterations, float(sv.stiffness), float(sv.bend_stiffness),
+                  self._max_disp, fused)
+        return kernel(self.model, state, motion, params, self._work)
+
+
+class XpbdSolver(_LaneSolver):
+    """XPBD with compliance (Macklin, Müller & Chentanez 2016;
+    :mod:`~hair_tracking.guides.pbd_constraints`)."""
+
+    kind = 'xpbd'
+
+    def _build_model(self) -> None:
+        super()._build_model()
+        lanes = pbd_constraints.lane_major
+        s, n = self.strands.inv_mass.shape
+        self._inv_mass_l = lanes(self.strands.inv_mass)
+        self._lam_stretch = lanes(np.zeros((s, n - 1)))
+        self._lam_bend = lanes(np.zeros((s, n - 2)))
+        self._xpbd_work = tuple(pbd_constraints.XpbdWork(self._work, self._lam_stretch,
+                                                         self._lam_bend))
+        self._xpbd_dt = None          # the model, with its dt-dependent gains: later
+
+    def _constraints(self, state, motion, dt, parallel, fused):
+        a_stretch, a_bend = self._xpbd_factors(dt)
+        kernel = pbd_constraints.xpbd_step if parallel else pbd_constraints.xpbd_step_serial
+        params = (self._iterations, a_stretch, a_bend, self._max_disp, fused)
+        return kernel(self.model, state, motion, params, self._xpbd_work)
+
     def _xpbd_factors(self, dt):
         sv = self.scene.solver
         a_stretch = float(sv.compliance) / (dt * dt)
@@ -414,6 +594,19 @@ class GuideSolver:
                 self._stretch_gain, self._bend_gain))
             self._xpbd_dt = dt
         return a_stretch, a_bend
+
+
+#: The solvers by their name in ``scene.solver.type``.
+SOLVERS = {cls.kind: cls for cls in (FtlSolver, PbdSolver, XpbdSolver)}
+
+
+def make_solver(strands: StrandSet, scene, parallel: Optional[bool] = None) -> GuideSolver:
+    """The guide solver ``scene.solver.type`` names (:data:`SOLVERS`) for ``strands``
+    (:class:`GuideSolver` for the arguments)."""
+    cls = SOLVERS.get(scene.solver.type)
+    if cls is None:
+        raise ValueError(f'solver.type: {scene.solver.type!r} is not one of ftl, pbd, xpbd')
+    return cls(strands, scene, parallel)
 
 
 def ftl_inner_steps(dt: float) -> int:
@@ -479,7 +672,7 @@ def _pose(name, head):
     return rot, pos
 
 
-def _check_strands(st: StrandSet, kind: str) -> None:
+def _check_strands(st: StrandSet) -> None:
     rest = st.rest
     if not isinstance(rest, np.ndarray) or rest.ndim != 3 or rest.shape[2] != 3:
         raise ValueError(f'strands.rest: must be an (S, N, 3) array, got '
@@ -505,6 +698,3 @@ def _check_strands(st: StrandSet, kind: str) -> None:
     if np.any(im[:, :2] != 0):
         raise ValueError('strands.inv_mass: nodes 0 and 1 are attached to the head and must have '
                          'inverse mass 0')
-    if kind == 'ftl' and np.any(im[:, 2:] <= 0):
-        raise ValueError("strands.inv_mass: the 'ftl' solver moves every free node; nodes 2.. "
-                         'must have inverse mass > 0')

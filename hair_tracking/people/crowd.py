@@ -4,7 +4,7 @@ Each person is a :class:`~hair_tracking.simulator.HairSimulator` of the same sce
 built groom: its head track, its ghost tracker, its counters and its outputs are its own.  What
 is batched is the guide solver, the stage that steps every substep: the people's guides live
 side by side in arrays shaped ``(places, G, N, 3)`` (a person's ``guides.x`` and ``.v`` are views
-of its place), and one call of
+of its place, :class:`~hair_tracking.guides.solver.HeadBatch`), and one call of
 :func:`~hair_tracking.guides.many_heads.ftl_advance_heads` advances all of them, each through its
 own head poses (its roots and its head collider placed by its own head).
 
@@ -12,10 +12,12 @@ Time: the crowd has one fixed-dt accumulator (:func:`~hair_tracking.simulator.su
 advanced to the newest stamp of any person (:meth:`Crowd.advance_to`); each person's head is
 sampled from its own track at the crowd's substep times (held at its newest pose until the next
 one arrives).  The split rule of the single head (a substep in which a node would move too far
-is split, :mod:`hair_tracking.simulator`) is applied with the largest estimate over the people:
-a substep split for one person is split for all (the others' heads interpolated the same way).
-The FTL solver without the body's bust is batched; PBD, XPBD, the bust and the paper tracker's
-every-substep ghost tracking take one solver call per person (the single-head code path).
+is split, :mod:`hair_tracking.guides.split`) is applied with the largest estimate over the
+people: a substep split for one person is split for all (the others' heads interpolated the
+same way).  A solver that batches heads (:meth:`~hair_tracking.guides.solver.GuideSolver.
+head_batch`: FTL without the body's bust) is batched; the others and the paper tracker's
+every-substep ghost tracking take one solver call per person
+(:meth:`~hair_tracking.simulator.HairSimulator.run_substeps`, the single-head code path).
 
 A person added gets fresh hair: the rest shape settled (``solver.settle_time``) and carried to
 the first pose, at rest (no jump); a person removed frees the place for the next.
@@ -27,13 +29,11 @@ from typing import Callable, Dict, List, Optional
 import numpy as np
 
 from hair_tracking.core.head_track import PoseResult
-from hair_tracking.core.model import HeadPose
 from hair_tracking.core.scene import Scene
 from hair_tracking.grooms.build import build_groom
-from hair_tracking.guides import many_heads
-from hair_tracking.guides.integrate import block_count, head_motions, runs_parallel
-from hair_tracking.guides.solver import NO_COLLIDER
-from hair_tracking.simulator import HairSimulator, split_heads, substep_times
+from hair_tracking.guides.integrate import runs_parallel
+from hair_tracking.guides.split import run_split, split_heads
+from hair_tracking.simulator import HairSimulator, substep_times
 
 
 class CrowdFull(RuntimeError):
@@ -58,18 +58,17 @@ class Crowd:
         first = self._make()
         g = first.guides
         self._free: List[int] = list(range(places - 1, -1, -1))
-        shape = (places,) + g.x.shape
-        self._x, self._v = np.zeros(shape), np.zeros(shape)
-        self._x_old, self._corr = np.zeros(shape), np.zeros(shape)
-        self._x_ref, self._before = np.zeros(shape), np.zeros(shape)
         self.parallel = runs_parallel(places * g.count * g.nodes) if parallel is None \
             else bool(parallel)
-        solver = first.guide_solver
-        #: whether the guides of all people advance in one call (FTL without the bust)
-        self.batched = solver.kind == 'ftl' and solver.body is None
-        self._model = solver.model if self.batched else None
-        self._collide = solver.collider is not None
-        self._collider = solver.collider.model if self._collide else NO_COLLIDER
+        #: the people's guides side by side, advanced in one call (None where the solver
+        #: takes one call a person: :meth:`~hair_tracking.guides.solver.GuideSolver.head_batch`)
+        self.batch = first.guide_solver.head_batch(places)
+        #: whether the guides of all people advance in one call
+        self.batched = self.batch is not None
+        #: where the people's guides live, side by side: (places, G, N, 3) positions and
+        #: velocities (a person's ``guides.x`` and ``.v`` are views of its place)
+        self.x, self.v = (self.batch.x, self.batch.v) if self.batched else \
+            (np.zeros((places,) + g.x.shape), np.zeros((places,) + g.x.shape))
         self.people: Dict[str, HairSimulator] = {}
         self._place: Dict[str, int] = {}
         self.time_ns: Optional[int] = None
@@ -79,7 +78,7 @@ class Crowd:
 
     @property
     def places(self) -> int:
-        return self._x.shape[0]
+        return self.x.shape[0]
 
     # ---------------------------------------------------------------- people
     def add(self, key: str, t_ns: int, position, quaternion) -> PoseResult:
@@ -96,9 +95,9 @@ class Crowd:
             return result
         place = self._free.pop()
         g = sim.guides
-        np.copyto(self._x[place], g.x)
-        np.copyto(self._v[place], g.v)
-        g.x, g.v = self._x[place], self._v[place]
+        np.copyto(self.x[place], g.x)
+        np.copyto(self.v[place], g.v)
+        g.x, g.v = self.x[place], self.v[place]
         self.people[key] = sim
         self._place[key] = place
         if self.time_ns is None:
@@ -145,7 +144,7 @@ class Crowd:
         for sim in sims:
             start = sim.clock()
             sim.counters.last_track_ms = 0.0
-            sim._begin_ghosts()
+            sim.begin_tracking()
             heads.append([sim.track.sample(t) for t in times])
             sim.counters.last_advance_ms = (sim.clock() - start) * 1e3
         if times:
@@ -155,7 +154,7 @@ class Crowd:
             if h:
                 sim.head = h[-1]
             sim.time_ns = self.time_ns
-            sim._track_ghosts(dt * len(times), len(times))
+            sim.finish_tracking(dt * len(times), len(times))
             c = sim.counters
             c.substeps += len(times)
             c.last_substeps = len(times)
@@ -167,67 +166,34 @@ class Crowd:
     def _run(self, dt: float, sims: List[HairSimulator], slots: np.ndarray, heads) -> None:
         """Every person's guides through their ``heads`` (substeps ``dt``): one batched call a
         run of substeps; a substep that any person's split rule splits, split for all."""
-        every = any(s.ghost_tracker is not None and s._every_substep() for s in sims)
-        if not self.batched or every:
+        if not self.batched or any(s.tracks_every_substep for s in sims):
             for sim, h in zip(sims, heads):
-                sim._run(dt, sim.head, h)
+                sim.run_substeps(dt, sim.head, h)
             return
-        first = sims[0]
-        prev = [s.head for s in sims]
-        rigid = np.array([[s._rigid(a, b) for a, b in zip([s.head] + h[:-1], h)]
-                          for s, h in zip(sims, heads)])
-        limit, floor = first._split_limit(dt)
-        gdt2 = first._gravity_norm * dt * dt
-        n, k = len(heads[0]), 0
-        while k < n:
-            parts = max(s._split_count(dt, rigid[i, k], s._last_speed)
-                        for i, s in enumerate(sims))
-            if parts > 1:
-                run = [split_heads(p, h[k], parts) for p, h in zip(prev, heads)]
-                steps, done = self._advance(dt / parts, sims, slots, prev, run, None)
-                for s in sims:
-                    s.counters.extra['split_substeps'] = \
-                        s.counters.extra.get('split_substeps', 0) + parts - 1
-                for i, s in enumerate(sims):
-                    s._last_speed = math.sqrt(steps[i, parts - 1]) * parts / dt
-                prev, k = [h[k] for h in heads], k + 1
-                continue
-            run = [h[k:] for h in heads]
-            stop = (rigid[:, k:], limit if floor > 1 else 0.0, gdt2)
-            steps, done = self._advance(dt, sims, slots, prev, run, stop)
-            for i, s in enumerate(sims):
-                s._last_speed = math.sqrt(steps[i, done - 1]) / dt
-            prev, k = [h[k + done - 1] for h in heads], k + done
+        rule = sims[0].split_rule
+        rigid = np.array([s.split_rule.rigid_run(s.head, h) for s, h in zip(sims, heads)])
 
-    def _advance(self, dt: float, sims, slots: np.ndarray, prev: List[HeadPose], runs, stop):
-        """One call of the batched kernel: every person (at its place ``slots[i]``) from
-        ``prev`` through its run of poses (all runs the same length); returns ``(steps (P, K),
-        substeps taken)``, ``steps`` the largest squared node displacement of each person's
-        substeps."""
-        people, n_sub = len(sims), len(runs[0])
-        rots = np.empty((people, n_sub + 1, 3, 3))
-        poss = np.empty((people, n_sub + 1, 3))
-        rels = np.empty((people, n_sub, 3, 3))
-        for i, (p, run) in enumerate(zip(prev, runs)):
-            for j, head in enumerate([p] + list(run)):
-                rots[i, j], poss[i, j] = head.rotation, head.position
-            if not head_motions(rots[i], poss[i], rels[i]):
-                raise ValueError('head pose must be finite')
-        solver = sims[0].guide_solver
-        blocks = block_count(self._x.shape[1])
-        counts = np.empty((people, blocks, n_sub, 2), dtype=np.int64)
-        steps = np.empty((people, blocks, n_sub))
-        sv = self.scene.solver
-        drive = (rots, poss, rels, solver._gravity, math.exp(-self.scene.damping * dt), dt,
-                 float(sv.shock_propagation))
-        rule = (np.zeros((people, 1)), 0.0, 0.0) if stop is None else \
-            (np.ascontiguousarray(stop[0]), float(stop[1]), float(stop[2]))
-        kernel = many_heads.ftl_advance_heads if self.parallel else \
-            many_heads.ftl_advance_heads_serial
-        done = kernel(self._model, (self._x, self._v, self._x_old), drive,
-                      solver._ftl_params(dt, True), self._collide, self._collider,
-                      (self._corr, self._x_ref, counts, steps, self._before), rule, slots)
-        return steps[:, 0, :done], int(done)
+        def prev(k):
+            return [h[k - 1] for h in heads] if k else [s.head for s in sims]
+
+        def split(k, parts):
+            run = [split_heads(p, h[k], parts) for p, h in zip(prev(k), heads)]
+            steps, _ = self.batch.advance(dt / parts, slots, prev(k), run, None, self.parallel)
+            for s in sims:
+                s.note_split(parts)
+            for i, s in enumerate(sims):
+                s.speed = math.sqrt(steps[i, parts - 1]) * parts / dt
+
+        def run(k):
+            steps, done = self.batch.advance(dt, slots, prev(k), [h[k:] for h in heads],
+                                             rule.stop(dt, rigid[:, k:]), self.parallel)
+            for i, s in enumerate(sims):
+                s.speed = math.sqrt(steps[i, done - 1]) / dt
+            return done
+
+        run_split(len(heads[0]),
+                  lambda k: max(s.split_rule.parts(dt, rigid[i, k], s.speed)
+                                for i, s in enumerate(sims)), split, run)
 
 
 def warm_up(scene: Scene, parallel: bool) -> None:
