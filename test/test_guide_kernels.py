@@ -394,3 +394,26 @@ def test_lane_major_layout_round_trip():
     b = np.arange(3 * 4, dtype=float).reshape(3, 4)
     assert np.array_equal(pbd_constraints.from_lane_major(pbd_constraints.lane_major(b), b.shape),
                           b)
+
+
+@pytest.mark.parametrize('variant', ['strain_limit', 'strain_limit_serial'])
+def test_strain_limiting_puts_every_segment_within_its_bound(variant):
+    from hair_tracking.guides import pbd_constraints
+    rng = np.random.default_rng(3)
+    s, n = 5, 9
+    rest = np.full((s, n - 1), 0.02)
+    x = np.cumsum(rng.normal(size=(s, n, 3)), axis=1)
+    x *= 0.02 / np.linalg.norm(np.diff(x, axis=1), axis=2).mean()
+    x[:, 1:] *= rng.uniform(0.7, 1.4, size=(s, n - 1, 1))       # stretched and squeezed
+    inv_mass = np.ones((s, n))
+    inv_mass[:, :2] = 0.0                                           # the roots are held
+    before, v = x.copy(), np.zeros_like(x)
+    moved = getattr(pbd_constraints, variant)(x, v, inv_mass, rest, 0.01, 0.005)
+    lengths = np.linalg.norm(np.diff(x, axis=1), axis=2)
+    free = inv_mass[:, 1:] > 0
+    assert np.all(np.abs(lengths[free] / rest[free] - 1.0) <= 0.01 + 1e-12)
+    assert np.array_equal(x[:, :2], before[:, :2]) and moved > 0
+    np.testing.assert_allclose(v, (x - before) / 0.005, atol=1e-9)  # the velocity follows
+    again = x.copy()
+    getattr(pbd_constraints, variant)(x, v, inv_mass, rest, 0.01, 0.005)
+    np.testing.assert_allclose(x, again, rtol=0, atol=1e-15)        # within bounds: left

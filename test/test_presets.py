@@ -94,3 +94,20 @@ def test_the_default_preset_gives_the_same_hair_as_no_scene(tmp_path):
                 RunOptions(markers=False, diagnostics=False, head_pose=False))
         clouds.append([(t, bytes(msg.data)) for t, msg in bag_io.cloud_messages(out)])
     assert clouds[0] and clouds[0] == clouds[1]
+
+
+def test_the_stiff_preset_is_stiff_on_the_walk():
+    """scene_stiff_extreme (XPBD, rigid, 10 g): every guide and ghost segment within 1 % of its
+    rest length over the first 2 s of the bundled walk (checked at every pose)."""
+    scene = Scene.from_yaml(os.path.join(ROOT, 'config', 'scene_stiff_extreme.yaml'))
+    sim = HairSimulator(scene.with_changes(groom__ghosts_per_guide=GHOSTS_PER_GUIDE))
+    walk = load_bundled_walk()
+    worst, poses = 0.0, 0
+    for t, p, q in zip(walk.t_ns, walk.position, walk.quaternion):
+        if t - walk.t_ns[0] > 2_000_000_000:
+            break
+        sim.push_pose(int(t), p, q)
+        sim.advance_to(int(t))
+        worst = max(worst, sim.max_stretch())
+        poses += 1
+    assert poses > 100 and worst <= 0.01, worst

@@ -151,6 +151,7 @@ class SolverSpec:
     max_substeps: int
     shock_propagation: float
     max_displacement: float
+    max_strain: float
     settle_time: float
     settle_speed: float
 

@@ -198,6 +198,10 @@ SCENE_PARAMS: Tuple[Param, ...] = (
     _row('solver.max_displacement', 'double', 0.05,
          'per-substep displacement clamp (ftl: per inner step); 0 disables', unit='m',
          lo=0.0, hi=10.0),
+    _row('solver.max_strain', 'double', 0.0,
+         'PBD/XPBD: after every substep no guide segment is longer or shorter than its rest '
+         'length by more than this fraction (strain limiting); 0 disables (FTL keeps lengths '
+         'exact)', lo=0.0, hi=0.5),
     _row('solver.settle_time', 'double', 0.5,
          'time simulated with a still head after a (re)build or reset', unit='s', lo=0.0, hi=60.0),
     _row('solver.settle_speed', 'double', 0.0,

@@ -263,7 +263,7 @@ class GuideSolver:
                              f'{pos_prev if bad == "head_prev" else pos}')
         st = self.strands
         damp = math.exp(-self._damping * dt)
-        fused = self.collider is None and self.body is None
+        fused = self._fuses()
         # the kernels' arguments, plain tuples in the fields' order of integrate.GuideState,
         # integrate.StepMotion and the solver's Params (built here each substep; the models in
         # _build_model / _xpbd_factors)
@@ -284,7 +284,16 @@ class GuideSolver:
             finalize = integrate.finalize if parallel else integrate.finalize_serial
             corr, max_disp, s_damp = self._finalize_args(dt)
             clamped = finalize(st.x, st.v, self._x_old, st.inv_mass, corr, dt, max_disp, s_damp)
+            self._after_finalize(dt, parallel)
         self._count(clamped, contacts)
+
+    def _fuses(self) -> bool:
+        """Whether the projection kernel finishes the substep itself (collision and
+        finalize have nothing to do)."""
+        return self.collider is None and self.body is None
+
+    def _after_finalize(self, dt: float, parallel: bool) -> None:
+        """What a solver does to the finished substep (nothing here)."""
 
     def _friction_ref(self) -> np.ndarray:
         """The collider's friction reference: the start-of-substep positions carried with the
@@ -519,6 +528,19 @@ class _LaneSolver(GuideSolver):
         self._work = pbd_constraints.lane_work(s, n)
         self._rest_length_l = lanes(st.rest_length)
         self._bend_rest_l = lanes(self._bend_rest)
+
+    def _fuses(self) -> bool:
+        return super()._fuses() and not self.scene.solver.max_strain > 0.0
+
+    def _after_finalize(self, dt, parallel):
+        """Strain limiting (``solver.max_strain``,
+        :func:`~hair_tracking.guides.pbd_constraints.strain_limit`)."""
+        limit = float(self.scene.solver.max_strain)
+        if limit > 0.0:
+            st = self.strands
+            kernel = pbd_constraints.strain_limit if parallel else \
+                pbd_constraints.strain_limit_serial
+            kernel(st.x, st.v, st.inv_mass, st.rest_length, limit, dt)
 
     def _project(self, state, motion, dt, parallel, fused):
         if self._x_ref is not None:
