@@ -42,6 +42,7 @@ of one :meth:`~HairSimulator.advance_to`, with :attr:`~HairSimulator.split_rule`
 :attr:`~HairSimulator.speed` and :meth:`~HairSimulator.note_split` for guides it advances in a
 batch.
 """
+import dataclasses
 from dataclasses import dataclass, field
 import math
 import time
@@ -202,6 +203,9 @@ class HairSimulator:
         :class:`~hair_tracking.grooms.polylines.GroomFileError` and changes nothing.
         """
         scene.validate()
+        if dataclasses.replace(scene, gravity=self.scene.gravity) == self.scene:
+            self.set_gravity(scene.gravity)          # gravity alone: a per-step input
+            return False
         rebuild = scene.groom != self.scene.groom or \
             scene.tracking.mode != self.scene.tracking.mode
         groom = build_groom(scene.groom) if rebuild else None
@@ -222,6 +226,19 @@ class HairSimulator:
         self.dt_ns = max(1, int(round(scene.solver.dt * 1e9)))
         self.split_rule = self._split_rule(scene)
         return False
+
+    def set_gravity(self, gravity) -> None:
+        """Gravity [m/s^2] (3,) in the fixed frame of the head poses from the next substep on,
+        an input of each step like the head pose (``gravity_frame``: the node turns the scene's
+        gravity into the pose frame whenever that frame moves): the solver and the split rule
+        take it, nothing is rebuilt.  ValueError for anything but three finite numbers (the
+        hair is left as it was)."""
+        g = np.asarray(gravity, dtype=np.float64)
+        if g.shape != (3,) or not np.all(np.isfinite(g)):
+            raise ValueError(f'gravity must be three finite numbers [m/s^2], got {gravity!r}')
+        self.scene = dataclasses.replace(self.scene, gravity=tuple(float(v) for v in g))
+        self.guide_solver.set_gravity(g)
+        self.split_rule = self._split_rule(self.scene)
 
     def _split_rule(self, scene: Scene) -> SplitRule:
         return SplitRule(scene.solver.max_displacement, float(np.linalg.norm(scene.gravity)),

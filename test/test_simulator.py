@@ -387,3 +387,28 @@ def test_settle_speed_settles_until_the_hair_is_still(mode):
                                 solver__settle_speed=0.002))
     again.reset()                                   # a reset settles the same way
     assert again.settled_s == pytest.approx(still.settled_s)
+
+
+def test_gravity_is_a_per_step_input_not_a_rebuild():
+    scene = Scene().with_changes(**SMALL)
+    sim, still = HairSimulator(scene), HairSimulator(scene)
+    t0 = 1_000_000_000
+    for s in (sim, still):
+        s.push_pose(t0, [0.0, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0])
+    solver, tracker = sim.guide_solver, sim.ghost_tracker
+    sideways = (4.0, 0.0, -9.0)
+    assert sim.update_scene(scene.with_changes(gravity=sideways)) is False
+    assert sim.guide_solver is solver and sim.ghost_tracker is tracker    # nothing rebuilt
+    assert sim.scene.gravity == sideways
+    for k in range(1, 31):
+        t = t0 + k * 16_666_667
+        for s in (sim, still):
+            s.push_pose(t, [0.0, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0])
+            s.advance_to(t)
+    tips = sim.guides.x[:, -1, 0] - still.guides.x[:, -1, 0]
+    assert np.all(tips > 0.005)                        # the hair swings toward +x
+    with pytest.raises(ValueError, match='three finite numbers'):
+        sim.set_gravity([0.0, np.nan, -9.81])
+    assert sim.scene.gravity == sideways
+    sim.set_gravity(still.scene.gravity)               # back: the step input, set again
+    assert sim.scene == still.scene and sim.guide_solver is solver

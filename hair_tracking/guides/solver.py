@@ -139,6 +139,11 @@ class GuideSolver:
         for key in self._counters:
             self._counters[key] = 0
 
+    def set_gravity(self, gravity) -> None:
+        """Gravity [m/s^2] (3,) in the fixed frame of the head poses from the next substep on
+        (a per-step input: nothing is rebuilt)."""
+        self._gravity[...] = np.asarray(gravity, dtype=np.float64).reshape(3)
+
     def leave_body(self, head: HeadPose) -> int:
         """Move the strands, as they stand, out of the bust posed at the head pose ``head``:
         after the hair was placed or carried rigidly with the head, which the bust does not

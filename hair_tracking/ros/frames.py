@@ -12,7 +12,6 @@ the message).  It also broadcasts the head pose on ``/tf`` (``publish_tf``).
 slot's frame (the last one found kept while none arrives).
 """
 from typing import Callable, Dict, List, Optional, Set, Tuple
-import dataclasses
 
 from geometry_msgs.msg import TransformStamped
 import numpy as np
@@ -219,8 +218,7 @@ class SceneFrames:
                                                          atol=1e-9):
             return
         self.gravity_used = g
-        sim = self._sim()
-        sim.update_scene(dataclasses.replace(sim.scene, gravity=tuple(float(v) for v in g)))
+        self._sim().set_gravity(g)
 
     def update_bodies(self) -> None:
         """``body.frame`` and the collider slots' frames: each one's pose handed to the
