@@ -2,8 +2,8 @@
 
 Every ``sensor_msgs/PointCloud2`` of the hair topic (default ``/hair/points``; one row per
 strand, as the node and ``hair_sim_bag run`` write it) becomes one time sample of the points of
-the linear BasisCurves prim ``/groom/hair`` (:func:`hair_tracking.grooms.writers.usd_stage`): time
-code ``k`` is the ``k``-th cloud, ``timeCodesPerSecond`` and ``framesPerSecond`` the clouds'
+the linear BasisCurves prim ``/groom/hair`` (:class:`hair_tracking.grooms.usd.AnimatedCurves`):
+time code ``k`` is the ``k``-th cloud, ``timeCodesPerSecond`` and ``framesPerSecond`` the clouds'
 median rate, so the animation plays at the recording's pace in Blender, Omniverse or Unreal.  The
 curve vertex counts are time-sampled too when the hair changes shape (a rebuilt groom); the
 first cloud is also the attributes' default value, so a reader of still grooms
@@ -11,7 +11,7 @@ first cloud is also the attributes' default value, so a reader of still grooms
 clouds' frame (``frame_id``, said in the summary).  Clouds are read one at a time.
 """
 from pathlib import Path
-from typing import Dict, Optional
+from typing import Dict
 
 import numpy as np
 
@@ -30,8 +30,7 @@ def export_usd(path, output, topic: str = '/hair/points', overwrite: bool = Fals
     """Write the clouds of ``topic`` in the bag ``path`` to the USD file ``output`` (see the
     module docstring); returns a summary: frames, strands, points per strand, rate, frame id."""
     from msg_adapters.pointcloud import pointcloud2_to_strands
-    from hair_tracking.grooms.writers import usd_stage
-    from pxr import Usd, Vt
+    from hair_tracking.grooms.usd import AnimatedCurves
 
     out = Path(output)
     if out.suffix.lower() not in USD_EXTENSIONS:
@@ -39,7 +38,7 @@ def export_usd(path, output, topic: str = '/hair/points', overwrite: bool = Fals
                        f'({", ".join(USD_EXTENSIONS)})', EXIT_USAGE)
     bag_io.check_output_path(output, overwrite)
     tmp = out.with_name(f'.{out.stem}.partial{out.suffix}')
-    summary: Dict[str, object] = {'frames': 0, 'frame_id': '', 'shapes': 0}
+    summary: Dict[str, object] = {'frame_id': ''}
     stamps = []
     try:
         with bag_io.open_bag(path) as reader:
@@ -50,9 +49,7 @@ def export_usd(path, output, topic: str = '/hair/points', overwrite: bool = Fals
             if info.msgtype != CLOUD_TYPE:
                 raise BagError(f'{path}: {topic} is a {info.msgtype}, not a PointCloud2',
                                EXIT_CONTENT)
-            stage, curves = usd_stage(str(tmp), 1.0, 'z')
-            points, counts = curves.CreatePointsAttr(), curves.CreateCurveVertexCountsAttr()
-            shape: Optional[tuple] = None
+            usd = AnimatedCurves(str(tmp))
             conns = [c for c in reader.connections if c.topic == topic]
             for conn, _, raw in bag_io.messages(reader, conns):
                 msg = bag_io.deserialize(reader, raw, conn.msgtype, topic)
@@ -60,32 +57,17 @@ def export_usd(path, output, topic: str = '/hair/points', overwrite: bool = Fals
                     strands = pointcloud2_to_strands(msg)[0]
                 except ValueError as exc:
                     raise BagError(f'{path}: {topic}: {exc}', EXIT_CONTENT) from None
-                k = len(stamps)
-                flat = Vt.Vec3fArray.FromNumpy(
-                    np.ascontiguousarray(strands.reshape(-1, 3), dtype=np.float32))
-                if strands.shape[:2] != shape:
-                    shape = strands.shape[:2]
-                    per = Vt.IntArray.FromNumpy(np.full(shape[0], shape[1], dtype=np.int32))
-                    counts.Set(per, Usd.TimeCode(k))
-                    if k == 0:
-                        counts.Set(per)
-                    summary['shapes'] = int(summary['shapes']) + 1
-                points.Set(flat, Usd.TimeCode(k))
-                if k == 0:
-                    points.Set(flat)
+                if not stamps:
                     summary['frame_id'] = str(msg.header.frame_id)
-                    summary['strands'], summary['points_per_strand'] = shape
+                    summary['strands'], summary['points_per_strand'] = strands.shape[:2]
+                usd.add(strands)
                 stamps.append(_stamp_ns(msg.header))
             if not stamps:
                 raise BagError(f'{path}: {topic} has no messages', EXIT_CONTENT)
             steps = np.diff(np.asarray(stamps, dtype=np.int64))
             steps = steps[steps > 0]
             rate = round(1e9 / float(np.median(steps)), 3) if steps.size else 1.0
-            stage.SetStartTimeCode(0)
-            stage.SetEndTimeCode(len(stamps) - 1)
-            stage.SetTimeCodesPerSecond(rate)
-            stage.SetFramesPerSecond(rate)
-            stage.GetRootLayer().Save()
+            usd.save(rate)
         tmp.replace(out)
     finally:
         if tmp.exists():

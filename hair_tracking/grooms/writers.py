@@ -84,35 +84,12 @@ def write_npz(path: str, points, counts, meters_per_unit: Optional[float] = None
     write(path, p, c, meters_per_unit, up_axis)
 
 
-def usd_stage(path: str, meters_per_unit: Optional[float], up_axis: Optional[str]):
-    """A new USD stage at ``path`` with its units and up axis (USD has only y and z up: another
-    up axis is left unstated), and the ``/groom/hair`` linear BasisCurves prim; returns
-    ``(stage, curves)``."""
-    try:
-        from pxr import Usd, UsdGeom
-    except ImportError:
-        from hair_tracking.grooms.usd import MISSING
-        raise GroomFileError(path, '', '', MISSING.replace('reading', 'writing')) from None
-    stage = Usd.Stage.CreateNew(str(path))
-    if meters_per_unit is not None:
-        UsdGeom.SetStageMetersPerUnit(stage, float(meters_per_unit))
-    if up_axis in ('y', 'z'):
-        UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.y if up_axis == 'y' else UsdGeom.Tokens.z)
-    stage.SetDefaultPrim(UsdGeom.Xform.Define(stage, '/groom').GetPrim())
-    curves = UsdGeom.BasisCurves.Define(stage, '/groom/hair')
-    curves.CreateTypeAttr(UsdGeom.Tokens.linear)
-    return stage, curves
-
-
 def write_usd(path: str, points, counts, meters_per_unit: Optional[float] = None,
               up_axis: Optional[str] = None) -> None:
-    """A USD stage of one linear BasisCurves prim (see the module docstring)."""
-    from pxr import Vt
+    """A USD stage of one linear BasisCurves prim (:func:`hair_tracking.grooms.usd.write_usd`)."""
+    from hair_tracking.grooms.usd import write_usd as write
     p, c = _checked(points, counts)
-    stage, curves = usd_stage(path, meters_per_unit, up_axis)
-    curves.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(p))
-    curves.CreateCurveVertexCountsAttr(Vt.IntArray.FromNumpy(c.astype(np.int32)))
-    stage.GetRootLayer().Save()
+    write(path, p, c, meters_per_unit, up_axis)
 
 
 WRITERS = {'.hair': write_hair, '.data': write_data, '.ply': write_ply, '.npz': write_npz,
