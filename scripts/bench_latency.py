@@ -69,6 +69,7 @@ from hair_tracking.core.param_table import by_name  # noqa: E402
 from hair_tracking.evaluation.provenance import command_line, provenance  # noqa: E402
 from cpu_steal import format_share, StealMeter  # noqa: E402  (scripts/cpu_steal.py)
 from hair_tracking.ros.node import HairSimNode  # noqa: E402
+from hair_tracking.ros.pose_intake import PoseIntake  # noqa: E402
 from hair_tracking.ros.ghosts import shard_topic  # noqa: E402
 from hair_tracking.output.shards import guide_state_bytes  # noqa: E402
 from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
@@ -284,21 +285,24 @@ class GcPauses:
 
 
 def timed_node(clock):
-    """A :class:`HairSimNode` subclass that marks its stages on ``clock``."""
-    class TimedNode(HairSimNode):
-        def _on_pose(self, msg):
+    """A :class:`HairSimNode` subclass whose pose intake marks its stages on ``clock``."""
+    class TimedIntake(PoseIntake):
+        def on_pose(self, msg, from_tf=False):
             stamp = time_to_ns(msg.header.stamp)
             clock.current = stamp
             clock.mark(stamp, 'callback')
             try:
-                super()._on_pose(msg)
+                super().on_pose(msg, from_tf)
             finally:
                 clock.mark(stamp, 'returned')
                 clock.current = None
 
-        def _step(self, t_ns):
-            super()._step(t_ns)
+        def step(self, t_ns):
+            super().step(t_ns)
             clock.mark(clock.current, 'stepped')
+
+    class TimedNode(HairSimNode):
+        intake_type = TimedIntake
     return TimedNode
 
 
@@ -437,7 +441,8 @@ def _run_case(ghosts, mode, args, domain_id, shards, guides, per_guide):
                 probe_ex.spin_once(timeout_sec=0.05)
     if args.stages:
         points = node.outputs['points']
-        node.encoder.cloud = _marking(node.encoder.cloud, clock, 'encoded')
+        encoder = node.publishing.encoder
+        encoder.cloud = _marking(encoder.cloud, clock, 'encoded')
         points.raw.publish = _marking(points.raw.publish, clock, 'published')
     probe_thread = threading.Thread(target=spin_probe, daemon=True)
     probe_thread.start()
@@ -511,8 +516,8 @@ def _run_case(ghosts, mode, args, domain_id, shards, guides, per_guide):
             shown, unshown = shown_by_all(sent, by_shard, stamps)
         else:
             shown, unshown = shown_latency(sent, received, stamps)
-    step_ms = list(node.step_ms)          # kernels were warmed up before the first pose
-    pub_ms = list(node.publish_ms)
+    step_ms = list(node.intake.step_ms)          # kernels were warmed up before the first pose
+    pub_ms = list(node.publishing.publish_ms)
     c = node.sim.counters
     result = {
         'ghosts': int(node.sim.ghosts.count), 'guides': int(node.sim.guides.count),

@@ -82,6 +82,9 @@ class HairSimNode(Node):
     (:class:`~hair_tracking.ros.faces.FaceHair`, ``people.source: hri``; else None).
     """
 
+    #: The pose intake's class (a benchmark's subclass marks its stages).
+    intake_type = PoseIntake
+
     def __init__(self, node_name: str = NODE_NAME, *, context=None,
                  parameter_overrides: Optional[List[Parameter]] = None,
                  cli_args: Optional[List[str]] = None, namespace: Optional[str] = None,
@@ -103,7 +106,7 @@ class HairSimNode(Node):
             secs = warm_up(settings.scene)
             self.get_logger().info(f'kernels and encoders ready in {secs:.2f} s')
         self.rebuilds = 0
-        self.intake = PoseIntake(self)
+        self.intake = self.intake_type(self)
         self.frames = Frames(self)
         self.frames.broadcasting(settings.publish_tf)
         self.scene_frames = SceneFrames(self, self.frames, lambda: self.sim,
