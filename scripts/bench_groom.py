@@ -87,7 +87,7 @@ def main(argv=None):
         load = {}
         for name, fn in (('read_s', lambda: read_strands(path)),
                          ('import_s', lambda: import_groom(imported.groom)),
-                         ('build_s', lambda: build_groom(imported.groom))):
+                         ('build_s', lambda: build_groom(imported.groom, cache=False))):
             load[name], load[name.replace('_s', '_cpu_s')] = median_seconds(fn, args.repeats)
             print(f'{name[:-2]:7s} {args.strands} x {args.vertices} ({size_mb:.1f} MB): median '
                   f'{load[name]:.3f} s wall, {load[name.replace("_s", "_cpu_s")]:.3f} s CPU',

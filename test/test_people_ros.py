@@ -233,6 +233,8 @@ def test_nan_faces_are_refused_before_any_hair_and_clouds_carry_their_pose_time(
         problems, values = hook.diagnostics()
         assert values['face_poses_refused'] == '90' and values['face_ids_without_hair'] == '1'
         assert 'face x: position has non-finite values' in problems[0]
+        problems, values = hook.diagnostics()               # none refused since: no warning
+        assert values['face_poses_refused'] == '90' and not any('refused' in p for p in problems)
         t0 = now[0]
         frames.on_tf(faces_message(t0, {'a': (0.0, 0.0), 'b': (1.0, 0.0)}))
         assert made == ['a', 'b']

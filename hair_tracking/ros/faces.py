@@ -76,6 +76,7 @@ class FaceHair:
         self._now = now_ns if now_ns is not None else \
             (lambda: node.get_clock().now().nanoseconds)
         s = settings()
+        self._rejected_reported = 0          # face poses refused at the last report
         self.roster = Roster(s.scene)
         if s.warmup:
             crowd_module.warm_up(s.scene, self.roster.crowd.parallel)
@@ -195,12 +196,15 @@ class FaceHair:
         self.publish(only_wanted=True)
 
     def diagnostics(self):
-        """``(problems, values)`` of the people for the node's diagnostics: poses refused,
-        ids seen without hair."""
+        """``(problems, values)`` of the people for the node's diagnostics (one report): poses
+        refused since the last report, ids seen without hair; the values count from the
+        start."""
         roster = self.roster
         problems, waiting = [], roster.without_pose()
-        if roster.rejected:
-            problems.append(f'{roster.rejected} face poses refused, last: '
+        fresh = roster.rejected - self._rejected_reported   # refused since the last report
+        self._rejected_reported = roster.rejected
+        if fresh:
+            problems.append(f'{fresh} face poses refused since the last report, last: '
                             f'{roster.last_rejection}')
         if waiting:
             problems.append(f'{len(waiting)} face ids without hair (no usable face_<id> pose '
