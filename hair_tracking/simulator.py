@@ -596,7 +596,7 @@ def _worst(a: float, b: float) -> float:
     return math.nan if math.isnan(a) or math.isnan(b) else max(a, b)
 
 
-def warm_up(scene: Scene) -> HairSimulator:
+def warm_up(scene: Scene, parallel: Optional[Parallelism] = None) -> HairSimulator:
     """Compile (or load from numba's on-disk cache) every kernel ``scene`` uses.
 
     Runs a tiny copy of the scene (same solver, collider, tracking and output options and
@@ -604,14 +604,16 @@ def warm_up(scene: Scene) -> HairSimulator:
     is read for its strand counts only) through a moving, turning head and the stretch and
     penetration checks, so the first real steps are not late: every stage through the variant,
     serial or parallel, that the full scene will run (:func:`parallelism` of ``scene``, handed
-    to the tiny copy), and only that one.  Returns the tiny simulator (callers may warm their
-    own output code on its frames).
+    to the tiny copy; ``parallel``: those of a simulator of ``scene`` already built, so an
+    imported groom is not read again), and only that one.  Returns the tiny simulator (callers
+    may warm their own output code on its frames).
     """
     g = scene.groom
     small = scene.with_changes(groom__guides=min(g.guides, 2),
                                groom__ghosts_per_guide=min(g.ghosts_per_guide, 2),
                                groom__file='', solver__settle_time=0.0)
-    sim = HairSimulator(small, parallel=parallelism(scene))
+    sim = HairSimulator(small, parallel=parallel if parallel is not None else
+                        parallelism(scene))
     dt_ns = max(1, int(round(small.solver.dt * 1e9)))
     sim.push_pose(1, [0.0, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0])
     sim.push_pose(1 + 4 * dt_ns, [0.01, 0.0, 0.0], [0.0, 0.0, 0.0871557, 0.9961947])

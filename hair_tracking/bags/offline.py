@@ -352,12 +352,12 @@ def run_bag(input_path: str, output_path: str, settings: Settings,
         raise BagError('the output frame is empty (set fixed_frame / head_frame)', EXIT_CONTENT)
 
     t_setup = time.perf_counter()
-    tiny = warm_up(scene)       # compile or load every kernel here, not inside the timed loop
+    sim = HairSimulator(scene)  # the groom read and built once
+    tiny = warm_up(scene, sim.parallel)   # every kernel compiled or loaded here, not in the loop
     if opt.points:              # and the clouds' point writers, on the tiny copy's hair
         warm = FrameEncoder(settings)
         for guides, ns in ((False, 'hair'), (True, 'guides')):
             warm.cloud(*tiny.record_writer(guides, head_out), 'warmup', 1, ns)
-    sim = HairSimulator(scene)
     summary.groom = sim.groom_note
     enc = FrameEncoder(settings)
     if after_setup is not None:

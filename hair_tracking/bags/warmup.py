@@ -28,12 +28,13 @@ from hair_tracking.core.scene import Scene
 from hair_tracking.core.param_table import MARKER_STYLES
 
 
-def warm_up(scene: Scene) -> float:
+def warm_up(scene: Scene, parallel=None) -> float:
     """Compile (or load from numba's on-disk cache) the kernels and encoders ``scene`` uses.
 
     Runs a tiny copy of the scene (same solver, collider, tracking and output options, few
     strands) through every call the node makes (:mod:`hair_tracking.ros.node`), so the first
-    real frames are not late.  Returns the seconds it took.
+    real frames are not late (``parallel``: the kernel variants of a simulator of ``scene``
+    already built, :func:`hair_tracking.simulator.warm_up`).  Returns the seconds it took.
     """
     from msg_adapters.marker_cdr import strands_to_marker_array_cdr
     from msg_adapters.pointcloud import CloudBuffer, pack_rgb_u32
@@ -41,7 +42,7 @@ def warm_up(scene: Scene) -> float:
     from hair_tracking.simulator import warm_up as warm_up_simulator
 
     start = time.perf_counter()
-    sim = warm_up_simulator(scene)
+    sim = warm_up_simulator(scene, parallel)
     for head_frame in (False, True):
         f = sim.frame(head_frame=head_frame, copy=False)
         for guides, strands in ((False, f.strands), (True, f.guides)):

@@ -18,7 +18,7 @@ from typing import Any, Dict, Mapping, Optional, Tuple
 from hair_tracking.core.param_table import by_name, NODE_PARAMS
 from hair_tracking.core.params import did_you_mean, ParamError
 from hair_tracking.core.scene import Scene, scene_fields, SceneError
-from hair_tracking.grooms.build import import_groom
+from hair_tracking.grooms.build import build_groom
 from hair_tracking.grooms.polylines import GroomFileError
 
 RGBA = Tuple[float, float, float, float]
@@ -114,7 +114,7 @@ def check_groom_file(scene: Scene) -> None:
     anything is rebuilt); nothing for the procedural groom."""
     if scene.groom.file:
         try:
-            import_groom(scene.groom)
+            build_groom(scene.groom)        # kept (grooms/cache.py): the hair's build loads it
         except GroomFileError as e:
             raise ParamError('groom.file', str(e)) from None
 

@@ -103,7 +103,7 @@ class HairSimNode(Node):
         if self.sim.groom_note:
             self.get_logger().info(self.sim.groom_note)
         if settings.warmup:
-            secs = warm_up(settings.scene)
+            secs = warm_up(settings.scene, self.sim.parallel)
             self.get_logger().info(f'kernels and encoders ready in {secs:.2f} s')
         self.rebuilds = 0
         self.intake = self.intake_type(self)
