@@ -189,3 +189,20 @@ def test_publish_bytes_over_dds():
     payloads = [strands_to_marker_array_cdr(x, **big),
                 strands_to_marker_array_cdr(x[:3], **small)]
     assert publish_and_receive(MarkerArray, payloads, 71) == expected
+
+
+def test_the_node_draws_at_most_marker_max_strands_evenly_spread():
+    from hair_tracking.output.frame_encoder import FrameEncoder
+    from hair_tracking.output.settings import make_settings
+    strands = np.random.default_rng(0).normal(size=(10, 5, 3))
+    enc = FrameEncoder(make_settings({'marker_max_strands': 4, 'marker_style': 'line_strips'}))
+    msg = deserialize_message(bytes(enc.markers(strands, 'world', 7).data), MarkerArray)
+    drawn = [m for m in msg.markers if m.action == Marker.ADD]
+    assert len(drawn) == 4
+    for m, s in zip(drawn, (0, 3, 6, 9)):                    # the first, the last, between
+        got = np.array([[p.x, p.y, p.z] for p in m.points])
+        np.testing.assert_allclose(got, strands[s], rtol=1e-6, atol=1e-6)
+    every = FrameEncoder(make_settings({'marker_max_strands': 0,
+                                        'marker_style': 'line_strips'}))
+    msg = deserialize_message(bytes(every.markers(strands, 'world', 7).data), MarkerArray)
+    assert len([m for m in msg.markers if m.action == Marker.ADD]) == 10

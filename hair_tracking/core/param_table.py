@@ -103,6 +103,10 @@ NODE_PARAMS: Tuple[Param, ...] = (
           '(one marker per strand)', choices=MARKER_STYLES),
     Param('marker_width', 'double', 0.001, 'line width of the hair markers', unit='m',
           lo=1e-5, hi=0.1),
+    Param('marker_max_strands', 'int', 10000,
+          'the markers draw at most this many strands, evenly spread over the scalp (a full '
+          'head of 100 000 would make some 70 MB of markers a frame; the cloud carries every '
+          'strand); 0: all', lo=0, hi=2_000_000),
     Param('marker_color', 'double_array', (0.45, 0.3, 0.15, 1.0),
           'RGBA colour of the hair markers and of the cloud rgb field', lo=0.0, hi=1.0,
           length=4),

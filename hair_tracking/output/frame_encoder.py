@@ -83,9 +83,13 @@ class FrameEncoder:
 
     def markers(self, strands: np.ndarray, frame_id: str, stamp_ns: int, ns: str = 'hair',
                 rgba=None) -> Encoded:
-        """The marker array of ``strands`` (S, N, 3) in namespace ``ns``; ``fresh`` when it
-        starts with a DELETEALL."""
+        """The marker array of ``strands`` (S, N, 3) in namespace ``ns``, at most
+        ``marker_max_strands`` of them, evenly spread in their order (along the scalp);
+        ``fresh`` when it starts with a DELETEALL."""
         s = self.settings
+        most = s.marker_max_strands
+        if 0 < most < strands.shape[0]:
+            strands = strands[np.linspace(0, strands.shape[0] - 1, most).round().astype(np.int64)]
         shape = (strands.shape[0], s.marker_style)
         fresh = self._shapes.get(ns) != shape
         self._shapes[ns] = shape
