@@ -22,10 +22,6 @@ USD_EXTENSIONS = ('.usd', '.usda', '.usdc')
 CLOUD_TYPE = 'sensor_msgs/msg/PointCloud2'
 
 
-def _stamp_ns(header) -> int:
-    return int(header.stamp.sec) * 1_000_000_000 + int(header.stamp.nanosec)
-
-
 def export_usd(path, output, topic: str = '/hair/points', overwrite: bool = False) -> Dict:
     """Write the clouds of ``topic`` in the bag ``path`` to the USD file ``output`` (see the
     module docstring); returns a summary: frames, strands, points per strand, rate, frame id."""
@@ -49,25 +45,23 @@ def export_usd(path, output, topic: str = '/hair/points', overwrite: bool = Fals
             if info.msgtype != CLOUD_TYPE:
                 raise BagError(f'{path}: {topic} is a {info.msgtype}, not a PointCloud2',
                                EXIT_CONTENT)
-            usd = AnimatedCurves(str(tmp))
-            conns = [c for c in reader.connections if c.topic == topic]
-            for conn, _, raw in bag_io.messages(reader, conns):
-                msg = bag_io.deserialize(reader, raw, conn.msgtype, topic)
-                try:
-                    strands = pointcloud2_to_strands(msg)[0]
-                except ValueError as exc:
-                    raise BagError(f'{path}: {topic}: {exc}', EXIT_CONTENT) from None
+        usd = AnimatedCurves(str(tmp))
+        try:
+            for t_ns, msg in bag_io.cloud_messages(path, topic):
+                strands = pointcloud2_to_strands(msg)[0]
                 if not stamps:
                     summary['frame_id'] = str(msg.header.frame_id)
                     summary['strands'], summary['points_per_strand'] = strands.shape[:2]
                 usd.add(strands)
-                stamps.append(_stamp_ns(msg.header))
-            if not stamps:
-                raise BagError(f'{path}: {topic} has no messages', EXIT_CONTENT)
-            steps = np.diff(np.asarray(stamps, dtype=np.int64))
-            steps = steps[steps > 0]
-            rate = round(1e9 / float(np.median(steps)), 3) if steps.size else 1.0
-            usd.save(rate)
+                stamps.append(t_ns)
+        except ValueError as exc:                  # a cloud that is no strands, a bad stamp
+            raise BagError(f'{path}: {topic}: {exc}', EXIT_CONTENT) from None
+        if not stamps:
+            raise BagError(f'{path}: {topic} has no messages', EXIT_CONTENT)
+        steps = np.diff(np.asarray(stamps, dtype=np.int64))
+        steps = steps[steps > 0]
+        rate = round(1e9 / float(np.median(steps)), 3) if steps.size else 1.0
+        usd.save(rate)
         tmp.replace(out)
     finally:
         if tmp.exists():
