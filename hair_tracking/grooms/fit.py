@@ -67,13 +67,20 @@ MIN_DROP = 0.05
 FIT_ROOTS = 2000
 
 
+def _span(roots: np.ndarray, points: np.ndarray) -> Tuple[float, float, str]:
+    """``(span [file units], the span it should have [m], words)``: the largest side of the
+    roots' bounding box against :data:`ROOT_SPAN`, or the whole groom's against
+    :data:`GROOM_SPAN` when the roots coincide."""
+    span = float(np.ptp(roots, axis=0).max()) if roots.shape[0] else 0.0
+    if span > 0.0:
+        return span, ROOT_SPAN, 'the roots span'
+    span = float(np.ptp(points, axis=0).max()) if points.shape[0] else 0.0
+    return span, GROOM_SPAN, 'the groom spans'
+
+
 def guess_units(roots: np.ndarray, points: np.ndarray) -> Tuple[str, str]:
     """``(unit, words)``: the unit of GROOM_UNITS whose roots' span is nearest ROOT_SPAN."""
-    span = float(np.ptp(roots, axis=0).max()) if roots.shape[0] else 0.0
-    target, what = ROOT_SPAN, 'the roots span'
-    if not span > 0.0:
-        span = float(np.ptp(points, axis=0).max()) if points.shape[0] else 0.0
-        target, what = GROOM_SPAN, 'the groom spans'
+    span, target, what = _span(roots, points)
     if not span > 0.0:
         return 'm', 'm (nothing to measure)'
     name = min(GROOM_UNITS, key=lambda k: abs(math.log(GROOM_UNITS[k] * span / target)))
@@ -86,11 +93,7 @@ def units_problem(roots: np.ndarray, points: np.ndarray, unit: float, words: str
     more than :data:`IMPLAUSIBLE_SPAN_FACTOR` times more or less than a head of hair's
     (:data:`ROOT_SPAN`; a whole groom's, :data:`GROOM_SPAN`, when the roots coincide), naming
     the unit the strands suggest (:func:`guess_units`); '' when it can."""
-    span = float(np.ptp(roots, axis=0).max()) if roots.shape[0] else 0.0
-    target, what = ROOT_SPAN, 'the roots span'
-    if not span > 0.0:
-        span = float(np.ptp(points, axis=0).max()) if points.shape[0] else 0.0
-        target, what = GROOM_SPAN, 'the groom spans'
+    span, target, what = _span(roots, points)
     if not span > 0.0 or abs(math.log(span * unit / target)) <= \
             math.log(IMPLAUSIBLE_SPAN_FACTOR):
         return ''
