@@ -159,10 +159,11 @@ def build_groom(spec: GroomSpec, cache: bool = True) -> Groom:
     if not cache:
         return _imported_groom(spec)
     from hair_tracking.grooms import cache as groom_cache
-    groom = groom_cache.load(spec)
+    name = groom_cache.key(spec)                 # reads the file's ends: once
+    groom = groom_cache.load(name)
     if groom is None:
         groom = _imported_groom(spec)
-        groom_cache.store(spec, groom)
+        groom_cache.store(name, groom)
     return groom
 
 

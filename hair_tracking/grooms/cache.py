@@ -47,9 +47,8 @@ def key(spec: GroomSpec) -> Optional[str]:
     return h.hexdigest()
 
 
-def load(spec: GroomSpec) -> Optional[Groom]:
-    """The cached groom of ``spec``, or None."""
-    name = key(spec)
+def load(name: Optional[str]) -> Optional[Groom]:
+    """The cached groom of the entry ``name`` (:func:`key`), or None."""
     path = os.path.join(folder(), f'{name}.npz') if name else ''
     if not path or not os.path.isfile(path):
         return None
@@ -65,9 +64,9 @@ def load(spec: GroomSpec) -> Optional[Groom]:
     return groom
 
 
-def store(spec: GroomSpec, groom: Groom) -> None:
-    """Keep ``groom`` as the entry of ``spec`` (nothing when the folder is not writable)."""
-    name = key(spec)
+def store(name: Optional[str], groom: Groom) -> None:
+    """Keep ``groom`` as the entry ``name`` (:func:`key`; nothing when it is None or the folder
+    is not writable)."""
     if not name:
         return
     where = folder()
