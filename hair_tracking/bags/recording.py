@@ -102,16 +102,17 @@ def _bvh(path, args, warn: Callable[[str], None]):
     about, when it makes the skeleton no person's height
     (:func:`hair_tracking.motion.bvh.units_problem`)."""
     from hair_tracking.motion import bvh as mocap
+    if args.scale is not None and not (math.isfinite(args.scale) and args.scale > 0):
+        raise BagError(f'--scale must be > 0 metres per unit, got {args.scale}', EXIT_USAGE)
+    skeleton = mocap.read_bvh(path)               # read once for the units and the axes
     if args.scale is not None:
-        if not (math.isfinite(args.scale) and args.scale > 0):
-            raise BagError(f'--scale must be > 0 metres per unit, got {args.scale}', EXIT_USAGE)
         scale, words = args.scale, f'{args.scale} m/unit'
     elif args.units != 'auto':
         scale, words = mocap.BVH_UNITS[args.units], args.units
     else:
-        scale, words = mocap.recognise_units(mocap.read_bvh(path))
+        scale, words = mocap.recognise_units(skeleton)
     if args.scale is not None or args.units != 'auto':
-        problem = mocap.units_problem(mocap.read_bvh(path), scale, words)
+        problem = mocap.units_problem(skeleton, scale, words)
         if problem and args.scale is None:
             raise BagError(f'{problem}: give that --units (or --scale to force a scale)',
                            EXIT_USAGE)
@@ -119,7 +120,7 @@ def _bvh(path, args, warn: Callable[[str], None]):
             warn(f'warning: {problem}')
     axes = mocap.CMU_HEAD_AXES
     if args.axes == 'infer':
-        axes = mocap.infer_head_axes(mocap.read_bvh(path), args.joint, scale=scale)
+        axes = mocap.infer_head_axes(skeleton, args.joint, scale=scale)
     motion = mocap.load_bvh_head_motion(path, joint=args.joint, scale=scale, head_axes=axes,
                                         origin=args.origin)
     return motion, f'BVH joint {args.joint!r}, units {words}, head axes {args.axes}'
