@@ -16,6 +16,8 @@ import signal, sys, time
 ignore = {ignore}
 for name in ignore:
     signal.signal(getattr(signal, name), signal.SIG_IGN)
+if 'SIGINT' not in ignore:             # as rclpy does: its own SIGINT handler, so Ctrl-C
+    signal.signal(signal.SIGINT, signal.default_int_handler)  # works in a background job too
 if 'SIGTERM' not in ignore:            # as rclpy does: SIGTERM shuts down, exit status 0
     signal.signal(signal.SIGTERM, lambda *a: sys.exit(0))
 print('ready', flush=True)
