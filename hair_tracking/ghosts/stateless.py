@@ -13,9 +13,9 @@ from typing import Dict, Optional, Tuple
 import numpy as np
 from numba import njit
 
-from hair_tracking.colliders.head import world_center
+from hair_tracking.colliders.head import rotation_entries, world_center
 from hair_tracking.colliders.kernels import slide_push_strands
-from hair_tracking.colliders.pose import frames_at
+from hair_tracking.colliders.pose import frames_at, world_quadric
 from hair_tracking.colliders.reference import (reference_level, reference_pose,
                                                reference_slide_push)
 from hair_tracking.colliders.scene_body import make_body
@@ -62,13 +62,11 @@ def node_map(ghost_nodes: int, guide_nodes: int) -> Tuple[np.ndarray, np.ndarray
 def world_collider(rot, pos, center, axes, out):
     """The collider ellipsoid (``center``, ``axes``: head frame) in the world for the head pose
     ``rot``, ``pos``: ``out[0:3]`` its centre, ``out[3:9]`` the entries Q00 Q11 Q22 Q01 Q02 Q12
-    of ``Q = R diag(1 / axes^2) R^T`` (a point ``x`` is inside when ``(x - c)^T Q (x - c) <
-    1``)."""
+    of ``Q = R diag(1 / axes^2) R^T`` (:func:`~hair_tracking.colliders.pose.world_quadric`; a
+    point ``x`` is inside when ``(x - c)^T Q (x - c) < 1``)."""
     out[0], out[1], out[2] = world_center(rot, pos, center)
     inv = 1.0 / (axes * axes)
-    for i, (a, b) in enumerate(((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))):
-        out[3 + i] = rot[a, 0] * rot[b, 0] * inv[0] + rot[a, 1] * rot[b, 1] * inv[1] + \
-            rot[a, 2] * rot[b, 2] * inv[2]
+    world_quadric(rotation_entries(rot), (inv[0], inv[1], inv[2]), out, 3)
 
 
 def reference_contact(p, prev, length, head: HeadPose, axes, center, slide=True):
