@@ -16,7 +16,7 @@ first imported, and a signal during those imports is already a stop request.
 
 numba's cache (``cache=True``) checks only the time stamp of the file that defines a kernel, not
 of the files whose jitted functions the kernel inlines (the ghost kernels inline functions of
-``guides.collision``, ``guides.ftl`` and ``ghosts.weights``), so one cache folder for all sources
+``colliders.head``, ``guides.ftl`` and ``ghosts.weights``), so one cache folder for all sources
 could keep a stale compiled caller after an edit.  A folder per source hash starts afresh after
 any edit and reuses the compiled kernels while the sources are unchanged.
 

@@ -64,8 +64,8 @@ from hair_tracking.ghosts.stateless import choose_guides
 from hair_tracking.ghosts.turn import TurnTracker
 from hair_tracking.ghosts.tracker import GhostTracker
 from hair_tracking.grooms.build import build_groom
-from hair_tracking.guides.collision import make_collider
-from hair_tracking.guides.integrate import runs_parallel
+from hair_tracking.colliders.table import ColliderTable
+from hair_tracking.core.kernels import runs_parallel
 from hair_tracking.guides.solver import make_solver
 from hair_tracking.guides.split import run_split, split_heads, SplitRule
 
@@ -90,7 +90,7 @@ class Frame:
 
 class Parallelism(NamedTuple):
     """Which variant of their kernels the guide and the ghost stages run: the parallel one
-    (True) or the serial one (:func:`~hair_tracking.guides.integrate.runs_parallel`)."""
+    (True) or the serial one (:func:`~hair_tracking.core.kernels.runs_parallel`)."""
 
     guides: bool
     ghosts: bool
@@ -98,7 +98,7 @@ class Parallelism(NamedTuple):
 
 def parallelism(scene: Scene, groom: Optional[Groom] = None) -> Parallelism:
     """The kernel variants of ``scene``'s stages, from the node counts of its guides and
-    ghosts (:func:`~hair_tracking.guides.integrate.runs_parallel`): the strand counts of
+    ghosts (:func:`~hair_tracking.core.kernels.runs_parallel`): the strand counts of
     ``groom``, the scene's groom already built, when given; else of the procedural groom the
     scene describes, or of the imported one (``groom.file``, read for its strand counts)."""
     g = scene.groom
@@ -170,8 +170,9 @@ class HairSimulator:
             self.guides = StrandSet.from_rest(groom.ghost_rest[self.guide_index])
         else:
             self.guides = StrandSet.from_rest(groom.guide_rest)
-        self.collider = make_collider(scene.collider)
-        self.guide_solver = make_solver(self.guides, scene, self.parallel.guides)
+        #: the scene's colliders, one table (its frames set once for every strand set)
+        self.colliders = ColliderTable(scene)
+        self.guide_solver = make_solver(self.guides, scene, self.parallel.guides, self.colliders)
         self.ghosts = None             # the ghost strands' rest data (state: the tracker's)
         self.ghost_tracker: Optional[GhostTracking] = None
         if groom.ghost_rest.shape[0] > 0:
@@ -214,8 +215,8 @@ class HairSimulator:
         if rebuild:
             self._build(self.head, groom)
             return True
-        self.collider = make_collider(scene.collider)
-        self.guide_solver = make_solver(self.guides, scene, self.parallel.guides)
+        self.colliders = self._table(scene, old)
+        self.guide_solver = make_solver(self.guides, scene, self.parallel.guides, self.colliders)
         if self.ghosts is not None:
             if scene.tracking != old.tracking or scene.collider != old.collider or \
                     scene.body != old.body or scene.colliders != old.colliders:
@@ -226,6 +227,17 @@ class HairSimulator:
         self.dt_ns = max(1, int(round(scene.solver.dt * 1e9)))
         self.split_rule = self._split_rule(scene)
         return False
+
+    def _table(self, scene: Scene, old: Scene) -> ColliderTable:
+        """The collider table of ``scene`` replacing ``old``'s: the same table while the
+        scene's colliders are unchanged, else a new one that keeps the frames' poses received
+        so far."""
+        if scene.collider == old.collider and scene.body == old.body and \
+                scene.colliders == old.colliders:
+            return self.colliders
+        table = ColliderTable(scene)
+        table.keep_frames(self.colliders)
+        return table
 
     def set_gravity(self, gravity) -> None:
         """Gravity [m/s^2] (3,) in the fixed frame of the head poses from the next substep on,
@@ -252,14 +264,15 @@ class HairSimulator:
 
     def _make_tracker(self, scene: Scene) -> GhostTracking:
         """The scene's ghost tracker, started from ``self.ghosts.x`` and ``.v``."""
-        collider = self.collider if scene.tracking.collide else None
+        collider = self.colliders.head if scene.tracking.collide else None
         if scene.tracking.mode == 'turn':
-            return TurnTracker(self.ghosts, self.guides, self.guide_index, scene, collider)
+            return TurnTracker(self.ghosts, self.guides, self.guide_index, scene, collider,
+                               colliders=self.colliders)
         if self._stateless(scene):
             return BlendTracker(self.ghosts, self.guides, self.guide_index, scene, collider,
-                                k=scene.tracking.blend_guides)
+                                k=scene.tracking.blend_guides, colliders=self.colliders)
         return GhostTracker(self.ghosts, self.guides, scene, collider,
-                            parallel=self.parallel.ghosts)
+                            parallel=self.parallel.ghosts, colliders=self.colliders)
 
     # ---------------------------------------------------------------- input
     def push_pose(self, t_ns: int, position, quaternion) -> PoseResult:
@@ -303,29 +316,21 @@ class HairSimulator:
         """The pose of the scene's ``body.frame`` (rotation (3, 3), origin (3,)) in the fixed
         frame of the head poses: the bust rides on it from the next substep on (kept until the
         next call; without one the bust rides on the neck frame of the head pose)."""
-        for owner in (self.guide_solver, self.ghost_tracker):
-            body = getattr(owner, 'body', None)
-            if body is not None:
-                body.set_frame(rotation, position)
+        self.colliders.set_body_frame(rotation, position)
 
     def set_collider_frame(self, name: str, rotation, position) -> None:
         """The pose of the TF frame ``name`` that a collider slot (``colliders.<slot>.frame``)
         rides on, in the fixed frame of the head poses: its colliders ride on it from the next
         substep on (kept until the next call; before the first one they are off)."""
-        for owner in (self.guide_solver, self.ghost_tracker):
-            body = getattr(owner, 'body', None)
-            if body is not None:
-                body.set_tf_frame(name, rotation, position)
+        self.colliders.set_tf_frame(name, rotation, position)
 
     def collider_frames(self) -> Tuple[str, ...]:
         """The TF frames the scene's collider slots ride on (``body.frame`` not included)."""
-        body = self.guide_solver.body
-        return body.tf_frames() if body is not None else ()
+        return self.colliders.tf_frames()
 
     def colliders_waiting(self) -> List[str]:
         """The slot colliders that are off until their TF frame first arrives."""
-        body = self.guide_solver.body
-        return body.waiting() if body is not None else []
+        return self.colliders.waiting()
 
     def reset(self) -> None:
         """Rest shape at the current head pose, settled; the head track is kept."""
@@ -453,12 +458,9 @@ class HairSimulator:
     def _depth(self, x, inv_mass, parallel) -> float:
         """Deepest node of ``x`` inside the head collider (all nodes) or the bust (the free
         nodes when ``inv_mass`` is given)."""
-        d = 0.0 if self.collider is None else \
-            self.collider.penetration(x, self.head, parallel=parallel)
-        body = self.guide_solver.body
-        if body is not None:
-            d = max(d, body.depth(x, self.head, inv_mass))
-        return d
+        head = self.colliders.head
+        d = 0.0 if head is None else head.penetration(x, self.head, parallel=parallel)
+        return max(d, self.colliders.body_depth(x, self.head, inv_mass))
 
     def audit(self, part: int = 0, parts: int = 1) -> Tuple[float, float, np.ndarray]:
         """:meth:`max_stretch` and :meth:`penetration` over the guides and part ``part`` of

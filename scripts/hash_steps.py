@@ -6,9 +6,11 @@ FTL's batched path, with a fast turn that splits substeps, and PBD's and the bus
 person).
 
 Run it before and after a change that must not change behaviour (a refactor, a move): the
-hashes must be identical.
+hashes must be identical.  A change that may move the hair by rounding only: ``--save DIR``
+before it keeps every variant's positions, ``--against DIR`` after it prints each variant's
+largest node difference [m] from them.
 
-    python scripts/hash_steps.py [--more]
+    python scripts/hash_steps.py [--more] [--save DIR | --against DIR]
 """
 import argparse
 import hashlib
@@ -52,27 +54,42 @@ def head_pose(k: int, i: int = 0, fast: bool = False):
         [0.0, 0.0, np.sin(a / 2), np.cos(a / 2)]
 
 
+class Print:
+    """The sha1 of the frames it is given, and their positions (``points``)."""
+
+    def __init__(self):
+        self.sha = hashlib.sha1()
+        self.points = []
+
+    def update(self, frame) -> None:
+        for x in (frame.guides, frame.ghosts):
+            if x is not None:
+                self.sha.update(x.tobytes())
+                self.points.append(np.asarray(x, dtype=np.float64).reshape(-1))
+
+    def hexdigest(self) -> str:
+        return self.sha.hexdigest()
+
+
 def _update(h, frame) -> None:
-    h.update(frame.guides.tobytes())
-    if frame.ghosts is not None:
-        h.update(frame.ghosts.tobytes())
+    h.update(frame)
 
 
-def fingerprint(scene: Scene, poses: int = 21) -> str:
+def fingerprint(scene: Scene, poses: int = 21) -> Print:
     sim = HairSimulator(scene)
-    h = hashlib.sha1()
+    h = Print()
     for k in range(poses):
         t, p, q = head_pose(k)
         sim.push_pose(t, p, q)
         sim.advance_to(t)
         _update(h, sim.frame())
-    return h.hexdigest()
+    return h
 
 
-def crowd_fingerprint(scene: Scene, fast: bool, people: int = 3, poses: int = 21) -> str:
+def crowd_fingerprint(scene: Scene, fast: bool, people: int = 3, poses: int = 21) -> Print:
     """:func:`fingerprint` of a crowd of ``people`` side by side, each nodding its own way."""
     crowd = Crowd(scene, people + 1)
-    h = hashlib.sha1()
+    h = Print()
     for k in range(poses):
         for i in range(people):
             t, p, q = head_pose(k, i, fast)
@@ -83,26 +100,45 @@ def crowd_fingerprint(scene: Scene, fast: bool, people: int = 3, poses: int = 21
         crowd.advance_to(t)
         for i in range(people):
             _update(h, crowd.people[str(i)].frame())
-    return h.hexdigest()
+    return h
+
+
+def report(name: str, h: Print, args) -> None:
+    """Print the variant's fingerprint; keep its positions (``--save``) or compare them with
+    the kept ones (``--against``)."""
+    points = np.concatenate(h.points)
+    line = f'{name} {h.hexdigest()}'
+    key = name.replace('/', '_')
+    if args.save:
+        np.save(os.path.join(args.save, key + '.npy'), points)
+    if args.against:
+        kept = np.load(os.path.join(args.against, key + '.npy'))
+        line += f'  max |difference| {np.max(np.abs(points - kept)):.3g} m'
+    print(line, flush=True)
 
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     ap.add_argument('--more', action='store_true',
                     help='also the trackers, the bust, long substeps and crowds')
+    ap.add_argument('--save', metavar='DIR', help="keep every variant's positions in DIR")
+    ap.add_argument('--against', metavar='DIR',
+                    help='print the largest node difference from the positions kept in DIR')
     args = ap.parse_args()
+    if args.save:
+        os.makedirs(args.save, exist_ok=True)
     for name, changes in VARIANTS.items():
-        print(name, fingerprint(Scene().with_changes(**changes) if changes else Scene()),
-              flush=True)
+        report(name, fingerprint(Scene().with_changes(**changes) if changes else Scene()),
+               args)
     if not args.more:
         return 0
     for name, changes in MORE.items():
-        print(name, fingerprint(Scene().with_changes(**changes)), flush=True)
-    print('long_hair', fingerprint(Scene.from_yaml(config_path('scene_long_hair.yaml'))),
-          flush=True)
+        report(name, fingerprint(Scene().with_changes(**changes)), args)
+    report('long_hair', fingerprint(Scene.from_yaml(config_path('scene_long_hair.yaml'))),
+           args)
     for name, (changes, fast) in CROWDS.items():
-        print(name, crowd_fingerprint(Scene().with_changes(**CROWD_GROOM, **changes), fast),
-              flush=True)
+        report(name, crowd_fingerprint(Scene().with_changes(**CROWD_GROOM, **changes), fast),
+               args)
     return 0
 
 

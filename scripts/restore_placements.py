@@ -31,7 +31,8 @@ from hair_tracking.bags import io as bag_io  # noqa: E402
 from hair_tracking.core.model import HeadPose  # noqa: E402
 from hair_tracking.core.scene import Scene  # noqa: E402
 from hair_tracking.core.transforms import quat_to_matrix  # noqa: E402
-from hair_tracking.guides import collision, ftl  # noqa: E402
+from hair_tracking.colliders import head as collision  # noqa: E402
+from hair_tracking.guides import ftl  # noqa: E402
 from hair_tracking.simulator import HairSimulator  # noqa: E402
 
 

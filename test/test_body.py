@@ -9,6 +9,7 @@ from hair_tracking.colliders.body import bust as bust_shapes
 from hair_tracking.colliders.pose import frames_at, posed
 from hair_tracking.colliders.reference import reference_depth
 from hair_tracking.colliders.scene_body import make_body, SceneBody
+from hair_tracking.colliders.table import ColliderTable
 from hair_tracking.colliders.shapes import Shape, shape_table
 from hair_tracking.core.metrics import max_stretch
 from hair_tracking.core.model import carry_rigidly, HeadPose
@@ -24,13 +25,13 @@ def head(position=(0.0, 0.0, 1.5), axis=(0.0, 0.0, 1.0), angle=0.0):
 
 
 def test_no_bust_no_body():
-    assert make_body(Scene().body, 0.01) is None
+    assert make_body(ColliderTable(Scene()), 0.01) is None
     assert HairSimulator(Scene().with_changes(groom__guides=4, groom__ghosts_per_guide=2,
                                               solver__settle_time=0.0)).guide_solver.body is None
 
 
 def test_the_fallback_bust_turns_with_the_heading_and_not_with_a_nod():
-    body = SceneBody(Scene().with_changes(body__bust=True).body, 0.01)
+    body = SceneBody(ColliderTable(Scene().with_changes(body__bust=True)), 0.01)
     still = body.posed_bare(head())
     turned = body.posed_bare(head(angle=0.5))
     nodded = body.posed_bare(head(axis=(0.0, 1.0, 0.0), angle=0.3))
@@ -48,10 +49,10 @@ def test_the_fallback_bust_turns_with_the_heading_and_not_with_a_nod():
 
 
 def test_a_tf_frame_carries_the_bust_and_its_last_pose_is_kept():
-    spec = Scene().with_changes(body__bust=True, body__frame='torso_1').body
-    body = SceneBody(spec, 0.01)
+    table = ColliderTable(Scene().with_changes(body__bust=True, body__frame='torso_1'))
+    body = SceneBody(table, 0.01)
     fallback = body.posed_bare(head())
-    body.set_frame(np.eye(3), [0.3, 0.0, 1.0])
+    table.set_body_frame(np.eye(3), [0.3, 0.0, 1.0])
     moved = body.posed_bare(head())
     local = shape_table(body.shapes, frames=('fixed', 'head', 'torso'))
     want = posed(local, *frames_at(np.eye(3), [0.0, 0.0, 1.5], [(np.eye(3), [0.3, 0.0, 1.0])]))
@@ -95,8 +96,8 @@ def test_the_strand_pass_leaves_no_node_inside_and_the_strand_below_follows(dtyp
 def test_the_shared_bound_test_changes_no_node(dtype, lead):
     """Blocks of strands share a box bound test at each node index: the result is that of
     every strand alone (a block of one, whose box is the node itself), bit for bit."""
-    body = SceneBody(Scene().with_changes(body__bust=True).body, 0.01,
-                     head=(np.zeros(3), np.array([0.1, 0.085, 0.11])))
+    body = SceneBody(ColliderTable(Scene().with_changes(body__bust=True)), 0.01,
+                     head=Shape('ellipsoid', radii=(0.1, 0.085, 0.11)))
     sh = body.posed(head(), head(), 0.0)
     rng = np.random.default_rng(7)
     n = 20
@@ -156,7 +157,7 @@ def test_long_hair_rests_on_the_shoulders():
             sim.advance_to(t + k * 16_666_667)
         f = sim.frame()
         h = sim.head
-        bare = SceneBody(scene.body, 0.01).posed_bare(h)
+        bare = SceneBody(ColliderTable(scene), 0.01).posed_bare(h)
         deep = np.zeros(f.guides.shape[0])
         kernels.deepest(f.guides, sim.guides.inv_mass, True, bare, deep)
         ghosts = np.ascontiguousarray(f.ghosts, dtype=np.float64)
@@ -203,7 +204,7 @@ def test_the_paper_trackers_ghosts_rest_on_the_bust():
         for k in range(30):                       # a still head, half a second
             sim.push_pose(t + k * 16_666_667, [0.0, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0])
             sim.advance_to(t + k * 16_666_667)
-        body = SceneBody(scene.with_changes(body__bust=True).body, 0.01)
+        body = SceneBody(ColliderTable(scene.with_changes(body__bust=True)), 0.01)
         ghosts = np.ascontiguousarray(sim.ghost_tracker.positions(), dtype=np.float64)
         deep = np.zeros(ghosts.shape[0])
         kernels.deepest(ghosts, sim.ghosts.inv_mass, True, body.posed_bare(sim.head), deep)

@@ -6,6 +6,7 @@ import pytest
 
 from hair_tracking.colliders import kernels
 from hair_tracking.colliders.scene_body import make_body
+from hair_tracking.colliders.table import ColliderTable
 from hair_tracking.core.scene import Scene, SceneError
 from hair_tracking.simulator import HairSimulator
 
@@ -35,7 +36,7 @@ def depths(sim):
 
 
 def test_no_slot_no_body():
-    assert make_body(Scene().body, 0.01, colliders=Scene().colliders) is None
+    assert make_body(ColliderTable(Scene()), 0.01) is None
 
 
 @pytest.mark.parametrize('mode', ['blend', 'turn', 'paper'])

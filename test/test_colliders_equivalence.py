@@ -27,8 +27,9 @@ from hair_tracking.core.transforms import quat_from_axis_angle, quat_normalize, 
 from hair_tracking.ghosts import stateless, turn
 from hair_tracking.ghosts import contacts as ghost_contacts
 from hair_tracking.ghosts.kernels import TRACK_FASTMATH
-from hair_tracking.guides import collision, ftl, integrate
-from hair_tracking.guides.integrate import FASTMATH
+from hair_tracking.colliders import head as collision
+from hair_tracking.guides import ftl, integrate
+from hair_tracking.core.kernels import FASTMATH
 from hair_tracking.guides.solver import make_solver
 
 RADII = (0.095, 0.08, 0.105)
@@ -74,7 +75,7 @@ def test_the_collision_stage_is_the_guide_solvers(radii, friction):
     rng = np.random.default_rng(int(radii[1] * 1000) + int(friction * 10))
     shape = head_shape(radii, friction=friction)
     rot_prev, pos_prev, rot, pos = head_poses(rng)
-    col = collision.Collider('ellipsoid', shape.center, radii, shape.margin, friction)
+    col = collision.HeadCollider('ellipsoid', shape.center, radii, shape.margin, friction)
     axes = np.asarray(radii) + shape.margin
     x = around(rng, np.asarray(shape.center), axes, rot, pos, 4000).reshape(200, 20, 3)
     start = x + rng.normal(scale=0.003, size=x.shape)
@@ -123,7 +124,7 @@ def test_the_depth_is_the_head_colliders():
     for radii in (RADII, (0.1, 0.1, 0.1)):
         rot_prev, pos_prev, rot, pos = head_poses(rng)
         shape = head_shape(radii)
-        col = collision.Collider('ellipsoid', shape.center, radii, 0.004, 0.3)
+        col = collision.HeadCollider('ellipsoid', shape.center, radii, 0.004, 0.3)
         x = around(rng, np.asarray(shape.center), np.asarray(radii), rot, pos, 3000)
         x = x.reshape(100, 30, 3)
         inv_mass = np.ones((100, 30))
@@ -333,8 +334,8 @@ def test_the_fitted_margin_is_the_guide_solvers_and_the_trackers():
         free = strands.inv_mass > 0
         fitted = margin.fit_margin(shape, rest[free], strands.rest_length)
         assert fitted == solver.margin
-        col = collision.make_collider(scene.collider)        # the simulator's: scene margin
-        center, axes = stateless.collider_axes(strands, col)
+        col = collision.head_collider(scene.collider)        # the simulator's: scene margin
+        axes = col.fitted(strands.rest, strands.inv_mass, strands.rest_length).axes
         tracker = margin.fit_margin(shape, rest[:, 2:], strands.rest_length)
         assert np.array_equal(axes, np.asarray(scene.collider.radii) + tracker)
     q = rng.normal(scale=0.1, size=(500, 3))

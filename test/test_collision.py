@@ -6,13 +6,14 @@ import numpy as np
 import pytest
 
 from hair_tracking.colliders import contact
-from hair_tracking.guides import collision
+from hair_tracking.colliders import head as collision
+from hair_tracking.colliders import shapes
 
 from hair_tracking.core.model import HeadPose, StrandSet
 from hair_tracking.core.scene import ColliderSpec, Scene
 from hair_tracking.core.transforms import quat_from_axis_angle, quat_normalize, quat_to_matrix
 from hair_tracking.guides import integrate
-from hair_tracking.guides.collision import Collider, make_collider
+from hair_tracking.colliders.head import HeadCollider, head_collider
 from hair_tracking.guides.solver import make_solver
 
 RADII = np.array([0.095, 0.08, 0.105])
@@ -87,7 +88,7 @@ def test_apply_matches_reference(shape, friction):
     rng = np.random.default_rng(1)
     spec = ColliderSpec(shape=shape, center=(0.01, -0.02, 0.015), radius=0.1,
                         radii=tuple(RADII), margin=0.004, friction=friction)
-    col = make_collider(spec)
+    col = head_collider(spec)
     head = random_pose(rng)
     x = cloud(rng, head, col.center, col.radii)
     x_prev = x + rng.normal(size=x.shape) * 0.01
@@ -109,7 +110,7 @@ def test_apply_matches_reference(shape, friction):
 
 def test_sphere_projection_is_radial_to_radius_plus_margin():
     rng = np.random.default_rng(2)
-    col = make_collider(ColliderSpec(shape='sphere', radius=0.1, margin=0.005, friction=0.0,
+    col = head_collider(ColliderSpec(shape='sphere', radius=0.1, margin=0.005, friction=0.0,
                                      center=(0.0, 0.0, 0.02)))
     assert np.all(col.radii == 0.1) and col.refine == 0
     head = random_pose(rng)
@@ -139,8 +140,8 @@ def test_ellipsoid_projection_is_near_closest_point():
     on = u / np.sqrt(np.sum((u / a) ** 2, axis=1))[:, None]
     normal = on / a ** 2
     normal /= np.linalg.norm(normal, axis=1)[:, None]
-    for depth, refine, tol in ((0.01, collision.ELLIPSOID_REFINEMENTS, 1e-4),
-                               (0.03, collision.PENETRATION_REFINEMENTS, 1e-4)):
+    for depth, refine, tol in ((0.01, shapes.ELLIPSOID_REFINEMENTS, 1e-4),
+                               (0.03, shapes.PENETRATION_REFINEMENTS, 1e-4)):
         q = on - normal * rng.uniform(0.0002, depth, size=(300, 1))
         y = np.array([contact.surface_point(*qi, *a, refine) for qi in q])
         assert np.allclose(np.sum((y / a) ** 2, axis=1), 1.0, atol=1e-12)
@@ -158,7 +159,7 @@ def test_centre_point_goes_out_along_shortest_axis():
 def test_penetration_measures_depth():
     rng = np.random.default_rng(4)
     head = random_pose(rng)
-    sphere = Collider('sphere', (0.0, 0.0, 0.0), (0.1, 0.1, 0.1), 0.004, 0.3)
+    sphere = HeadCollider('sphere', (0.0, 0.0, 0.0), (0.1, 0.1, 0.1), 0.004, 0.3)
     depths = np.array([0.0, 0.003, 0.0125, 0.007])
     dirs = rng.normal(size=(4, 3))
     dirs /= np.linalg.norm(dirs, axis=1)[:, None]
@@ -171,14 +172,14 @@ def test_penetration_measures_depth():
     mass[1, 0] = 0.0                                         # the deepest point is a root
     assert sphere.penetration(x, head, mass) == pytest.approx(0.007, abs=1e-12)
     # ellipsoid: along an axis the closest point is the vertex (depth < radius of curvature)
-    ell = Collider('ellipsoid', (0.01, 0.0, 0.0), RADII, 0.004, 0.3)
+    ell = HeadCollider('ellipsoid', (0.01, 0.0, 0.0), RADII, 0.004, 0.3)
     q = np.array([[[0.01 + RADII[0] - 0.01, 0.0, 0.0], [0.01, 0.0, RADII[2] - 0.02]]])
     xw = np.ascontiguousarray(head.to_world(q))
     assert ell.penetration(xw, head) == pytest.approx(0.02, abs=1e-9)
     # and it agrees with the numpy reference on random points
     x = cloud(rng, head, ell.center, RADII)
     assert ell.penetration(x, head) == pytest.approx(
-        ref_penetration(x, head, ell.center, RADII, collision.PENETRATION_REFINEMENTS),
+        ref_penetration(x, head, ell.center, RADII, shapes.PENETRATION_REFINEMENTS),
         abs=1e-12)
 
 
@@ -190,7 +191,7 @@ def test_friction_reduces_tangential_displacement():
     inv_mass = np.ones((1, 1))
     out = {}
     for fr in (0.0, 0.5, 1.0):
-        col = Collider('sphere', (0, 0, 0), (r, r, r), m, fr)
+        col = HeadCollider('sphere', (0, 0, 0), (r, r, r), m, fr)
         x = np.ascontiguousarray(head.to_world(x_head))
         col.apply(x, np.ascontiguousarray(head.to_world(x_prev_head)), inv_mass, head)
         out[fr] = head.to_head(x)[0, 0]
@@ -205,14 +206,14 @@ def test_friction_reduces_tangential_displacement():
         assert np.linalg.norm(out[fr]) >= r + m - 1e-12        # still outside
 
 
-def test_make_collider_and_errors():
-    assert make_collider(ColliderSpec(shape='none')) is None
-    ell = make_collider(ColliderSpec(shape='ellipsoid', radii=(0.1, 0.09, 0.12)))
+def test_head_collider_and_errors():
+    assert head_collider(ColliderSpec(shape='none')) is None
+    ell = head_collider(ColliderSpec(shape='ellipsoid', radii=(0.1, 0.09, 0.12)))
     assert np.allclose(ell.radii, (0.1, 0.09, 0.12)) and ell.refine > 0
     with pytest.raises(ValueError, match='collider.shape'):
-        make_collider(SimpleNamespace(shape='capsule'))
+        head_collider(SimpleNamespace(shape='capsule'))
     with pytest.raises(ValueError, match='radii'):
-        Collider('ellipsoid', (0, 0, 0), (0.1, 0.0, 0.1), 0.0, 0.0)
+        HeadCollider('ellipsoid', (0, 0, 0), (0.1, 0.0, 0.1), 0.0, 0.0)
     head = pose([0, 0, 0], [0, 0, 0, 1])
     x = np.zeros((2, 3, 3))
     with pytest.raises(ValueError, match='x:'):
@@ -274,7 +275,7 @@ def test_collider_scene_calls_kernel_and_keeps_hair_outside(monkeypatch, shape):
                                  solver__type='xpbd', solver__iterations=8)
     strands = hanging_strands()
     g = make_solver(strands, scene)
-    assert isinstance(g.collider, Collider)
+    assert isinstance(g.collider, HeadCollider)
     dt = scene.solver.dt
     steps = 240
     h_prev = pose([0, 0, 0], [0, 0, 0, 1])

@@ -343,10 +343,10 @@ def test_fused_ellipsoid_collision_pushes_ghosts_out(length_restore):
     """The project's Collider runs inside the kernel: after a step that drives the ghosts into a
     sphere, no free node is inside it; with length restoration the segments keep their rest
     lengths; velocities stay the displacement over dt; with collision off they stay inside."""
-    from hair_tracking.guides.collision import Collider
+    from hair_tracking.colliders.head import HeadCollider
     guides, ghosts = comb([(0.0, 0.0, 0.0), (0.03, 0.0, 0.0)], 8)
     radius, margin = 0.05, 0.004
-    collider = Collider('sphere', (0.02, 0.0, -0.15), (radius,) * 3, margin, 0.3)
+    collider = HeadCollider('sphere', (0.02, 0.0, -0.15), (radius,) * 3, margin, 0.3)
     opts = dict(length_restore=length_restore, offset_strength=0.0, com_strength=0.0)
     results = {}
     for collide in (False, True):

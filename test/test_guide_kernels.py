@@ -3,7 +3,7 @@
 The references (:mod:`hair_tracking.guides.reference`) are written independently of the
 kernels' loop structure: vectorised over strands, Gauss–Seidel along the strand, masses used
 directly (not through ``pair_weights``).
-Kernels use fused multiply-add (``integrate.FASTMATH``), so agreement is to ~1e-12, not bitwise.
+Kernels use fused multiply-add (``core.kernels.FASTMATH``), so agreement is to ~1e-12, not bitwise.
 """
 import numba
 import numpy as np

@@ -10,13 +10,15 @@ import numba
 import numpy as np
 import pytest
 
-from hair_tracking.guides import collision
+from hair_tracking.colliders import head as collision
 
 from hair_tracking.guides import ftl
 
 from hair_tracking.guides import solver as guides
 
 from hair_tracking.guides import integrate
+
+from hair_tracking.core import kernels
 
 from hair_tracking.core.model import HeadPose, StrandSet
 from hair_tracking.core.scene import Scene
@@ -643,11 +645,11 @@ def test_the_kernel_variant_depends_on_the_size_not_on_the_thread_count():
     """One numba thread runs the same (parallel) kernels as several from PARALLEL_MIN_NODES
     nodes on, so a one-thread timing of every method measures the same code."""
     before = numba.get_num_threads()
-    n = integrate.PARALLEL_MIN_NODES
+    n = kernels.PARALLEL_MIN_NODES
     try:
         for threads in sorted({1, numba.config.NUMBA_NUM_THREADS}):
             numba.set_num_threads(threads)
-            assert integrate.runs_parallel(n)
-            assert not integrate.runs_parallel(n - 1)
+            assert kernels.runs_parallel(n)
+            assert not kernels.runs_parallel(n - 1)
     finally:
         numba.set_num_threads(before)

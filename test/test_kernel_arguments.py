@@ -19,7 +19,8 @@ from hair_tracking.ghosts import kernels as tracking_kernels
 from hair_tracking.ghosts.interface import TrackStep
 from hair_tracking.ghosts.tracker import GhostTracker
 from hair_tracking.grooms import guides as groom_guides
-from hair_tracking.guides import collision, ftl, integrate, pbd_constraints
+from hair_tracking.colliders import head as collision
+from hair_tracking.guides import ftl, integrate, pbd_constraints
 from hair_tracking.guides.solver import make_solver
 
 #: The modules whose compiled functions the default scene runs (FTL guides with the ellipsoid
@@ -47,12 +48,14 @@ def dispatchers(module):
 
 
 def simulation_modules():
-    """Every module of the layers that simulate (core, grooms, guides, ghosts)."""
+    """Every module of the layers that simulate (core, grooms, guides, ghosts) and the head's
+    row of the colliders (the contact model's one-node functions take a node and a shape by
+    their numbers)."""
     import hair_tracking.core
     import hair_tracking.ghosts
     import hair_tracking.grooms
     import hair_tracking.guides
-    found = []
+    found = [collision]
     for package in (hair_tracking.core, hair_tracking.grooms, hair_tracking.guides,
                     hair_tracking.ghosts):
         for info in pkgutil.iter_modules(package.__path__, package.__name__ + '.'):
@@ -97,7 +100,7 @@ def test_solver_models_hold_the_named_fields_in_order():
 
 
 def test_collider_model_holds_the_named_fields_in_order():
-    c = collision.make_collider(Scene().collider)
+    c = collision.head_collider(Scene().collider)
     fields = collision.ColliderModel._fields
     assert type(c.model) is tuple and len(c.model) == len(fields)
     assert c.model[fields.index('radii')] is c.radii

@@ -6,7 +6,7 @@ here.  Each one must
 
 * start with no root inside its collider: the attached nodes of every guide and ghost (their
   rest shapes, head frame) are measured with the collider's own
-  :meth:`~hair_tracking.guides.collision.Collider.penetration`, and the hair the simulator
+  :meth:`~hair_tracking.colliders.head.Collider.penetration`, and the hair the simulator
   starts with (settled) has no node deeper in it than the collider margin;
 * pass the stability matrix's criteria (:func:`hair_tracking.evaluation.stability.run_case`:
   finite, guide and ghost stretch within ``STRETCH_BOUND`` / ``GHOST_STRETCH_BOUND``, roots
@@ -58,13 +58,13 @@ def test_every_preset_is_found():
 def test_no_root_starts_inside_the_collider(path):
     scene = Scene.from_yaml(path)
     sim = HairSimulator(scene)
-    if sim.collider is None:
+    if sim.colliders.head is None:
         pytest.skip('no collider')
     for part, strands in (('guides', sim.guides), ('ghosts', sim.ghosts)):
         if strands is None:
             continue
         attached = np.ascontiguousarray(strands.rest[:, :2])
-        depth = sim.collider.penetration(attached, IDENTITY)
+        depth = sim.colliders.head.penetration(attached, IDENTITY)
         assert depth <= ROUNDING_M, \
             f'{_name(path)}: {part} roots start {depth * 1e3:.2f} mm inside the collider'
     depth = sim.penetration()

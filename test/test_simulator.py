@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from hair_tracking.guides import collision
+from hair_tracking.colliders import head as collision
 
 from hair_tracking.guides import ftl
 
@@ -126,7 +126,7 @@ def test_stages_the_scene_does_not_need_are_not_built_or_run(monkeypatch):
         monkeypatch.setattr(ftl, variant, spy)
     curve = _spy(monkeypatch, curves, 'resample')
     sim = HairSimulator(scene(collider__shape='none', groom__ghosts_per_guide=0))
-    assert sim.collider is None and sim.ghost_tracker is None and sim.ghosts is None
+    assert sim.colliders.head is None and sim.ghost_tracker is None and sim.ghosts is None
     drive(sim, 10)
     f = sim.frame()
     assert f.curves is None and f.strands is f.guides
@@ -227,8 +227,8 @@ def test_warm_up_loads_exactly_the_kernel_variants_the_full_scene_runs(
     stage will call, so none is compiled or loaded from disk on the first real frame, and
     through no other (compiling a variant nobody calls only makes the start slower)."""
     from hair_tracking import simulator
-    from hair_tracking.guides import integrate
-    threshold = integrate.PARALLEL_MIN_NODES
+    from hair_tracking.core import kernels
+    threshold = kernels.PARALLEL_MIN_NODES
     calls = set()
     for module, names in ((ftl, ('ftl_step', 'ftl_step_serial', 'ftl_collide_step',
                                  'ftl_collide_step_serial', 'ftl_advance',
@@ -245,8 +245,8 @@ def test_warm_up_loads_exactly_the_kernel_variants_the_full_scene_runs(
             monkeypatch.setattr(module, name, spy)
     scene = Scene().with_changes(groom__guides=guides, groom__ghosts_per_guide=per_guide,
                                  tracking__mode='paper')
-    guides_parallel = integrate.runs_parallel(guides * 16)
-    ghosts_parallel = integrate.runs_parallel(guides * per_guide * 16)
+    guides_parallel = kernels.runs_parallel(guides * 16)
+    ghosts_parallel = kernels.runs_parallel(guides * per_guide * 16)
     tiny = simulator.warm_up(scene)
     assert scene.collider.shape != 'none'         # FTL's substeps with the head collider
     pen = {True: 'penetration_ellipsoid', False: 'penetration_ellipsoid_serial'}
@@ -254,17 +254,17 @@ def test_warm_up_loads_exactly_the_kernel_variants_the_full_scene_runs(
                      'track_groups' if ghosts_parallel else 'track_groups_serial',
                      pen[guides_parallel], pen[ghosts_parallel]}
     assert tiny.parallel == simulator.parallelism(scene) == (guides_parallel, ghosts_parallel)
-    assert integrate.PARALLEL_MIN_NODES == threshold        # no setting touched
+    assert kernels.PARALLEL_MIN_NODES == threshold        # no setting touched
 
 
 @pytest.mark.parametrize('mode', ['paper', 'blend'])
 def test_parallelism_is_decided_from_the_scene_and_handed_to_every_stage(mode):
     from hair_tracking.simulator import Parallelism, parallelism
-    from hair_tracking.guides import integrate
+    from hair_tracking.core import kernels
     big = Scene().with_changes(groom__guides=300, groom__ghosts_per_guide=1, tracking__mode=mode)
     nodes = 300 * (big.groom.ghost_nodes if mode == 'blend' else big.groom.guide_nodes)
-    assert parallelism(big) == (integrate.runs_parallel(nodes),
-                                integrate.runs_parallel(300 * big.groom.ghost_nodes))
+    assert parallelism(big) == (kernels.runs_parallel(nodes),
+                                kernels.runs_parallel(300 * big.groom.ghost_nodes))
     small = scene(tracking__mode=mode)
     sim = HairSimulator(small, parallel=Parallelism(True, True))
     assert sim.parallel == (True, True) and sim.guide_solver.parallel

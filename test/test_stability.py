@@ -18,7 +18,7 @@ from hair_tracking.core.transforms import quat_from_axis_angle, quat_to_matrix
 from hair_tracking.evaluation import stability
 from hair_tracking.evaluation.provenance import provenance
 from hair_tracking.evaluation import synthetic_motion as sm
-from hair_tracking.guides.collision import Collider, outside_distance, placed
+from hair_tracking.colliders.head import HeadCollider, outside_distance, placed
 from hair_tracking.guides.solver import (BEND_REFERENCE_DT, GuideSolver, ftl_inner_steps,
                                          ftl_bend_stiffness)
 from hair_tracking.simulator import HairSimulator
@@ -284,7 +284,7 @@ def test_ftl_collide_pass_matches_reference_and_keeps_lengths(friction):
     assert max_stretch(xk, st.rest_length) < 1e-12          # exact lengths
     # the pass really moved nodes out of the ellipsoid (not a no-op on this input): from
     # centimetres inside to a fraction of a millimetre
-    probe = Collider('ellipsoid', center, axes, 0.0, 0.0)
+    probe = HeadCollider('ellipsoid', center, axes, 0.0, 0.0)
     from hair_tracking.core.model import HeadPose
     head = HeadPose(pos, np.zeros(4), rot)
     assert probe.penetration(x, head, st.inv_mass) > 0.02
@@ -426,7 +426,7 @@ def test_ghost_collision_keeps_lengths(mode, stretch):
         slack = 0.0 if mode == 'paper' else 2.0 * stability.float32_slack(x) / rl.min()
         assert max_stretch(x, rl) < stretch + slack
     assert contacts > 0
-    c = Collider('ellipsoid', scene.collider.center, scene.collider.radii, 0.0, 0.0)
+    c = HeadCollider('ellipsoid', scene.collider.center, scene.collider.radii, 0.0, 0.0)
     assert c.penetration(sim.ghost_tracker.positions(), sim.head, sim.ghosts.inv_mass) <= \
         scene.collider.margin
 

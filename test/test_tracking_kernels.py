@@ -116,13 +116,13 @@ def test_kernel_collision_matches_scalar_reference(shape, length_restore):
     """(h) inside the kernel (lane-parallel, all lanes of a group at once) against the scalar
     one-node functions applied node by node: a collider placed where the ghosts hang, so that
     many nodes are pushed each substep."""
-    from hair_tracking.guides.collision import Collider
+    from hair_tracking.colliders.head import HeadCollider
     rng = np.random.default_rng(11)
     guides = StrandSet.from_rest(random_strands(rng, 4, 6))
     ghosts = StrandSet.from_rest(random_strands(rng, 37, 9, seg=0.013))
     scene = scene_with(collide=True, length_restore=length_restore)
     radii = (0.06,) * 3 if shape == 'sphere' else (0.06, 0.05, 0.07)
-    collider = Collider(shape, (0.0, 0.0, -0.09), radii, 0.004, 0.3)
+    collider = HeadCollider(shape, (0.0, 0.0, -0.09), radii, 0.004, 0.3)
     tracker = GhostTracker(ghosts, guides, scene, collider)
     assert _steps_match_reference(rng, tracker, guides, ghosts, scene, collider, 4) > 50
 
@@ -204,10 +204,10 @@ def test_parallel_and_serial_kernels_agree():
     """Below PARALLEL_MIN_NODES the tracker calls the serial kernel; asking for the parallel one
     gives the same contacts and the same hair, with the fused collider on.  The two variants are
     separately compiled functions and the kernels may fuse multiply-adds
-    (``integrate.FASTMATH``), so they agree to rounding, not necessarily bit for bit."""
-    from hair_tracking.guides.collision import make_collider
+    (``core.kernels.FASTMATH``), so they agree to rounding, not necessarily bit for bit."""
+    from hair_tracking.colliders.head import head_collider
     scene = scene_with(spread=0.5, spread_target=1.5)
-    collider = make_collider(scene.collider)
+    collider = head_collider(scene.collider)
     runs = []
     for parallel in (None, True):
         rng = np.random.default_rng(5)
@@ -231,7 +231,7 @@ def test_blocks_of_groups_large_small_and_single():
     group of one ghost and a mid-sized one beside it, with the collider on, all agree with the
     plain-numpy reference."""
     from hair_tracking.ghosts.kernels import block_groups, BLOCK_LANES
-    from hair_tracking.guides.collision import Collider
+    from hair_tracking.colliders.head import HeadCollider
     rng = np.random.default_rng(23)
     roots = np.array([[0.0, 0.0, 0.0], [0.3, 0.0, 0.0], [0.0, 0.3, 0.0]])[:, None]
     guide_rest = random_strands(rng, 3, 7, spread=0.0) + roots
@@ -242,7 +242,7 @@ def test_blocks_of_groups_large_small_and_single():
     guides = StrandSet.from_rest(guide_rest)
     ghosts = StrandSet.from_rest(ghost_rest)
     scene = scene_with(collide=True, spread=0.3, spread_target=1.3)
-    collider = Collider('sphere', (0.0, 0.0, -0.08), (0.05,) * 3, 0.004, 0.3)
+    collider = HeadCollider('sphere', (0.0, 0.0, -0.08), (0.05,) * 3, 0.004, 0.3)
     tracker = GhostTracker(ghosts, guides, scene, collider)
     assert sorted(np.diff(tracker.group_start)) == sorted(sizes)
     blocks = block_groups(tracker.group_start)

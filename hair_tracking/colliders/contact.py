@@ -47,14 +47,12 @@ import math
 
 from numba import njit
 
+from hair_tracking.core.kernels import FASTMATH  # noqa: F401 (the contact kernels' flags)
 from hair_tracking.colliders.shapes import (A0, A1, A2, CX, CY, CZ, ELLIPSOID, FRICTION, I0, I1,
                                             I2, KIND, M00, M01, M02, M10, M11, M12, M20, M21,
                                             M22, OX, OY, OZ, PLANE, PX, PY, PZ, R00, R01, R02,
                                             R10, R11, R12, R20, R21, R22, REFINE)
 
-#: LLVM fast-math flags of the contact kernels: only ``contract`` (fused multiply-add); NaN and
-#: infinity semantics kept.  The guide and ghost kernels compile with (at least) these.
-FASTMATH = {'contract'}
 #: Below this ellipsoid level ``F(q)`` a node is at the centre (no radial direction).
 CENTRE_LEVEL = 1e-24
 #: Below this squared distance [m^2] from a capsule's core segment a node has no radial
@@ -166,6 +164,34 @@ def surface_point(qx, qy, qz, ax, ay, az, refine):
     ex, ey, ez = centre_exit(ax, ay, az)
     deg = f < CENTRE_LEVEL
     return (ex if deg else yx), (ey if deg else yy), (ez if deg else yz)
+
+
+@njit(cache=True, inline='always')
+def ellipsoid_pushed(qx, qy, qz, rx, ry, rz, placed, inv, exit_point):
+    """:func:`ellipsoid_contact`'s arithmetic for a node known to be inside, without branches
+    on the node's values (the loop over a block's pushed nodes of the fast paths,
+    :func:`~hair_tracking.colliders.head.project_block` and the paper tracker's
+    :func:`~hair_tracking.ghosts.contacts.collide_lanes`): ``q`` the node in the ellipsoid's
+    axes, ``r`` its friction reference (world), ``placed`` as there (at most 2 refinements,
+    unrolled), ``inv`` the inverse squared semi-axes, ``exit_point`` :func:`centre_exit`'s
+    point.  Returns the node's new world position."""
+    rot, cx, cy, cz, _, _, _, mu, refine = placed
+    ix, iy, iz = inv
+    f, sc = ellipsoid_radial(qx, qy, qz, ix, iy, iz)
+    yx, yy, yz = qx * sc, qy * sc, qz * sc
+    cc = f - 1.0
+    if refine >= 1:
+        yx, yy, yz = ellipsoid_refine(qx, qy, qz, yx, yy, yz, cc, ix, iy, iz)
+    if refine >= 2:
+        yx, yy, yz = ellipsoid_refine(qx, qy, qz, yx, yy, yz, cc, ix, iy, iz)
+    deg = f < CENTRE_LEVEL
+    yx = exit_point[0] if deg else yx
+    yy = exit_point[1] if deg else yy
+    yz = exit_point[2] if deg else yz
+    if mu > 0.0:
+        px, py, pz = local_of(rx, ry, rz, rot, cx, cy, cz)
+        yx, yy, yz = ellipsoid_friction(yx, yy, yz, px, py, pz, ix, iy, iz, mu)
+    return world_of(yx, yy, yz, rot, cx, cy, cz)
 
 
 @njit(cache=True, inline='always')

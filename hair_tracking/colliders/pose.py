@@ -24,7 +24,7 @@ import math
 import numpy as np
 from numba import njit
 
-from hair_tracking.colliders.contact import FASTMATH
+from hair_tracking.colliders.contact import FASTMATH, rotation_of
 from hair_tracking.colliders.shapes import (A0, A1, A2, BOUND, BOUND_PAD, CAPSULE, CX, CY, CZ,
                                             ELLIPSOID, FRICTION, I0, I1, I2, KIND, L_CX, L_CY,
                                             L_CZ, L_FRAME, L_FRICTION, L_KIND, L_MARGIN, L_R00,
@@ -128,13 +128,20 @@ def _jumped(local, k, kind, rot_prev, pos_prev, out, jump):
 
 
 @njit(cache=True, inline='always')
-def _quadric(out, k):
-    """The ellipsoid quadric ``R diag(I) R^T`` of row ``k`` (entries Q00 Q11 Q22 Q01 Q02 Q12),
-    in the arithmetic of the stateless trackers' world collider."""
+def world_quadric(rot, inv, out, at):
+    """The ellipsoid's world quadric ``R diag(inv) R^T`` into ``out[at:at + 6]`` (entries Q00
+    Q11 Q22 Q01 Q02 Q12): ``rot`` its axes' nine entries row by row (``R_ij`` at ``3 i + j``),
+    ``inv`` its inverse squared semi-axes.  The posed table's columns and the stateless
+    trackers' head collider (:func:`~hair_tracking.ghosts.stateless.world_collider`)."""
     for n, (a, b) in enumerate(((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))):
-        out[k, Q00 + n] = out[k, R00 + 3 * a] * out[k, R00 + 3 * b] * out[k, I0] + \
-            out[k, R00 + 3 * a + 1] * out[k, R00 + 3 * b + 1] * out[k, I1] + \
-            out[k, R00 + 3 * a + 2] * out[k, R00 + 3 * b + 2] * out[k, I2]
+        out[at + n] = rot[3 * a] * rot[3 * b] * inv[0] + \
+            rot[3 * a + 1] * rot[3 * b + 1] * inv[1] + rot[3 * a + 2] * rot[3 * b + 2] * inv[2]
+
+
+@njit(cache=True, inline='always')
+def _quadric(out, k):
+    """The ellipsoid quadric of row ``k`` (:func:`world_quadric`)."""
+    world_quadric(rotation_of(out, k), (out[k, I0], out[k, I1], out[k, I2]), out[k], Q00)
 
 
 @njit(cache=True)

@@ -49,7 +49,7 @@ from typing import Callable, Dict, List, Optional, Sequence
 
 import numpy as np
 
-from hair_tracking.colliders.scene_body import make_body
+from hair_tracking.colliders.table import ColliderTable
 from hair_tracking.core.metrics import max_stretch, position_error, tip_error
 from hair_tracking.core.model import HeadPose
 from hair_tracking.core.scene import Scene
@@ -58,7 +58,6 @@ from hair_tracking.core.transforms import quat_to_matrix, slerp
 from hair_tracking.evaluation.methods import (FullSim, GhostTracking, Method, PyPBD, RigidOffset,
                                               Workload,
                                               make_workload, pypbd_available)
-from hair_tracking.guides.collision import make_collider
 from hair_tracking.motion.head_motion import HeadMotion
 
 #: Output frame rate [Hz]: errors are measured and time is charged per frame of this rate.
@@ -149,9 +148,9 @@ class Scorer:
         self.w = workload
         self.ref = ref_frames                          # (F, S, N, 3) float32
         self.ref0 = np.asarray(ref_settled, dtype=np.float64)
-        self.collider = make_collider(workload.scene.collider)
-        #: the scene's bust (``body.bust``), measured bare: ``pen_body``
-        self.body = make_body(workload.scene.body, 0.0)
+        #: the scene's colliders, measured bare: the head (``pen``), the bust and slots
+        #: (``pen_body``)
+        self.colliders = ColliderTable(workload.scene)
         self._order = np.argsort(workload.groups, kind='stable')
         g = workload.groups[self._order]
         self._starts = np.flatnonzero(np.r_[True, g[1:] != g[:-1]])
@@ -178,10 +177,9 @@ class Scorer:
         rms, mx = position_error(x, ref, self.w.strand_length)
         motion, _ = position_error(x - x0, ref - self.ref0, self.w.strand_length)
         pen = pen_body = 0.0
-        if self.collider is not None:
-            pen = self.collider.penetration(x, head, self.w.inv_mass)
-        if self.body is not None:
-            pen_body = self.body.depth(x, head, self.w.inv_mass)
+        if self.colliders.head is not None:
+            pen = self.colliders.head.penetration(x, head, self.w.inv_mass)
+        pen_body = self.colliders.body_depth(x, head, self.w.inv_mass)
         rs = self.ref_spread[j]
         return {'rms': rms, 'max': mx, 'tip': tip_error(x, ref, self.w.strand_length),
                 'stretch': max_stretch(x, self.w.rest_length), 'pen': pen, 'pen_body': pen_body,

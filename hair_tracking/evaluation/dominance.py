@@ -128,7 +128,8 @@ def study(workload: Workload, trajectory: Trajectory, duration_s: float, repeats
     moving = first_moving_frame(schedule)
     margin_mm = 1e3 * float(scene.collider.margin) if scene.collider.shape != 'none' else 0.0
     cands = candidates(scene)
-    body_margin_mm = 1e3 * float(scorer.body.margin) if scorer.body is not None else 0.0
+    body = scorer.colliders.extra or scene.body.bust
+    body_margin_mm = 1e3 * float(scene.body.margin) if body else 0.0
     rows = {c.name: Row(c.name, c.ghost, stretch=0.0, penetration_mm=0.0, body_mm=0.0)
             for c in cands}
     for c in cands:                                           # accuracy runs
@@ -179,7 +180,7 @@ def study(workload: Workload, trajectory: Trajectory, duration_s: float, repeats
                         'moving_from': moving, 'threads': threads,
                         'reference': f'FTL dt 1/{60 * REFERENCE_SUBSTEPS} s, every strand',
                         'margin_mm': margin_mm, 'body_margin_mm': body_margin_mm,
-                        'nodes': workload.ghost_rest.shape[1], 'body': scorer.body is not None,
+                        'nodes': workload.ghost_rest.shape[1], 'body': bool(body),
                         'rows': list(timed.values())})
     return reports
 

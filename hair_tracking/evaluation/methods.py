@@ -52,7 +52,7 @@ from hair_tracking.ghosts.turn import TurnTracker
 from hair_tracking.ghosts.correspondence import assign_guides, node_correspondence
 from hair_tracking.ghosts.interface import TrackStep
 from hair_tracking.ghosts.tracker import GhostTracker
-from hair_tracking.guides.collision import make_collider
+from hair_tracking.colliders.table import ColliderTable
 from hair_tracking.guides.solver import make_solver
 
 #: Ghosts per guide of the fixed grouping used for the spread metric (the default groom's ratio
@@ -196,8 +196,9 @@ class GhostTracking(_GuidedMethod):
     def __init__(self, name, workload, scene, ratio, knobs=None):
         super().__init__(name, workload, scene, ratio, knobs or {})
         self.ghosts = StrandSet.from_rest(workload.ghost_rest)
-        collider = make_collider(scene.collider) if scene.tracking.collide else None
-        self.tracker = GhostTracker(self.ghosts, self.guides, scene, collider)
+        table = self.solver.colliders
+        collider = table.head if scene.tracking.collide else None
+        self.tracker = GhostTracker(self.ghosts, self.guides, scene, collider, colliders=table)
         self._x_old = np.empty_like(self.guides.x)
         self.every_substep = bool(getattr(scene.tracking, 'every_substep', True))
         self._pending = 0
@@ -261,13 +262,15 @@ class BlendTracking(_Solved):
             raise ValueError(f'ratio: 1:{ratio} leaves no guide for {workload.count} strands')
         self.guide_index = choose_guides(workload.ghost_rest[:, 0], count)
         self.guides = StrandSet.from_rest(workload.ghost_rest[self.guide_index])
-        self.solver = make_solver(self.guides, scene)
+        table = ColliderTable(scene)
+        self.solver = make_solver(self.guides, scene, colliders=table)
         self.ghosts = StrandSet.from_rest(workload.ghost_rest)
-        collider = make_collider(scene.collider) if scene.tracking.collide else None
-        self.tracker = self._tracker(scene, collider, k)
+        collider = table.head if scene.tracking.collide else None
+        self.tracker = self._tracker(scene, collider, k, table)
 
-    def _tracker(self, scene, collider, k):
-        return BlendTracker(self.ghosts, self.guides, self.guide_index, scene, collider, k=k)
+    def _tracker(self, scene, collider, k, table):
+        return BlendTracker(self.ghosts, self.guides, self.guide_index, scene, collider, k=k,
+                            colliders=table)
 
     def reset(self, head):
         super().reset(head)
@@ -286,8 +289,9 @@ class TurnTracking(BlendTracking):
 
     family = 'turn'
 
-    def _tracker(self, scene, collider, k):
-        return TurnTracker(self.ghosts, self.guides, self.guide_index, scene, collider)
+    def _tracker(self, scene, collider, k, table):
+        return TurnTracker(self.ghosts, self.guides, self.guide_index, scene, collider,
+                           colliders=table)
 
 
 class RigidOffset(_GuidedMethod):

@@ -227,13 +227,14 @@ def run_case(case: Case) -> CaseResult:
         worst['root_err_m'] = max(worst['root_err_m'],
                                   *(_roots_error(s, x, head, slack if s is sim.ghosts else 0.0)
                                     for s, x, _ in states))
-        if sim.collider is not None:
-            worst['pen_guides_mm'] = max(worst['pen_guides_mm'], 1e3 * sim.collider.penetration(
+        collider = sim.colliders.head
+        if collider is not None:
+            worst['pen_guides_mm'] = max(worst['pen_guides_mm'], 1e3 * collider.penetration(
                 sim.guides.x, head, sim.guides.inv_mass))
             if sim.ghost_tracker is not None:
                 worst['pen_ghosts_mm'] = max(worst['pen_ghosts_mm'], 1e3 *
-                                             sim.collider.penetration(states[1][1], head,
-                                                                      sim.ghosts.inv_mass))
+                                             collider.penetration(states[1][1], head,
+                                                                  sim.ghosts.inv_mass))
         body = sim.guide_solver.body
         if body is not None:             # the bare bust: no node deeper than its margin
             worst['pen_body_mm'] = max(worst['pen_body_mm'], 1e3 * body.depth(
@@ -278,10 +279,10 @@ def run_case(case: Case) -> CaseResult:
         if worst['root_err_m'] > ROOT_TOLERANCE:
             failures.append(f'roots detached by {worst["root_err_m"]:.3g} m')
         margin_mm = 1e3 * scene.collider.margin
-        if sim.collider is not None and worst['pen_guides_mm'] > margin_mm + 1e-9:
+        if sim.colliders.head is not None and worst['pen_guides_mm'] > margin_mm + 1e-9:
             failures.append(f'guide penetration {worst["pen_guides_mm"]:.2f} mm > margin '
                             f'{margin_mm:g} mm')
-        if sim.collider is not None and scene.tracking.collide and \
+        if sim.colliders.head is not None and scene.tracking.collide and \
                 worst['pen_ghosts_mm'] > margin_mm + 1e-9:
             failures.append(f'ghost penetration {worst["pen_ghosts_mm"]:.2f} mm > margin '
                             f'{margin_mm:g} mm')

@@ -55,7 +55,7 @@ from hair_tracking.core.model import HeadPose, StrandSet, part_rows
 from hair_tracking.core.point_records import put_record
 from hair_tracking.ghosts.stateless import (StatelessTracker, at_fractions, node_map,
                                             reference_contact, world_collider)
-from hair_tracking.guides.integrate import FASTMATH
+from hair_tracking.core.kernels import FASTMATH
 
 #: Guides blended per ghost by default (Unreal's groom interpolation uses up to three).
 DEFAULT_GUIDES_PER_GHOST = 3
@@ -400,8 +400,8 @@ class BlendTracker(StatelessTracker):
     ghost."""
 
     def __init__(self, ghosts: StrandSet, guides: StrandSet, guide_index, scene, collider=None,
-                 k: int = DEFAULT_GUIDES_PER_GHOST):
-        super().__init__(ghosts, guides, guide_index, scene, collider)
+                 k: int = DEFAULT_GUIDES_PER_GHOST, colliders=None):
+        super().__init__(ghosts, guides, guide_index, scene, collider, colliders)
         self.guide_of, self.weight = blend_weights(ghosts.rest[:, 0], guides.rest[:, 0], k)
         guide_pad, weight_pad = pad_guides(self.guide_of, self.weight)
         #: the guide each strand is, -1 for the others (those copy their guide)

@@ -30,9 +30,8 @@ import math
 
 from numba import njit
 
-from hair_tracking.colliders.contact import (CENTRE_LEVEL, ellipsoid_contact, ellipsoid_friction,
-                                             ellipsoid_level, ellipsoid_refine, local_of,
-                                             surface_point, world_of)
+from hair_tracking.colliders.contact import (centre_exit, ellipsoid_contact, ellipsoid_level,
+                                             ellipsoid_pushed, local_of, surface_point, world_of)
 from hair_tracking.guides.ftl import ellipsoid_of, FTL_TINY_SQ, restore_f_ok, restore_node
 
 #: Normal-line refinements the vectorised pass unrolls (the ellipsoid default is 2).
@@ -51,7 +50,7 @@ def collide_lanes(X0, P, W, j, lanes, strands, ftl, contact, rot):
     (friction reference); ``lanes`` = ``(n, k0)`` the lanes and the group-order row of the
     first; ``strands`` = ``(order, seg_len, rest)``: the ghost of each group-order row, the
     block's rest lengths (N-1, n) and the rest shapes; ``contact`` the head
-    collider placed by the head pose (:data:`~hair_tracking.guides.collision.Contact`: the
+    collider placed by the head pose (:data:`~hair_tracking.colliders.head.Contact`: the
     ellipsoid's semi-axes ``a``, margin included, around the world point ``c``) and ``rot``
     (3, 3) the head rotation (for :func:`~hair_tracking.guides.ftl.restore_node`).  ``W`` is
     work space of at least (:data:`CONTACT_ROWS`, n).  Returns the number of pushed nodes."""
@@ -92,32 +91,13 @@ def collide_lanes(X0, P, W, j, lanes, strands, ftl, contact, rot):
             W[_EY, c] = rest[s, j, 1] - rest[s, j - 1, 1]
             W[_EZ, c] = rest[s, j, 2] - rest[s, j - 1, 2]
             W[_LEN, c] = seg_len[j - 1, kk]
-    # 3. the arithmetic of every pushed node, without branches
-    # the model's surface point (contact.surface_point) with its refinements unrolled and the
-    # centre's exit as a select; written out here, in the kernel's own loop: under the
-    # kernel's reassociation an inlined function around it changes the last bit
-    dx0 = ax if ax <= ay and ax <= az else 0.0
-    dy0 = ay if dx0 == 0.0 and ay <= az else 0.0
-    dz0 = az if dx0 == 0.0 and dy0 == 0.0 else 0.0
+    # 3. the arithmetic of every pushed node, without branches (the contact model's)
+    exit_point = centre_exit(ax, ay, az)
     f_ok = restore_f_ok(ax, ay, az)
     for c in range(m):
         qx, qy, qz = local_of(W[_PX, c], W[_PY, c], W[_PZ, c], r, cx, cy, cz)
-        f = qx * qx * ix + qy * qy * iy + qz * qz * iz
-        deg = f < CENTRE_LEVEL
-        sc = 1.0 / math.sqrt(f if not deg else 1.0)
-        yx, yy, yz = qx * sc, qy * sc, qz * sc
-        cc = f - 1.0
-        if refine >= 1:
-            yx, yy, yz = ellipsoid_refine(qx, qy, qz, yx, yy, yz, cc, ix, iy, iz)
-        if refine >= 2:
-            yx, yy, yz = ellipsoid_refine(qx, qy, qz, yx, yy, yz, cc, ix, iy, iz)
-        yx = dx0 if deg else yx
-        yy = dy0 if deg else yy
-        yz = dz0 if deg else yz
-        if friction > 0.0:
-            px, py, pz = local_of(W[_SX, c], W[_SY, c], W[_SZ, c], r, cx, cy, cz)
-            yx, yy, yz = ellipsoid_friction(yx, yy, yz, px, py, pz, ix, iy, iz, friction)
-        wx, wy, wz = world_of(yx, yy, yz, r, cx, cy, cz)
+        wx, wy, wz = ellipsoid_pushed(qx, qy, qz, W[_SX, c], W[_SY, c], W[_SZ, c], contact,
+                                      (ix, iy, iz), exit_point)
         more = 0.0
         if ftl:     # the first placement of restore_node, its test as a flag
             bx, by, bz = W[_BX, c], W[_BY, c], W[_BZ, c]

@@ -40,7 +40,7 @@ import numpy as np
 from hair_tracking.ghosts.contacts import collide_lanes, CONTACT_ROWS
 from hair_tracking.ghosts.spread import group_variance, spread_factor
 from hair_tracking.ghosts.weights import com_weight, elastic_weight, ELASTIC_OFF, weighted_position
-from hair_tracking.guides.collision import rotation_entries, world_center
+from hair_tracking.colliders.head import rotation_entries, world_center
 
 
 @njit(cache=True, inline='always')

@@ -41,7 +41,7 @@ def guide_segment_frames(guide_rest, gx, rot):
 def ghost_step(x, v, ghost_rest, ghost_len, guide_of, seg, t, guide_rest, gx, gx_old, head,
                dt, tracking, collider=None):
     """One ghost-tracking substep, stages (a)-(g) of :mod:`.tracking_kernels`, and (h) node by
-    node with ``collider`` (a :class:`.collision.Collider`).
+    node with ``collider`` (a :class:`~hair_tracking.colliders.head.HeadCollider`).
 
     ``x``, ``v`` (S, N, 3) the ghosts' state; ``ghost_rest`` (S, N, 3) and ``ghost_len``
     (S, N-1) their rest shapes and segment lengths; ``guide_of`` (S,) the guide of each ghost

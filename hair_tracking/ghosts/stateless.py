@@ -3,27 +3,28 @@
 guides are some of the strands themselves (:func:`choose_guides`; a ratio of 1:1 is full
 simulation), every guide is read at the ghosts' node fractions (:func:`node_map`,
 :func:`guide_columns`), the ghosts are kept out of the head collider with the guide solver's
-margin rule (:func:`collider_axes`), and every strand is placed from the guides and head pose
-of the last step when the hair is next read (:class:`StatelessTracker`), once per output frame
-however many head poses came in between.
+margin rule (:meth:`~hair_tracking.colliders.head.HeadCollider.fitted`), and every strand is
+placed from the guides and head pose of the last step when the hair is next read
+(:class:`StatelessTracker`), once per output frame however many head poses came in between.
 """
 from collections import namedtuple
-from typing import Dict, Tuple
+from typing import Dict, Optional, Tuple
 
 import numpy as np
 from numba import njit
 
+from hair_tracking.colliders.head import rotation_entries, world_center
 from hair_tracking.colliders.kernels import slide_push_strands
-from hair_tracking.colliders.pose import frames_at
+from hair_tracking.colliders.pose import frames_at, world_quadric
 from hair_tracking.colliders.reference import (reference_level, reference_pose,
                                                reference_slide_push)
 from hair_tracking.colliders.scene_body import make_body
 from hair_tracking.colliders.shapes import Shape, shape_table
+from hair_tracking.colliders.table import ColliderTable
 from hair_tracking.core.model import carry_rigidly, HeadPose, StrandSet, strand_part
 from hair_tracking.core.point_records import points_to_records, record_target
 from hair_tracking.ghosts.interface import TrackStep
 from hair_tracking.grooms.guides import farthest_points
-from hair_tracking.guides.collision import outside_distance, world_center
 
 
 #: Where a placement kernel writes, a plain tuple in these fields' order (numba types a named
@@ -57,28 +58,15 @@ def node_map(ghost_nodes: int, guide_nodes: int) -> Tuple[np.ndarray, np.ndarray
     return seg, t
 
 
-def collider_axes(ghosts: StrandSet, collider) -> Tuple[np.ndarray, np.ndarray]:
-    """``(centre, axes)`` of the ellipsoid the ghosts are kept out of (head frame): the head
-    collider's radii plus its margin, the margin capped as the guide solver caps it: by the rest
-    clearance of any free node and half the shortest segment, so no ghost is pushed out of its
-    own rest shape."""
-    clearance = outside_distance(ghosts.rest[:, 2:] - collider.center, collider.radii)
-    margin = min(collider.margin, float(clearance.min()), 0.5 * float(ghosts.rest_length.min()))
-    return (np.ascontiguousarray(collider.center, dtype=np.float64),
-            np.ascontiguousarray(collider.radii + max(0.0, margin), dtype=np.float64))
-
-
 @njit(cache=True, inline='always')
 def world_collider(rot, pos, center, axes, out):
     """The collider ellipsoid (``center``, ``axes``: head frame) in the world for the head pose
     ``rot``, ``pos``: ``out[0:3]`` its centre, ``out[3:9]`` the entries Q00 Q11 Q22 Q01 Q02 Q12
-    of ``Q = R diag(1 / axes^2) R^T`` (a point ``x`` is inside when ``(x - c)^T Q (x - c) <
-    1``)."""
+    of ``Q = R diag(1 / axes^2) R^T`` (:func:`~hair_tracking.colliders.pose.world_quadric`; a
+    point ``x`` is inside when ``(x - c)^T Q (x - c) < 1``)."""
     out[0], out[1], out[2] = world_center(rot, pos, center)
     inv = 1.0 / (axes * axes)
-    for i, (a, b) in enumerate(((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))):
-        out[3 + i] = rot[a, 0] * rot[b, 0] * inv[0] + rot[a, 1] * rot[b, 1] * inv[1] + \
-            rot[a, 2] * rot[b, 2] * inv[2]
+    world_quadric(rotation_entries(rot), (inv[0], inv[1], inv[2]), out, 3)
 
 
 def reference_contact(p, prev, length, head: HeadPose, axes, center, slide=True):
@@ -133,9 +121,11 @@ class StatelessTracker:
 
     ``guides`` must be some of the ghost strands: ``guide_index[i]`` is the ghost strand that
     guide ``i`` is (``ghosts.rest[guide_index] == guides.rest``).  ``collider``, when given and
-    ``scene.tracking.collide`` is true, is the head collider (a
-    :class:`~hair_tracking.guides.collision.Collider`).  Ghosts carry no velocity of their
-    own (:meth:`velocities` is zero).
+    ``scene.tracking.collide`` is true, is the head's row of the collider table (a
+    :class:`~hair_tracking.colliders.head.HeadCollider`; its margin fitted to the ghosts,
+    :meth:`~hair_tracking.colliders.head.HeadCollider.fitted`); ``colliders`` the scene's
+    :class:`~hair_tracking.colliders.table.ColliderTable` (default: one built from ``scene``).
+    Ghosts carry no velocity of their own (:meth:`velocities` is zero).
 
     :meth:`step` keeps the guides (read at the ghosts' node fractions) and the head pose; the
     ghosts are placed from them when they are next read: :meth:`positions` (and
@@ -148,7 +138,8 @@ class StatelessTracker:
     :meth:`reset` and :meth:`carry` are kept exactly (float64) until the next step.
     """
 
-    def __init__(self, ghosts: StrandSet, guides: StrandSet, guide_index, scene, collider=None):
+    def __init__(self, ghosts: StrandSet, guides: StrandSet, guide_index, scene, collider=None,
+                 colliders: Optional[ColliderTable] = None):
         self.ghosts = ghosts
         self.guides = guides
         self.guide_index = np.asarray(guide_index, dtype=np.int64)
@@ -168,19 +159,21 @@ class StatelessTracker:
         self._v = np.zeros(ghosts.rest.shape)
         self._v.flags.writeable = False
         self.collide = bool(scene.tracking.collide and collider is not None)
-        #: the ellipsoid the ghosts are kept out of, head frame (:func:`collider_axes`; a
-        #: stand-in without a collider)
-        if self.collide:
-            self.center, self.axes = collider_axes(ghosts, collider)
+        table = colliders if colliders is not None else ColliderTable(scene)
+        head = collider.fitted(ghosts.rest, ghosts.inv_mass, ghosts.rest_length) \
+            if self.collide else None
+        #: the ellipsoid the ghosts are kept out of, head frame: its centre and its radii plus
+        #: the margin fitted to the ghosts (a stand-in without a collider)
+        if head is not None:
+            self.center, self.axes = head.center, head.axes
         else:
             self.center, self.axes = np.zeros(3), np.ones(3)
-        positive = ghosts.rest_length[ghosts.rest_length > 0]
-        #: the scene's bust and slot colliders (``None`` without either): every placement is
-        #: followed by their contact pass
+        #: the scene's bust and slot colliders (``None`` without either), the head's row
+        #: first: every placement is followed by their contact pass
         #: (:func:`~hair_tracking.colliders.kernels.slide_push_strands`)
-        self.body = make_body(scene.body, float(positive.min()) if positive.size else 0.0,
-                              (self.center, self.axes) if self.collide else None,
-                              scene.colliders)
+        positive = ghosts.rest_length[ghosts.rest_length > 0]
+        self.body = make_body(table, float(positive.min()) if positive.size else 0.0,
+                              head.row() if head is not None else None)
         self._head = HeadPose(np.zeros(3), np.array([0.0, 0.0, 0.0, 1.0]), np.eye(3))
         self._rest_length = np.ascontiguousarray(ghosts.rest_length, dtype=np.float64)
         self.stats: Dict[str, int] = {'ghosts': int(ghosts.count), 'steps': 0, 'evaluations': 0,

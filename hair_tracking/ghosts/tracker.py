@@ -17,8 +17,8 @@ d. centre-of-mass tracking -- per group and node index the ghosts' centre of mas
 e. optional spread control (HairControl, Milliez et al. 2018);
 f. optional length restoration (one Follow-The-Leader pass, Mueller, Kim & Chentanez 2012);
 g. roots (nodes 0 and 1) pinned at ``head.to_world(rest)``;
-h. optional collision with the head collider: inside the kernel for the project's
-   :class:`hair_tracking.guides.collision.Collider`, node by node after (f) (push out with
+h. optional collision with the head collider: inside the kernel for the table's head row
+   (:class:`hair_tracking.colliders.head.HeadCollider`), node by node after (f) (push out with
    friction, then, with length restoration on, the collision-aware FTL step of the guides,
    :func:`hair_tracking.guides.ftl.restore_node`, so a
    push does not stretch the ghost); any other collider's ``apply`` runs after the kernel on the
@@ -42,8 +42,10 @@ from typing import Dict, Optional, Tuple
 import numba
 import numpy as np
 
+from hair_tracking.colliders.head import HeadCollider
 from hair_tracking.colliders.kernels import collide
-from hair_tracking.colliders.scene_body import make_body
+from hair_tracking.colliders.table import ColliderTable
+from hair_tracking.core.kernels import runs_parallel
 from hair_tracking.core.model import carry_rigidly, HeadPose, StrandSet, strand_part
 from hair_tracking.core.point_records import blocks_to_records
 from hair_tracking.core.scene import Scene
@@ -53,9 +55,7 @@ from hair_tracking.ghosts.kernels import (block_groups, chunk_count, copy_blocks
                                           group_blocks, guide_frames, TMP_ROWS, track_groups,
                                           track_groups_serial, TrackWork)
 from hair_tracking.ghosts.weights import elastic_code, tip_weights
-from hair_tracking.guides.collision import Collider
 from hair_tracking.guides.ftl import ftl_restore_shapes
-from hair_tracking.guides.integrate import runs_parallel
 
 
 class GhostTracker:
@@ -70,8 +70,12 @@ class GhostTracker:
     blocks, and :meth:`set_state` puts a state in.  So several substeps without a read cost no
     conversion.
 
-    ``collider`` is used only when ``scene.tracking.collide`` is true and it is given; it must
-    then expose ``apply(x, x_prev, inv_mass, head) -> int``.
+    ``collider`` is used only when ``scene.tracking.collide`` is true and it is given: the
+    head's row of the collider table (a :class:`~hair_tracking.colliders.head.HeadCollider`,
+    with the scene's margin as given) or any object with ``apply(x, x_prev, inv_mass, head) ->
+    int``.  ``colliders``: the scene's
+    :class:`~hair_tracking.colliders.table.ColliderTable` (its bust and slots, stage (i);
+    default: one built from ``scene``).
 
     ``regroup`` (default true): the ghost StrandSet is reordered **once**, at construction, so
     that the ghosts of each guide are contiguous in memory (stable order within a group); its
@@ -82,12 +86,13 @@ class GhostTracker:
     ``order``.
 
     ``parallel``: run the parallel kernel rather than its serial variant (default: by the ghost
-    node count, :func:`~hair_tracking.guides.integrate.runs_parallel`; the simulator decides
+    node count, :func:`~hair_tracking.core.kernels.runs_parallel`; the simulator decides
     for the whole scene).
     """
 
     def __init__(self, ghosts: StrandSet, guides: StrandSet, scene: Scene, collider=None,
-                 regroup: bool = True, parallel: Optional[bool] = None):
+                 regroup: bool = True, parallel: Optional[bool] = None,
+                 colliders: Optional[ColliderTable] = None):
         tr = scene.tracking
         self.ghosts = ghosts
         self.guides = guides
@@ -198,7 +203,7 @@ class GhostTracker:
         self._contacts = np.zeros(chunks, dtype=np.int64)
         # the project's ellipsoid collider runs inside the kernel (h); any other collider object
         # runs after it on the whole arrays
-        self._fused_collider = self.collide and isinstance(collider, Collider)
+        self._fused_collider = self.collide and isinstance(collider, HeadCollider)
         if self._fused_collider:
             self._axes = np.ascontiguousarray(collider.radii + collider.margin)
             self._center = collider.center
@@ -207,10 +212,9 @@ class GhostTracker:
             self._axes, self._center = np.ones(3), np.zeros(3)
             self._friction, self._refine = 0.0, 0
         self._collide_after = self.collide and not self._fused_collider
-        positive = ghosts.rest_length[ghosts.rest_length > 0]
-        #: the scene's bust (``None`` without ``body.bust``): stage (i)
-        self.body = make_body(scene.body, float(positive.min()) if positive.size else 0.0,
-                              colliders=scene.colliders)
+        table = colliders if colliders is not None else ColliderTable(scene)
+        #: the scene's bust and slot shapes (``None`` without either): stage (i)
+        self.body = table.for_strands(ghosts).body
         self._body_head: Optional[HeadPose] = None      # the head pose of the last step
         self._x_prev = np.empty(ghosts.rest.shape) \
             if self._collide_after or self.body is not None else None

@@ -50,7 +50,7 @@ from hair_tracking.core.point_records import put_record
 from hair_tracking.ghosts.blend import blend_weights
 from hair_tracking.ghosts.stateless import (StatelessTracker, at_fractions, node_map,
                                             reference_contact, world_collider)
-from hair_tracking.guides.integrate import FASTMATH
+from hair_tracking.core.kernels import FASTMATH
 
 #: Strands of one guide advanced together (one block): two AVX2 or one AVX-512 register of
 #: float64 lanes.
@@ -389,8 +389,9 @@ class TurnTracker(StatelessTracker):
     """Moves ``ghosts`` after ``guides`` when they are read (see the module docstring and
     :class:`~hair_tracking.ghosts.stateless.StatelessTracker`)."""
 
-    def __init__(self, ghosts: StrandSet, guides: StrandSet, guide_index, scene, collider=None):
-        super().__init__(ghosts, guides, guide_index, scene, collider)
+    def __init__(self, ghosts: StrandSet, guides: StrandSet, guide_index, scene, collider=None,
+                 colliders=None):
+        super().__init__(ghosts, guides, guide_index, scene, collider, colliders)
         near, _ = blend_weights(ghosts.rest[:, 0], guides.rest[:, 0], 1)
         self.guide_of = near[:, 0].astype(np.int64)
         self.guide_of[self.guide_index] = np.arange(guides.count)    # a guide follows itself

@@ -38,9 +38,10 @@ from hair_tracking.colliders.bounds import near
 from hair_tracking.colliders.contact import (ellipsoid_contact_shallow, ellipsoid_level,
                                              local_of, outside_within, surface_point)
 from hair_tracking.colliders.crease import escape
-from hair_tracking.guides.collision import placed, placed_shape, rotation_entries, to_head
-from hair_tracking.guides.integrate import (BLOCK, carry_rigid_block, FASTMATH, finalize_block,
-                                            max_step_sq_block, predict_block)
+from hair_tracking.colliders.head import placed, placed_shape, rotation_entries, to_head
+from hair_tracking.core.kernels import BLOCK, FASTMATH
+from hair_tracking.guides.integrate import (carry_rigid_block, finalize_block, max_step_sq_block,
+                                            predict_block)
 from hair_tracking.guides.pbd_constraints import jacobi_bend_block
 from hair_tracking.guides.split import split_due
 
@@ -79,7 +80,7 @@ def ftl_pass_block(x, rest, rest_length, rot, corr, s0, s1, add, collide):
     ``rot`` (3, 3) is the head rotation (only used for collapsed segments).  ``collide``:
     ``None``, or ``(x_ref, inv_mass, contact)`` for the pass aware of the head collider: the
     friction reference (S, N, 3), the inverse masses and the collider placed by the head pose
-    (:data:`~hair_tracking.guides.collision.Contact`).  Then, node ``i`` of the block's strands
+    (:data:`~hair_tracking.colliders.head.Contact`).  Then, node ``i`` of the block's strands
     placed, every free one (``inv_mass > 0``) inside the collider goes through
     :func:`contact_node` before node ``i + 1`` is placed (the inside test of a node index in
     the placement's loop, without branches; the contacts after it).  Returns the nodes the
@@ -216,7 +217,7 @@ Ellipsoid = namedtuple('Ellipsoid', ['cx', 'cy', 'cz', 'ax', 'ay', 'az', 'refine
 
 @njit(cache=True, inline='always')
 def ellipsoid_of(contact):
-    """The :data:`Ellipsoid` of a :data:`~hair_tracking.guides.collision.Contact`."""
+    """The :data:`Ellipsoid` of a :data:`~hair_tracking.colliders.head.Contact`."""
     return contact[1], contact[2], contact[3], contact[4], contact[5], contact[6], contact[8]
 
 
@@ -489,7 +490,7 @@ def ftl_collide_step(model, state, motion, params, work, collider):
     cost more than the plain pass.
 
     ``work``: ``(corr, x_ref)``, the first two fields of :data:`FtlWork`; ``collider``: the
-    fields of :data:`~hair_tracking.guides.collision.ColliderModel`.  Without ``params``'
+    fields of :data:`~hair_tracking.colliders.head.ColliderModel`.  Without ``params``'
     ``do_finalize`` the substep stops before finalize (a body's contact comes next; the
     clamped count is then 0).  Returns ``(clamped, contacts)``.
     """
@@ -530,7 +531,7 @@ def ftl_collide_step_serial(model, state, motion, params, work, collider):
 def ftl_collide_block(model, state, motion, params, work, contact, s0, s1):
     """One FTL substep with the head collider of the strands ``s0 <= s < s1``
     (:func:`ftl_collide_step`'s loop body; ``contact`` the collider placed by the substep's
-    head pose, :data:`~hair_tracking.guides.collision.Contact`); returns ``(clamped,
+    head pose, :data:`~hair_tracking.colliders.head.Contact`); returns ``(clamped,
     contacts)``."""
     x, v, x_old = state                                                 # GuideState
     rest, inv_mass, rest_length, bend_rest, bend_w = model              # FtlModel
@@ -553,7 +554,7 @@ def ftl_advance(model, state, drive, params, collide, collider, work, stop):
     """Kernel: ``K`` FTL substeps of all strands in one call.  Strands do not interact, so this
     is exactly ``K`` calls of :func:`ftl_collide_step` (with a collider) or of :func:`ftl_step`
     finalizing (without), one after another.  Without a stop rule every block of
-    :data:`~hair_tracking.guides.integrate.BLOCK` strands runs all ``K`` substeps before the
+    :data:`~hair_tracking.core.kernels.BLOCK` strands runs all ``K`` substeps before the
     next (its strands stay in cache; one parallel region for the whole run); with one, all
     blocks take a substep before the next, and the run stops before the first substep whose
     split estimate (``stop``) exceeds the limit.
@@ -562,7 +563,7 @@ def ftl_advance(model, state, drive, params, collide, collider, work, stop):
     every substep, ``rels[k] = rots[k + 1] rots[k]^T``, and
     :data:`~hair_tracking.guides.integrate.StepMotion`'s constant fields; ``params``:
     :data:`FtlParams` (``do_finalize`` true: every substep finalizes); ``collide``: whether the
-    head collider ``collider`` (:data:`~hair_tracking.guides.collision.ColliderModel`) acts;
+    head collider ``collider`` (:data:`~hair_tracking.colliders.head.ColliderModel`) acts;
     ``work``: the fields of :data:`FtlWork`, ``counts``, ``steps`` and ``before`` included: on
     return ``steps[0]`` holds every substep's largest squared node displacement [m^2] (NaN
     when one is NaN; not measured, and ``before`` not touched, when ``steps`` is (B, 0)).

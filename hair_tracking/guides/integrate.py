@@ -9,7 +9,7 @@ One substep of a guide solver (see :mod:`hair_tracking.guides.solver`) is
    ``p = x + v dt`` (Müller, Heidelberger, Hennix & Ratcliff 2007, "Position Based Dynamics");
 2. constraint projection (:mod:`~hair_tracking.guides.pbd_constraints`,
    :mod:`~hair_tracking.guides.ftl`);
-3. optional head collision (:mod:`~hair_tracking.guides.collision`);
+3. optional head collision (:mod:`~hair_tracking.colliders.head`);
 4. **finalize** (:func:`finalize_block`, kernel :func:`finalize`): per-substep displacement clamp
    and the velocity update ``v = (p - x) / dt``, with the Follow-The-Leader damping correction
    ``v_i -= s_damp d_{i+1} / dt`` (Müller, Kim & Chentanez 2012) when ``s_damp > 0``.
@@ -33,32 +33,8 @@ import math
 import numpy as np
 from numba import njit, prange
 
-#: Below this many nodes a problem runs the serial variants of the kernels (``<kernel>_serial``:
-#: the same block bodies in a plain loop on the calling thread): the work is then smaller than
-#: a parallel region's launch.  The default groom's 64 guides (1 k nodes) stay serial, its 512
-#: ghosts (8 k nodes) run the parallel kernels.  Results do not depend on the thread count
-#: (tested).
-PARALLEL_MIN_NODES = 1 << 12
+from hair_tracking.core.kernels import BLOCK, FASTMATH
 
-
-def runs_parallel(nodes: int) -> bool:
-    """Whether a problem of ``nodes`` nodes runs the parallel kernels (at least
-    PARALLEL_MIN_NODES nodes) rather than their serial variants, whatever the numba thread
-    count: on one thread a parallel kernel costs a launch but is not slower otherwise, and
-    where LLVM compiles a loop body differently in the two variants the parallel one was the
-    faster, so every method runs the same code at any thread count.  The simulator decides
-    once, from the whole scene's node counts, and hands the decision to each stage."""
-    return nodes >= PARALLEL_MIN_NODES
-
-
-#: Strands one thread processes together.  The constraint sweeps interleave the strands of a
-#: block (strand index innermost), so the CPU overlaps their independent dependency chains.
-BLOCK = 8
-
-#: LLVM fast-math flags of every kernel: only ``contract`` (fused multiply-add). Results are
-#: deterministic for a given build, agree with the numpy references to ~1e-15 relative, and NaN /
-#: infinity semantics are kept (no ``nnan``/``ninf``).
-FASTMATH = {'contract'}
 
 #: Arguments of the guide kernels (:func:`hair_tracking.guides.pbd_constraints.pbd_step`,
 #: :func:`~hair_tracking.guides.pbd_constraints.xpbd_step`,

@@ -19,7 +19,7 @@ from numba import njit, prange
 
 from hair_tracking.guides.ftl import CHUNKS, ftl_advance_blocks
 from hair_tracking.guides.ftl import _measured, _split_after
-from hair_tracking.guides.integrate import BLOCK
+from hair_tracking.core.kernels import BLOCK
 
 
 @njit(cache=True, nogil=True, parallel=True)

@@ -36,7 +36,8 @@ import math
 import numpy as np
 from numba import njit, prange, uint64
 
-from hair_tracking.guides.integrate import FASTMATH, finalize_block, predict_block
+from hair_tracking.core.kernels import FASTMATH
+from hair_tracking.guides.integrate import finalize_block, predict_block
 
 #: Static data of :func:`pbd_step` (the last four in :func:`lane_major` layout): ``rest``
 #: (S, N, 3) head frame [m], ``inv_mass`` (S, N), ``rest_length``, ``bend_rest`` (rest

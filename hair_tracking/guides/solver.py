@@ -17,9 +17,9 @@ and their roots follow the head. One call of :meth:`GuideSolver.step` is one sub
    (:class:`FtlSolver`; see :mod:`~hair_tracking.guides.pbd_constraints` and
    :mod:`~hair_tracking.guides.ftl`); the rest of the substep is their base class's,
    :class:`GuideSolver`;
-5. head collision, only if the scene has a collider (:mod:`~hair_tracking.guides.collision`), with
-   friction measured against the start-of-substep positions carried rigidly with the head (FTL:
-   within its pass, node by node, :func:`~hair_tracking.guides.ftl.contact_node`); then,
+5. head collision, only if the scene has a collider (:mod:`~hair_tracking.colliders.head`),
+   with friction measured against the start-of-substep positions carried rigidly with the head
+   (FTL: within its pass, node by node, :func:`~hair_tracking.guides.ftl.contact_node`); then,
    only if the scene has a body (``body.bust``), the bust's capsules
    (:class:`~hair_tracking.colliders.scene_body.SceneBody`, the contact model's collision stage
    :func:`~hair_tracking.colliders.kernels.collide` with its push-out velocity bound; FTL
@@ -50,13 +50,12 @@ from typing import Any, Dict, Optional, Sequence, Tuple
 import numpy as np
 
 from hair_tracking.colliders import kernels as contact_kernels
-from hair_tracking.colliders.scene_body import make_body
-from hair_tracking.guides import collision
-
+from hair_tracking.colliders.table import ColliderTable
 from hair_tracking.guides import ftl
 
 from hair_tracking.guides import integrate
 
+from hair_tracking.core.kernels import runs_parallel
 from hair_tracking.core.metrics import max_stretch
 from hair_tracking.core.model import HeadPose, StrandSet
 from hair_tracking.guides import many_heads, pbd_constraints
@@ -70,7 +69,7 @@ BEND_REFERENCE_DT = 1.0 / 240.0
 #: 0.004166667 s is 1/240 s).
 REFERENCE_TOLERANCE = 1e-6
 #: What the FTL kernels take as the collider where there is none (not read; the fields of
-#: :data:`~hair_tracking.guides.collision.ColliderModel`).
+#: :data:`~hair_tracking.colliders.head.ColliderModel`).
 NO_COLLIDER = (np.zeros(3), np.ones(3), 0.0, 0.0, 0)
 #: What :func:`~hair_tracking.guides.ftl.ftl_advance` takes as its stop rule where there is
 #: none (a limit of 0: not applied).
@@ -88,14 +87,17 @@ class GuideSolver:
     ``v`` must be C-contiguous float64 ``(S, N, 3)``, ``N >= 3``); ``scene``: a
     :class:`~hair_tracking.core.scene.Scene` (solver, gravity, damping, collider);
     ``parallel``: run the parallel kernels rather than their serial variants (default: by the
-    node count, :func:`~hair_tracking.guides.integrate.runs_parallel`; the simulator decides
-    for the whole scene).
+    node count, :func:`~hair_tracking.core.kernels.runs_parallel`; the simulator decides
+    for the whole scene); ``colliders``: the scene's
+    :class:`~hair_tracking.colliders.table.ColliderTable` (the simulator's; default: one built
+    from ``scene``).
 
-    Attributes: ``collider`` (``None`` when the scene has none; the simulator may hand it to the
-    ghost tracker), ``kind`` (the solver's name in ``scene.solver.type``, reported in
-    :attr:`stats`), ``margin`` the collider margin in use [m]: ``scene.collider.margin``, but at
-    most the rest clearance of the closest free node and half the shortest segment (see
-    ``_fit_margin``); ``parallel`` the kernel variant; ``model`` the kernels' static data, the
+    Attributes: ``collider`` (the table's head row for these strands, ``None`` when the scene
+    has none), ``body`` (its bust and slot shapes), ``kind`` (the solver's name in
+    ``scene.solver.type``, reported in :attr:`stats`), ``margin`` the collider margin in use
+    [m]: ``scene.collider.margin``, but at most the rest clearance of the closest free node and
+    half the shortest segment (:meth:`~hair_tracking.colliders.head.HeadCollider.fitted`);
+    ``parallel`` the kernel variant; ``model`` the kernels' static data, the
     fields of :data:`~hair_tracking.guides.ftl.FtlModel`,
     :data:`~hair_tracking.guides.pbd_constraints.PbdModel` or
     :data:`~hair_tracking.guides.pbd_constraints.XpbdModel` as a plain tuple (XPBD's from
@@ -104,18 +106,21 @@ class GuideSolver:
 
     kind = ''
 
-    def __init__(self, strands: StrandSet, scene, parallel: Optional[bool] = None):
+    def __init__(self, strands: StrandSet, scene, parallel: Optional[bool] = None,
+                 colliders: Optional[ColliderTable] = None):
         self._check_strands(strands)
         self.strands = strands
         self.scene = scene
-        self.parallel = bool(integrate.runs_parallel(strands.count * strands.nodes)
+        self.parallel = bool(runs_parallel(strands.count * strands.nodes)
                              if parallel is None else parallel)
-        self.collider = collision.make_collider(scene.collider)
-        self.margin = self._fit_margin()
-        positive = strands.rest_length[strands.rest_length > 0]
-        #: the scene's bust (``None`` without ``body.bust``)
-        self.body = make_body(scene.body, float(positive.min()) if positive.size else 0.0,
-                              colliders=scene.colliders)
+        #: the scene's collider table (the simulator's, or one of this solver's own)
+        self.colliders = colliders if colliders is not None else ColliderTable(scene)
+        mine = self.colliders.for_strands(strands)
+        #: the head's row, margin fitted to the strands (``None`` without a head collider)
+        self.collider = mine.head
+        self.margin = self.collider.margin if self.collider is not None else 0.0
+        #: the bust and slot shapes (``None`` without either)
+        self.body = mine.body
         sv = scene.solver
         self._gravity = np.ascontiguousarray(scene.gravity, dtype=np.float64)
         self._damping = float(scene.damping)
@@ -313,24 +318,6 @@ class GuideSolver:
         c['contacts'] = int(contacts)
         c['contacts_total'] += int(contacts)
 
-    def _fit_margin(self) -> float:
-        """Collider margin actually used [m]: the scene's, but no more than the rest clearance of
-        the closest free node (the collider must never push a strand out of its own rest shape)
-        and no more than half the shortest segment (a push is resolved by moving a node; pushes
-        longer than its segments tear PBD strands: with 1 mm segments and a 4 mm margin the
-        first segments were stretched by 200 %)."""
-        if self.collider is None:
-            return 0.0
-        c = self.collider
-        st = self.strands
-        free = st.inv_mass > 0
-        if c.margin > 0.0 and np.any(free):
-            clearance = collision.outside_distance(st.rest[free] - c.center, c.radii)
-            positive = st.rest_length[st.rest_length > 0]
-            half_segment = 0.5 * positive.min() if positive.size else c.margin
-            c.margin = float(min(c.margin, clearance.min(), half_segment))
-        return c.margin
-
     @staticmethod
     def _check_strands(st: StrandSet) -> None:
         _check_strands(st)
@@ -411,7 +398,7 @@ class FtlSolver(GuideSolver):
 
     def collider_model(self) -> tuple:
         """The collider as the FTL kernels take it
-        (:data:`~hair_tracking.guides.collision.ColliderModel`; a stand-in without one)."""
+        (:data:`~hair_tracking.colliders.head.ColliderModel`; a stand-in without one)."""
         return self.collider.model if self.collider is not None else NO_COLLIDER
 
     @property
@@ -445,7 +432,7 @@ class FtlSolver(GuideSolver):
         rule_args = (np.ascontiguousarray(stop[0], dtype=np.float64), float(stop[1]),
                      float(stop[2])) if stop is not None else NO_STOP
         kernel = ftl.ftl_advance if self.parallel else ftl.ftl_advance_serial
-        # plain tuples in the fields' order of ftl.FtlWork and collision.ColliderModel
+        # plain tuples in the fields' order of ftl.FtlWork and colliders.head.ColliderModel
         work = (self._corr, self._friction_ref(), counts, steps,
                 self._x_before if measure else self._x_before[:0])
         done, clamped, clamped_total, contacts, contacts_total = kernel(
@@ -627,13 +614,14 @@ class XpbdSolver(_LaneSolver):
 SOLVERS = {cls.kind: cls for cls in (FtlSolver, PbdSolver, XpbdSolver)}
 
 
-def make_solver(strands: StrandSet, scene, parallel: Optional[bool] = None) -> GuideSolver:
+def make_solver(strands: StrandSet, scene, parallel: Optional[bool] = None,
+                colliders: Optional[ColliderTable] = None) -> GuideSolver:
     """The guide solver ``scene.solver.type`` names (:data:`SOLVERS`) for ``strands``
     (:class:`GuideSolver` for the arguments)."""
     cls = SOLVERS.get(scene.solver.type)
     if cls is None:
         raise ValueError(f'solver.type: {scene.solver.type!r} is not one of ftl, pbd, xpbd')
-    return cls(strands, scene, parallel)
+    return cls(strands, scene, parallel, colliders)
 
 
 def ftl_inner_steps(dt: float) -> int:

@@ -31,7 +31,7 @@ import numpy as np
 from hair_tracking.core.head_track import PoseResult
 from hair_tracking.core.scene import Scene
 from hair_tracking.grooms.build import build_groom
-from hair_tracking.guides.integrate import runs_parallel
+from hair_tracking.core.kernels import runs_parallel
 from hair_tracking.guides.split import run_split, split_heads
 from hair_tracking.simulator import HairSimulator, substep_times
 
@@ -45,7 +45,7 @@ class Crowd:
 
     ``places``: most people at once; ``clock()`` [s] times the work (a test injects one).
     ``parallel``: the batched kernel's variant (default: by the node count of all places,
-    :func:`~hair_tracking.guides.integrate.runs_parallel`).
+    :func:`~hair_tracking.core.kernels.runs_parallel`).
     """
 
     def __init__(self, scene: Scene, places: int, clock: Callable[[], float] = time.perf_counter,

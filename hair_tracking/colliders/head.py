@@ -1,4 +1,5 @@
-"""Head collider: a sphere or an ellipsoid fixed in the head frame.
+"""The head's row of the collider table: a sphere or an ellipsoid on the head frame, and the
+kernels of its fast path.
 
 The collision surface is the ellipsoid with semi-axes ``radii + margin`` around ``center`` (head
 frame); a sphere is the ellipsoid with three equal radii. For a sphere this is exactly the surface
@@ -14,7 +15,11 @@ radial projection is already exact (``refine = 0``).
 All work happens in the head frame: points are transformed with the head pose inside the
 kernels (``q = R^T (x - t) - center``); inputs and outputs are world-frame positions [m].
 :func:`project_ellipsoid` and :func:`penetration_ellipsoid` are plain kernels usable on any
-``(S, N, 3)`` arrays (the ghost tracker calls them through :class:`Collider` on its own arrays).
+``(S, N, 3)`` arrays (the ghost tracker calls them through :class:`HeadCollider` on its own
+arrays).  The head's row is the first of the scene's table
+(:class:`~hair_tracking.colliders.table.ColliderTable`); :class:`HeadCollider` is that row as
+the guide solvers and trackers run it, its margin fitted to their strands
+(:meth:`HeadCollider.fitted`).
 """
 from collections import namedtuple
 import math
@@ -23,20 +28,15 @@ from typing import Optional
 import numpy as np
 from numba import njit, prange
 
-from hair_tracking.colliders.contact import (CENTRE_LEVEL, centre_exit, ellipsoid_contact,
-                                             ellipsoid_friction, ellipsoid_level,
-                                             ellipsoid_radial, ellipsoid_refine, local_of,
-                                             surface_point, world_of)
-from hair_tracking.colliders.margin import outside_distance  # noqa: F401 (the guides' margin)
-from hair_tracking.guides.integrate import BLOCK, FASTMATH, runs_parallel
+from hair_tracking.colliders.contact import (centre_exit, ellipsoid_contact, ellipsoid_level,
+                                             ellipsoid_pushed, local_of, surface_point)
+from hair_tracking.colliders.margin import fit_margin
+from hair_tracking.colliders.shapes import HEAD_FRAME, Shape
+from hair_tracking.core.kernels import BLOCK, FASTMATH, runs_parallel
 
-#: Normal-line refinements of the ellipsoid projection in :meth:`Collider.apply`.
-ELLIPSOID_REFINEMENTS = 2
-#: Refinements used by :meth:`Collider.penetration` (a measurement: a few more).
-PENETRATION_REFINEMENTS = 6
 
 #: The collider as the kernels take it, a plain tuple in these fields' order
-#: (:attr:`Collider.model`; numba types a named tuple by encoding its class and field names on
+#: (:attr:`HeadCollider.model`; numba types a named tuple by encoding its class and field names on
 #: every call): ``center`` (3,) and ``radii`` (3,) head frame [m], ``margin`` [m],
 #: ``friction`` 0..1, ``refine`` projection refinements.
 ColliderModel = namedtuple('ColliderModel', ['center', 'radii', 'margin', 'friction', 'refine'])
@@ -124,7 +124,8 @@ def project_ellipsoid_serial(x, x_prev, inv_mass, rot, pos, collider):
 
 
 #: Normal-line refinements :func:`project_block`'s pass over the pushed nodes unrolls (the
-#: ellipsoid default is :data:`ELLIPSOID_REFINEMENTS`); more take the node-by-node path.
+#: ellipsoid default is :data:`~hair_tracking.colliders.shapes.ELLIPSOID_REFINEMENTS`); more
+#: take the node-by-node path.
 MAX_VECTOR_REFINE = 2
 #: Rows of :func:`project_block`'s work space (per node of the block): inside flag, index of a
 #: pushed node, its position, its friction reference.
@@ -180,24 +181,12 @@ def project_block(x, x_prev, inv_mass, contact, s0, s1):
             _, w[_PX, c], w[_PY, c], w[_PZ, c] = ellipsoid_contact(
                 w[_PX, c], w[_PY, c], w[_PZ, c], w[_RX, c], w[_RY, c], w[_RZ, c], contact)
     else:
-        ex, ey, ez = centre_exit(ax, ay, az)
+        exit_point = centre_exit(ax, ay, az)
         for c in range(m):
             qx, qy, qz = local_of(w[_PX, c], w[_PY, c], w[_PZ, c], rot, cx, cy, cz)
-            f, sc = ellipsoid_radial(qx, qy, qz, ix, iy, iz)
-            yx, yy, yz = qx * sc, qy * sc, qz * sc
-            cc = f - 1.0
-            if refine >= 1:
-                yx, yy, yz = ellipsoid_refine(qx, qy, qz, yx, yy, yz, cc, ix, iy, iz)
-            if refine >= 2:
-                yx, yy, yz = ellipsoid_refine(qx, qy, qz, yx, yy, yz, cc, ix, iy, iz)
-            deg = f < CENTRE_LEVEL
-            yx = ex if deg else yx
-            yy = ey if deg else yy
-            yz = ez if deg else yz
-            if mu > 0.0:
-                px, py, pz = local_of(w[_RX, c], w[_RY, c], w[_RZ, c], rot, cx, cy, cz)
-                yx, yy, yz = ellipsoid_friction(yx, yy, yz, px, py, pz, ix, iy, iz, mu)
-            w[_PX, c], w[_PY, c], w[_PZ, c] = world_of(yx, yy, yz, rot, cx, cy, cz)
+            w[_PX, c], w[_PY, c], w[_PZ, c] = ellipsoid_pushed(
+                qx, qy, qz, w[_RX, c], w[_RY, c], w[_RZ, c], contact, (ix, iy, iz),
+                exit_point)
     # 4. scatter
     for c in range(m):
         j = int(w[_IDX, c])
@@ -270,12 +259,14 @@ def _pose(head):
     return rot, pos
 
 
-class Collider:
-    """A sphere or ellipsoid fixed in the head frame (see the module docstring).
+class HeadCollider:
+    """The head's row (a sphere or ellipsoid on the head frame, see the module docstring) as
+    the kernels of its fast path take it.
 
     ``center`` (3,) and ``radii`` (3,) [m] head frame, ``margin`` [m] kept between hair and
-    surface, ``friction`` 0..1. ``refine`` is the number of projection refinements (0 for a sphere,
-    :data:`ELLIPSOID_REFINEMENTS` otherwise).
+    surface, ``friction`` 0..1. ``refine`` is the number of projection refinements (0 for a
+    sphere, :data:`~hair_tracking.colliders.shapes.ELLIPSOID_REFINEMENTS` otherwise), the
+    row's (:meth:`~hair_tracking.colliders.shapes.Shape.refinements`).
     """
 
     def __init__(self, shape: str, center, radii, margin: float, friction: float):
@@ -292,9 +283,34 @@ class Collider:
             raise ValueError(f'collider friction: must be in [0, 1], got {friction}')
         self.margin = float(margin)
         self.friction = float(friction)
-        spherical = bool(np.all(self.radii == self.radii[0]))
-        self.refine = 0 if spherical else ELLIPSOID_REFINEMENTS
-        self._pen_refine = 0 if spherical else PENETRATION_REFINEMENTS
+        row = self.row()
+        self.refine = row.refinements()
+        self._pen_refine = row.refinements(measure=True)
+
+    @classmethod
+    def of_row(cls, row: Shape) -> 'HeadCollider':
+        """The head collider of the table's head row ``row`` (an ellipsoid on the head frame;
+        a sphere is the ellipsoid of three equal radii)."""
+        return cls(row.name, row.center, row.radii, row.margin, row.friction)
+
+    def row(self) -> Shape:
+        """This collider as a row of the collider table (an ellipsoid on the head frame)."""
+        return Shape('ellipsoid', frame=HEAD_FRAME, center=tuple(self.center),
+                     radii=tuple(self.radii), margin=self.margin, friction=self.friction,
+                     name=self.shape)
+
+    def fitted(self, rest: np.ndarray, inv_mass: np.ndarray,
+               rest_length: np.ndarray) -> 'HeadCollider':
+        """This collider with the margin a strand set (``rest`` (S, N, 3) head frame,
+        ``inv_mass`` (S, N), ``rest_length`` (S, N - 1)) can use: the rule of every shape
+        (:func:`~hair_tracking.colliders.margin.fit_margin`) over its free nodes."""
+        margin = fit_margin(self.row(), rest[inv_mass > 0], rest_length)
+        return HeadCollider(self.shape, self.center, self.radii, margin, self.friction)
+
+    @property
+    def axes(self) -> np.ndarray:
+        """The semi-axes the hair is kept outside of [m]: the radii plus the margin."""
+        return np.ascontiguousarray(self.radii + self.margin)
 
     @property
     def model(self) -> tuple:
@@ -309,7 +325,7 @@ class Collider:
         only nodes with ``inv_mass > 0`` move; ``head`` a
         :class:`~hair_tracking.core.model.HeadPose`.  Returns the number of contacts (nodes
         moved).  Small problems run the serial variant of the kernel
-        (:func:`~hair_tracking.guides.integrate.runs_parallel`).
+        (:func:`~hair_tracking.core.kernels.runs_parallel`).
         """
         _points('x', x)
         _points('x_prev', x_prev)
@@ -335,7 +351,7 @@ class Collider:
         With ``inv_mass`` only the free nodes (``inv_mass > 0``) count (attached roots lie on the
         scalp, which may be inside the collider).  ``x`` may be float32 (the stateless trackers'
         ghost positions).  ``parallel``: the kernel variant (default: by the size of ``x``,
-        :func:`~hair_tracking.guides.integrate.runs_parallel`).
+        :func:`~hair_tracking.core.kernels.runs_parallel`).
         """
         _points('x', x, types=(np.float64, np.float32))
         if inv_mass is None:
@@ -358,9 +374,10 @@ class Collider:
         return float(out.max()) if out.size else 0.0
 
 
-def make_collider(spec) -> Optional[Collider]:
-    """The collider of a :class:`~hair_tracking.core.scene.ColliderSpec`; ``None`` for shape
-    'none'."""
+def head_row(spec) -> Optional[Shape]:
+    """The table's head row for a :class:`~hair_tracking.core.scene.ColliderSpec` (an
+    ellipsoid on the head frame named after the spec's shape; a sphere's three radii equal);
+    ``None`` for shape 'none'.  ValueError of one line for an unusable spec."""
     if spec.shape == 'none':
         return None
     if spec.shape == 'sphere':
@@ -369,4 +386,11 @@ def make_collider(spec) -> Optional[Collider]:
         radii = spec.radii
     else:
         raise ValueError(f'collider.shape: {spec.shape!r} is not one of none, sphere, ellipsoid')
-    return Collider(spec.shape, spec.center, radii, spec.margin, spec.friction)
+    return HeadCollider(spec.shape, spec.center, radii, spec.margin, spec.friction).row()
+
+
+def head_collider(spec) -> Optional[HeadCollider]:
+    """The head's row of a :class:`~hair_tracking.core.scene.ColliderSpec` as its kernels take
+    it (:func:`head_row`); ``None`` for shape 'none'."""
+    row = head_row(spec)
+    return HeadCollider.of_row(row) if row is not None else None
