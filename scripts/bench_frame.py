@@ -65,8 +65,9 @@ class FrameClock:
         t1 = time.perf_counter()
         c1 = time.process_time()
         n_strands, n_points, write = sim.record_writer()
-        self.cloud.encode(n_strands, n_points, write, frame_id='world', stamp_ns=t,
-                          packed_rgb=self.rgb)
+        msg = self.cloud.encode(n_strands, n_points, write, frame_id='world', stamp_ns=t,
+                                packed_rgb=self.rgb)
+        self.cloud_bytes = int(msg.nbytes)
         t2 = time.perf_counter()
         c2 = time.process_time()
         return {'frame_cpu': (c2 - c0) * 1e3, 'guides_cpu': (c1 - c0) * 1e3,
@@ -76,8 +77,8 @@ class FrameClock:
 
 def frame_times(sim, frames, warm=WARM_FRAMES):
     """Per-frame times [ms] of ``sim`` following the bundled walk at 60 Hz for ``frames``
-    frames after ``warm`` untimed ones: lists of :meth:`FrameClock.frame`'s times, and
-    ``substeps_per_frame``."""
+    frames after ``warm`` untimed ones: lists of :meth:`FrameClock.frame`'s times,
+    ``substeps_per_frame`` and ``cloud_bytes`` (the size of one frame's cloud message)."""
     clock = FrameClock(sim)
     n_frames = min(frames + warm, len(clock))
     parts = {'guides': [], 'ghosts_cloud': [], 'frame': [], 'frame_cpu': [], 'guides_cpu': [],
@@ -88,6 +89,7 @@ def frame_times(sim, frames, warm=WARM_FRAMES):
             for key, value in times.items():
                 parts[key].append(value)
     parts['substeps_per_frame'] = sim.counters.substeps / max(1, n_frames)
+    parts['cloud_bytes'] = clock.cloud_bytes
     return parts
 
 

@@ -18,7 +18,8 @@ from hair_tracking.core.transforms import quat_from_axis_angle, quat_to_matrix
 from hair_tracking.evaluation import stability
 from hair_tracking.evaluation.provenance import provenance
 from hair_tracking.evaluation import synthetic_motion as sm
-from hair_tracking.colliders.head import HeadCollider, outside_distance, placed
+from hair_tracking.colliders.head import HeadCollider, placed
+from hair_tracking.colliders.margin import outside_distance
 from hair_tracking.guides.solver import (BEND_REFERENCE_DT, GuideSolver, ftl_inner_steps,
                                          ftl_bend_stiffness)
 from hair_tracking.simulator import HairSimulator
