@@ -218,7 +218,8 @@ Ellipsoid = namedtuple('Ellipsoid', ['cx', 'cy', 'cz', 'ax', 'ay', 'az', 'refine
 @njit(cache=True, inline='always')
 def ellipsoid_of(contact):
     """The :data:`Ellipsoid` of a :data:`~hair_tracking.colliders.head.Contact`."""
-    return contact[1], contact[2], contact[3], contact[4], contact[5], contact[6], contact[8]
+    _, cx, cy, cz, ax, ay, az, _, refine = contact                     # Contact
+    return cx, cy, cz, ax, ay, az, refine
 
 
 @njit(cache=True, inline='always', fastmath=FASTMATH, error_model='numpy')
@@ -348,7 +349,8 @@ def ftl_step(model, state, motion, params, corr):
     :func:`hair_tracking.guides.integrate.finalize` when a collider runs before finalizing).
     Returns the clamped node count (0 when not finalizing).
     """
-    nblk = (state[0].shape[0] + BLOCK - 1) // BLOCK
+    x, _, _ = state                                                     # GuideState
+    nblk = (x.shape[0] + BLOCK - 1) // BLOCK
     clamped = 0
     for blk in prange(nblk):
         clamped += ftl_step_block(model, state, motion, params, corr, np.int64(blk))
@@ -358,7 +360,8 @@ def ftl_step(model, state, motion, params, corr):
 @njit(cache=True, nogil=True, fastmath=FASTMATH, error_model='numpy')
 def ftl_step_serial(model, state, motion, params, corr):
     """:func:`ftl_step` on the calling thread."""
-    nblk = (state[0].shape[0] + BLOCK - 1) // BLOCK
+    x, _, _ = state                                                     # GuideState
+    nblk = (x.shape[0] + BLOCK - 1) // BLOCK
     clamped = 0
     for blk in range(nblk):
         clamped += ftl_step_block(model, state, motion, params, corr, blk)
@@ -369,12 +372,14 @@ def ftl_step_serial(model, state, motion, params, corr):
 def ftl_step_block(model, state, motion, params, corr, blk):
     """Block ``blk`` of :func:`ftl_step`; returns its clamped node count."""
     x, v, x_old = state                                                 # GuideState
+    _, inv_mass, _, _, _ = model                                        # FtlModel
+    _, _, _, _, _, _, dt, _ = motion                                    # StepMotion
     inner_steps, bend_stiffness, s_damp, max_disp, do_finalize = params     # FtlParams
     s0 = blk * BLOCK
     s1 = min(s0 + BLOCK, x.shape[0])
     ftl_block(model, state, motion, inner_steps, bend_stiffness, s_damp, corr, s0, s1, None)
     if do_finalize:
-        return finalize_block(x, v, x_old, model[1], corr, s0, s1, motion[6], max_disp, s_damp)
+        return finalize_block(x, v, x_old, inv_mass, corr, s0, s1, dt, max_disp, s_damp)
     return 0
 
 
@@ -411,10 +416,10 @@ def ftl_block(model, state, motion, inner_steps, bend_stiffness, s_damp, corr, s
             jacobi_bend_block(x, bend_rest, bend_w, bend_stiffness, s0, s1)
         if collide is not None:
             if r == inner_steps - 1:
-                pushed = ftl_pass_block(x, rest, rest_length, motion[0], corr, s0, s1, r > 0,
+                pushed = ftl_pass_block(x, rest, rest_length, rot, corr, s0, s1, r > 0,
                                         collide)
                 continue
-        ftl_pass_block(x, rest, rest_length, motion[0], corr, s0, s1, r > 0, None)
+        ftl_pass_block(x, rest, rest_length, rot, corr, s0, s1, r > 0, None)
     return pushed
 
 
@@ -494,9 +499,10 @@ def ftl_collide_step(model, state, motion, params, work, collider):
     ``do_finalize`` the substep stops before finalize (a body's contact comes next; the
     clamped count is then 0).  Returns ``(clamped, contacts)``.
     """
-    rot = motion[0]
-    cx, cy, cz, ax, ay, az, fr, refine = placed_shape(collider, rot, motion[1])
-    n = state[0].shape[0]
+    rot, pos, _, _, _, _, _, _ = motion                                 # StepMotion
+    x, _, _ = state                                                     # GuideState
+    cx, cy, cz, ax, ay, az, fr, refine = placed_shape(collider, rot, pos)
+    n = x.shape[0]
     nblk = (n + BLOCK - 1) // BLOCK
     clamped = 0
     contacts = 0
@@ -513,8 +519,10 @@ def ftl_collide_step(model, state, motion, params, work, collider):
 @njit(cache=True, nogil=True, fastmath=FASTMATH, error_model='numpy')
 def ftl_collide_step_serial(model, state, motion, params, work, collider):
     """:func:`ftl_collide_step` on the calling thread."""
-    contact = placed(collider, motion[0], motion[1])
-    n = state[0].shape[0]
+    rot, pos, _, _, _, _, _, _ = motion                                 # StepMotion
+    contact = placed(collider, rot, pos)
+    x, _, _ = state                                                     # GuideState
+    n = x.shape[0]
     nblk = (n + BLOCK - 1) // BLOCK
     clamped = 0
     contacts = 0
@@ -538,7 +546,7 @@ def ftl_collide_block(model, state, motion, params, work, contact, s0, s1):
     rot, pos, rot_rel, pos_prev, gravity, damp, dt, shock = motion      # StepMotion
     inner_steps, bend_stiffness, s_damp, max_disp, do_finalize = params     # FtlParams
     corr, x_ref = work                                                  # FtlWork[:2]
-    friction = contact[7]
+    _, _, _, _, _, _, _, friction, _ = contact                          # Contact
     ref = x_ref if friction > 0.0 else x_old
     if friction > 0.0:
         carry_rigid_block(x, rot_rel, pos_prev, pos, x_ref, s0, s1)
@@ -617,10 +625,14 @@ def ftl_advance_serial(model, state, drive, params, collide, collider, work, sto
 def _run_plan(state, drive, work, stop):
     """``(substeps, blocks, chunks, limited)`` of a run of :func:`ftl_advance`: ``limited``
     when the stop rule applies (the displacements measured and a limit given)."""
-    n_sub = drive[2].shape[0]
-    nblk = (state[0].shape[0] + BLOCK - 1) // BLOCK
-    measure = work[3].shape[1] == n_sub
-    return n_sub, nblk, min(nblk, CHUNKS), measure and stop[1] > 0.0
+    _, _, rels, _, _, _, _ = drive                                      # FtlDrive
+    x, _, _ = state                                                     # GuideState
+    _, _, _, steps, _ = work                                            # FtlWork
+    _, limit, _ = stop
+    n_sub = rels.shape[0]
+    nblk = (x.shape[0] + BLOCK - 1) // BLOCK
+    measure = steps.shape[1] == n_sub
+    return n_sub, nblk, min(nblk, CHUNKS), measure and limit > 0.0
 
 
 @njit(cache=True, inline='always')
@@ -633,24 +645,27 @@ def _chunk_blocks(c, chunks, nblk):
 def _split_after(drive, work, stop, k, nblk):
     """Whether the run stops after substep ``k`` (:func:`ftl_advance`'s stop rule), with the
     substep's largest displacement gathered into ``steps[0, k]`` first."""
-    far = _column_max(work[3], k, nblk)
+    _, _, rels, _, _, dt, _ = drive                                     # FtlDrive
+    _, _, _, steps, _ = work                                            # FtlWork
+    far = _column_max(steps, k, nblk)
     rigid, limit, gdt2 = stop
-    return k + 1 < drive[2].shape[0] and split_due(far, drive[5], rigid[k + 1], gdt2, limit)
+    return k + 1 < rels.shape[0] and split_due(far, dt, rigid[k + 1], gdt2, limit)
 
 
 @njit(cache=True)
 def _measured(work, n_sub, nblk):
     """Every substep's largest displacement into ``steps[0]`` (when measured)."""
-    if work[3].shape[1] == n_sub:
+    _, _, _, steps, _ = work                                            # FtlWork
+    if steps.shape[1] == n_sub:
         for k in range(n_sub):
-            _column_max(work[3], k, nblk)
+            _column_max(steps, k, nblk)
 
 
 @njit(cache=True)
 def _run_counts(work, nblk, done):
     """:func:`ftl_advance`'s return value from the per-block counts of its ``done``
     substeps."""
-    counts = work[2]
+    _, _, counts, _, _ = work                                           # FtlWork
     totals = np.zeros((done, 2), dtype=np.int64)
     for blk in range(nblk):
         for k in range(done):
@@ -675,20 +690,24 @@ def _column_max(steps, k, nblk):
 def ftl_advance_blocks(model, state, drive, params, collide, collider, work, blocks, substeps):
     """:func:`ftl_advance` for the blocks ``blocks = (b0, b1)``, each through the substeps
     ``substeps = (k0, k1)``."""
-    for blk in range(blocks[0], blocks[1]):
+    b0, b1 = blocks
+    for blk in range(b0, b1):
         ftl_advance_block(model, state, drive, params, collide, collider, work, blk, substeps)
 
 
 @njit(cache=True, inline='always')
 def ftl_advance_block(model, state, drive, params, collide, collider, work, blk, substeps):
     """:func:`ftl_advance_blocks` for block ``blk``."""
-    x, v, x_old = state
-    rots, poss, rels, gravity, damp, dt, shock = drive
-    corr, x_ref, counts, steps, before = work
+    x, v, x_old = state                                                 # GuideState
+    _, inv_mass, _, _, _ = model                                        # FtlModel
+    rots, poss, rels, gravity, damp, dt, shock = drive                  # FtlDrive
+    inner_steps, bend_stiffness, s_damp, max_disp, _ = params           # FtlParams
+    corr, x_ref, counts, steps, before = work                           # FtlWork
     measure = steps.shape[1] > 0
     s0 = blk * BLOCK
     s1 = min(s0 + BLOCK, x.shape[0])
-    for k in range(substeps[0], substeps[1]):
+    k0, k1 = substeps
+    for k in range(k0, k1):
         rot, pos = rots[k + 1], poss[k + 1]
         motion = (rot, pos, rels[k], poss[k], gravity, damp, dt, shock)
         if measure:
@@ -700,9 +719,9 @@ def ftl_advance_block(model, state, drive, params, collide, collider, work, blk,
             c, p = ftl_collide_block(model, state, motion, params, (corr, x_ref),
                                      placed(collider, rot, pos), s0, s1)
         else:
-            ftl_block(model, state, motion, params[0], params[1], params[2], corr, s0,
+            ftl_block(model, state, motion, inner_steps, bend_stiffness, s_damp, corr, s0,
                       s1, None)
-            c = finalize_block(x, v, x_old, model[1], corr, s0, s1, dt, params[3], params[2])
+            c = finalize_block(x, v, x_old, inv_mass, corr, s0, s1, dt, max_disp, s_damp)
             p = 0
         counts[blk, k, 0] = c
         counts[blk, k, 1] = p

@@ -80,11 +80,15 @@ def ftl_advance_heads_serial(model, state, drive, params, collide, collider, wor
 @njit(cache=True, inline='always')
 def _plan(state, drive, work, stop, slots):
     """``(heads, substeps, blocks per head, chunks per head, limited)`` of a run."""
+    x, _, _ = state                                                     # GuideState
+    _, _, rels, _, _, _, _ = drive                                      # FtlDrive
+    _, _, _, steps, _ = work                                            # FtlWork
+    _, limit, _ = stop
     heads = slots.shape[0]
-    n_sub = drive[2].shape[1]
-    nblk = (state[0].shape[1] + BLOCK - 1) // BLOCK
-    measure = work[3].shape[2] == n_sub
-    return heads, n_sub, nblk, min(nblk, CHUNKS), measure and stop[1] > 0.0
+    n_sub = rels.shape[1]
+    nblk = (x.shape[1] + BLOCK - 1) // BLOCK
+    measure = steps.shape[2] == n_sub
+    return heads, n_sub, nblk, min(nblk, CHUNKS), measure and limit > 0.0
 
 
 @njit(cache=True, inline='always')
@@ -95,7 +99,8 @@ def _head_run(model, state, drive, params, collide, collider, work, slots, item)
     h = j // chunks
     c = j - h * chunks
     s = slots[h]
-    ftl_advance_blocks(model, (state[0][s], state[1][s], state[2][s]), _drive_of(drive, h),
+    x, v, x_old = state                                                 # GuideState
+    ftl_advance_blocks(model, (x[s], v[s], x_old[s]), _drive_of(drive, h),
                        params, collide, collider, _work_of(work, h, s),
                        (c * nblk // chunks, (c + 1) * nblk // chunks), (k0, k1))
 
@@ -103,22 +108,25 @@ def _head_run(model, state, drive, params, collide, collider, work, slots, item)
 @njit(cache=True, inline='always')
 def _drive_of(drive, h):
     """Head ``h``'s :data:`~hair_tracking.guides.ftl.RunDrive`."""
-    return (drive[0][h], drive[1][h], drive[2][h], drive[3], drive[4], drive[5], drive[6])
+    rots, poss, rels, gravity, damp, dt, shock = drive
+    return (rots[h], poss[h], rels[h], gravity, damp, dt, shock)
 
 
 @njit(cache=True, inline='always')
 def _work_of(work, h, s):
     """Head ``h``'s :data:`~hair_tracking.guides.ftl.FtlWork` (its place ``s``)."""
-    return (work[0][s], work[1][s], work[2][h], work[3][h], work[4][s])
+    corr, x_ref, counts, steps, before = work
+    return (corr[s], x_ref[s], counts[h], steps[h], before[s])
 
 
 @njit(cache=True)
 def _any_split(drive, work, stop, k, nblk, heads):
     """Whether any head's stop rule ends the run after substep ``k`` (every head's largest
     displacement of the substep gathered first)."""
+    rigid, limit, gdt2 = stop
     split = False
     for h in range(heads):
-        rule = (stop[0][h], stop[1], stop[2])
+        rule = (rigid[h], limit, gdt2)
         if _split_after(_drive_of(drive, h), _work_of(work, h, 0), rule, k, nblk):
             split = True
     return split

@@ -376,7 +376,7 @@ def lanes_out(p, x, s0, s1):
 def _lanes_predicted(blk, state, rest, inv_mass, motion, work):
     """Step 1 for the strands of block ``blk`` (:func:`integrate.predict_block`), their
     predicted positions into the block's row of ``work``; returns the strand range (s0, s1)."""
-    x = state[0]
+    x, _, _ = state                                                     # GuideState
     s0 = blk * LANES
     s1 = min(s0 + LANES, x.shape[0])
     predict_block(state, rest, inv_mass, motion, s0, s1)
@@ -401,14 +401,15 @@ def _pbd_block(blk, model, state, motion, params, work):
     serial kernel run the same code)."""
     rest, inv_mass, rest_length, bend_rest, stretch_w, bend_w = model   # PbdModel
     iterations, stiffness, bend_stiffness, max_disp, do_finalize = params   # PbdParams
+    _, _, _, _, _, _, dt, _ = motion                                    # StepMotion
     s0, s1 = _lanes_predicted(blk, state, rest, inv_mass, motion, work)
-    n = state[0].shape[1]
+    n = inv_mass.shape[1]
     p = work[blk]
     for _ in range(iterations):
         pbd_sweep_lanes(p, rest_length[blk], stretch_w[blk], n, 1, stiffness)
         if bend_stiffness > 0.0:
             pbd_sweep_lanes(p, bend_rest[blk], bend_w[blk], n, 2, bend_stiffness)
-    return _lanes_finished(p, state, inv_mass, s0, s1, motion[6], max_disp, do_finalize)
+    return _lanes_finished(p, state, inv_mass, s0, s1, dt, max_disp, do_finalize)
 
 
 @njit(cache=True, fastmath=FASTMATH, error_model='numpy')
@@ -418,8 +419,9 @@ def _xpbd_block(blk, model, state, motion, params, xwork):
      bend_gain) = model                                                 # XpbdModel
     work, lam_stretch, lam_bend = xwork                                 # XpbdWork
     iterations, alpha_stretch, alpha_bend, max_disp, do_finalize = params   # XpbdParams
+    _, _, _, _, _, _, dt, _ = motion                                    # StepMotion
     s0, s1 = _lanes_predicted(blk, state, rest, inv_mass, motion, work)
-    n = state[0].shape[1]
+    n = inv_mass.shape[1]
     p = work[blk]
     lam_stretch[blk, :] = 0.0
     lam_bend[blk, :] = 0.0
@@ -429,7 +431,7 @@ def _xpbd_block(blk, model, state, motion, params, xwork):
         if alpha_bend >= 0.0:
             xpbd_sweep_lanes(p, inv_mass_l[blk], bend_rest[blk], bend_gain[blk], lam_bend[blk],
                              n, 2, alpha_bend)
-    return _lanes_finished(p, state, inv_mass, s0, s1, motion[6], max_disp, do_finalize)
+    return _lanes_finished(p, state, inv_mass, s0, s1, dt, max_disp, do_finalize)
 
 
 @njit(cache=True, nogil=True, parallel=True, fastmath=FASTMATH, error_model='numpy')
@@ -483,8 +485,9 @@ def xpbd_step(model, state, motion, params, work):
     layout. A negative ``alpha_bend`` disables bending. Returns the clamped node count (0 when
     not finalizing).
     """
+    lanes, _, _ = work                                                  # XpbdWork
     clamped = 0
-    for blk in prange(work[0].shape[0]):
+    for blk in prange(lanes.shape[0]):
         clamped += _xpbd_block(np.int64(blk), model, state, motion, params, work)
     return clamped
 
@@ -492,7 +495,8 @@ def xpbd_step(model, state, motion, params, work):
 @njit(cache=True, nogil=True, fastmath=FASTMATH, error_model='numpy')
 def xpbd_step_serial(model, state, motion, params, work):
     """:func:`xpbd_step` on the calling thread."""
+    lanes, _, _ = work                                                  # XpbdWork
     clamped = 0
-    for blk in range(work[0].shape[0]):
+    for blk in range(lanes.shape[0]):
         clamped += _xpbd_block(blk, model, state, motion, params, work)
     return clamped

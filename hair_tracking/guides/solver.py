@@ -537,7 +537,8 @@ class _LaneSolver(GuideSolver):
     def _project(self, state, motion, dt, parallel, fused):
         if self._x_ref is not None:
             carry = integrate.carry_rigid if parallel else integrate.carry_rigid_serial
-            carry(self.strands.x, motion[2], motion[3], motion[1], self._x_ref)
+            _, pos, rot_rel, pos_prev, _, _, _, _ = motion            # StepMotion
+            carry(self.strands.x, rot_rel, pos_prev, pos, self._x_ref)
         return self._constraints(state, motion, dt, parallel, fused), 0, fused
 
     def _constraints(self, state, motion, dt, parallel, fused) -> int:
