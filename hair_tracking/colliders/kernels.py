@@ -168,7 +168,8 @@ def _slide_push_blocks(x, rest_length, shapes, how, blocks):
     in_block = np.zeros(count, dtype=np.bool_)          # the shapes a block's box meets
     listed = np.zeros(count, dtype=np.bool_)            # the shapes a strand's box meets
     moved = 0
-    for b in range(blocks[0], blocks[1]):
+    b0, b1 = blocks
+    for b in range(b0, b1):
         s0 = b * STRAND_BLOCK
         s1 = min(s0 + STRAND_BLOCK, x.shape[0])
         lo0 = lo1 = lo2 = math.inf

@@ -320,9 +320,11 @@ def blend_strands(target, model, pose, params):
     pass moves it. Returns the number of nodes that were inside the collider and whether every
     coordinate written is finite (always true without ``check``)."""
     restore, collide, center, axes = params
-    n_strands = model[0].shape[0]
+    offset, _, _, _, _, _, _ = model                                    # BlendModel
+    _, rot, pos = pose                                                  # GuidePose
+    n_strands = offset.shape[0]
     geo = np.empty(9)                    # the collider in the world: centre, then Q
-    world_collider(pose[1], pose[2], center, axes, geo)
+    world_collider(rot, pos, center, axes, geo)
     n_blocks = (n_strands + STRAND_BLOCK - 1) // STRAND_BLOCK
     n_chunks = min(n_blocks, CHUNKS)
     contacts = 0

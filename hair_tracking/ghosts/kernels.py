@@ -247,7 +247,8 @@ def track_groups(model, state, motion, params, work):
     rewritten with ``v = (x_new - x_old) / dt`` in one contiguous loop.  Groups are independent:
     the result does not depend on the number of chunks or threads.
     """
-    n_chunks = work[1].shape[0]
+    _, buf, _, _, _ = work                                              # TrackWork
+    n_chunks = buf.shape[0]
     for c in prange(n_chunks):
         # the parallel loop's index is unsigned: as int64 the serial variant's loop shares this
         # compiled body instead of compiling its own
@@ -258,7 +259,8 @@ def track_groups(model, state, motion, params, work):
 def track_groups_serial(model, state, motion, params, work):
     """:func:`track_groups` on the calling thread, for small problems: no parallel region to
     launch (which costs more than a small substep's arithmetic).  Same results."""
-    n_chunks = work[1].shape[0]
+    _, buf, _, _, _ = work                                              # TrackWork
+    n_chunks = buf.shape[0]
     for c in range(n_chunks):
         _track_chunk(c, n_chunks, model, state, motion, params, work)
 
@@ -438,8 +440,9 @@ def _predict_group(block, j, lanes, group, guide, weights):
      q22) = _group_point(group, j, guide, need_target)
     c0, c1, c2, cw = _group_centre(X0, j, lanes, com_w)
     tip = (1.0 if use_tip else 0.0) * tw
-    u0 = uint64(lanes[0])
-    n = uint64(lanes[1] - lanes[0])
+    l0, l1 = lanes
+    u0 = uint64(l0)
+    n = uint64(l1 - l0)
     n_clamped = 0
     xs0 = xs1 = xs2 = qs0 = qs1 = qs2 = 0.0
     for kk in range(n):             # (the invariant branch is unswitched by LLVM)
@@ -484,8 +487,9 @@ def _targets(T, block, j, lanes, k0, group, node_row, guide, need_target):
     off = block[3]
     gi, fg = group
     node_table, guide_x, guide_x_old, frames, m_last = guide
-    u0 = uint64(lanes[0])
-    n = uint64(lanes[1] - lanes[0])
+    l0, l1 = lanes
+    u0 = uint64(l0)
+    n = uint64(l1 - l0)
     for kk in range(n):
         i = u0 + kk
         r = node_row[uint64(k0) + kk]
@@ -516,8 +520,9 @@ def _com_lanes(X0, T, j, lanes, com_w):
     of mass at the start of the substep into T[_C0.._C2] and the weight per length into T[_CW]
     (see :func:`_group_centre`)."""
     c0, c1, c2, cw = _group_centre(X0, j, lanes, com_w)
-    u0 = uint64(lanes[0])
-    for kk in range(uint64(lanes[1] - lanes[0])):
+    l0, l1 = lanes
+    u0 = uint64(l0)
+    for kk in range(uint64(l1 - l0)):
         i = u0 + kk
         T[_C0, i] = c0
         T[_C1, i] = c1
@@ -536,8 +541,9 @@ def _predict(block, T, j, lanes, weights):
     elastic_mode, use_tip = weights[2], weights[3]
     tip_f = 1.0 if use_tip else 0.0
     n_clamped = 0
-    u0 = uint64(lanes[0])
-    n = uint64(lanes[1] - lanes[0])
+    l0, l1 = lanes
+    u0 = uint64(l0)
+    n = uint64(l1 - l0)
     if elastic_mode != ELASTIC_OFF:
         for kk in range(n):
             i = u0 + kk
@@ -591,9 +597,10 @@ def _group_sums(P, T, j, lanes):
     """Sums over the lanes ``lanes`` of the predicted positions ``P`` (N, 3, n) at node ``j``
     and of the targets ``T[_QX.._QZ]`` (groups with mixed layouts; :func:`_predict_group` sums
     as it goes)."""
-    u0 = uint64(lanes[0])
+    l0, l1 = lanes
+    u0 = uint64(l0)
     xs0 = xs1 = xs2 = qs0 = qs1 = qs2 = 0.0
-    for kk in range(uint64(lanes[1] - lanes[0])):     # one loop for all six sums
+    for kk in range(uint64(l1 - l0)):                 # one loop for all six sums
         i = u0 + kk
         xs0 += P[j, 0, i]
         xs1 += P[j, 1, i]
@@ -612,8 +619,9 @@ def _group_stage(P, j, lanes, stage, sums):
     predicted positions ``xs*`` and of its targets ``qs*``."""
     k_com, spread, var_target, have_target = stage
     xs0, xs1, xs2, qs0, qs1, qs2 = sums
-    n = lanes[1] - lanes[0]
-    u0 = uint64(lanes[0])
+    l0, l1 = lanes
+    n = l1 - l0
+    u0 = uint64(l0)
     count = uint64(n)
     m0 = xs0 / n
     m1 = xs1 / n

@@ -328,14 +328,15 @@ def turn_strands(target, model, pose, params, turns):
     ``check``)."""
     gcol, rot, pos = pose
     collide, center, axes = params
-    u0 = model[5]
+    _, _, _, block_guide, block_strand, u0 = model                      # TurnModel
+    out, _, _, _, _ = target                                            # Placement
     for g in prange(gcol.shape[0]):
         guide_turns(gcol, u0, rot, turns, g)
     geo = np.empty(12)       # the collider in the world (centre, Q), then the guide's node
     world_collider(rot, pos, center, axes, geo)
-    n_blocks = model[3].shape[0]
+    n_blocks = block_guide.shape[0]
     n_chunks = min(n_blocks, CHUNKS)
-    slab = 2 * target[0].shape[1] * 3 * model[4].shape[1]
+    slab = 2 * out.shape[1] * 3 * block_strand.shape[1]
     contacts = 0
     bad = 0
     for c in prange(n_chunks):
