@@ -74,7 +74,7 @@ def test_a_shoulder_moving_into_the_hair_pushes_it_out_without_adding_energy(har
         deep = np.zeros(ghosts.shape[0])
         kernels.deepest(ghosts, np.zeros((0, 0)), False, bare, deep)
         depth_s = max(depth_s, float(deep.max()))
-    assert np.allclose(sim.guide_solver.body.torso(sim.head)[1], [0.0, 0.0, -0.2])
+    assert np.allclose(sim.colliders.torso(sim.head)[1], [0.0, 0.0, -0.2])
     assert sim.guide_solver.stats['contacts_total'] > contacts     # the hair was pushed
     margin = sim.guide_solver.body.margin
     assert depth_g <= margin and depth_s <= margin + 1e-5
@@ -112,7 +112,7 @@ def test_a_frame_that_never_arrives_or_stops_is_said_in_diagnostics(harness):
     assert d.level == DiagnosticStatus.WARN and "body.frame 'torso_1' not received" in d.message
     torso(h, t1, 0.1)
     h.send(pub, pose_stamped_msg(t1, [0.0, 0.0, 0.0], yaw_quat(0.0), 'world'))
-    assert np.allclose(h.node.sim.guide_solver.body.torso(h.node.sim.head)[1], [0.1, 0.0, -0.2])
+    assert np.allclose(h.node.sim.colliders.torso(h.node.sim.head)[1], [0.1, 0.0, -0.2])
     d = h.node.diagnostics()
     assert 'body.frame' not in d.message
     assert float({kv.key: kv.value for kv in d.values}['body_frame_age_s']) >= 0.0
@@ -123,7 +123,7 @@ def test_a_frame_that_never_arrives_or_stops_is_said_in_diagnostics(harness):
     # the bust keeps its last pose
     t2 = t1 + (t1 - t0)
     h.send(pub, pose_stamped_msg(t2, [0.0, 0.0, 0.0], yaw_quat(0.5), 'world'))
-    assert np.allclose(h.node.sim.guide_solver.body.torso(h.node.sim.head)[1], [0.1, 0.0, -0.2])
+    assert np.allclose(h.node.sim.colliders.torso(h.node.sim.head)[1], [0.1, 0.0, -0.2])
 
 
 def test_a_bad_body_is_refused_in_one_line_naming_the_field():
