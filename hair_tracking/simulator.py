@@ -215,11 +215,11 @@ class HairSimulator:
         if rebuild:
             self._build(self.head, groom)
             return True
-        self.colliders = self._table(scene, old)
+        table = self._table(scene, old)
+        new_table, self.colliders = table is not self.colliders, table
         self.guide_solver = make_solver(self.guides, scene, self.parallel.guides, self.colliders)
         if self.ghosts is not None:
-            if scene.tracking != old.tracking or scene.collider != old.collider or \
-                    scene.body != old.body or scene.colliders != old.colliders:
+            if scene.tracking != old.tracking or new_table:
                 # the new tracker starts where the old one leaves the ghosts
                 np.copyto(self.ghosts.x, self.ghost_tracker.positions())
                 np.copyto(self.ghosts.v, self.ghost_tracker.velocities())

@@ -287,12 +287,6 @@ class HeadCollider:
         self.refine = row.refinements()
         self._pen_refine = row.refinements(measure=True)
 
-    @classmethod
-    def of_row(cls, row: Shape) -> 'HeadCollider':
-        """The head collider of the table's head row ``row`` (an ellipsoid on the head frame;
-        a sphere is the ellipsoid of three equal radii)."""
-        return cls(row.name, row.center, row.radii, row.margin, row.friction)
-
     def row(self) -> Shape:
         """This collider as a row of the collider table (an ellipsoid on the head frame)."""
         return Shape('ellipsoid', frame=HEAD_FRAME, center=tuple(self.center),
@@ -374,10 +368,10 @@ class HeadCollider:
         return float(out.max()) if out.size else 0.0
 
 
-def head_row(spec) -> Optional[Shape]:
-    """The table's head row for a :class:`~hair_tracking.core.scene.ColliderSpec` (an
-    ellipsoid on the head frame named after the spec's shape; a sphere's three radii equal);
-    ``None`` for shape 'none'.  ValueError of one line for an unusable spec."""
+def head_collider(spec) -> Optional[HeadCollider]:
+    """The head's row of a :class:`~hair_tracking.core.scene.ColliderSpec` as its kernels take
+    it (a sphere is the ellipsoid of three equal radii); ``None`` for shape 'none'.
+    ValueError of one line for an unusable spec."""
     if spec.shape == 'none':
         return None
     if spec.shape == 'sphere':
@@ -386,11 +380,4 @@ def head_row(spec) -> Optional[Shape]:
         radii = spec.radii
     else:
         raise ValueError(f'collider.shape: {spec.shape!r} is not one of none, sphere, ellipsoid')
-    return HeadCollider(spec.shape, spec.center, radii, spec.margin, spec.friction).row()
-
-
-def head_collider(spec) -> Optional[HeadCollider]:
-    """The head's row of a :class:`~hair_tracking.core.scene.ColliderSpec` as its kernels take
-    it (:func:`head_row`); ``None`` for shape 'none'."""
-    row = head_row(spec)
-    return HeadCollider.of_row(row) if row is not None else None
+    return HeadCollider(spec.shape, spec.center, radii, spec.margin, spec.friction)

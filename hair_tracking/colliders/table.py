@@ -2,9 +2,10 @@
 poses of the frames they ride on.
 
 The simulator owns one :class:`ColliderTable`, built from the scene: the head's row
-(``collider.*``: an ellipsoid or sphere on the frame ``head``, :func:`~hair_tracking.colliders.
-head.head_row`; none for shape ``none``), the bust (``body.*``) on the torso frame and the
-further shapes of the collider slots (``colliders.<slot>.*``), each on its frame.  Every strand
+(``collider.*``: an ellipsoid or sphere on the frame ``head``,
+:func:`~hair_tracking.colliders.head.head_collider`; none for shape ``none``), the bust
+(``body.*``) on the torso frame and the further shapes of the collider slots
+(``colliders.<slot>.*``), each on its frame.  Every strand
 set meets the same table through :meth:`ColliderTable.for_strands`, with the margins fitted to
 its strands (:func:`~hair_tracking.colliders.margin.fit_margin`): the head's row as its fast
 path runs it (:class:`~hair_tracking.colliders.head.HeadCollider`) and the bust and slots as
@@ -34,7 +35,7 @@ from hair_tracking.colliders.body import neck_frame
 from hair_tracking.colliders.head import head_collider, HeadCollider
 from hair_tracking.colliders.pose import frames_at
 from hair_tracking.colliders.scene_body import make_body, SceneBody, slot_shapes, TORSO
-from hair_tracking.colliders.shapes import FIXED_FRAME, HEAD_FRAME, L_FRAME
+from hair_tracking.colliders.shapes import FIXED_FRAME, HEAD_FRAME, L_FRAME, Shape
 
 
 class StrandColliders(NamedTuple):
@@ -64,28 +65,29 @@ class ColliderTable:
             if f not in (FIXED_FRAME, HEAD_FRAME))
         self._frame: Optional[Tuple[np.ndarray, np.ndarray]] = None
         self._tf: Dict[str, Tuple[np.ndarray, np.ndarray]] = {}
-        self._measure: Optional[tuple] = None       # (the body :meth:`body_depth` measures,)
+        #: the bust and slots :meth:`body_depth` measures (bare: no margin is fitted)
+        self._measured = make_body(self, 0.0)
 
     # ------------------------------------------------------------ strand sets
-    def for_strands(self, strands, head_in_body: bool = False) -> StrandColliders:
+    def for_strands(self, strands) -> StrandColliders:
         """The table as the strand set ``strands`` (a
-        :class:`~hair_tracking.core.model.StrandSet`) meets it, margins fitted to it;
-        ``head_in_body``: the head's row also leads the body's posed tables (the trackers
-        that run every shape in one pass)."""
+        :class:`~hair_tracking.core.model.StrandSet`) meets it, margins fitted to it."""
         head = None if self.head is None else \
             self.head.fitted(strands.rest, strands.inv_mass, strands.rest_length)
+        return StrandColliders(head, self.body_for(strands))
+
+    def body_for(self, strands, head: Optional[Shape] = None) -> Optional[SceneBody]:
+        """The bust and slot shapes as the strand set ``strands`` meets them (margins capped
+        at half its shortest positive segment; ``None`` without either); ``head``: a head row
+        (margin fitted) put first in their posed tables (the trackers that run every shape in
+        one pass)."""
         positive = strands.rest_length[strands.rest_length > 0]
-        body = make_body(self, float(positive.min()) if positive.size else 0.0,
-                         head.row() if head_in_body and head is not None else None)
-        return StrandColliders(head, body)
+        return make_body(self, float(positive.min()) if positive.size else 0.0, head)
 
     def body_depth(self, x, head, inv_mass=None) -> float:
         """Deepest node [m] of ``x`` (S, N, 3) inside the bare bust and slot shapes at the head
         pose ``head`` (0 without any); with ``inv_mass`` only the free nodes count."""
-        if self._measure is None:
-            self._measure = (make_body(self, 0.0),)
-        body = self._measure[0]
-        return 0.0 if body is None else body.depth(x, head, inv_mass)
+        return 0.0 if self._measured is None else self._measured.depth(x, head, inv_mass)
 
     # ------------------------------------------------------------ frames
     def set_body_frame(self, rotation, position) -> None:

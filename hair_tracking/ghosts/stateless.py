@@ -18,7 +18,6 @@ from hair_tracking.colliders.kernels import slide_push_strands
 from hair_tracking.colliders.pose import frames_at, world_quadric
 from hair_tracking.colliders.reference import (reference_level, reference_pose,
                                                reference_slide_push)
-from hair_tracking.colliders.scene_body import make_body
 from hair_tracking.colliders.shapes import Shape, shape_table
 from hair_tracking.colliders.table import ColliderTable
 from hair_tracking.core.model import carry_rigidly, HeadPose, StrandSet, strand_part
@@ -171,9 +170,7 @@ class StatelessTracker:
         #: the scene's bust and slot colliders (``None`` without either), the head's row
         #: first: every placement is followed by their contact pass
         #: (:func:`~hair_tracking.colliders.kernels.slide_push_strands`)
-        positive = ghosts.rest_length[ghosts.rest_length > 0]
-        self.body = make_body(table, float(positive.min()) if positive.size else 0.0,
-                              head.row() if head is not None else None)
+        self.body = table.body_for(ghosts, head.row() if head is not None else None)
         self._head = HeadPose(np.zeros(3), np.array([0.0, 0.0, 0.0, 1.0]), np.eye(3))
         self._rest_length = np.ascontiguousarray(ghosts.rest_length, dtype=np.float64)
         self.stats: Dict[str, int] = {'ghosts': int(ghosts.count), 'steps': 0, 'evaluations': 0,

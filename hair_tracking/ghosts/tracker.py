@@ -214,7 +214,7 @@ class GhostTracker:
         self._collide_after = self.collide and not self._fused_collider
         table = colliders if colliders is not None else ColliderTable(scene)
         #: the scene's bust and slot shapes (``None`` without either): stage (i)
-        self.body = table.for_strands(ghosts).body
+        self.body = table.body_for(ghosts)
         self._body_head: Optional[HeadPose] = None      # the head pose of the last step
         self._x_prev = np.empty(ghosts.rest.shape) \
             if self._collide_after or self.body is not None else None
