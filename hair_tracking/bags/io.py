@@ -649,7 +649,8 @@ def check_output_path(path, overwrite: bool = False) -> Path:
     return p
 
 
-def _remove(p: Path):
+def remove_path(p: Path):
+    """Remove a file, a symlink or a folder tree (an output about to be replaced)."""
     if p.is_dir() and not p.is_symlink():
         shutil.rmtree(p)
     elif p.exists() or p.is_symlink():
@@ -742,7 +743,7 @@ class BagWriter:
                 if not self.overwrite:
                     raise BagError(f'{self.path}: output appeared while writing; the new bag '
                                    f'is not moved over it', EXIT_OUTPUT)
-                _remove(self.path)
+                remove_path(self.path)
             os.replace(src, self.path)
         except OSError as exc:
             raise BagError(f'{self.path}: cannot write the output: {exc.strerror or exc}',

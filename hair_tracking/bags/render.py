@@ -420,7 +420,7 @@ def render(path, output, *, gif: bool = True, png: bool = False, fps: float = 10
         if out.exists() or out.is_symlink():
             if not overwrite:
                 raise BagError(f'{output}: output appeared while rendering', EXIT_OUTPUT)
-            bag_io._remove(out)
+            bag_io.remove_path(out)
         os.replace(tmp, out)
     except OSError as exc:
         raise BagError(f'{output}: cannot write: {exc.strerror or exc}', EXIT_OUTPUT) from None

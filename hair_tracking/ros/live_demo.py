@@ -143,7 +143,7 @@ def run_demo(args, stop) -> int:
     pictures = out / 'pictures'
     for old in (output, pictures):
         if old.exists():
-            bag_io._remove(old)
+            bag_io.remove_path(old)
     domain = args.domain_id
     if domain is None:
         domain = int(os.environ.get('HAIR_DEMO_DOMAIN_ID', DEFAULT_DOMAIN))
