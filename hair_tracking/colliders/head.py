@@ -32,7 +32,7 @@ from hair_tracking.colliders.contact import (centre_exit, ellipsoid_contact, ell
                                              ellipsoid_pushed, local_of, surface_point)
 from hair_tracking.colliders.margin import fit_margin
 from hair_tracking.colliders.shapes import HEAD_FRAME, Shape
-from hair_tracking.core.kernels import BLOCK, FASTMATH, runs_parallel
+from hair_tracking.core.kernels import BLOCK, FASTMATH, parallel_and_serial, runs_parallel
 
 
 #: The collider as the kernels take it, a plain tuple in these fields' order
@@ -94,7 +94,6 @@ def placed_shape(collider, rot, pos):
     return cx, cy, cz, radii[0] + margin, radii[1] + margin, radii[2] + margin, friction, refine
 
 
-@njit(cache=True, nogil=True, parallel=True, fastmath=FASTMATH, error_model='numpy')
 def project_ellipsoid(x, x_prev, inv_mass, rot, pos, collider):
     """Kernel: push nodes with ``inv_mass > 0`` out of the ellipsoid ``radii + margin``; friction.
 
@@ -106,19 +105,8 @@ def project_ellipsoid(x, x_prev, inv_mass, rot, pos, collider):
     n = x.shape[0]
     contacts = 0
     for blk in prange((n + BLOCK - 1) // BLOCK):
-        s0 = np.int64(blk) * BLOCK   # (as in the serial variant: one compiled block body)
+        s0 = np.int64(blk) * BLOCK   # (signed in both variants: one compiled block body)
         contact = (rotation_entries(rot), cx, cy, cz, ax, ay, az, fr, refine)
-        contacts += project_block(x, x_prev, inv_mass, contact, s0, min(s0 + BLOCK, n))
-    return contacts
-
-
-@njit(cache=True, nogil=True, fastmath=FASTMATH, error_model='numpy')
-def project_ellipsoid_serial(x, x_prev, inv_mass, rot, pos, collider):
-    """:func:`project_ellipsoid` on the calling thread."""
-    contact = placed(collider, rot, pos)
-    n = x.shape[0]
-    contacts = 0
-    for s0 in range(0, n, BLOCK):
         contacts += project_block(x, x_prev, inv_mass, contact, s0, min(s0 + BLOCK, n))
     return contacts
 
@@ -197,7 +185,6 @@ def project_block(x, x_prev, inv_mass, contact, s0, s1):
     return m
 
 
-@njit(cache=True, nogil=True, parallel=True, fastmath=FASTMATH, error_model='numpy')
 def penetration_ellipsoid(x, inv_mass, use_mass, rot, pos, center, radii, refine, out):
     """Kernel: ``out[s]`` = deepest distance [m] of strand ``s``'s nodes inside the ellipsoid.
 
@@ -209,14 +196,6 @@ def penetration_ellipsoid(x, inv_mass, use_mass, rot, pos, center, radii, refine
     for s in prange(x.shape[0]):
         contact = (rotation_entries(rot), cx, cy, cz, ax, ay, az, fr, n_ref)
         out[s] = strand_depth(x, inv_mass, use_mass, contact, np.int64(s))
-
-
-@njit(cache=True, nogil=True, fastmath=FASTMATH, error_model='numpy')
-def penetration_ellipsoid_serial(x, inv_mass, use_mass, rot, pos, center, radii, refine, out):
-    """:func:`penetration_ellipsoid` on the calling thread."""
-    contact = placed((center, radii, 0.0, 0.0, refine), rot, pos)
-    for s in range(x.shape[0]):
-        out[s] = strand_depth(x, inv_mass, use_mass, contact, s)
 
 
 @njit(cache=True, fastmath=FASTMATH, error_model='numpy')
@@ -237,6 +216,12 @@ def strand_depth(x, inv_mass, use_mass, contact, s):
         if depth > deepest:
             deepest = depth
     return deepest
+
+
+project_ellipsoid, project_ellipsoid_serial = parallel_and_serial(
+    project_ellipsoid, fastmath=FASTMATH, error_model='numpy')
+penetration_ellipsoid, penetration_ellipsoid_serial = parallel_and_serial(
+    penetration_ellipsoid, fastmath=FASTMATH, error_model='numpy')
 
 
 def _points(name, arr, ndim=3, types=(np.float64,)):

@@ -41,6 +41,7 @@ from hair_tracking.ghosts.contacts import collide_lanes, CONTACT_ROWS
 from hair_tracking.ghosts.spread import group_variance, spread_factor
 from hair_tracking.ghosts.weights import com_weight, elastic_weight, ELASTIC_OFF, weighted_position
 from hair_tracking.colliders.head import rotation_entries, world_center
+from hair_tracking.core.kernels import parallel_and_serial
 
 
 @njit(cache=True, inline='always')
@@ -183,7 +184,6 @@ def block_groups(group_start: np.ndarray, lanes: int = BLOCK_LANES) -> np.ndarra
     return np.asarray(starts, dtype=np.int64)
 
 
-@njit(cache=True, nogil=True, parallel=True, fastmath=TRACK_FASTMATH, error_model='numpy')
 def track_groups(model, state, motion, params, work):
     """One tracking substep of all ghosts, in place on ``state`` (see the module doc).
 
@@ -255,14 +255,8 @@ def track_groups(model, state, motion, params, work):
         _track_chunk(np.int64(c), n_chunks, model, state, motion, params, work)
 
 
-@njit(cache=True, nogil=True, fastmath=TRACK_FASTMATH, error_model='numpy')
-def track_groups_serial(model, state, motion, params, work):
-    """:func:`track_groups` on the calling thread, for small problems: no parallel region to
-    launch (which costs more than a small substep's arithmetic).  Same results."""
-    _, buf, _, _, _ = work                                              # TrackWork
-    n_chunks = buf.shape[0]
-    for c in range(n_chunks):
-        _track_chunk(c, n_chunks, model, state, motion, params, work)
+track_groups, track_groups_serial = parallel_and_serial(
+    track_groups, fastmath=TRACK_FASTMATH, error_model='numpy')
 
 
 @njit(cache=True, fastmath=TRACK_FASTMATH, error_model='numpy')

@@ -39,7 +39,7 @@ from hair_tracking.colliders.contact import (ellipsoid_contact_shallow, ellipsoi
                                              local_of, outside_within, surface_point)
 from hair_tracking.colliders.crease import escape
 from hair_tracking.colliders.head import placed, placed_shape, rotation_entries, to_head
-from hair_tracking.core.kernels import BLOCK, FASTMATH
+from hair_tracking.core.kernels import BLOCK, FASTMATH, parallel_and_serial
 from hair_tracking.guides.integrate import (carry_rigid_block, finalize_block, max_step_sq_block,
                                             predict_block)
 from hair_tracking.guides.pbd_constraints import jacobi_bend_block
@@ -338,7 +338,6 @@ def _restore_shapes_strand(x, x_old, rest, rest_length, rot, sh, corr, cap, s):
     return 1 if start < n else 0
 
 
-@njit(cache=True, nogil=True, parallel=True, fastmath=FASTMATH, error_model='numpy')
 def ftl_step(model, state, motion, params, corr):
     """Kernel: one FTL substep of all strands (predict, bending, FTL pass, finalize).
 
@@ -357,15 +356,7 @@ def ftl_step(model, state, motion, params, corr):
     return clamped
 
 
-@njit(cache=True, nogil=True, fastmath=FASTMATH, error_model='numpy')
-def ftl_step_serial(model, state, motion, params, corr):
-    """:func:`ftl_step` on the calling thread."""
-    x, _, _ = state                                                     # GuideState
-    nblk = (x.shape[0] + BLOCK - 1) // BLOCK
-    clamped = 0
-    for blk in range(nblk):
-        clamped += ftl_step_block(model, state, motion, params, corr, blk)
-    return clamped
+ftl_step, ftl_step_serial = parallel_and_serial(ftl_step, fastmath=FASTMATH, error_model='numpy')
 
 
 @njit(cache=True, fastmath=FASTMATH, error_model='numpy')
@@ -481,7 +472,6 @@ def inner_predict_block(state, inv_mass, corr, gravity, step, first, s0, s1):
             x[s, i, 2] = pz + (vz * damp + gz) * h
 
 
-@njit(cache=True, nogil=True, parallel=True, fastmath=FASTMATH, error_model='numpy')
 def ftl_collide_step(model, state, motion, params, work, collider):
     """Kernel: one FTL substep of all strands with the head collider, block by block (the
     block's strands stay in cache): :func:`ftl_step`'s predict and bending, then the FTL pass
@@ -516,23 +506,8 @@ def ftl_collide_step(model, state, motion, params, work, collider):
     return clamped, contacts
 
 
-@njit(cache=True, nogil=True, fastmath=FASTMATH, error_model='numpy')
-def ftl_collide_step_serial(model, state, motion, params, work, collider):
-    """:func:`ftl_collide_step` on the calling thread."""
-    rot, pos, _, _, _, _, _, _ = motion                                 # StepMotion
-    contact = placed(collider, rot, pos)
-    x, _, _ = state                                                     # GuideState
-    n = x.shape[0]
-    nblk = (n + BLOCK - 1) // BLOCK
-    clamped = 0
-    contacts = 0
-    for blk in range(nblk):
-        s0 = blk * BLOCK
-        c, p = ftl_collide_block(model, state, motion, params, work, contact, s0,
-                                 min(s0 + BLOCK, n))
-        clamped += c
-        contacts += p
-    return clamped, contacts
+ftl_collide_step, ftl_collide_step_serial = parallel_and_serial(
+    ftl_collide_step, fastmath=FASTMATH, error_model='numpy')
 
 
 @njit(cache=True, fastmath=FASTMATH, error_model='numpy')
@@ -557,7 +532,6 @@ def ftl_collide_block(model, state, motion, params, work, contact, s0, s1):
     return finalize_block(x, v, x_old, inv_mass, corr, s0, s1, dt, max_disp, s_damp), pushed
 
 
-@njit(cache=True, nogil=True, parallel=True, fastmath=FASTMATH, error_model='numpy')
 def ftl_advance(model, state, drive, params, collide, collider, work, stop):
     """Kernel: ``K`` FTL substeps of all strands in one call.  Strands do not interact, so this
     is exactly ``K`` calls of :func:`ftl_collide_step` (with a collider) or of :func:`ftl_step`
@@ -600,25 +574,8 @@ def ftl_advance(model, state, drive, params, collide, collider, work, stop):
     return _run_counts(work, nblk, done)
 
 
-@njit(cache=True, nogil=True, fastmath=FASTMATH, error_model='numpy')
-def ftl_advance_serial(model, state, drive, params, collide, collider, work, stop):
-    """:func:`ftl_advance` on the calling thread."""
-    n_sub, nblk, chunks, limited = _run_plan(state, drive, work, stop)
-    done = n_sub
-    if limited:
-        for k in range(n_sub):
-            for c in range(chunks):
-                ftl_advance_blocks(model, state, drive, params, collide, collider, work,
-                                   _chunk_blocks(c, chunks, nblk), (k, k + 1))
-            if _split_after(drive, work, stop, k, nblk):
-                done = k + 1
-                break
-    else:
-        for c in range(chunks):
-            ftl_advance_blocks(model, state, drive, params, collide, collider, work,
-                               _chunk_blocks(c, chunks, nblk), (0, n_sub))
-        _measured(work, n_sub, nblk)
-    return _run_counts(work, nblk, done)
+ftl_advance, ftl_advance_serial = parallel_and_serial(
+    ftl_advance, fastmath=FASTMATH, error_model='numpy')
 
 
 @njit(cache=True, inline='always')

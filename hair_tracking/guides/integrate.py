@@ -33,7 +33,7 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from hair_tracking.core.kernels import BLOCK, FASTMATH
+from hair_tracking.core.kernels import BLOCK, FASTMATH, parallel_and_serial
 
 
 #: Arguments of the guide kernels (:func:`hair_tracking.guides.pbd_constraints.pbd_step`,
@@ -239,7 +239,6 @@ def max_step_sq_block(x, x_old, s0, s1):
     return best
 
 
-@njit(cache=True, nogil=True, parallel=True, fastmath=FASTMATH, error_model='numpy')
 def finalize(x, v, x_old, inv_mass, corr, dt, max_disp, s_damp):
     """Kernel: :func:`finalize_block` over all strands (used when a collider runs in between)."""
     total = 0
@@ -249,16 +248,9 @@ def finalize(x, v, x_old, inv_mass, corr, dt, max_disp, s_damp):
     return total
 
 
-@njit(cache=True, nogil=True, fastmath=FASTMATH, error_model='numpy')
-def finalize_serial(x, v, x_old, inv_mass, corr, dt, max_disp, s_damp):
-    """:func:`finalize` on the calling thread."""
-    total = 0
-    for s in range(x.shape[0]):
-        total += finalize_block(x, v, x_old, inv_mass, corr, s, s + 1, dt, max_disp, s_damp)
-    return total
+finalize, finalize_serial = parallel_and_serial(finalize, fastmath=FASTMATH, error_model='numpy')
 
 
-@njit(cache=True, nogil=True, parallel=True, fastmath=FASTMATH, error_model='numpy')
 def carry_rigid(x, rot_rel, pos_prev, pos, out):
     """Kernel: ``out = R_rel (x - pos_prev) + pos``, the points moved rigidly with the head.
 
@@ -270,11 +262,8 @@ def carry_rigid(x, rot_rel, pos_prev, pos, out):
         carry_rigid_block(x, rot_rel, pos_prev, pos, out, i, i + 1)
 
 
-@njit(cache=True, nogil=True, fastmath=FASTMATH, error_model='numpy')
-def carry_rigid_serial(x, rot_rel, pos_prev, pos, out):
-    """:func:`carry_rigid` on the calling thread."""
-    for s in range(x.shape[0]):
-        carry_rigid_block(x, rot_rel, pos_prev, pos, out, s, s + 1)
+carry_rigid, carry_rigid_serial = parallel_and_serial(
+    carry_rigid, fastmath=FASTMATH, error_model='numpy')
 
 
 @njit(cache=True, fastmath=FASTMATH, error_model='numpy')

@@ -19,10 +19,9 @@ from numba import njit, prange
 
 from hair_tracking.guides.ftl import CHUNKS, ftl_advance_blocks
 from hair_tracking.guides.ftl import _measured, _split_after
-from hair_tracking.core.kernels import BLOCK
+from hair_tracking.core.kernels import BLOCK, parallel_and_serial
 
 
-@njit(cache=True, nogil=True, parallel=True)
 def ftl_advance_heads(model, state, drive, params, collide, collider, work, stop, slots):
     """Kernel: ``K`` FTL substeps of the guides of every head ``h``, at ``slots[h]`` of the
     state.
@@ -56,25 +55,7 @@ def ftl_advance_heads(model, state, drive, params, collide, collider, work, stop
     return done
 
 
-@njit(cache=True, nogil=True)
-def ftl_advance_heads_serial(model, state, drive, params, collide, collider, work, stop, slots):
-    """:func:`ftl_advance_heads` on the calling thread."""
-    heads, n_sub, nblk, chunks, limited = _plan(state, drive, work, stop, slots)
-    done = n_sub
-    if limited:
-        for k in range(n_sub):
-            for j in range(heads * chunks):
-                _head_run(model, state, drive, params, collide, collider, work, slots,
-                          (j, chunks, nblk, k, k + 1))
-            if _any_split(drive, work, stop, k, nblk, heads):
-                done = k + 1
-                break
-    else:
-        for j in range(heads * chunks):
-            _head_run(model, state, drive, params, collide, collider, work, slots,
-                      (j, chunks, nblk, np.int64(0), n_sub))
-        _all_measured(drive, work, n_sub, nblk, heads)
-    return done
+ftl_advance_heads, ftl_advance_heads_serial = parallel_and_serial(ftl_advance_heads)
 
 
 @njit(cache=True, inline='always')

@@ -36,7 +36,7 @@ import math
 import numpy as np
 from numba import njit, prange, uint64
 
-from hair_tracking.core.kernels import FASTMATH
+from hair_tracking.core.kernels import FASTMATH, parallel_and_serial
 from hair_tracking.guides.integrate import finalize_block, predict_block
 
 #: Static data of :func:`pbd_step` (the last four in :func:`lane_major` layout): ``rest``
@@ -325,7 +325,6 @@ def _strain_limit_strand(x, v, inv_mass, rest_length, limit, inv_dt, s):
     return moved
 
 
-@njit(cache=True, nogil=True, parallel=True, fastmath=FASTMATH, error_model='numpy')
 def strain_limit(x, v, inv_mass, rest_length, limit, dt):
     """Strain limiting (Provot 1995, "Deformation constraints in a mass-spring model to describe
     rigid cloth behavior"), root to tip: a free node (``inv_mass`` > 0) farther from the node
@@ -341,14 +340,8 @@ def strain_limit(x, v, inv_mass, rest_length, limit, dt):
     return moved
 
 
-@njit(cache=True, nogil=True, fastmath=FASTMATH, error_model='numpy')
-def strain_limit_serial(x, v, inv_mass, rest_length, limit, dt):
-    """The serial variant of :func:`strain_limit`."""
-    moved = 0
-    inv_dt = 1.0 / dt
-    for s in range(x.shape[0]):
-        moved += _strain_limit_strand(x, v, inv_mass, rest_length, limit, inv_dt, s)
-    return moved
+strain_limit, strain_limit_serial = parallel_and_serial(
+    strain_limit, fastmath=FASTMATH, error_model='numpy')
 
 
 @njit(cache=True, fastmath=FASTMATH, error_model='numpy')
@@ -434,7 +427,6 @@ def _xpbd_block(blk, model, state, motion, params, xwork):
     return _lanes_finished(p, state, inv_mass, s0, s1, dt, max_disp, do_finalize)
 
 
-@njit(cache=True, nogil=True, parallel=True, fastmath=FASTMATH, error_model='numpy')
 def pbd_step(model, state, motion, params, work):
     """Kernel: one PBD substep of all strands (predict, ``iterations`` sweeps, finalize).
 
@@ -460,16 +452,9 @@ def pbd_step(model, state, motion, params, work):
     return clamped
 
 
-@njit(cache=True, nogil=True, fastmath=FASTMATH, error_model='numpy')
-def pbd_step_serial(model, state, motion, params, work):
-    """:func:`pbd_step` on the calling thread."""
-    clamped = 0
-    for blk in range(work.shape[0]):
-        clamped += _pbd_block(blk, model, state, motion, params, work)
-    return clamped
+pbd_step, pbd_step_serial = parallel_and_serial(pbd_step, fastmath=FASTMATH, error_model='numpy')
 
 
-@njit(cache=True, nogil=True, parallel=True, fastmath=FASTMATH, error_model='numpy')
 def xpbd_step(model, state, motion, params, work):
     """Kernel: one XPBD substep of all strands (predict, reset λ, ``iterations`` sweeps, finalize).
 
@@ -492,11 +477,5 @@ def xpbd_step(model, state, motion, params, work):
     return clamped
 
 
-@njit(cache=True, nogil=True, fastmath=FASTMATH, error_model='numpy')
-def xpbd_step_serial(model, state, motion, params, work):
-    """:func:`xpbd_step` on the calling thread."""
-    lanes, _, _ = work                                                  # XpbdWork
-    clamped = 0
-    for blk in range(lanes.shape[0]):
-        clamped += _xpbd_block(blk, model, state, motion, params, work)
-    return clamped
+xpbd_step, xpbd_step_serial = parallel_and_serial(
+    xpbd_step, fastmath=FASTMATH, error_model='numpy')
