@@ -163,6 +163,18 @@ def predict_block(state, rest, inv_mass, motion, s0, s1):
                 x[s, i, 2] = pz
 
 
+@njit(cache=True, inline='always', fastmath=FASTMATH, error_model='numpy')
+def capped(dx, dy, dz, max_disp, lim2):
+    """The step ``d`` scaled down to the length ``max_disp`` [m] when longer (``lim2`` its
+    square; ``max_disp`` 0: no cap), and whether it was."""
+    if max_disp > 0.0:
+        d2 = dx * dx + dy * dy + dz * dz
+        if d2 > lim2:
+            f = max_disp / math.sqrt(d2)
+            return dx * f, dy * f, dz * f, True
+    return dx, dy, dz, False
+
+
 @njit(cache=True, fastmath=FASTMATH, error_model='numpy')
 def finalize_block(x, v, x_old, inv_mass, corr, s0, s1, dt, max_disp, s_damp):
     """Displacement clamp and velocity update of strands ``s0..s1-1``; returns the clamped count.
@@ -185,29 +197,17 @@ def finalize_block(x, v, x_old, inv_mass, corr, s0, s1, dt, max_disp, s_damp):
             dz = x[s, i, 2] - x_old[s, i, 2]
             hit = False
             if inv_mass[s, i] > 0.0:
-                if max_disp > 0.0:
-                    d2 = dx * dx + dy * dy + dz * dz
-                    if d2 > lim2:
-                        f = max_disp / math.sqrt(d2)
-                        dx *= f
-                        dy *= f
-                        dz *= f
-                        x[s, i, 0] = x_old[s, i, 0] + dx
-                        x[s, i, 1] = x_old[s, i, 1] + dy
-                        x[s, i, 2] = x_old[s, i, 2] + dz
-                        hit = True
+                dx, dy, dz, hit = capped(dx, dy, dz, max_disp, lim2)
+                if hit:
+                    x[s, i, 0] = x_old[s, i, 0] + dx
+                    x[s, i, 1] = x_old[s, i, 1] + dy
+                    x[s, i, 2] = x_old[s, i, 2] + dz
                 if s_damp > 0.0 and i + 1 < n:
-                    dx -= s_damp * corr[s, i + 1, 0]
-                    dy -= s_damp * corr[s, i + 1, 1]
-                    dz -= s_damp * corr[s, i + 1, 2]
-                    if max_disp > 0.0:
-                        d2 = dx * dx + dy * dy + dz * dz
-                        if d2 > lim2:
-                            f = max_disp / math.sqrt(d2)
-                            dx *= f
-                            dy *= f
-                            dz *= f
-                            hit = True
+                    dx, dy, dz, damped_hit = capped(dx - s_damp * corr[s, i + 1, 0],
+                                                    dy - s_damp * corr[s, i + 1, 1],
+                                                    dz - s_damp * corr[s, i + 1, 2],
+                                                    max_disp, lim2)
+                    hit = hit or damped_hit
             v[s, i, 0] = dx * inv_dt
             v[s, i, 1] = dy * inv_dt
             v[s, i, 2] = dz * inv_dt

@@ -136,6 +136,20 @@ def lane_work(strands: int, nodes: int) -> np.ndarray:
     return np.zeros((lane_blocks(strands), nodes * 3 * LANES))
 
 
+@njit(cache=True, inline='always', fastmath=FASTMATH, error_model='numpy')
+def pair_correction(x, rest_dist, s, i, j, a, c):
+    """The projection of the distance constraint ``C = |d| - rest_dist[s, i]`` of the nodes
+    ``i`` and ``j`` of strand ``s`` (``d = x_j - x_i``): ``(a C / |d|, c C / |d|, d)``, the
+    factors of ``d`` that move node ``i`` (added) and node ``j`` (subtracted), given their
+    weights ``a`` and ``c``."""
+    dx = x[s, j, 0] - x[s, i, 0]
+    dy = x[s, j, 1] - x[s, i, 1]
+    dz = x[s, j, 2] - x[s, i, 2]
+    l2 = dx * dx + dy * dy + dz * dz
+    f = 1.0 - rest_dist[s, i] / math.sqrt(max(l2, TINY_SQ))   # C / |d|
+    return a * f, c * f, dx, dy, dz
+
+
 @njit(cache=True, fastmath=FASTMATH, error_model='numpy')
 def pbd_sweep_block(x, rest_dist, weights, gap, k, s0, s1):
     """One PBD Gauss–Seidel sweep over the constraints ``(i, i+gap)`` of strands ``s0..s1-1``.
@@ -150,13 +164,7 @@ def pbd_sweep_block(x, rest_dist, weights, gap, k, s0, s1):
             c = k * weights[s, i, 1]
             if a == 0.0 and c == 0.0:
                 continue
-            dx = x[s, j, 0] - x[s, i, 0]
-            dy = x[s, j, 1] - x[s, i, 1]
-            dz = x[s, j, 2] - x[s, i, 2]
-            l2 = dx * dx + dy * dy + dz * dz
-            f = 1.0 - rest_dist[s, i] / math.sqrt(max(l2, TINY_SQ))   # C / |d|
-            a *= f
-            c *= f
+            a, c, dx, dy, dz = pair_correction(x, rest_dist, s, i, j, a, c)
             x[s, i, 0] += a * dx
             x[s, i, 1] += a * dy
             x[s, i, 2] += a * dz
@@ -193,13 +201,7 @@ def jacobi_bend_block(x, rest_dist, weights, k, s0, s1):
             c = h * weights[s, i, 1]
             cx, cy, cz = 0.0, 0.0, 0.0
             if a != 0.0 or c != 0.0:
-                dx = x[s, j, 0] - x[s, i, 0]
-                dy = x[s, j, 1] - x[s, i, 1]
-                dz = x[s, j, 2] - x[s, i, 2]
-                l2 = dx * dx + dy * dy + dz * dz
-                f = 1.0 - rest_dist[s, i] / math.sqrt(max(l2, TINY_SQ))   # C / |d|
-                a *= f
-                c *= f
+                a, c, dx, dy, dz = pair_correction(x, rest_dist, s, i, j, a, c)
                 ax += a * dx
                 ay += a * dy
                 az += a * dz

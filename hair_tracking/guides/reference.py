@@ -44,18 +44,22 @@ def guide_predict(x, v, rest, inv_mass, rot, pos, rot_prev, pos_prev, gravity, d
     return p, xc, vn
 
 
+def _pair(p, rest_dist, inv_mass, i, j):
+    """The distance constraint of nodes ``i`` and ``j`` of every strand: their inverse masses
+    and sum, ``C = |p_j - p_i| - rest_dist[:, i]`` and the unit direction from ``i`` to ``j``."""
+    wi, wj = inv_mass[:, i], inv_mass[:, j]
+    d = p[:, j] - p[:, i]
+    length = np.linalg.norm(d, axis=1)
+    return wi, wj, wi + wj, length - rest_dist[:, i], d / np.maximum(length, 1e-15)[:, None]
+
+
 def pbd_sweep(p, rest_dist, inv_mass, gap, k):
     """One PBD sweep, in place on ``p`` (S, N, 3): for ``i = 0 .. N-1-gap`` the constraint
     ``C = |p_j - p_i| - rest_dist[:, i]`` (``j = i + gap``) projected with stiffness ``k``,
     the correction shared by the inverse masses."""
     for i in range(p.shape[1] - gap):
         j = i + gap
-        wi, wj = inv_mass[:, i], inv_mass[:, j]
-        ws = wi + wj
-        d = p[:, j] - p[:, i]
-        length = np.linalg.norm(d, axis=1)
-        c = length - rest_dist[:, i]
-        nrm = d / np.maximum(length, 1e-15)[:, None]
+        wi, wj, ws, c, nrm = _pair(p, rest_dist, inv_mass, i, j)
         safe = np.where(ws > 0, ws, 1.0)
         p[:, i] += (k * wi / safe * c)[:, None] * nrm
         p[:, j] -= (k * wj / safe * c)[:, None] * nrm
@@ -84,12 +88,7 @@ def xpbd_sweep(p, rest_dist, inv_mass, lam, gap, alpha_tilde):
     the time-step scaled compliance."""
     for i in range(p.shape[1] - gap):
         j = i + gap
-        wi, wj = inv_mass[:, i], inv_mass[:, j]
-        ws = wi + wj
-        d = p[:, j] - p[:, i]
-        length = np.linalg.norm(d, axis=1)
-        c = length - rest_dist[:, i]
-        nrm = d / np.maximum(length, 1e-15)[:, None]
+        wi, wj, ws, c, nrm = _pair(p, rest_dist, inv_mass, i, j)
         dlam = np.where(ws > 0, (-c - alpha_tilde * lam[:, i]) / (ws + alpha_tilde), 0.0)
         lam[:, i] += dlam
         p[:, i] -= (wi * dlam)[:, None] * nrm
