@@ -167,6 +167,17 @@ def surface_point(qx, qy, qz, ax, ay, az, refine):
 
 
 @njit(cache=True, inline='always')
+def ellipsoid_depth(qx, qy, qz, ax, ay, az, ix, iy, iz, refine):
+    """How deep [m] the point ``q`` (the ellipsoid's axes, relative to its centre) lies inside
+    the ellipsoid of semi-axes ``a`` (``i`` their inverse squares): the distance to its
+    :func:`surface_point`; 0 outside."""
+    if ellipsoid_level(qx, qy, qz, ix, iy, iz) >= 1.0:
+        return 0.0
+    yx, yy, yz = surface_point(qx, qy, qz, ax, ay, az, refine)
+    return math.sqrt((yx - qx) ** 2 + (yy - qy) ** 2 + (yz - qz) ** 2)
+
+
+@njit(cache=True, inline='always')
 def ellipsoid_pushed(qx, qy, qz, rx, ry, rz, placed, inv, exit_point):
     """:func:`ellipsoid_contact`'s arithmetic for a node known to be inside, without branches
     on the node's values (the loop over a block's pushed nodes of the fast paths,
@@ -443,11 +454,8 @@ def depth(x0, x1, x2, sh, k):
     kind = int(sh[k, KIND])
     if kind == ELLIPSOID:
         qx, qy, qz = to_local(x0, x1, x2, sh, k)
-        if ellipsoid_level(qx, qy, qz, sh[k, I0], sh[k, I1], sh[k, I2]) >= 1.0:
-            return 0.0
-        yx, yy, yz = surface_point(qx, qy, qz, sh[k, A0], sh[k, A1], sh[k, A2],
-                                   int(sh[k, REFINE]))
-        return math.sqrt((yx - qx) ** 2 + (yy - qy) ** 2 + (yz - qz) ** 2)
+        return ellipsoid_depth(qx, qy, qz, sh[k, A0], sh[k, A1], sh[k, A2], sh[k, I0],
+                               sh[k, I1], sh[k, I2], int(sh[k, REFINE]))
     if kind == PLANE:
         return max(-plane_level(x0, x1, x2, sh, k), 0.0)
     bx, by, bz, ex, ey, ez = core_point(x0, x1, x2, sh, k)

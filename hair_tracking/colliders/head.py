@@ -28,8 +28,8 @@ from typing import Optional
 import numpy as np
 from numba import njit, prange
 
-from hair_tracking.colliders.contact import (centre_exit, ellipsoid_contact, ellipsoid_level,
-                                             ellipsoid_pushed, local_of, surface_point)
+from hair_tracking.colliders.contact import (centre_exit, ellipsoid_contact, ellipsoid_depth,
+                                             ellipsoid_level, ellipsoid_pushed, local_of)
 from hair_tracking.colliders.margin import fit_margin
 from hair_tracking.colliders.shapes import HEAD_FRAME, Shape
 from hair_tracking.core.kernels import BLOCK, FASTMATH, parallel_and_serial, runs_parallel
@@ -209,10 +209,7 @@ def strand_depth(x, inv_mass, use_mass, contact, s):
         if use_mass and inv_mass[s, i] <= 0.0:
             continue
         qx, qy, qz = local_of(x[s, i, 0], x[s, i, 1], x[s, i, 2], rot, cx, cy, cz)
-        if qx * qx * ix + qy * qy * iy + qz * qz * iz >= 1.0:
-            continue
-        yx, yy, yz = surface_point(qx, qy, qz, ax, ay, az, refine)
-        depth = math.sqrt((yx - qx) ** 2 + (yy - qy) ** 2 + (yz - qz) ** 2)
+        depth = ellipsoid_depth(qx, qy, qz, ax, ay, az, ix, iy, iz, refine)
         if depth > deepest:
             deepest = depth
     return deepest
