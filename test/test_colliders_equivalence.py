@@ -16,7 +16,7 @@ import numpy as np
 from numba import njit
 import pytest
 
-from hair_tracking.colliders import contact, kernels, margin, pose
+from hair_tracking.colliders import contact, kernels, margin, pose, reference
 from hair_tracking.colliders import slide as stateless_slide
 from hair_tracking.colliders.shapes import (CAPSULE, CX, CZ, ELLIPSOID, FRICTION, KIND, M00,
                                             PLANE, Q00, Q01, Q02, Q11, Q12, Q22, REFINE, Shape,
@@ -163,7 +163,11 @@ def _placements(px, py, pz, bx, by, bz, r, ex, ey, ez, rot, sh, k, kind):
             break
         if contact.outside_within(px, py, pz, sh, k, ftl.RESTORE_TOLERANCE):
             break
-        moved, px, py, pz = contact.contact_of(kind, px, py, pz, px, py, pz, sh, k, 0.0)
+        if kind == ELLIPSOID:                   # contact.project: the closest point
+            moved, px, py, pz = contact.ellipsoid_projection(
+                px, py, pz, contact.placed_ellipsoid(sh, k, 0.0))
+        else:
+            moved, px, py, pz = contact.contact_of(kind, px, py, pz, px, py, pz, sh, k, 0.0)
     return px, py, pz
 
 
@@ -342,21 +346,35 @@ def test_the_fitted_margin_is_the_guide_solvers_and_the_trackers():
     assert math.isfinite(float(margin.outside_distance(q, RADII).max()))
 
 
+def _refined(x, ref, placed):
+    """The contact's refined projection and friction about the surface normal, without the
+    fast path (what contact.ellipsoid_contact does for a deeper node)."""
+    rot, cx, cy, cz, ax, ay, az, mu, refine = placed
+    q = contact.local_of(*x, rot, cx, cy, cz)
+    y = contact.surface_point(*q, ax, ay, az, refine)
+    if mu > 0.0:
+        p = contact.local_of(*ref, rot, cx, cy, cz)
+        y = contact.ellipsoid_friction(*y, *p, 1.0 / ax ** 2, 1.0 / ay ** 2, 1.0 / az ** 2, mu)
+    return contact.world_of(*y, rot, cx, cy, cz)
+
+
 @pytest.mark.parametrize('radii', [RADII, (0.1, 0.1, 0.1)])
 @pytest.mark.parametrize('friction', [0.0, 0.3])
-def test_the_shallow_contact_is_the_contact_models_to_a_micrometre(radii, friction):
-    """contact.ellipsoid_contact_shallow (the FTL guides' pass): for nodes with F(q) above
-    SHALLOW_LEVEL (up to about half a per cent of the semi-axes deep), its Newton step and
-    friction about the gradient land within a few micrometres of ellipsoid_contact's refined
+def test_the_contacts_fast_path_is_its_refined_projection_to_a_few_micrometres(radii, friction):
+    """contact.ellipsoid_contact (every solver's and tracker's): for nodes with F(q) above
+    SHALLOW_LEVEL (up to about half a per cent of the semi-axes deep) its fast path, a Newton
+    step and friction about the gradient, lands within a few micrometres of the refined
     projection and friction about the surface normal (2.4 um at most here), on the surface to
-    10 um / a; deeper nodes are ellipsoid_contact's exactly; outside nodes stay."""
+    10 um / a; deeper nodes take the refined projection; outside nodes stay.  The plain-numpy
+    reference states both paths."""
     rng = np.random.default_rng(7 + int(friction * 10))
     rot = quat_to_matrix(quat_normalize(rng.normal(size=4)))
     pos = rng.normal(scale=0.2, size=3)
     center = np.array([0.01, -0.02, 0.03])
     axes = np.asarray(radii) + 0.004
     placed = collision.placed((center, np.asarray(radii), 0.004, friction, 2), rot, pos)
-    shallow_f = contact.SHALLOW_LEVEL
+    row = posed_head(Shape('ellipsoid', center=center, radii=radii, margin=0.004,
+                           friction=friction), rot, pos, rot, pos)[0]
     seen = {'shallow': 0, 'deep': 0, 'out': 0}
     for k in range(600):
         u = rng.normal(size=3)
@@ -365,19 +383,22 @@ def test_the_shallow_contact_is_the_contact_models_to_a_micrometre(radii, fricti
         q = u * math.sqrt(level)          # F(q) = level
         x = rot @ (q + center) + pos
         ref = x + rng.normal(scale=0.002, size=3)
-        new = contact.ellipsoid_contact_shallow(*x, *ref, placed)
-        old = contact.ellipsoid_contact(*x, *ref, placed)
-        assert new[0] == old[0]
-        if not old[0]:
+        new = contact.ellipsoid_contact(*x, *ref, placed)
+        moved, expected = reference.reference_push_out(x, ref, row)
+        assert new[0] == moved[0]
+        np.testing.assert_allclose(new[1:], expected[0], rtol=0, atol=1e-12)
+        if not new[0]:
             seen['out'] += 1
             assert new[1:] == tuple(x)
-        elif level > shallow_f:
+            continue
+        refined = _refined(x, ref, placed)
+        if level > contact.SHALLOW_LEVEL:
             seen['shallow'] += 1
-            assert np.linalg.norm(np.subtract(new[1:], old[1:])) < 5e-6
+            assert 0.0 < np.linalg.norm(np.subtract(new[1:], refined)) < 5e-6
             y = rot.T @ (np.array(new[1:]) - pos) - center
             if friction == 0.0:
                 assert abs(np.sum((y / axes) ** 2) - 1.0) < 1e-5 / axes.min()
         else:
             seen['deep'] += 1
-            assert new == old
+            np.testing.assert_allclose(new[1:], refined, rtol=0, atol=1e-15)
     assert min(seen.values()) > 50

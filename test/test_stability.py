@@ -189,7 +189,7 @@ def ref_ftl_collide_pass(x, x_ref, rest, rest_length, rot, pos, center, axes, re
     back at its rest distance while inside the ellipsoid scaled by ``1 - tolerance /
     max(axes)`` (at most ``iterations`` surface points).  ``corr`` receives the placements, not
     the push.  A node less than 1 % of the semi-axes deep goes one Newton step along the
-    gradient instead (:func:`contact.ellipsoid_contact_shallow`)."""
+    gradient instead (the fast path of :func:`contact.ellipsoid_contact`)."""
     x = x.copy()
     corr = corr.copy()
     c_world = rot @ center + pos

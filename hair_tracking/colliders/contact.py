@@ -18,6 +18,12 @@ shape's surface + margin is moved onto it, to the closest point of the surface:
   shortest semi-axis.  Distance to the true closest point with 2 refinements on the head
   ellipsoid (0.095, 0.08, 0.105) m: 3e-7 m at 2 mm depth, 4e-5 m at 1 cm.
 
+  The contact (:func:`ellipsoid_contact`) takes a fast path for a node just inside (``F(q) >``
+  :data:`SHALLOW_LEVEL`, resting hair): one Newton step along the gradient, with friction
+  about it (:func:`ellipsoid_newton`), within a few micrometres of the refined point.  The
+  closest-point queries (:func:`project`, :func:`depth`) take the refined projection at every
+  depth.
+
 **Friction** (:func:`friction`), position-level as in Macklin, Müller, Chentanez & Kim 2014
 ("Unified Particle Physics for Real-Time Applications"), a proportional reduction in place of a
 Coulomb cone: the displacement of the projected node ``y`` from its reference ``r`` is split at
@@ -177,15 +183,46 @@ def ellipsoid_depth(qx, qy, qz, ax, ay, az, ix, iy, iz, refine):
     return math.sqrt((yx - qx) ** 2 + (yy - qy) ** 2 + (yz - qz) ** 2)
 
 
+#: :func:`ellipsoid_contact` takes its fast path, one Newton step (:func:`ellipsoid_newton`),
+#: for a node with ``F(q)`` above this level (up to about 0.5 % of the semi-axis deep, 0.5 mm on
+#: a head): resting contact, hair pulled ``|g| dt^2`` (0.17 mm at 1/240 s) into the surface
+#: every substep.
+SHALLOW_LEVEL = 0.98
+
+
+@njit(cache=True, inline='always')
+def ellipsoid_newton(qx, qy, qz, f, ix, iy, iz, px, py, pz, mu):
+    """The contact's fast path for a node just inside (``F(q) = f`` above
+    :data:`SHALLOW_LEVEL`): the surface point ``q - (F - 1) / (2 |g|^2) g`` with ``g`` the
+    gradient direction ``(q_k / a_k^2)_k`` (Newton's method on ``F = 1`` along the normal; it
+    lands within 2.5 um of :func:`surface_point`'s point at the level's limit, the difference
+    falling as the square of the depth, test_colliders_equivalence.py), then :func:`friction`
+    about that normal relative to ``p`` (``mu`` 0: none), written with ``1 / |g|^2`` instead of
+    a unit vector: one division where the refined projection and its unit normal take four
+    square roots and four divisions, a chain each contact waits for.  All in the ellipsoid's
+    axes."""
+    gx, gy, gz = qx * ix, qy * iy, qz * iz
+    inv = 1.0 / (gx * gx + gy * gy + gz * gz)
+    t = 0.5 * (f - 1.0) * inv
+    yx, yy, yz = qx - t * gx, qy - t * gy, qz - t * gz
+    if mu > 0.0:
+        mx, my, mz = yx - px, yy - py, yz - pz
+        dn = (mx * gx + my * gy + mz * gz) * inv
+        yx -= mu * (mx - dn * gx)
+        yy -= mu * (my - dn * gy)
+        yz -= mu * (mz - dn * gz)
+    return yx, yy, yz
+
+
 @njit(cache=True, inline='always')
 def ellipsoid_pushed(qx, qy, qz, rx, ry, rz, placed, inv, exit_point):
     """:func:`ellipsoid_contact`'s arithmetic for a node known to be inside, without branches
-    on the node's values (the loop over a block's pushed nodes of the fast paths,
-    :func:`~hair_tracking.colliders.head.project_block` and the paper tracker's
-    :func:`~hair_tracking.ghosts.contacts.collide_lanes`): ``q`` the node in the ellipsoid's
-    axes, ``r`` its friction reference (world), ``placed`` as there (at most 2 refinements,
-    unrolled), ``inv`` the inverse squared semi-axes, ``exit_point`` :func:`centre_exit`'s
-    point.  Returns the node's new world position."""
+    on the node's values: both its fast path and its refined projection, one selected (the
+    loop over a block's pushed nodes of :func:`~hair_tracking.colliders.head.project_block`
+    and the paper tracker's :func:`~hair_tracking.ghosts.contacts.collide_lanes`): ``q`` the
+    node in the ellipsoid's axes, ``r`` its friction reference (world), ``placed`` as there (at
+    most 2 refinements, unrolled), ``inv`` the inverse squared semi-axes, ``exit_point``
+    :func:`centre_exit`'s point.  Returns the node's new world position."""
     rot, cx, cy, cz, _, _, _, mu, refine = placed
     ix, iy, iz = inv
     f, sc = ellipsoid_radial(qx, qy, qz, ix, iy, iz)
@@ -199,9 +236,15 @@ def ellipsoid_pushed(qx, qy, qz, rx, ry, rz, placed, inv, exit_point):
     yx = exit_point[0] if deg else yx
     yy = exit_point[1] if deg else yy
     yz = exit_point[2] if deg else yz
+    px, py, pz = qx, qy, qz
     if mu > 0.0:
         px, py, pz = local_of(rx, ry, rz, rot, cx, cy, cz)
         yx, yy, yz = ellipsoid_friction(yx, yy, yz, px, py, pz, ix, iy, iz, mu)
+    nx, ny, nz = ellipsoid_newton(qx, qy, qz, f, ix, iy, iz, px, py, pz, mu)
+    shallow = f > SHALLOW_LEVEL
+    yx = nx if shallow else yx
+    yy = ny if shallow else yy
+    yz = nz if shallow else yz
     return world_of(yx, yy, yz, rot, cx, cy, cz)
 
 
@@ -277,61 +320,42 @@ def plane_level(x0, x1, x2, sh, k):
 @njit(cache=True, inline='always')
 def ellipsoid_contact(x0, x1, x2, r0, r1, r2, placed):
     """The projection and friction of one node ``x`` (world [m]) against one ellipsoid: the one
-    statement of the rule every ellipsoid contact runs (the guide solver's head collider, the
-    paper tracker's, :func:`contact_ellipsoid` of a posed table).  ``placed`` = ``(rot, cx, cy,
-    cz, ax, ay, az, mu, refine)``: the nine entries of its world axes (:func:`local_of`), its
-    centre in the world, its semi-axes (margin included), friction ``mu`` (0: none) relative to
-    the reference ``r``, normal-line refinements.  Returns ``(moved, y0, y1, y2)``; a node
-    outside comes back as it is with ``moved`` false."""
+    statement of the rule every ellipsoid contact runs (the guide solvers' head collider, the
+    FTL pass, the paper tracker's, :func:`contact_ellipsoid` of a posed table).  ``placed`` =
+    ``(rot, cx, cy, cz, ax, ay, az, mu, refine)``: the nine entries of its world axes
+    (:func:`local_of`), its centre in the world, its semi-axes (margin included), friction
+    ``mu`` (0: none) relative to the reference ``r``, normal-line refinements.  A node just
+    inside takes the fast path (:func:`ellipsoid_newton`), a deeper one :func:`surface_point`
+    and :func:`ellipsoid_friction`.  Returns ``(moved, y0, y1, y2)``; a node outside comes back
+    as it is with ``moved`` false."""
     rot, cx, cy, cz, ax, ay, az, mu, refine = placed
-    qx, qy, qz = local_of(x0, x1, x2, rot, cx, cy, cz)
     ix, iy, iz = 1.0 / (ax * ax), 1.0 / (ay * ay), 1.0 / (az * az)
-    if ellipsoid_level(qx, qy, qz, ix, iy, iz) >= 1.0:
+    qx, qy, qz = local_of(x0, x1, x2, rot, cx, cy, cz)
+    f = ellipsoid_level(qx, qy, qz, ix, iy, iz)
+    if f >= 1.0:
         return False, x0, x1, x2
-    yx, yy, yz = surface_point(qx, qy, qz, ax, ay, az, refine)
+    px, py, pz = qx, qy, qz
     if mu > 0.0:
         px, py, pz = local_of(r0, r1, r2, rot, cx, cy, cz)
-        yx, yy, yz = ellipsoid_friction(yx, yy, yz, px, py, pz, ix, iy, iz, mu)
+    if f > SHALLOW_LEVEL:
+        yx, yy, yz = ellipsoid_newton(qx, qy, qz, f, ix, iy, iz, px, py, pz, mu)
+    else:
+        yx, yy, yz = surface_point(qx, qy, qz, ax, ay, az, refine)
+        if mu > 0.0:
+            yx, yy, yz = ellipsoid_friction(yx, yy, yz, px, py, pz, ix, iy, iz, mu)
     y0, y1, y2 = world_of(yx, yy, yz, rot, cx, cy, cz)
     return True, y0, y1, y2
 
 
-#: :func:`ellipsoid_contact_shallow` takes its Newton step for a node with ``F(q)`` above
-#: this level (up to about 0.5 % of the semi-axis deep, 0.5 mm on a head): resting contact,
-#: hair pulled ``|g| dt^2`` (0.17 mm at 1/240 s) into the surface every substep.
-SHALLOW_LEVEL = 0.98
-
-
 @njit(cache=True, inline='always')
-def ellipsoid_contact_shallow(x0, x1, x2, r0, r1, r2, placed):
-    """:func:`ellipsoid_contact` with one Newton step for a node just inside: for ``F(q) >``
-    :data:`SHALLOW_LEVEL` the surface point is ``q - (F - 1) / (2 |g|^2) g`` with ``g`` the
-    gradient direction ``(q_k / a_k^2)_k`` (Newton's method on ``F = 1`` along the normal; it
-    lands within 2.5 um of :func:`ellipsoid_contact`'s point at the level's limit, the
-    difference falling as the square of the depth, test_colliders_equivalence.py) and
-    friction is :func:`friction` about that normal, written with ``1 / |g|^2`` instead of a
-    unit vector: one division where the projection of :func:`surface_point` and its unit
-    normal take four square roots and four divisions, a chain each contact waits for.  Deeper
-    nodes take :func:`ellipsoid_contact`.  Returns ``(moved, y0, y1, y2)``."""
-    rot, cx, cy, cz, ax, ay, az, mu, _ = placed
-    ix, iy, iz = 1.0 / (ax * ax), 1.0 / (ay * ay), 1.0 / (az * az)
+def ellipsoid_projection(x0, x1, x2, placed):
+    """The refined projection of :func:`ellipsoid_contact` at every depth, without friction
+    (the closest point of the surface, :func:`surface_point`): ``(moved, y0, y1, y2)``."""
+    rot, cx, cy, cz, ax, ay, az, _, refine = placed
     qx, qy, qz = local_of(x0, x1, x2, rot, cx, cy, cz)
-    f = ellipsoid_level(qx, qy, qz, ix, iy, iz)
-    if not f > SHALLOW_LEVEL:
-        return ellipsoid_contact(x0, x1, x2, r0, r1, r2, placed)
-    if f >= 1.0:
+    if ellipsoid_level(qx, qy, qz, 1.0 / (ax * ax), 1.0 / (ay * ay), 1.0 / (az * az)) >= 1.0:
         return False, x0, x1, x2
-    gx, gy, gz = qx * ix, qy * iy, qz * iz
-    inv = 1.0 / (gx * gx + gy * gy + gz * gz)
-    t = 0.5 * (f - 1.0) * inv
-    yx, yy, yz = qx - t * gx, qy - t * gy, qz - t * gz
-    if mu > 0.0:
-        px, py, pz = local_of(r0, r1, r2, rot, cx, cy, cz)
-        mx, my, mz = yx - px, yy - py, yz - pz
-        dn = (mx * gx + my * gy + mz * gz) * inv
-        yx -= mu * (mx - dn * gx)
-        yy -= mu * (my - dn * gy)
-        yz -= mu * (mz - dn * gz)
+    yx, yy, yz = surface_point(qx, qy, qz, ax, ay, az, refine)
     y0, y1, y2 = world_of(yx, yy, yz, rot, cx, cy, cz)
     return True, y0, y1, y2
 
@@ -407,9 +431,16 @@ def push_out(x0, x1, x2, r0, r1, r2, sh, k):
 
 @njit(cache=True, inline='always')
 def project(x0, x1, x2, sh, k):
-    """:func:`contact_of` shape ``k`` without friction: ``(moved, y0, y1, y2)`` (the
-    collision-aware Follow-The-Leader pass)."""
-    return contact_of(int(sh[k, KIND]), x0, x1, x2, x0, x1, x2, sh, k, 0.0)
+    """A node inside shape ``k``'s surface + margin moved to the closest point of it, without
+    friction: ``(moved, y0, y1, y2)`` (the collision-aware Follow-The-Leader pass's placements
+    and the crease escape).  :func:`contact_of` without friction, but for the ellipsoid its
+    refined projection whatever the depth (:func:`ellipsoid_projection`): the closest point,
+    as the head's restoration (:func:`~hair_tracking.guides.ftl.restore_node`) and
+    :func:`depth` take it."""
+    shape = int(sh[k, KIND])
+    if shape == ELLIPSOID:
+        return ellipsoid_projection(x0, x1, x2, placed_ellipsoid(sh, k, 0.0))
+    return contact_of(shape, x0, x1, x2, x0, x1, x2, sh, k, 0.0)
 
 
 @njit(cache=True, inline='always')

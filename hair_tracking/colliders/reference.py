@@ -7,6 +7,7 @@ import math
 
 import numpy as np
 
+from hair_tracking.colliders.contact import SHALLOW_LEVEL
 from hair_tracking.colliders.shapes import (A0, A1, A2, BOUND, BOUND_PAD, CAPSULE, CX, CZ,
                                             ELLIPSOID, FRICTION, I0, I2, KIND, L_CX, L_CZ, L_FRAME,
                                             L_FRICTION, L_KIND, L_MARGIN, L_R00, L_REFINE, L_S0,
@@ -133,9 +134,34 @@ def reference_normal(y, row) -> np.ndarray:
     return n / np.linalg.norm(n, axis=1)[:, None]
 
 
-def reference_push_out(x, ref, row, with_friction=True):
+def _ellipsoid_push_out(x, ref, row, with_friction, fast=True):
+    """:func:`reference_push_out` of points ``x`` inside an ellipsoid: with ``fast`` those just
+    inside (``F(q) >`` :data:`~hair_tracking.colliders.contact.SHALLOW_LEVEL`) one Newton step
+    along the gradient ``g`` and friction about ``g``, the others (all without ``fast``)
+    :func:`reference_surface_point` and friction about the normal there."""
+    r, c, a = _axes(row), row[CX:CZ + 1], row[A0:A2 + 1]
+    q = (x - c) @ r
+    p = (ref - c) @ r
+    f = np.sum((q / a) ** 2, axis=1)
+    g = q / a ** 2
+    g2 = np.sum(g * g, axis=1)
+    y = reference_surface_point(q, a, int(row[REFINE]))
+    n = y / a ** 2
+    n /= np.linalg.norm(n, axis=1)[:, None]
+    shallow = (f > SHALLOW_LEVEL) & fast
+    y[shallow] = q[shallow] - (0.5 * (f[shallow] - 1.0) / g2[shallow])[:, None] * g[shallow]
+    n[shallow] = g[shallow] / np.sqrt(g2[shallow])[:, None]
+    if with_friction and row[FRICTION] > 0.0:
+        m = y - p
+        y = y - row[FRICTION] * (m - np.sum(m * n, axis=1)[:, None] * n)
+    return y @ r.T + c
+
+
+def reference_push_out(x, ref, row, with_friction=True, fast=True):
     """Points ``x`` moved onto the surface + margin where inside, with the friction rule
-    relative to ``ref``: ``(moved (n,), y (n, 3))``."""
+    relative to ``ref``: ``(moved (n,), y (n, 3))`` (:func:`contact.contact_of
+    <hair_tracking.colliders.contact.contact_of>`; without ``fast`` the ellipsoid's refined
+    projection at every depth)."""
     x = np.atleast_2d(np.asarray(x, dtype=np.float64))
     ref = np.atleast_2d(np.asarray(ref, dtype=np.float64))
     inside = reference_inside(x, row)
@@ -144,9 +170,9 @@ def reference_push_out(x, ref, row, with_friction=True):
     kind = int(row[KIND])
     c = row[CX:CZ + 1]
     if kind == ELLIPSOID:
-        yi = reference_surface_point((xi - c) @ _axes(row), row[A0:A2 + 1],
-                                     int(row[REFINE])) @ _axes(row).T + c
-    elif kind == PLANE:
+        y[inside] = _ellipsoid_push_out(xi, ref[inside], row, with_friction, fast)
+        return inside, y
+    if kind == PLANE:
         n = _axes(row)[:, 2]
         yi = xi - (((xi - c) @ n) - row[A0])[:, None] * n
     else:
@@ -160,6 +186,13 @@ def reference_push_out(x, ref, row, with_friction=True):
     return inside, y
 
 
+def reference_project(x, row):
+    """Points ``x`` moved to the closest point of the surface + margin where inside, without
+    friction (:func:`contact.project <hair_tracking.colliders.contact.project>`):
+    ``(moved (n,), y (n, 3))``."""
+    return reference_push_out(x, x, row, with_friction=False, fast=False)
+
+
 def reference_bounded_start(s, y, r, n, cap) -> np.ndarray:
     """Start positions moved along ``n`` by the part of ``(y - r) . n`` beyond ``cap``."""
     e = np.sum((y - r) * n, axis=-1) - cap
@@ -171,7 +204,7 @@ def reference_bounded_start(s, y, r, n, cap) -> np.ndarray:
 def reference_depth(x, row) -> np.ndarray:
     """Depth [m] of points inside the surface + margin (0 outside)."""
     x = np.atleast_2d(np.asarray(x, dtype=np.float64))
-    inside, y = reference_push_out(x, x, row, with_friction=False)
+    inside, y = reference_project(x, row)
     return np.where(inside, np.linalg.norm(y - x, axis=1), 0.0)
 
 

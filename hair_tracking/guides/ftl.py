@@ -35,8 +35,8 @@ import numpy as np
 from numba import njit, prange
 
 from hair_tracking.colliders.bounds import near
-from hair_tracking.colliders.contact import (ellipsoid_contact_shallow, ellipsoid_level,
-                                             local_of, outside_within, surface_point)
+from hair_tracking.colliders.contact import (ellipsoid_contact, ellipsoid_level, local_of,
+                                             outside_within, surface_point)
 from hair_tracking.colliders.crease import escape
 from hair_tracking.colliders.head import placed, placed_shape, rotation_entries, to_head
 from hair_tracking.core.kernels import BLOCK, FASTMATH, parallel_and_serial
@@ -142,13 +142,12 @@ def ftl_pass_block(x, rest, rest_length, rot, corr, s0, s1, add, collide):
 def contact_node(x, x_ref, rest, rest_length, rot, corr, contact, s, i):
     """Node ``i`` of strand ``s``, just placed by the FTL pass, against the head collider
     ``contact``: if inside, moved to the surface with friction relative to ``x_ref[s, i]``
-    (:func:`~hair_tracking.colliders.contact.ellipsoid_contact_shallow`: most contacts are
-    hair resting on the head, a fraction of a millimetre deep) and put back at its rest
+    (:func:`~hair_tracking.colliders.contact.ellipsoid_contact`, whose fast path takes most
+    contacts: hair resting on the head, a fraction of a millimetre deep) and put back at its rest
     distance from its predecessor outside the surface (:func:`restore_node`; that placement is
     added to ``corr``, the push is not).  Returns 1 if the node was inside, else 0."""
-    moved, y0, y1, y2 = ellipsoid_contact_shallow(x[s, i, 0], x[s, i, 1], x[s, i, 2],
-                                                  x_ref[s, i, 0], x_ref[s, i, 1],
-                                                  x_ref[s, i, 2], contact)
+    moved, y0, y1, y2 = ellipsoid_contact(x[s, i, 0], x[s, i, 1], x[s, i, 2], x_ref[s, i, 0],
+                                          x_ref[s, i, 1], x_ref[s, i, 2], contact)
     if not moved:
         return 0
     px, py, pz = restore_node(
