@@ -21,8 +21,7 @@ h. optional collision with the head collider: inside the kernel for the table's 
    (:class:`hair_tracking.colliders.head.HeadCollider`), node by node after (f) (push out with
    friction, then, with length restoration on, the collision-aware FTL step of the guides,
    :func:`hair_tracking.guides.ftl.restore_node`, so a
-   push does not stretch the ghost); any other collider's ``apply`` runs after the kernel on the
-   whole arrays;
+   push does not stretch the ghost);
 i. with a body (``body.bust``), the contact model's collision stage against the bust's
    capsules after the kernel, as the guide solver runs it
    (:func:`~hair_tracking.colliders.kernels.collide`: friction relative to the body's motion,
@@ -72,8 +71,7 @@ class GhostTracker:
 
     ``collider`` is used only when ``scene.tracking.collide`` is true and it is given: the
     head's row of the collider table (a :class:`~hair_tracking.colliders.head.HeadCollider`,
-    with the scene's margin as given) or any object with ``apply(x, x_prev, inv_mass, head) ->
-    int``.  ``colliders``: the scene's
+    with the scene's margin as given).  ``colliders``: the scene's
     :class:`~hair_tracking.colliders.table.ColliderTable` (its bust and slots, stage (i);
     default: one built from ``scene``).
 
@@ -90,7 +88,8 @@ class GhostTracker:
     for the whole scene).
     """
 
-    def __init__(self, ghosts: StrandSet, guides: StrandSet, scene: Scene, collider=None,
+    def __init__(self, ghosts: StrandSet, guides: StrandSet, scene: Scene,
+                 collider: Optional[HeadCollider] = None,
                  regroup: bool = True, parallel: Optional[bool] = None,
                  colliders: Optional[ColliderTable] = None):
         tr = scene.tracking
@@ -104,8 +103,9 @@ class GhostTracker:
             raise ValueError('guides: a ghost tracker needs at least one guide strand')
         # tracking.collide means "collide with the head collider, if the scene has one"
         self.collide = bool(tr.collide and collider is not None)
-        if self.collide and not callable(getattr(collider, 'apply', None)):
-            raise ValueError('collider must expose apply(x, x_prev, inv_mass, head)')
+        if collider is not None and not isinstance(collider, HeadCollider):
+            raise ValueError(f'collider: the head row of the collider table (a HeadCollider), '
+                             f'got {type(collider).__name__}')
         s_count, n_nodes = ghosts.count, ghosts.nodes
         self.parallel = bool(runs_parallel(s_count * n_nodes) if parallel is None else parallel)
 
@@ -201,23 +201,19 @@ class GhostTracker:
         self._tmp = np.zeros((chunks, TMP_ROWS * lanes))
         self._clamped = np.zeros(n_blocks, dtype=np.int64)
         self._contacts = np.zeros(chunks, dtype=np.int64)
-        # the project's ellipsoid collider runs inside the kernel (h); any other collider object
-        # runs after it on the whole arrays
-        self._fused_collider = self.collide and isinstance(collider, HeadCollider)
-        if self._fused_collider:
+        # the head's row runs inside the kernel (h)
+        if self.collide:
             self._axes = np.ascontiguousarray(collider.radii + collider.margin)
             self._center = collider.center
             self._friction, self._refine = collider.friction, collider.refine
         else:
             self._axes, self._center = np.ones(3), np.zeros(3)
             self._friction, self._refine = 0.0, 0
-        self._collide_after = self.collide and not self._fused_collider
         table = colliders if colliders is not None else ColliderTable(scene)
         #: the scene's bust and slot shapes (``None`` without either): stage (i)
         self.body = table.body_for(ghosts)
         self._body_head: Optional[HeadPose] = None      # the head pose of the last step
-        self._x_prev = np.empty(ghosts.rest.shape) \
-            if self._collide_after or self.body is not None else None
+        self._x_prev = np.empty(ghosts.rest.shape) if self.body is not None else None
         #: the kernel's static data: the fields of
         #: :data:`~hair_tracking.ghosts.kernels.GhostModel` (a plain tuple)
         self.model = tuple(GhostModel(
@@ -357,23 +353,15 @@ class GhostTracker:
                  1.0 / float(dt))
         params = (self._elastic, tr.tip_weight > 0.0, tr.com_weight, tr.max_weight,
                   _per(tr.offset_strength, substeps), _per(tr.com_strength, substeps),
-                  _per(tr.spread, substeps), tr.length_restore, self._fused_collider,
+                  _per(tr.spread, substeps), tr.length_restore, self.collide,
                   self._center, self._axes, self._friction, self._refine)
         kernel = track_groups if self.parallel else track_groups_serial
         kernel(self.model, (self._xb, self._vb), drive, params, self.work)
         self._synced_x = self._synced_v = False
         self.stats['steps'] += 1
         self.stats['clamped'] = int(self._clamped.sum())
-        if self._fused_collider:
+        if self.collide:
             self.stats['contacts'] = int(self._contacts.sum())
-        elif self._collide_after:
-            self._write_back()
-            x, v = self._x, self._v
-            self.stats['contacts'] = int(
-                self.collider.apply(x, self._x_prev, self.ghosts.inv_mass, head))
-            np.subtract(x, self._x_prev, out=v)
-            v *= 1.0 / dt
-            self.set_state(x, v)
         if self.body is not None:
             head_contacts = self.stats['contacts'] if self.collide else 0
             self.stats['contacts'] = head_contacts + self._collide_body(dt, head)
