@@ -419,23 +419,28 @@ class HairSimulator:
             smooth = curves.resample(src, out.points_per_strand, out.curve)
         return Frame(t_ns=self.time_ns or 0, head=self.head, guides=g, ghosts=s, curves=smooth)
 
-    def record_writer(self, guides: bool = False, head_frame: bool = False):
+    def record_writer(self, guides: bool = False, head_frame: bool = False,
+                      rows: Optional[np.ndarray] = None):
         """``(S, N, write)`` for an output format with one record per point: the shape of the
         strands a :meth:`frame` shows (``frame.strands``; ``frame.guides`` with ``guides``)
         and ``write(words, stride) -> bool``, which puts their positions now as float32 x y z
         at the start of ``words``' S * N records of ``stride`` float32 words (strand ``s``'s
         point ``j`` at record ``s * N + j``; in the head frame with ``head_frame``) and says
         whether all are finite (:mod:`~hair_tracking.core.point_records`).  The ghosts are read
-        straight from the tracker's layout, without the write-back a frame makes."""
+        straight from the tracker's layout, without the write-back a frame makes.  ``rows``:
+        those strands only (an index array; S is then its length)."""
         rot = origin = None
         if head_frame:
             rot, origin = self.head.rotation.T, self.head.position
         tracker = self.ghost_tracker
-        if not guides and tracker is not None and self.scene.output.curve == 'none':
+        if rows is None and not guides and tracker is not None and \
+                self.scene.output.curve == 'none':
             s, n = self.ghosts.rest.shape[:2]
             return s, n, lambda words, stride: tracker.write_records(words, stride, rot, origin)
         # the guides as a frame holds them, without the frame's write-back of the ghosts
         x = self.guides.x if guides else self.frame(copy=False).strands
+        if rows is not None:
+            x = x[rows]
         return x.shape[0], x.shape[1], \
             lambda words, stride: points_to_records(words, stride, x, rot, origin)
 

@@ -134,3 +134,36 @@ def test_curves_output_is_written_from_the_frame():
     assert write(words, 5) is True
     np.testing.assert_array_equal(written(words, 5, (n_strands, n_points))[0],
                                   sim.frame().strands.astype(np.float32))
+
+
+@pytest.mark.parametrize('guides', [False, True])
+def test_a_cloud_sends_at_most_cloud_max_strands_evenly_spread_with_their_ids(guides):
+    """``cloud_max_strands``: the cloud carries that many strands, the first, the last and
+    evenly between, each with its position now, its strand id and its colour in the cloud of
+    all; 0 sends every strand."""
+    from rclpy.serialization import deserialize_message
+    from sensor_msgs.msg import PointCloud2
+
+    from msg_adapters.pointcloud import pointcloud2_to_strands
+    from hair_tracking.output.frame_encoder import FrameEncoder
+    from hair_tracking.output.settings import make_settings
+    sim = moved_sim()
+    key = 'guide_points' if guides else 'points'
+    strands = sim.frame().guides if guides else sim.frame().strands
+    clouds = {}
+    for most in (0, 4):
+        enc = FrameEncoder(make_settings({'cloud_max_strands': most}))
+        data = enc.frame(sim, [key], 'world', 5)[key].data
+        msg = deserialize_message(bytes(data), PointCloud2)
+        pts, ids = pointcloud2_to_strands(msg)
+        rgb = np.frombuffer(bytes(msg.data), dtype=np.uint8).reshape(-1, msg.point_step)[
+            :, 16:20].copy().view('<u4').reshape(len(ids), -1)[:, 0]
+        clouds[most] = (pts, ids, rgb)
+    pts, ids, rgb = clouds[0]
+    assert ids.tolist() == list(range(len(strands)))
+    np.testing.assert_array_equal(pts, strands.astype(np.float32))
+    sub_pts, sub_ids, sub_rgb = clouds[4]
+    want = np.linspace(0, len(strands) - 1, 4).round().astype(int)
+    assert sub_ids.tolist() == want.tolist() and want[0] == 0 and want[-1] == len(strands) - 1
+    np.testing.assert_array_equal(sub_pts, pts[want])
+    np.testing.assert_array_equal(sub_rgb, rgb[want])

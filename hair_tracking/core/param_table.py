@@ -106,7 +106,11 @@ NODE_PARAMS: Tuple[Param, ...] = (
     Param('marker_max_strands', 'int', 10000,
           'the markers draw at most this many strands, evenly spread over the scalp (a full '
           'head of 100 000 would make some 70 MB of markers a frame; the cloud carries every '
-          'strand); 0: all', lo=0, hi=2_000_000),
+          'strand, or cloud_max_strands); 0: all', lo=0, hi=2_000_000),
+    Param('cloud_max_strands', 'int', 50000,
+          'the hair clouds carry at most this many strands, evenly spread over the scalp, '
+          'each with its strand id and colour (at 16 points a strand, 50 000 strands make a '
+          '16 MB cloud, some 480 MB/s at 30 Hz); 0: all', lo=0, hi=2_000_000),
     Param('marker_color', 'double_array', (0.45, 0.3, 0.15, 1.0),
           'RGBA colour of the hair markers and of the cloud rgb field', lo=0.0, hi=1.0,
           length=4),

@@ -8,7 +8,10 @@ simulator's state (:meth:`~hair_tracking.simulator.HairSimulator.record_writer`)
 kept per namespace (:class:`msg_adapters.pointcloud.CloudBuffer`, rewritten in place), with
 per-strand colours (:mod:`hair_tracking.output.strand_colors`); markers are ``line_list`` or
 ``line_strips`` with a DELETEALL in front of the first array of a namespace and whenever its
-strand count or style changes, and a lifetime of ``marker_lifetime``.
+strand count or style changes, and a lifetime of ``marker_lifetime``.  A full head draws
+only some of its strands (``marker_max_strands``) and may send some (``cloud_max_strands``):
+evenly spread in their order, which runs along the scalp (:func:`spread_rows`); a cloud's
+strands keep their ids and colours.
 """
 from typing import Callable, Dict, NamedTuple, Optional, Sequence
 
@@ -28,6 +31,14 @@ OUTPUTS = {
     'guide_points': (True, 'guides', 'cloud'),
     'guide_markers': (True, 'guides', 'markers'),
 }
+
+
+def spread_rows(count: int, most: int) -> Optional[np.ndarray]:
+    """``most`` of ``count`` strand indices, evenly spread in order; None for all (``most``
+    0 or at least ``count``)."""
+    if 0 < most < count:
+        return np.linspace(0, count - 1, most).round().astype(np.int64)
+    return None
 
 
 class Encoded(NamedTuple):
@@ -62,22 +73,24 @@ class FrameEncoder:
 
     def cloud(self, n_strands: int, n_points: int, write_xyz: Callable, frame_id: str,
               stamp_ns: int, ns: str = 'hair', rgba=None, first: int = 0,
-              total: Optional[int] = None) -> np.ndarray:
+              total: Optional[int] = None, rows: Optional[np.ndarray] = None) -> np.ndarray:
         """The cloud whose coordinates ``write_xyz(words, stride)`` writes (as
         :meth:`hair_tracking.simulator.HairSimulator.record_writer`'s), in the buffer of
         ``ns``: valid until the next cloud of ``ns``.  ``rgba``: the strands' colour (default:
         ``marker_color``, ``guide_color`` for ``ns`` guides).  ``first``, ``total``: the rows
-        are strands ``first`` .. ``first + n_strands - 1`` of ``total`` (a ghost shard's),
-        numbered and coloured as in the cloud of all."""
+        are strands ``first`` .. ``first + n_strands - 1`` of ``total`` (a ghost shard's), or
+        the strands ``rows`` of ``total``, numbered and coloured as in the cloud of all."""
         buf = self._clouds.get(ns)
         if buf is None:
             buf = self._clouds[ns] = CloudBuffer()
         s = self.settings
         whole = n_strands if total is None else int(total)
+        ids = rows if rows is not None else (np.arange(first, first + n_strands) if first
+                                             else None)
         rgb = None
         if s.cloud_rgb:
-            rgb = self.colors(ns, whole, self._rgba(ns, rgba))[first:first + n_strands]
-        ids = np.arange(first, first + n_strands) if first else None
+            rgb = self.colors(ns, whole, self._rgba(ns, rgba))
+            rgb = rgb[ids] if ids is not None else rgb[:n_strands]
         return buf.encode(n_strands, n_points, write_xyz, frame_id=frame_id, stamp_ns=stamp_ns,
                           packed_rgb=rgb, strand_ids=ids, strand_field=s.cloud_strand)
 
@@ -87,9 +100,9 @@ class FrameEncoder:
         ``marker_max_strands`` of them, evenly spread in their order (along the scalp);
         ``fresh`` when it starts with a DELETEALL."""
         s = self.settings
-        most = s.marker_max_strands
-        if 0 < most < strands.shape[0]:
-            strands = strands[np.linspace(0, strands.shape[0] - 1, most).round().astype(np.int64)]
+        rows = spread_rows(strands.shape[0], s.marker_max_strands)
+        if rows is not None:
+            strands = strands[rows]
         shape = (strands.shape[0], s.marker_style)
         fresh = self._shapes.get(ns) != shape
         self._shapes[ns] = shape
@@ -113,8 +126,13 @@ class FrameEncoder:
             if key not in keys:
                 continue
             if kind == 'cloud':
-                out[key] = Encoded(self.cloud(*sim.record_writer(guides, head_frame), frame_id,
-                                              stamp_ns, ns), False)
+                count, n_points, write = sim.record_writer(guides, head_frame)
+                rows = spread_rows(count, self.settings.cloud_max_strands)
+                if rows is not None:
+                    _, n_points, write = sim.record_writer(guides, head_frame, rows)
+                out[key] = Encoded(self.cloud(len(rows) if rows is not None else count,
+                                              n_points, write, frame_id, stamp_ns, ns,
+                                              total=count, rows=rows), False)
                 continue
             out[key] = self.markers(frame.guides if guides else frame.strands, frame_id,
                                     stamp_ns, ns)
