@@ -10,9 +10,10 @@ USC-HairSalon ``.data`` file (``scripts/make_groom_file.py``, into a temporary f
 default scene with ``groom.file`` set to it is built twice: the first build reads, places and
 chooses guides (and stores the result in the groom cache), the second loads it from the
 cache.  The second simulator then follows the bundled walk at 60 Hz as
-``scripts/bench_frame.py`` times it (push_pose, advance_to, the cloud written as the node
-writes it).  Prints the setup times, the median frame and its parts, the cloud's bytes a
-frame and the bytes a second at 30 Hz, and the process's peak resident memory.
+``scripts/bench_frame.py`` times it (push_pose, advance_to, the cloud of every strand).  Prints
+the setup times, the median frame and its parts, the cloud's bytes a frame and the bytes a
+second at 30 Hz, the same of the cloud as the node sends it with the default settings
+(``cloud_max_strands``) and the time to write it, and the process's peak resident memory.
 (``scripts/bench_groom.py`` compares the default frame on an imported groom with the frame on a
 procedural groom of the same counts.)
 """
@@ -38,10 +39,14 @@ import bench_frame  # noqa: E402
 import make_groom_file  # noqa: E402
 from hair_tracking.core.scene import Scene  # noqa: E402
 from hair_tracking.evaluation.provenance import command_line, provenance  # noqa: E402
+from hair_tracking.output.frame_encoder import FrameEncoder  # noqa: E402
+from hair_tracking.output.settings import make_settings  # noqa: E402
 from hair_tracking.simulator import HairSimulator, warm_up  # noqa: E402
 
 #: The cloud's rate [Hz] the bytes a second are given at (the node's default output rate).
 CLOUD_HZ = 30.0
+#: Clouds written as the node writes them (default settings: ``cloud_max_strands``), timed.
+NODE_CLOUDS = 10
 
 
 def one(strands: int, vertices: int, frames: int, folder: str) -> dict:
@@ -59,6 +64,12 @@ def one(strands: int, vertices: int, frames: int, folder: str) -> dict:
     warm_up(scene, sim.parallel)
     parts = bench_frame.frame_times(sim, frames)
     f = np.asarray(parts['frame'])
+    encoder = FrameEncoder(make_settings({}))       # the node's cloud: cloud_max_strands
+    node_ms = []
+    for _ in range(NODE_CLOUDS):
+        c0 = time.perf_counter()
+        node_bytes = int(encoder.frame(sim, ['points'], 'world', 1)['points'].data.nbytes)
+        node_ms.append((time.perf_counter() - c0) * 1e3)
     return {'strands': strands, 'vertices': vertices, 'ghosts': int(sim.ghosts.count),
             'ghost_nodes': int(sim.ghosts.nodes), 'guides': int(sim.guides.count),
             'guide_nodes': int(sim.guides.nodes), 'file_bytes': os.path.getsize(path),
@@ -67,7 +78,10 @@ def one(strands: int, vertices: int, frames: int, folder: str) -> dict:
             'guides_median_ms': statistics.median(parts['guides']),
             'ghosts_cloud_median_ms': statistics.median(parts['ghosts_cloud']),
             'cloud_bytes': parts['cloud_bytes'],
-            'cloud_mb_per_s': parts['cloud_bytes'] * CLOUD_HZ / 1e6}
+            'cloud_mb_per_s': parts['cloud_bytes'] * CLOUD_HZ / 1e6,
+            'node_cloud_strands': min(strands, encoder.settings.cloud_max_strands or strands),
+            'node_cloud_bytes': node_bytes, 'node_cloud_median_ms': statistics.median(node_ms),
+            'node_cloud_mb_per_s': node_bytes * CLOUD_HZ / 1e6}
 
 
 def main(argv=None):
@@ -92,7 +106,10 @@ def main(argv=None):
                   f"frame median {row['frame_median_ms']:.1f} ms (guides "
                   f"{row['guides_median_ms']:.1f}, ghosts + cloud "
                   f"{row['ghosts_cloud_median_ms']:.1f}); cloud {row['cloud_bytes'] / 1e6:.1f} "
-                  f"MB a frame, {row['cloud_mb_per_s']:.0f} MB/s at {CLOUD_HZ:g} Hz", flush=True)
+                  f"MB a frame, {row['cloud_mb_per_s']:.0f} MB/s at {CLOUD_HZ:g} Hz; the node's "
+                  f"cloud (cloud_max_strands: {row['node_cloud_strands']} strands) "
+                  f"{row['node_cloud_bytes'] / 1e6:.1f} MB, {row['node_cloud_mb_per_s']:.0f} "
+                  f"MB/s, written in {row['node_cloud_median_ms']:.1f} ms", flush=True)
     peak_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
     print(f'peak resident memory {peak_mb:.0f} MB ({args.threads} thread(s))')
     if args.json:
