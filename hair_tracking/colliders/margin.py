@@ -36,13 +36,17 @@ def outside_distance(q: np.ndarray, radii) -> np.ndarray:
     return np.where(outside, np.linalg.norm(q - y, axis=-1), 0.0)
 
 
-def clearance(points, shape: Shape) -> np.ndarray:
-    """Distance [m] of ``points`` (..., 3), given in the shape's frame, outside the bare shape
-    (no margin); 0 inside."""
+def _local(points, shape: Shape) -> np.ndarray:
+    """``points`` (..., 3), given in the shape's frame, relative to its centre in its axes."""
     p = np.asarray(points, dtype=np.float64) - np.asarray(shape.center, dtype=np.float64)
     q = np.asarray(shape.rotation, dtype=np.float64)
     if q[0] != 0.0 or q[1] != 0.0 or q[2] != 0.0:
         p = p @ quat_to_matrix(q / np.linalg.norm(q))            # R^T p, point by point
+    return p
+
+
+def _local_clearance(p: np.ndarray, shape: Shape) -> np.ndarray:
+    """:func:`clearance` of points already in the shape's axes (:func:`_local`)."""
     if shape.kind == 'ellipsoid':
         return outside_distance(p, shape.radii)
     if shape.kind == 'plane':
@@ -53,10 +57,30 @@ def clearance(points, shape: Shape) -> np.ndarray:
     return np.maximum(np.linalg.norm(p - core, axis=-1) - shape.radius, 0.0)
 
 
+def clearance(points, shape: Shape) -> np.ndarray:
+    """Distance [m] of ``points`` (..., 3), given in the shape's frame, outside the bare shape
+    (no margin); 0 inside."""
+    return _local_clearance(_local(points, shape), shape)
+
+
+def _nearer_than(p: np.ndarray, shape: Shape, d: float) -> np.ndarray:
+    """The points of ``p`` (P, 3; the shape's axes) that may lie nearer than ``d`` to the bare
+    shape.  For an ellipsoid of semi-axes ``a`` a point on the ellipsoid scaled by ``s =
+    sqrt(sum (q_k / a_k)^2)`` lies at least ``(s - 1) min(a)`` from it (``g(q) = s`` is a norm
+    with ``g(v) <= |v| / min(a)``, so ``|q - y| >= min(a) g(q - y) >= min(a) (s - 1)`` for ``y``
+    on it): the others need no distance (the exact one is a bisection per point)."""
+    if shape.kind != 'ellipsoid':
+        return p
+    a = np.asarray(shape.radii, dtype=np.float64)
+    s = np.sqrt((p * p) @ (1.0 / (a * a)))
+    return p[(s - 1.0) * a.min() < d]
+
+
 def fit_margin(shape: Shape, rest_points, segment_lengths) -> float:
     """The margin [m] of ``shape`` for a strand set whose free nodes rest at ``rest_points``
     (..., 3) in the shape's frame (none: the rest shape is not known in that frame) and whose
-    segments have the rest lengths ``segment_lengths`` (module docstring)."""
+    segments have the rest lengths ``segment_lengths`` (module docstring).  Only the nodes that
+    may lie nearer the shape than the margin so far are measured."""
     margin = float(shape.margin)
     points = None if rest_points is None else np.asarray(rest_points, dtype=np.float64)
     if margin <= 0.0 or (points is not None and points.size == 0):
@@ -66,5 +90,7 @@ def fit_margin(shape: Shape, rest_points, segment_lengths) -> float:
     half_segment = 0.5 * float(positive.min()) if positive.size else margin
     fitted = min(margin, half_segment)
     if points is not None:
-        fitted = min(fitted, float(clearance(points, shape).min()))
+        near = _nearer_than(_local(points, shape).reshape(-1, 3), shape, fitted)
+        if near.size:
+            fitted = min(fitted, float(_local_clearance(near, shape).min()))
     return max(0.0, fitted)
