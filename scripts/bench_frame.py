@@ -115,11 +115,13 @@ def main(argv=None):
            'p95_ms': float(np.percentile(f, 95)), 'max_ms': float(f.max()),
            'guides_median_ms': statistics.median(parts['guides']),
            'ghosts_cloud_median_ms': statistics.median(parts['ghosts_cloud']),
+           'frame_cpu_median_ms': statistics.median(parts['frame_cpu']),
            'substeps_per_frame': parts['substeps_per_frame']}
     print(f"{args.mode}: {row['ghosts']} ghosts x 16 ({row['guides']} guides), "
           f"{args.threads} thread(s), "
           f"{row['frames']} frames at 60 Hz: median {row['median_ms']:.2f} ms, p95 "
-          f"{row['p95_ms']:.2f}, worst {row['max_ms']:.2f} (guide substeps "
+          f"{row['p95_ms']:.2f}, worst {row['max_ms']:.2f}, CPU median "
+          f"{row['frame_cpu_median_ms']:.2f} (guide substeps "
           f"{row['guides_median_ms']:.2f}, ghosts + cloud bytes "
           f"{row['ghosts_cloud_median_ms']:.2f})")
     if args.json:
