@@ -216,11 +216,12 @@ def ellipsoid_newton(qx, qy, qz, f, ix, iy, iz, px, py, pz, mu):
 
 @njit(cache=True, inline='always')
 def ellipsoid_pushed(qx, qy, qz, rx, ry, rz, placed, inv, exit_point):
-    """:func:`ellipsoid_contact`'s arithmetic for a node known to be inside, without branches
-    on the node's values: both its fast path and its refined projection, one selected (the
-    loop over a block's pushed nodes of :func:`~hair_tracking.colliders.head.project_block`
-    and the paper tracker's :func:`~hair_tracking.ghosts.contacts.collide_lanes`): ``q`` the
-    node in the ellipsoid's axes, ``r`` its friction reference (world), ``placed`` as there (at
+    """:func:`ellipsoid_contact`'s refined projection and friction for a node known to lie
+    deeper than its fast path takes (:func:`ellipsoid_pushed_shallow` the others), without
+    branches on the node's values (the loops over a block's pushed nodes, sorted by
+    :func:`contact_depth_class`, of :func:`~hair_tracking.colliders.head.project_block` and the
+    paper tracker's :func:`~hair_tracking.ghosts.contacts.collide_lanes`): ``q`` the node in
+    the ellipsoid's axes, ``r`` its friction reference (world), ``placed`` as there (at
     most 2 refinements, unrolled), ``inv`` the inverse squared semi-axes, ``exit_point``
     :func:`centre_exit`'s point.  Returns the node's new world position."""
     rot, cx, cy, cz, _, _, _, mu, refine = placed
@@ -236,16 +237,33 @@ def ellipsoid_pushed(qx, qy, qz, rx, ry, rz, placed, inv, exit_point):
     yx = exit_point[0] if deg else yx
     yy = exit_point[1] if deg else yy
     yz = exit_point[2] if deg else yz
-    px, py, pz = qx, qy, qz
     if mu > 0.0:
         px, py, pz = local_of(rx, ry, rz, rot, cx, cy, cz)
         yx, yy, yz = ellipsoid_friction(yx, yy, yz, px, py, pz, ix, iy, iz, mu)
-    nx, ny, nz = ellipsoid_newton(qx, qy, qz, f, ix, iy, iz, px, py, pz, mu)
-    shallow = f > SHALLOW_LEVEL
-    yx = nx if shallow else yx
-    yy = ny if shallow else yy
-    yz = nz if shallow else yz
     return world_of(yx, yy, yz, rot, cx, cy, cz)
+
+
+@njit(cache=True, inline='always')
+def ellipsoid_pushed_shallow(qx, qy, qz, rx, ry, rz, placed, inv):
+    """:func:`ellipsoid_contact`'s fast path (:func:`ellipsoid_newton`) for a node known to lie
+    just inside (above :data:`SHALLOW_LEVEL`), arguments as :func:`ellipsoid_pushed`.  Returns
+    the node's new world position."""
+    rot, cx, cy, cz, _, _, _, mu, _ = placed
+    ix, iy, iz = inv
+    f = ellipsoid_level(qx, qy, qz, ix, iy, iz)
+    px, py, pz = qx, qy, qz
+    if mu > 0.0:
+        px, py, pz = local_of(rx, ry, rz, rot, cx, cy, cz)
+    yx, yy, yz = ellipsoid_newton(qx, qy, qz, f, ix, iy, iz, px, py, pz, mu)
+    return world_of(yx, yy, yz, rot, cx, cy, cz)
+
+
+@njit(cache=True, inline='always')
+def contact_depth_class(f):
+    """Which path of :func:`ellipsoid_contact` a node at level ``F(q) = f`` takes, as a number a
+    block's compaction can sort by: 0 outside (NaN too), 1 the refined projection, 2 the fast
+    path."""
+    return 0.0 if not f < 1.0 else (2.0 if f > SHALLOW_LEVEL else 1.0)
 
 
 @njit(cache=True, inline='always')

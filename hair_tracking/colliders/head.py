@@ -29,7 +29,8 @@ import numpy as np
 from numba import njit, prange
 
 from hair_tracking.colliders.contact import (centre_exit, ellipsoid_contact, ellipsoid_depth,
-                                             ellipsoid_level, ellipsoid_pushed, local_of)
+                                             ellipsoid_level, ellipsoid_pushed,
+                                             ellipsoid_pushed_shallow, local_of, SHALLOW_LEVEL)
 from hair_tracking.colliders.margin import fit_margin
 from hair_tracking.colliders.shapes import HEAD_FRAME, Shape
 from hair_tracking.core.kernels import BLOCK, FASTMATH, parallel_and_serial, runs_parallel
@@ -128,31 +129,39 @@ def project_block(x, x_prev, inv_mass, contact, s0, s1):
     Every node's arithmetic is :func:`~hair_tracking.colliders.contact.ellipsoid_contact`'s,
     in passes over the pushed nodes only, laid out contiguously (as the ghosts' contact,
     :mod:`hair_tracking.ghosts.contacts`): the inside test of every node, a branch-free
-    compaction of the pushed ones, their positions and references gathered, one loop without
-    data-dependent branches (the surface point of
+    compaction of the pushed ones (those the contact's fast path takes first), their positions
+    and references gathered, two loops without data-dependent branches (the fast path's Newton
+    step and friction; the surface point of
     :func:`~hair_tracking.colliders.contact.surface_point` with its refinements unrolled and the
-    centre's exit as a select, friction, back to the world), the results scattered.  Hair
+    centre's exit as a select, friction; back to the world), the results scattered.  Hair
     resting on the head keeps many nodes in contact every substep; node by node each is a
     chain of dependent square roots and divisions behind a hard-to-predict branch."""
     rot, cx, cy, cz, ax, ay, az, mu, refine = contact
     n = x.shape[1]
     ix, iy, iz = 1.0 / (ax * ax), 1.0 / (ay * ay), 1.0 / (az * az)
     w = np.empty((8, (s1 - s0) * n))
-    # 1. inside test of every node (NaN compares as ellipsoid_contact's tests), then compaction
+    # 1. inside test of every node (NaN compares as ellipsoid_contact's tests: inside, deep),
+    # then compaction: the nodes the contact's fast path takes first (m_fast), then the deeper
     m = 0
     for s in range(s0, s1):
         for i in range(n):
             q0, q1, q2 = local_of(x[s, i, 0], x[s, i, 1], x[s, i, 2], rot, cx, cy, cz)
-            inside = not inv_mass[s, i] <= 0.0 and \
-                not ellipsoid_level(q0, q1, q2, ix, iy, iz) >= 1.0
-            w[_FLAG, (s - s0) * n + i] = 1.0 if inside else 0.0
-            m += 1 if inside else 0
+            f = ellipsoid_level(q0, q1, q2, ix, iy, iz)
+            depth_class = 0.0 if inv_mass[s, i] <= 0.0 or f >= 1.0 else \
+                (2.0 if f > SHALLOW_LEVEL else 1.0)
+            w[_FLAG, (s - s0) * n + i] = depth_class
+            m += 1 if depth_class != 0.0 else 0
     if m == 0:
         return 0
-    m = 0
+    m_fast, m_deep = 0, 0
     for c in range((s1 - s0) * n):
-        w[_IDX, m] = c
-        m += 1 if w[_FLAG, c] != 0.0 else 0
+        w[_IDX, m_fast] = c
+        w[_RX, m_deep] = c                                  # (scratch until the gather)
+        m_fast += 1 if w[_FLAG, c] == 2.0 else 0
+        m_deep += 1 if w[_FLAG, c] == 1.0 else 0
+    for c in range(m_deep):
+        w[_IDX, m_fast + c] = w[_RX, c]
+    m = m_fast + m_deep
     # 2. gather
     for c in range(m):
         j = int(w[_IDX, c])
@@ -169,8 +178,12 @@ def project_block(x, x_prev, inv_mass, contact, s0, s1):
             _, w[_PX, c], w[_PY, c], w[_PZ, c] = ellipsoid_contact(
                 w[_PX, c], w[_PY, c], w[_PZ, c], w[_RX, c], w[_RY, c], w[_RZ, c], contact)
     else:
+        for c in range(m_fast):
+            qx, qy, qz = local_of(w[_PX, c], w[_PY, c], w[_PZ, c], rot, cx, cy, cz)
+            w[_PX, c], w[_PY, c], w[_PZ, c] = ellipsoid_pushed_shallow(
+                qx, qy, qz, w[_RX, c], w[_RY, c], w[_RZ, c], contact, (ix, iy, iz))
         exit_point = centre_exit(ax, ay, az)
-        for c in range(m):
+        for c in range(m_fast, m):
             qx, qy, qz = local_of(w[_PX, c], w[_PY, c], w[_PZ, c], rot, cx, cy, cz)
             w[_PX, c], w[_PY, c], w[_PZ, c] = ellipsoid_pushed(
                 qx, qy, qz, w[_RX, c], w[_RY, c], w[_RZ, c], contact, (ix, iy, iz),

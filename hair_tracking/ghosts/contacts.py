@@ -30,8 +30,10 @@ import math
 
 from numba import njit
 
-from hair_tracking.colliders.contact import (centre_exit, ellipsoid_contact, ellipsoid_level,
-                                             ellipsoid_pushed, local_of, surface_point, world_of)
+from hair_tracking.colliders.contact import (centre_exit, contact_depth_class,
+                                             ellipsoid_contact, ellipsoid_level, ellipsoid_pushed,
+                                             ellipsoid_pushed_shallow, local_of, surface_point,
+                                             world_of)
 from hair_tracking.guides.ftl import ellipsoid_of, FTL_TINY_SQ, restore_f_ok, restore_node
 
 #: Normal-line refinements the vectorised pass unrolls (the ellipsoid default is 2).
@@ -58,19 +60,25 @@ def collide_lanes(X0, P, W, j, lanes, strands, ftl, contact, rot):
     order, seg_len, rest = strands
     r, cx, cy, cz, ax, ay, az, friction, refine = contact
     ix, iy, iz = 1.0 / (ax * ax), 1.0 / (ay * ay), 1.0 / (az * az)
-    # 1. inside test of every lane (vectorises), then the pushed lanes' indices compacted
+    # 1. inside test of every lane (vectorises), then the pushed lanes' indices compacted: those
+    # the contact's fast path takes first (m_fast of them), then the deeper ones
     n_in = 0
     for kk in range(n):
         q0, q1, q2 = local_of(P[j, 0, kk], P[j, 1, kk], P[j, 2, kk], r, cx, cy, cz)
-        inside = ellipsoid_level(q0, q1, q2, ix, iy, iz) < 1.0
-        W[_FLAG, kk] = 1.0 if inside else 0.0
-        n_in += 1 if inside else 0
+        depth_class = contact_depth_class(ellipsoid_level(q0, q1, q2, ix, iy, iz))
+        W[_FLAG, kk] = depth_class
+        n_in += 1 if depth_class != 0.0 else 0
     if n_in == 0:
         return 0
-    m = 0
+    m_fast, m_deep = 0, 0
     for kk in range(n):
-        W[_IDX, m] = kk
-        m += 1 if W[_FLAG, kk] != 0.0 else 0
+        W[_IDX, m_fast] = kk
+        W[_MORE, m_deep] = kk                               # (scratch until step 3)
+        m_fast += 1 if W[_FLAG, kk] == 2.0 else 0
+        m_deep += 1 if W[_FLAG, kk] == 1.0 else 0
+    for c in range(m_deep):
+        W[_IDX, m_fast + c] = W[_MORE, c]
+    m = m_fast + m_deep
     if refine > MAX_VECTOR_REFINE:
         return _collide_scalar(X0, P, W, j, (m, k0), strands, ftl, contact, rot)
     # 2. gather
@@ -91,13 +99,20 @@ def collide_lanes(X0, P, W, j, lanes, strands, ftl, contact, rot):
             W[_EY, c] = rest[s, j, 1] - rest[s, j - 1, 1]
             W[_EZ, c] = rest[s, j, 2] - rest[s, j - 1, 2]
             W[_LEN, c] = seg_len[j - 1, kk]
-    # 3. the arithmetic of every pushed node, without branches (the contact model's)
+    # 3. the arithmetic of every pushed node, without branches (the contact model's: its fast
+    # path, then its refined projection), then the first placement
+    for c in range(m_fast):
+        qx, qy, qz = local_of(W[_PX, c], W[_PY, c], W[_PZ, c], r, cx, cy, cz)
+        W[_PX, c], W[_PY, c], W[_PZ, c] = ellipsoid_pushed_shallow(
+            qx, qy, qz, W[_SX, c], W[_SY, c], W[_SZ, c], contact, (ix, iy, iz))
     exit_point = centre_exit(ax, ay, az)
+    for c in range(m_fast, m):
+        qx, qy, qz = local_of(W[_PX, c], W[_PY, c], W[_PZ, c], r, cx, cy, cz)
+        W[_PX, c], W[_PY, c], W[_PZ, c] = ellipsoid_pushed(
+            qx, qy, qz, W[_SX, c], W[_SY, c], W[_SZ, c], contact, (ix, iy, iz), exit_point)
     f_ok = restore_f_ok(ax, ay, az)
     for c in range(m):
-        qx, qy, qz = local_of(W[_PX, c], W[_PY, c], W[_PZ, c], r, cx, cy, cz)
-        wx, wy, wz = ellipsoid_pushed(qx, qy, qz, W[_SX, c], W[_SY, c], W[_SZ, c], contact,
-                                      (ix, iy, iz), exit_point)
+        wx, wy, wz = W[_PX, c], W[_PY, c], W[_PZ, c]
         more = 0.0
         if ftl:     # the first placement of restore_node, its test as a flag
             bx, by, bz = W[_BX, c], W[_BY, c], W[_BZ, c]
