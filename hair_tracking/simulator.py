@@ -419,6 +419,13 @@ class HairSimulator:
             smooth = curves.resample(src, out.points_per_strand, out.curve)
         return Frame(t_ns=self.time_ns or 0, head=self.head, guides=g, ghosts=s, curves=smooth)
 
+    def strand_count(self, guides: bool = False) -> int:
+        """How many strands a :meth:`frame` shows (``frame.strands``; ``frame.guides`` with
+        ``guides``), without making the frame."""
+        if guides or self.ghosts is None:
+            return self.guides.count
+        return self.ghosts.count
+
     def record_writer(self, guides: bool = False, head_frame: bool = False,
                       rows: Optional[np.ndarray] = None):
         """``(S, N, write)`` for an output format with one record per point: the shape of the

@@ -126,13 +126,11 @@ class FrameEncoder:
             if key not in keys:
                 continue
             if kind == 'cloud':
-                count, n_points, write = sim.record_writer(guides, head_frame)
+                count = sim.strand_count(guides)
                 rows = spread_rows(count, self.settings.cloud_max_strands)
-                if rows is not None:
-                    _, n_points, write = sim.record_writer(guides, head_frame, rows)
-                out[key] = Encoded(self.cloud(len(rows) if rows is not None else count,
-                                              n_points, write, frame_id, stamp_ns, ns,
-                                              total=count, rows=rows), False)
+                out[key] = Encoded(self.cloud(*sim.record_writer(guides, head_frame, rows),
+                                              frame_id, stamp_ns, ns, total=count, rows=rows),
+                                   False)
                 continue
             out[key] = self.markers(frame.guides if guides else frame.strands, frame_id,
                                     stamp_ns, ns)
