@@ -11,7 +11,7 @@ import pytest
 from hair_tracking.colliders import head as collision
 from hair_tracking.core import kernels
 from hair_tracking.ghosts import kernels as ghost_kernels
-from hair_tracking.guides import ftl, integrate, many_heads
+from hair_tracking.guides import ftl, integrate
 from hair_tracking.guides import solver as guides
 from hair_tracking.core.model import HeadPose, StrandSet
 from hair_tracking.core.scene import Scene
@@ -533,7 +533,7 @@ def test_advance_rejects_a_bad_pose_before_moving_anything():
     (integrate, 'finalize'), (integrate, 'carry_rigid'), (ftl, 'ftl_step'),
     (ftl, 'ftl_collide_step'), (ftl, 'ftl_advance'), (pbd_constraints, 'pbd_step'),
     (pbd_constraints, 'xpbd_step'), (pbd_constraints, 'strain_limit'),
-    (many_heads, 'ftl_advance_heads'), (collision, 'project_ellipsoid'),
+    (collision, 'project_ellipsoid'),
     (collision, 'penetration_ellipsoid'), (ghost_kernels, 'track_groups')])
 def test_every_serial_variant_is_compiled_from_its_kernels_body(module, name):
     """A serial variant is the parallel kernel's body (the same code) under its own qualified

@@ -6,7 +6,7 @@ import pytest
 from hair_tracking.core.head_track import PoseResult
 from hair_tracking.core.scene import Scene
 from hair_tracking.core.transforms import quat_to_matrix
-from hair_tracking.guides import many_heads
+from hair_tracking.guides import ftl
 from hair_tracking.guides.solver import GuideSolver
 from hair_tracking.people.crowd import Crowd, CrowdFull
 from hair_tracking.people.roster import face_id, id_problem, Roster
@@ -73,12 +73,12 @@ def test_the_guides_of_all_people_advance_in_one_call(monkeypatch):
         p, q = pose(0, i)
         crowd.add(str(i), T0, p, q)
     calls = []
-    kernel = many_heads.ftl_advance_heads_serial
+    kernel = ftl.ftl_advance_serial
 
     def spy(*args):
         calls.append(args[-1].copy())
         return kernel(*args)
-    monkeypatch.setattr(many_heads, 'ftl_advance_heads_serial', spy)
+    monkeypatch.setattr(ftl, 'ftl_advance_serial', spy)
     for name in ('advance', 'step'):
         monkeypatch.setattr(GuideSolver, name, lambda *a, **k: pytest.fail('a solver a head'))
     t = T0 + 4 * crowd.dt_ns

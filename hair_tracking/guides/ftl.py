@@ -56,14 +56,16 @@ FtlParams = namedtuple('FtlParams', ['inner_steps', 'bend_stiffness', 's_damp', 
                                      'do_finalize'])
 #: Work space of the FTL kernels: ``corr`` (S, N, 3) the FTL corrections, ``x_ref`` (S, N, 3)
 #: the friction reference (the start-of-substep positions carried rigidly with the head;
-#: written when the collider has friction), and for :func:`ftl_advance` ``counts`` (B, K, 2)
+#: written when the collider has friction), and for a run of substeps ``counts`` (B, K, 2)
 #: int64, ``steps`` (B, K) or (B, 0) and ``before`` (S, N, 3) (``B`` the block count, ``K``
-#: the substeps).
+#: the substeps); :func:`ftl_advance` takes them with a head axis (a place axis on the
+#: positions' shapes).
 FtlWork = namedtuple('FtlWork', ['corr', 'x_ref', 'counts', 'steps', 'before'])
-#: What drives a run of :func:`ftl_advance`: ``rots`` (K + 1, 3, 3), ``poss`` (K + 1, 3) the
+#: What drives a run of substeps of one head: ``rots`` (K + 1, 3, 3), ``poss`` (K + 1, 3) the
 #: head poses at the start and at the end of every substep, ``rels`` (K, 3, 3) with
 #: ``rels[k] = rots[k + 1] rots[k]^T``, and the constant fields of
-#: :data:`~hair_tracking.guides.integrate.StepMotion`.
+#: :data:`~hair_tracking.guides.integrate.StepMotion` (:func:`ftl_advance` takes the poses
+#: with a head axis).
 RunDrive = namedtuple('RunDrive', ['rots', 'poss', 'rels', 'gravity', 'damp', 'dt', 'shock'])
 
 #: Work items of :func:`ftl_advance`'s parallel loop (each a run of blocks).
@@ -531,46 +533,54 @@ def ftl_collide_block(model, state, motion, params, work, contact, s0, s1):
     return finalize_block(x, v, x_old, inv_mass, corr, s0, s1, dt, max_disp, s_damp), pushed
 
 
-def ftl_advance(model, state, drive, params, collide, collider, work, stop):
-    """Kernel: ``K`` FTL substeps of all strands in one call.  Strands do not interact, so this
-    is exactly ``K`` calls of :func:`ftl_collide_step` (with a collider) or of :func:`ftl_step`
-    finalizing (without), one after another.  Without a stop rule every block of
-    :data:`~hair_tracking.core.kernels.BLOCK` strands runs all ``K`` substeps before the
-    next (its strands stay in cache; one parallel region for the whole run); with one, all
-    blocks take a substep before the next, and the run stops before the first substep whose
-    split estimate (``stop``) exceeds the limit.
+def ftl_advance(model, state, drive, params, collide, collider, work, stop, slots):
+    """Kernel: ``K`` FTL substeps of the guides of every head ``h`` of a run, one groom worn on
+    several heads (one head: a run of a single person's guides).  Head ``h``'s guides are
+    ``x[slots[h]]`` of the state's arrays shaped ``(C, G, N, 3)`` (``C`` places), and each
+    head has its own poses, so its own roots and its own collider placement.  Strands do not
+    interact, so this is exactly ``K`` calls of :func:`ftl_collide_step` (with a collider) or
+    of :func:`ftl_step` finalizing (without) for each head, one after another.  The work items
+    of the one parallel region are (head, run of blocks) pairs: without a stop rule every block
+    of :data:`~hair_tracking.core.kernels.BLOCK` strands runs all ``K`` substeps before the
+    next (its strands stay in cache); with one, all blocks of all heads take a substep before
+    the next, and the run stops before the first substep whose split estimate (``stop``)
+    exceeds the limit for any head.
 
-    ``drive``: the fields of :data:`RunDrive`: the head poses at the start and at the end of
-    every substep, ``rels[k] = rots[k + 1] rots[k]^T``, and
+    ``model``: :data:`FtlModel` (the groom, shared); ``state``: ``(x, v, x_old)`` each
+    ``(C, G, N, 3)``; ``drive``: the fields of :data:`RunDrive` with a head axis on ``rots``
+    (H, K + 1, 3, 3), ``poss`` (H, K + 1, 3) and ``rels`` (H, K, 3, 3): the head poses at the
+    start and at the end of every substep, ``rels[h, k] = rots[h, k + 1] rots[h, k]^T``, and
     :data:`~hair_tracking.guides.integrate.StepMotion`'s constant fields; ``params``:
     :data:`FtlParams` (``do_finalize`` true: every substep finalizes); ``collide``: whether the
     head collider ``collider`` (:data:`~hair_tracking.colliders.head.ColliderModel`) acts;
-    ``work``: the fields of :data:`FtlWork`, ``counts``, ``steps`` and ``before`` included: on
-    return ``steps[0]`` holds every substep's largest squared node displacement [m^2] (NaN
-    when one is NaN; not measured, and ``before`` not touched, when ``steps`` is (B, 0)).
-    ``stop``: ``(rigid (K,), limit, gdt2)``, active when ``limit > 0`` and the displacements
-    are measured: substep ``k + 1`` is not taken when ``max(rigid[k + 1], speed dt) + gdt2 >
-    limit`` with ``speed`` the largest displacement of substep ``k`` over ``dt`` (the
-    split rule, :func:`~hair_tracking.guides.split.split_due`).
-    Returns the substeps taken, then the clamped and the collider-moved node counts of the
-    last of them and of all: ``(done, clamped, clamped_total, contacts, contacts_total)``.
+    ``work``: the fields of :data:`FtlWork`, ``corr``, ``x_ref`` and ``before`` shaped like
+    ``x``, ``counts`` (H, B, K, 2) and ``steps`` (H, B, K) or (H, B, 0): on return
+    ``counts[h, b, k]`` holds the clamped and the collider-moved node counts of block ``b`` in
+    substep ``k`` and ``steps[h, 0]`` head ``h``'s largest squared node displacement of every
+    substep [m^2] (NaN when one is NaN; not measured, and ``before`` not touched, when
+    ``steps`` is (H, B, 0)).  ``stop``: ``(rigid (H, K), limit, gdt2)``, active when
+    ``limit > 0`` and the displacements are measured: substep ``k + 1`` is not taken when
+    ``max(rigid[h, k + 1], speed dt) + gdt2 > limit`` for a head ``h`` with ``speed`` the
+    largest displacement of its substep ``k`` over ``dt`` (the split rule,
+    :func:`~hair_tracking.guides.split.split_due`).  Returns the substeps taken.
     """
-    n_sub, nblk, chunks, limited = _run_plan(state, drive, work, stop)
+    heads, n_sub, nblk, chunks, limited = _run_plan(state, drive, work, stop, slots)
     done = n_sub
     if limited:
         for k in range(n_sub):
-            for c in prange(chunks):
-                ftl_advance_blocks(model, state, drive, params, collide, collider, work,
-                                   _chunk_blocks(np.int64(c), chunks, nblk), (k, k + 1))
-            if _split_after(drive, work, stop, k, nblk):
+            for j in prange(heads * chunks):
+                _head_run(model, state, drive, params, collide, collider, work, slots,
+                          (np.int64(j), chunks, nblk, k, k + 1))
+            if _any_split(drive, work, stop, k, nblk, heads):
                 done = k + 1
                 break
     else:
-        for c in prange(chunks):
-            ftl_advance_blocks(model, state, drive, params, collide, collider, work,
-                               _chunk_blocks(np.int64(c), chunks, nblk), (0, n_sub))
-        _measured(work, n_sub, nblk)
-    return _run_counts(work, nblk, done)
+        for j in prange(heads * chunks):
+            _head_run(model, state, drive, params, collide, collider, work, slots,
+                      (np.int64(j), chunks, nblk, np.int64(0), n_sub))
+        for h in range(heads):
+            _measured(_work_of(work, h, 0), n_sub, nblk)
+    return done
 
 
 ftl_advance, ftl_advance_serial = parallel_and_serial(
@@ -578,30 +588,67 @@ ftl_advance, ftl_advance_serial = parallel_and_serial(
 
 
 @njit(cache=True, inline='always')
-def _run_plan(state, drive, work, stop):
-    """``(substeps, blocks, chunks, limited)`` of a run of :func:`ftl_advance`: ``limited``
-    when the stop rule applies (the displacements measured and a limit given)."""
-    _, _, rels, _, _, _, _ = drive                                      # FtlDrive
+def _run_plan(state, drive, work, stop, slots):
+    """``(heads, substeps, blocks a head, chunks a head, limited)`` of a run of
+    :func:`ftl_advance`: ``limited`` when the stop rule applies (the displacements measured and
+    a limit given)."""
     x, _, _ = state                                                     # GuideState
+    _, _, rels, _, _, _, _ = drive                                      # RunDrive
     _, _, _, steps, _ = work                                            # FtlWork
     _, limit, _ = stop
-    n_sub = rels.shape[0]
-    nblk = (x.shape[0] + BLOCK - 1) // BLOCK
-    measure = steps.shape[1] == n_sub
-    return n_sub, nblk, min(nblk, CHUNKS), measure and limit > 0.0
+    n_sub = rels.shape[1]
+    nblk = (x.shape[1] + BLOCK - 1) // BLOCK
+    measure = steps.shape[2] == n_sub
+    return slots.shape[0], n_sub, nblk, min(nblk, CHUNKS), measure and limit > 0.0
 
 
 @njit(cache=True, inline='always')
-def _chunk_blocks(c, chunks, nblk):
-    """The blocks ``(b0, b1)`` of chunk ``c`` of ``chunks``."""
-    return c * nblk // chunks, (c + 1) * nblk // chunks
+def _head_run(model, state, drive, params, collide, collider, work, slots, item):
+    """Work item ``item = (j, chunks, blocks, k0, k1)``: chunk ``j % chunks`` of head
+    ``j // chunks``'s ``blocks`` blocks through the substeps ``k0 <= k < k1``."""
+    j, chunks, nblk, k0, k1 = item
+    h = j // chunks
+    c = j - h * chunks
+    s = slots[h]
+    x, v, x_old = state                                                 # GuideState
+    ftl_advance_blocks(model, (x[s], v[s], x_old[s]), _drive_of(drive, h),
+                       params, collide, collider, _work_of(work, h, s),
+                       (c * nblk // chunks, (c + 1) * nblk // chunks), (k0, k1))
+
+
+@njit(cache=True, inline='always')
+def _drive_of(drive, h):
+    """Head ``h``'s :data:`RunDrive` (its poses without the head axis)."""
+    rots, poss, rels, gravity, damp, dt, shock = drive
+    return (rots[h], poss[h], rels[h], gravity, damp, dt, shock)
+
+
+@njit(cache=True, inline='always')
+def _work_of(work, h, s):
+    """Head ``h``'s :data:`FtlWork` (its place ``s``), without the head axis."""
+    corr, x_ref, counts, steps, before = work
+    return (corr[s], x_ref[s], counts[h], steps[h], before[s])
+
+
+@njit(cache=True)
+def _any_split(drive, work, stop, k, nblk, heads):
+    """Whether any head's stop rule ends the run after substep ``k`` (every head's largest
+    displacement of the substep gathered first)."""
+    rigid, limit, gdt2 = stop
+    split = False
+    for h in range(heads):
+        if _split_after(_drive_of(drive, h), _work_of(work, h, 0), (rigid[h], limit, gdt2),
+                        k, nblk):
+            split = True
+    return split
 
 
 @njit(cache=True)
 def _split_after(drive, work, stop, k, nblk):
-    """Whether the run stops after substep ``k`` (:func:`ftl_advance`'s stop rule), with the
-    substep's largest displacement gathered into ``steps[0, k]`` first."""
-    _, _, rels, _, _, dt, _ = drive                                     # FtlDrive
+    """Whether one head's run stops after substep ``k`` (:func:`ftl_advance`'s stop rule),
+    with the substep's largest displacement gathered into ``steps[0, k]`` first (``drive``,
+    ``work``, ``stop``: that head's)."""
+    _, _, rels, _, _, dt, _ = drive                                     # RunDrive
     _, _, _, steps, _ = work                                            # FtlWork
     far = _column_max(steps, k, nblk)
     rigid, limit, gdt2 = stop
@@ -610,7 +657,8 @@ def _split_after(drive, work, stop, k, nblk):
 
 @njit(cache=True)
 def _measured(work, n_sub, nblk):
-    """Every substep's largest displacement into ``steps[0]`` (when measured)."""
+    """Every substep's largest displacement into ``steps[0]`` (when measured; one head's
+    ``work``)."""
     _, _, _, steps, _ = work                                            # FtlWork
     if steps.shape[1] == n_sub:
         for k in range(n_sub):
@@ -618,17 +666,19 @@ def _measured(work, n_sub, nblk):
 
 
 @njit(cache=True)
-def _run_counts(work, nblk, done):
-    """:func:`ftl_advance`'s return value from the per-block counts of its ``done``
-    substeps."""
-    _, _, counts, _, _ = work                                           # FtlWork
-    totals = np.zeros((done, 2), dtype=np.int64)
-    for blk in range(nblk):
+def run_counts(counts, done):
+    """One head's clamped and collider-moved node counts of a run of :func:`ftl_advance`
+    (``counts`` (B, K, 2), ``done`` substeps taken): ``(clamped, clamped_total, contacts,
+    contacts_total)`` of the last substep and of all."""
+    last = np.zeros(2, dtype=np.int64)
+    total = np.zeros(2, dtype=np.int64)
+    for blk in range(counts.shape[0]):
         for k in range(done):
-            totals[k, 0] += counts[blk, k, 0]
-            totals[k, 1] += counts[blk, k, 1]
-    return (done, totals[done - 1, 0], totals[:, 0].sum(), totals[done - 1, 1],
-            totals[:, 1].sum())
+            for j in range(2):
+                total[j] += counts[blk, k, j]
+        for j in range(2):
+            last[j] += counts[blk, done - 1, j]
+    return last[0], total[0], last[1], total[1]
 
 
 @njit(cache=True)
@@ -656,7 +706,7 @@ def ftl_advance_block(model, state, drive, params, collide, collider, work, blk,
     """:func:`ftl_advance_blocks` for block ``blk``."""
     x, v, x_old = state                                                 # GuideState
     _, inv_mass, _, _, _ = model                                        # FtlModel
-    rots, poss, rels, gravity, damp, dt, shock = drive                  # FtlDrive
+    rots, poss, rels, gravity, damp, dt, shock = drive                  # RunDrive
     inner_steps, bend_stiffness, s_damp, max_disp, _ = params           # FtlParams
     corr, x_ref, counts, steps, before = work                           # FtlWork
     measure = steps.shape[1] > 0

@@ -35,8 +35,9 @@ the collision is part of the pass); PBD and XPBD with a collider stop after step
 collision kernel runs, then the finalize kernel; so do all three with a body (FTL: its pass
 with the head collider, then the bust), one substep a call.
 :meth:`GuideSolver.advance` takes a run of substeps in one call: for FTL one compiled call for
-all of them (:func:`~hair_tracking.guides.ftl.ftl_advance`), and the guides of several heads
-in one call too (:class:`HeadBatch`). Kernels are
+all of them (:func:`~hair_tracking.guides.ftl.ftl_advance`), whose state has a head axis: one
+person's guides are a run of one head, several people's (:class:`HeadBatch`) one call for all
+of them, the same code. Kernels are
 looked up on their modules at call time, so only the ones the scene needs are ever called (and
 compiled), and tests can spy on them.
 
@@ -45,7 +46,7 @@ general inverse masses are accepted by PBD/XPBD (a free node with 0 is static), 
 free node to be movable. ``strands.inv_mass`` is read when the solver is built.
 """
 import math
-from typing import Any, Dict, Optional, Sequence, Tuple
+from typing import Any, Dict, Optional, Sequence
 
 import numpy as np
 
@@ -58,7 +59,7 @@ from hair_tracking.guides import integrate
 from hair_tracking.core.kernels import runs_parallel
 from hair_tracking.core.metrics import max_stretch
 from hair_tracking.core.model import HeadPose, StrandSet
-from hair_tracking.guides import many_heads, pbd_constraints
+from hair_tracking.guides import pbd_constraints
 from hair_tracking.guides.split import split_due
 
 #: Substep [s] at which ``solver.bend_stiffness`` applies as given to FTL (the default dt), and
@@ -71,9 +72,8 @@ REFERENCE_TOLERANCE = 1e-6
 #: What the FTL kernels take as the collider where there is none (not read; the fields of
 #: :data:`~hair_tracking.colliders.head.ColliderModel`).
 NO_COLLIDER = (np.zeros(3), np.ones(3), 0.0, 0.0, 0)
-#: What :func:`~hair_tracking.guides.ftl.ftl_advance` takes as its stop rule where there is
-#: none (a limit of 0: not applied).
-NO_STOP = (np.zeros(1), 0.0, 0.0)
+#: The slots of a run of one head's guides (:meth:`FtlSolver.run_heads`).
+ONE_HEAD = np.zeros(1, dtype=np.int64)
 
 
 class GuideSolver:
@@ -344,7 +344,7 @@ class FtlSolver(GuideSolver):
         self._corr = np.zeros_like(st.x)
         self.model = tuple(ftl.FtlModel(st.rest, im, st.rest_length, self._bend_rest,
                                         self._bend_w))
-        self._spaces: Dict[Tuple[int, bool], tuple] = {}
+        self._spaces: Dict[tuple, tuple] = {}
 
     @staticmethod
     def _check_strands(st: StrandSet) -> None:
@@ -361,7 +361,7 @@ class FtlSolver(GuideSolver):
 
     def drive(self, rots, poss, rels, dt: float) -> tuple:
         """What drives a run of substeps ``dt`` (the fields of
-        :data:`~hair_tracking.guides.ftl.FtlDrive`): the head's poses ``rots``, ``poss`` and
+        :data:`~hair_tracking.guides.ftl.RunDrive`): the head's poses ``rots``, ``poss`` and
         motions ``rels`` (:func:`~hair_tracking.guides.integrate.head_motions`), gravity,
         damping and shock propagation."""
         return (rots, poss, rels, self._gravity, math.exp(-self._damping * dt), dt,
@@ -414,56 +414,69 @@ class FtlSolver(GuideSolver):
 
     def _run(self, dt, head_prev, heads, measure, stop):
         """Without a body, all substeps in one compiled call
-        (:func:`~hair_tracking.guides.ftl.ftl_advance`)."""
+        (:func:`~hair_tracking.guides.ftl.ftl_advance`, the head's guides a run of one head)."""
         if self.body is not None:
             return super()._run(dt, head_prev, heads, measure, stop)
-        dt = _check_dt(dt)
-        n_sub = len(heads)
-        rots, poss, rels, counts, steps = self._advance_space(n_sub, measure)
-        rots[0], poss[0] = _pose('head_prev', head_prev)
-        for k, head in enumerate(heads, 1):
-            rots[k], poss[k] = _pose('head', head)
-        if not integrate.head_motions(rots, poss, rels):
-            bad = int(np.flatnonzero(~(np.isfinite(rots).all(axis=(1, 2))
-                                       & np.isfinite(poss).all(axis=1)))[0])
-            raise ValueError(f'{"head_prev" if bad == 0 else "head"}: pose must be finite, '
-                             f'got position {poss[bad]}')
         st = self.strands
-        rule_args = (np.ascontiguousarray(stop[0], dtype=np.float64), float(stop[1]),
-                     float(stop[2])) if stop is not None else NO_STOP
-        kernel = ftl.ftl_advance if self.parallel else ftl.ftl_advance_serial
-        # plain tuples in the fields' order of ftl.FtlWork and colliders.head.ColliderModel
-        work = (self._corr, self._friction_ref(), counts, steps,
-                self._x_before if measure else self._x_before[:0])
-        done, clamped, clamped_total, contacts, contacts_total = kernel(
-            self.model, (st.x, st.v, self._x_old), self.drive(rots, poss, rels, dt),
-            self.params(dt, True), self.collider is not None, self.collider_model(), work,
-            rule_args)
+        rule = None if stop is None else (np.asarray(stop[0])[None], stop[1], stop[2])
+        done, counts, steps = self.run_heads(
+            dt, (st.x[None], st.v[None], self._x_old[None]),
+            (self._corr[None], self._friction_ref()[None], self._x_before[None]),
+            ONE_HEAD, [head_prev], [heads], rule, measure, self.parallel)
+        clamped, clamped_total, contacts, contacts_total = ftl.run_counts(counts[0], done)
         cn = self._counters
-        cn['substeps'] += int(done)
+        cn['substeps'] += done
         cn['clamped'], cn['contacts'] = int(clamped), int(contacts)
         cn['clamped_total'] += int(clamped_total)
         cn['contacts_total'] += int(contacts_total)
         return steps[0, :done].copy() if measure else None
 
-    def _advance_space(self, n_sub: int, measure: bool):
-        """:meth:`_run`'s work arrays for ``n_sub`` substeps (kept for the next call)."""
-        key = (n_sub, measure)
+    def run_heads(self, dt: float, state, work, slots: np.ndarray, prev: Sequence[HeadPose],
+                  runs, stop, measure: bool, parallel: bool):
+        """One call of :func:`~hair_tracking.guides.ftl.ftl_advance`: every head ``i`` (at
+        place ``slots[i]`` of ``state = (x, v, x_old)``, each (C, G, N, 3)) from ``prev[i]``
+        through its run of poses ``runs[i]`` (all runs the same length), substeps ``dt``, this
+        solver's model, collider and parameters; ``work``: ``(corr, x_ref, before)`` shaped
+        like ``x``; ``stop``: the split rule (``(rigid (P, K), limit, gdt2)``,
+        :meth:`~hair_tracking.guides.split.SplitRule.stop`) or None; ``measure``: the largest
+        displacements wanted.  Returns ``(substeps taken, counts (P, B, K, 2), steps (P, B, K)
+        or (P, B, 0))``, ``steps[i, 0]`` the largest squared node displacement of each of head
+        ``i``'s substeps."""
+        dt = _check_dt(dt)
+        people, n_sub = len(prev), len(runs[0])
+        blocks = integrate.block_count(state[0].shape[1])
+        key = (people, n_sub, blocks, measure)
         space = self._spaces.get(key)
-        if space is None:
-            blocks = integrate.block_count(self.strands.x.shape[0])
+        if space is None:           # kept for the next run of the same shape
             space = self._spaces[key] = (
-                np.empty((n_sub + 1, 3, 3)), np.empty((n_sub + 1, 3)), np.empty((n_sub, 3, 3)),
-                np.empty((blocks, n_sub, 2), dtype=np.int64),
-                np.empty((blocks, n_sub if measure else 0)))
-        return space
+                np.empty((people, n_sub + 1, 3, 3)), np.empty((people, n_sub + 1, 3)),
+                np.empty((people, n_sub, 3, 3)),
+                np.empty((people, blocks, n_sub, 2), dtype=np.int64),
+                np.empty((people, blocks, n_sub if measure else 0)))
+        rots, poss, rels, counts, steps = space
+        for i, (p, run) in enumerate(zip(prev, runs)):
+            for j, head in enumerate([p] + list(run)):
+                rots[i, j], poss[i, j] = _pose('head_prev' if j == 0 else 'head', head)
+            if not integrate.head_motions(rots[i], poss[i], rels[i]):
+                bad = int(np.flatnonzero(~(np.isfinite(rots[i]).all(axis=(1, 2))
+                                           & np.isfinite(poss[i]).all(axis=1)))[0])
+                raise ValueError(f'{"head_prev" if bad == 0 else "head"}: pose must be '
+                                 f'finite, got position {poss[i, bad]}')
+        rule = (np.zeros((people, 1)), 0.0, 0.0) if stop is None else \
+            (np.ascontiguousarray(stop[0], dtype=np.float64), float(stop[1]), float(stop[2]))
+        kernel = ftl.ftl_advance if parallel else ftl.ftl_advance_serial
+        corr, x_ref, before = work
+        done = kernel(self.model, state, self.drive(rots, poss, rels, dt), self.params(dt, True),
+                      self.collider is not None, self.collider_model(),
+                      (corr, x_ref, counts, steps, before), rule, slots)
+        return int(done), counts, steps[:, 0]
 
 
 class HeadBatch:
     """The guides of several heads wearing one groom, advanced in one compiled call
-    (:func:`~hair_tracking.guides.many_heads.ftl_advance_heads`): ``x``, ``v`` shaped
-    ``(places, G, N, 3)``, head ``h``'s guides at place ``slots[h]``; ``solver`` the
-    :class:`FtlSolver` of one of them (its model, collider and parameters serve all)."""
+    (:meth:`FtlSolver.run_heads`): ``x``, ``v`` shaped ``(places, G, N, 3)``, head ``h``'s
+    guides at place ``slots[h]``; ``solver`` the :class:`FtlSolver` of one of them (its model,
+    collider and parameters serve all)."""
 
     def __init__(self, solver: FtlSolver, places: int):
         self.solver = solver
@@ -483,28 +496,10 @@ class HeadBatch:
         (``(rigid (P, K), limit, gdt2)``, :meth:`~hair_tracking.guides.split.SplitRule.stop`)
         or None.  Returns ``(steps (P, K), substeps taken)``, ``steps`` the largest squared
         node displacement of each head's substeps."""
-        people, n_sub = len(prev), len(runs[0])
-        rots = np.empty((people, n_sub + 1, 3, 3))
-        poss = np.empty((people, n_sub + 1, 3))
-        rels = np.empty((people, n_sub, 3, 3))
-        for i, (p, run) in enumerate(zip(prev, runs)):
-            for j, head in enumerate([p] + list(run)):
-                rots[i, j], poss[i, j] = head.rotation, head.position
-            if not integrate.head_motions(rots[i], poss[i], rels[i]):
-                raise ValueError('head pose must be finite')
-        solver = self.solver
-        blocks = integrate.block_count(self.x.shape[1])
-        counts = np.empty((people, blocks, n_sub, 2), dtype=np.int64)
-        steps = np.empty((people, blocks, n_sub))
-        rule = (np.zeros((people, 1)), 0.0, 0.0) if stop is None else \
-            (np.ascontiguousarray(stop[0]), float(stop[1]), float(stop[2]))
-        kernel = many_heads.ftl_advance_heads if parallel else \
-            many_heads.ftl_advance_heads_serial
-        done = kernel(solver.model, (self.x, self.v, self._x_old),
-                      solver.drive(rots, poss, rels, dt), solver.params(dt, True),
-                      solver.collider is not None, solver.collider_model(),
-                      (self._corr, self._x_ref, counts, steps, self._before), rule, slots)
-        return steps[:, 0, :done], int(done)
+        done, _, steps = self.solver.run_heads(
+            dt, (self.x, self.v, self._x_old), (self._corr, self._x_ref, self._before), slots,
+            prev, runs, stop, True, parallel)
+        return steps[:, :done].copy(), done
 
 
 class _LaneSolver(GuideSolver):

@@ -5,8 +5,9 @@ built groom: its head track, its ghost tracker, its counters and its outputs are
 is batched is the guide solver, the stage that steps every substep: the people's guides live
 side by side in arrays shaped ``(places, G, N, 3)`` (a person's ``guides.x`` and ``.v`` are views
 of its place, :class:`~hair_tracking.guides.solver.HeadBatch`), and one call of
-:func:`~hair_tracking.guides.many_heads.ftl_advance_heads` advances all of them, each through its
-own head poses (its roots and its head collider placed by its own head).
+:func:`~hair_tracking.guides.ftl.ftl_advance` (the kernel of one person's guides too, a run
+of one head) advances all of them, each through its own head poses (its roots and its head
+collider placed by its own head).
 
 Time: the crowd has one fixed-dt accumulator (:func:`~hair_tracking.simulator.substep_times`),
 advanced to the newest stamp of any person (:meth:`Crowd.advance_to`); each person's head is
