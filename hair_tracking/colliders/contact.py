@@ -259,6 +259,30 @@ def ellipsoid_pushed_shallow(qx, qy, qz, rx, ry, rz, placed, inv):
 
 
 @njit(cache=True, inline='always')
+def push_sorted(w, rows, m_fast, m, placed, inv):
+    """The contact of a block's pushed nodes, sorted by :func:`contact_depth_class` (the block
+    contacts of :func:`~hair_tracking.colliders.head.project_block` and the paper tracker's
+    :func:`~hair_tracking.ghosts.contacts.collide_lanes`): columns ``0 <= c < m_fast`` of the
+    work array ``w`` take the fast path (:func:`ellipsoid_pushed_shallow`), columns
+    ``m_fast <= c < m`` the refined projection (:func:`ellipsoid_pushed`), each loop without
+    branches on the nodes' values.  ``rows = (px, py, pz, rx, ry, rz)``: the rows of ``w`` that
+    hold the nodes' world positions (replaced by their new positions) and their friction
+    references; ``placed`` the collider placed (:data:`~hair_tracking.colliders.head.Contact`),
+    ``inv`` its inverse squared semi-axes."""
+    rot, cx, cy, cz, ax, ay, az, _, _ = placed
+    px, py, pz, rx, ry, rz = rows
+    for c in range(m_fast):
+        qx, qy, qz = local_of(w[px, c], w[py, c], w[pz, c], rot, cx, cy, cz)
+        w[px, c], w[py, c], w[pz, c] = ellipsoid_pushed_shallow(
+            qx, qy, qz, w[rx, c], w[ry, c], w[rz, c], placed, inv)
+    exit_point = centre_exit(ax, ay, az)
+    for c in range(m_fast, m):
+        qx, qy, qz = local_of(w[px, c], w[py, c], w[pz, c], rot, cx, cy, cz)
+        w[px, c], w[py, c], w[pz, c] = ellipsoid_pushed(
+            qx, qy, qz, w[rx, c], w[ry, c], w[rz, c], placed, inv, exit_point)
+
+
+@njit(cache=True, inline='always')
 def contact_depth_class(f):
     """Which path of :func:`ellipsoid_contact` a node at level ``F(q) = f`` takes, as a number a
     block's compaction can sort by: 0 outside (NaN too), 1 the refined projection, 2 the fast

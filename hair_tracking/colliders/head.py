@@ -28,9 +28,9 @@ from typing import Optional
 import numpy as np
 from numba import njit, prange
 
-from hair_tracking.colliders.contact import (centre_exit, ellipsoid_contact, ellipsoid_depth,
-                                             ellipsoid_level, ellipsoid_pushed,
-                                             ellipsoid_pushed_shallow, local_of, SHALLOW_LEVEL)
+from hair_tracking.colliders.contact import (ellipsoid_contact, ellipsoid_depth,
+                                             ellipsoid_level, local_of, push_sorted,
+                                             SHALLOW_LEVEL)
 from hair_tracking.colliders.margin import fit_margin
 from hair_tracking.colliders.shapes import HEAD_FRAME, Shape
 from hair_tracking.core.kernels import BLOCK, FASTMATH, parallel_and_serial, runs_parallel
@@ -178,16 +178,7 @@ def project_block(x, x_prev, inv_mass, contact, s0, s1):
             _, w[_PX, c], w[_PY, c], w[_PZ, c] = ellipsoid_contact(
                 w[_PX, c], w[_PY, c], w[_PZ, c], w[_RX, c], w[_RY, c], w[_RZ, c], contact)
     else:
-        for c in range(m_fast):
-            qx, qy, qz = local_of(w[_PX, c], w[_PY, c], w[_PZ, c], rot, cx, cy, cz)
-            w[_PX, c], w[_PY, c], w[_PZ, c] = ellipsoid_pushed_shallow(
-                qx, qy, qz, w[_RX, c], w[_RY, c], w[_RZ, c], contact, (ix, iy, iz))
-        exit_point = centre_exit(ax, ay, az)
-        for c in range(m_fast, m):
-            qx, qy, qz = local_of(w[_PX, c], w[_PY, c], w[_PZ, c], rot, cx, cy, cz)
-            w[_PX, c], w[_PY, c], w[_PZ, c] = ellipsoid_pushed(
-                qx, qy, qz, w[_RX, c], w[_RY, c], w[_RZ, c], contact, (ix, iy, iz),
-                exit_point)
+        push_sorted(w, (_PX, _PY, _PZ, _RX, _RY, _RZ), m_fast, m, contact, (ix, iy, iz))
     # 4. scatter
     for c in range(m):
         j = int(w[_IDX, c])

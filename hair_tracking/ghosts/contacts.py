@@ -30,10 +30,9 @@ import math
 
 from numba import njit
 
-from hair_tracking.colliders.contact import (centre_exit, contact_depth_class,
-                                             ellipsoid_contact, ellipsoid_level, ellipsoid_pushed,
-                                             ellipsoid_pushed_shallow, local_of, surface_point,
-                                             world_of)
+from hair_tracking.colliders.contact import (contact_depth_class, ellipsoid_contact,
+                                             ellipsoid_level, local_of, push_sorted,
+                                             surface_point, world_of)
 from hair_tracking.guides.ftl import ellipsoid_of, FTL_TINY_SQ, restore_f_ok, restore_node
 
 #: Normal-line refinements the vectorised pass unrolls (the ellipsoid default is 2).
@@ -101,15 +100,7 @@ def collide_lanes(X0, P, W, j, lanes, strands, ftl, contact, rot):
             W[_LEN, c] = seg_len[j - 1, kk]
     # 3. the arithmetic of every pushed node, without branches (the contact model's: its fast
     # path, then its refined projection), then the first placement
-    for c in range(m_fast):
-        qx, qy, qz = local_of(W[_PX, c], W[_PY, c], W[_PZ, c], r, cx, cy, cz)
-        W[_PX, c], W[_PY, c], W[_PZ, c] = ellipsoid_pushed_shallow(
-            qx, qy, qz, W[_SX, c], W[_SY, c], W[_SZ, c], contact, (ix, iy, iz))
-    exit_point = centre_exit(ax, ay, az)
-    for c in range(m_fast, m):
-        qx, qy, qz = local_of(W[_PX, c], W[_PY, c], W[_PZ, c], r, cx, cy, cz)
-        W[_PX, c], W[_PY, c], W[_PZ, c] = ellipsoid_pushed(
-            qx, qy, qz, W[_SX, c], W[_SY, c], W[_SZ, c], contact, (ix, iy, iz), exit_point)
+    push_sorted(W, (_PX, _PY, _PZ, _SX, _SY, _SZ), m_fast, m, contact, (ix, iy, iz))
     f_ok = restore_f_ok(ax, ay, az)
     for c in range(m):
         wx, wy, wz = W[_PX, c], W[_PY, c], W[_PZ, c]
