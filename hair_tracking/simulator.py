@@ -105,12 +105,14 @@ def parallelism(scene: Scene, groom: Optional[Groom] = None) -> Parallelism:
     if groom is None and g.file:
         groom = build_groom(g)
     if groom is not None:
-        guides, ghosts = groom.guide_rest.shape[0], groom.ghost_rest.shape[0]
+        (guides, guide_nodes), (ghosts, ghost_nodes) = groom.guide_rest.shape[:2], \
+            groom.ghost_rest.shape[:2]
     else:
         guides, ghosts = g.guides, g.guides * g.ghosts_per_guide
+        guide_nodes, ghost_nodes = g.guide_nodes, g.ghost_nodes
     among = scene.tracking.mode in GUIDES_AMONG_STRANDS and ghosts > 0
-    return Parallelism(runs_parallel(guides * (g.ghost_nodes if among else g.guide_nodes)),
-                       runs_parallel(ghosts * g.ghost_nodes))
+    return Parallelism(runs_parallel(guides * (ghost_nodes if among else guide_nodes)),
+                       runs_parallel(ghosts * ghost_nodes))
 
 
 @dataclass
@@ -128,11 +130,15 @@ class HairSimulator:
     """Guides + ghosts driven by a head-pose stream, assembled from a :class:`Scene`."""
 
     def __init__(self, scene: Scene, clock: Callable[[], float] = time.perf_counter,
-                 parallel: Optional[Parallelism] = None, groom: Optional[Groom] = None):
+                 parallel: Optional[Parallelism] = None, groom: Optional[Groom] = None,
+                 settled: bool = True):
         """``clock()`` [s] times the work reported in :attr:`counters` (a test injects one);
         ``parallel`` the kernel variants of the stages (default: :func:`parallelism` of the
         scene; :func:`warm_up` runs a tiny scene through the variants of a large one);
-        ``groom`` the scene's groom when already built (one hair per person shares it)."""
+        ``groom`` the scene's groom when already built (one hair per person shares it), or
+        strands of the caller's own (the evaluation's methods); ``settled``: false leaves the
+        hair in its rest shape, not settled, for a driver that settles it its own way
+        (:meth:`rest_at`)."""
         scene.validate()
         self.scene = scene
         self.clock = clock
@@ -147,12 +153,13 @@ class HairSimulator:
         #: ghost shard receives them (hair_tracking_msgs/GuideState): set by the node that
         #: publishes the guides' state, so its own ghosts are the shards' to the bit.
         self.guides_as_float32 = False
-        self._build(groom=groom)
+        self._build(groom=groom, settle=settled)
 
     # ------------------------------------------------------------- assembly
-    def _build(self, head: HeadPose = IDENTITY, groom: Optional[Groom] = None) -> None:
+    def _build(self, head: HeadPose = IDENTITY, groom: Optional[Groom] = None,
+               settle: bool = True) -> None:
         """Assemble every stage from the scene (``groom``: the scene's groom, if already
-        built), the hair at rest at ``head``."""
+        built), the hair in its rest shape at ``head`` (:meth:`rest_at`)."""
         scene = self.scene
         if groom is None:
             groom = build_groom(scene.groom)
@@ -192,8 +199,7 @@ class HairSimulator:
         #: a driver that advances the guides in a batch sets it after each run)
         self.speed = 0.0
         self.dt_ns = max(1, int(round(scene.solver.dt * 1e9)))
-        self.head = head
-        self._rest_at(head)
+        self.rest_at(head, settle)
 
     def update_scene(self, scene: Scene) -> bool:
         """Adopt a changed scene; returns True when the hair had to be rebuilt.
@@ -299,18 +305,25 @@ class HairSimulator:
         times, self.time_ns, dropped = substep_times(self.time_ns, t_ns, self.dt_ns,
                                                      self.scene.solver.max_substeps)
         self.counters.substeps_dropped += dropped
-        dt = self.scene.solver.dt
         self.counters.last_track_ms = 0.0
-        self.begin_tracking()
-        heads = [self.track.sample(t) for t in times]
-        if heads:
-            self.run_substeps(dt, self.head, heads)
-            self.head = heads[-1]
-        self.finish_tracking(dt * len(times), len(times))
+        self.advance_poses([self.track.sample(t) for t in times])
         self.counters.substeps += len(times)
         self.counters.last_substeps = len(times)
         self.counters.last_advance_ms = (self.clock() - start) * 1e3
         return len(times)
+
+    def advance_poses(self, heads: List[HeadPose]) -> None:
+        """One substep (``solver.dt``) a pose of ``heads``, from the current head on, the
+        ghosts tracked as the scene says; the head is then ``heads[-1]``.  What
+        :meth:`advance_to` runs with the poses it samples from the head track, for a driver
+        that has the poses itself (the evaluation's methods); the simulator's time and head
+        track are not touched."""
+        dt = self.scene.solver.dt
+        self.begin_tracking()
+        if heads:
+            self.run_substeps(dt, self.head, heads)
+            self.head = heads[-1]
+        self.finish_tracking(dt * len(heads), len(heads))
 
     def set_body_frame(self, rotation, position) -> None:
         """The pose of the scene's ``body.frame`` (rotation (3, 3), origin (3,)) in the fixed
@@ -334,8 +347,21 @@ class HairSimulator:
 
     def reset(self) -> None:
         """Rest shape at the current head pose, settled; the head track is kept."""
-        self._rest_at(self.head)
+        self.rest_at(self.head)
         self.counters.resets += 1
+
+    def rest_at(self, head: HeadPose, settle: bool = True) -> None:
+        """The hair in its rest shape carried by ``head`` (out of the body's bust), at rest,
+        the head now there; then :meth:`settle` unless ``settle`` is false (a driver that
+        settles the hair its own way).  The simulator's time and head track are kept."""
+        self.head = head
+        self.guide_solver.reset(head)
+        self.guide_solver.leave_body(head)
+        if self.ghost_tracker is not None:
+            self.ghost_tracker.reset(head)
+        self.speed = 0.0
+        if settle:
+            self.settle()
 
     def settle(self) -> float:
         """Let the hair come to rest where it is, the head still at its current pose:
@@ -349,16 +375,20 @@ class HairSimulator:
         once, self.track_once_per_call = self.track_once_per_call, False   # the scene's rest
         sv = self.scene.solver
         try:
-            self.settled_s = settle_until_still(lambda steps: self._settle(head, steps),
-                                                self._settling_nodes, sv.dt, sv.settle_time,
-                                                sv.settle_speed)
+            self.settled_s = settle_until_still(
+                lambda steps: self.advance_poses([head] * steps), self._settling_nodes, sv.dt,
+                sv.settle_time, sv.settle_speed)
         finally:
             self.track_once_per_call = once
+        self.zero_velocities()
+        return self.settled_s
+
+    def zero_velocities(self) -> None:
+        """The hair at rest where it is: the guides' and the ghosts' velocities zero."""
         self.guides.v[...] = 0.0
         if self.ghost_tracker is not None:
             self.ghost_tracker.zero_velocities()
         self.speed = 0.0
-        return self.settled_s
 
     def step(self) -> int:
         """One substep (``solver.dt``) on from the simulator's time, the head sampled from its
@@ -418,6 +448,14 @@ class HairSimulator:
             src = s if s is not None else g
             smooth = curves.resample(src, out.points_per_strand, out.curve)
         return Frame(t_ns=self.time_ns or 0, head=self.head, guides=g, ghosts=s, curves=smooth)
+
+    def strand_positions(self) -> np.ndarray:
+        """The strands a :meth:`frame` shows (``frame.strands``: the ghosts, or the guides
+        without ghosts) as they are now, world frame [m], without making a frame: a view of the
+        state, valid until the next step (read only for the ghosts).  The ghosts come in the
+        tracker's order (``ghost_tracker.permutation`` where the paper tracker grouped them)."""
+        s = self._ghost_positions()
+        return self.guides.x if s is None else s
 
     def strand_count(self, guides: bool = False) -> int:
         """How many strands a :meth:`frame` shows (``frame.strands``; ``frame.guides`` with
@@ -557,22 +595,6 @@ class HairSimulator:
             guide_x = guide_x.astype(np.float32).astype(np.float64)
         self.ghost_tracker.step(TrackStep(dt, substeps, start_x, guide_x, self.head))
         self.counters.last_track_ms += (self.clock() - start) * 1e3
-
-    def _rest_at(self, head: HeadPose) -> None:
-        """The rest shape at ``head`` (the current head pose; out of the body's bust), then
-        :meth:`settle`."""
-        self.guide_solver.reset(head)
-        self.guide_solver.leave_body(head)
-        if self.ghost_tracker is not None:
-            self.ghost_tracker.reset(head)
-        self.settle()
-
-    def _settle(self, head: HeadPose, steps: int) -> None:
-        """``steps`` substeps with the head still at ``head``, the ghosts tracked as the scene
-        says."""
-        self.begin_tracking()
-        self.run_substeps(self.scene.solver.dt, head, [head] * steps)
-        self.finish_tracking(self.scene.solver.dt * steps, steps)
 
     def _settling_nodes(self):
         """The positions that settle: the guides, and the paper tracker's ghosts (the blend and

@@ -336,7 +336,7 @@ def test_ghosts_once_per_frame_track_like_every_substep(workload):
     for every in (True, False):
         scene = Scene().with_changes(tracking__every_substep=every)
         m = GhostTracking(str(every), workload, scene, 4)
-        assert m.every_substep is every
+        assert m.sim.tracks_every_substep is every
         xs = []
         ea.run_frames(m, sched, sched.frames,
                       lambda j, x, h, xs=xs: xs.append(x.copy()) if j >= 0 else None, 0.25)

@@ -1,17 +1,18 @@
 """The methods compared by the accuracy evaluation, behind one small interface.
 
 Every method produces the positions of the *same* ghost strands (the workload's ``ghost_rest``,
-head frame) node for node, so its output can be compared with the reference:
+head frame) node for node, so its output can be compared with the reference.  The package's
+methods run through the package's one loop, a :class:`~hair_tracking.simulator.HairSimulator`
+of the method's scene on the method's own strands (its split rule, its solver and tracker
+objects, its tracking schedule), so the evaluation measures the product:
 
-* :class:`FullSim` -- every ghost strand simulated as a guide by
-  :class:`~hair_tracking.guides.solver.GuideSolver` (PBD, XPBD or FTL at the scene's settings).
-  With a fine step, many iterations and XPBD at compliance 0 this is the reference.
+* :class:`FullSim` -- every ghost strand simulated as a guide (PBD, XPBD or FTL at the scene's
+  settings, no ghosts).  With a fine step, many iterations and XPBD at compliance 0 this is the
+  reference.
 * :class:`GhostTracking` -- the method of the package (Park & Kim): ``S / ratio`` guides made by
-  :func:`~hair_tracking.core.groom.make_groom` (as :class:`~hair_tracking.simulator.HairSimulator`
-  makes them) simulated by :class:`~hair_tracking.guides.solver.GuideSolver`, the ghosts moved by
-  :class:`~hair_tracking.ghosts.tracker.GhostTracker` each substep
-  (or once per output frame over all its substeps with ``tracking.every_substep: false``, as the
-  simulator does once per pose).
+  :func:`~hair_tracking.core.groom.make_groom` (as the procedural groom makes them), the ghosts
+  moved by :class:`~hair_tracking.ghosts.tracker.GhostTracker` each substep (or once per output
+  frame over all its substeps with ``tracking.every_substep: false``).
 * :class:`BlendTracking` -- the blend tracker: guides chosen among the strands, every strand the
   skinned blend of its nearest guides once per output frame.
 * :class:`TurnTracking` -- the turn tracker: as the blend, every strand's segments turned as its
@@ -30,11 +31,11 @@ head frame) node for node, so its output can be compared with the reference:
   is kept out of its timing: it measures the binding, not the library).
 
 The interface: ``reset(head)`` puts the hair in its rest shape at ``head``, at rest;
-``step(dt, head_prev, head)`` advances one substep of ``dt`` seconds while the head moves from
-``head_prev`` to ``head``; ``advance(dt, head_prev, heads)`` advances one substep a pose of
-``heads`` (a frame's substeps; the guide solver's one compiled call,
-:meth:`~hair_tracking.guides.solver.GuideSolver.advance`, where the method allows it: the
-same engineering for every method); ``output(head)`` returns the ghost positions (S, N, 3),
+``step(dt, head_prev, head)`` advances one substep of ``dt`` seconds (the scene's
+``solver.dt``) while the head moves from ``head_prev`` to ``head``; ``advance(dt, head_prev,
+heads)`` advances one substep a pose of ``heads`` (a frame's substeps; the guide solver's one
+compiled call where the method allows it: the same engineering for every method);
+``output(head)`` returns the ghost positions (S, N, 3),
 world frame [m], at the end of the frame (a view that stays valid until the next ``step``);
 ``zero_velocities()`` puts the hair at rest where it is.
 """
@@ -43,17 +44,12 @@ from typing import Dict
 
 import numpy as np
 
-from hair_tracking.core.groom import make_groom
+from hair_tracking.core.groom import Groom, make_groom
 from hair_tracking.core.model import HeadPose, StrandSet
 from hair_tracking.core.scene import Scene
-from hair_tracking.ghosts.blend import BlendTracker
 from hair_tracking.ghosts.stateless import choose_guides
-from hair_tracking.ghosts.turn import TurnTracker
 from hair_tracking.ghosts.correspondence import assign_guides, node_correspondence
-from hair_tracking.ghosts.interface import TrackStep
-from hair_tracking.ghosts.tracker import GhostTracker
-from hair_tracking.colliders.table import ColliderTable
-from hair_tracking.guides.solver import make_solver
+from hair_tracking.simulator import HairSimulator
 
 #: Ghosts per guide of the fixed grouping used for the spread metric (the default groom's ratio
 #: is 1:8; 1:16 groups are large enough for a meaningful variance).
@@ -147,163 +143,121 @@ class Method:
         """Release external resources (pypbd)."""
 
 
-class _Solved(Method):
-    """A method whose strands the scene's guide solver ``self.solver`` advances."""
+class _Simulated(Method):
+    """A method run by the package's loop: a :class:`~hair_tracking.simulator.HairSimulator`
+    of ``scene`` on the strands of ``groom`` (the method's own guides and ghosts), driven pose
+    by pose (:meth:`~hair_tracking.simulator.HairSimulator.advance_poses`: the guide substeps
+    of a frame in one solver call, split where the simulator's split rule splits them, the
+    ghosts tracked as the scene says) and read without a frame
+    (:meth:`~hair_tracking.simulator.HairSimulator.strand_positions`)."""
 
-    def reset(self, head):
-        self.solver.reset(head)
-
-    def step(self, dt, head_prev, head):
-        self.solver.step(dt, head_prev, head)
-
-    def advance(self, dt, head_prev, heads):
-        self.solver.advance(dt, head_prev, heads)
-
-
-class FullSim(_Solved):
-    """All ghost strands simulated as guides (the reference at high fidelity)."""
-
-    family = 'full'
-
-    def __init__(self, name, workload, scene, knobs=None):
-        super().__init__(name, workload, scene, knobs or {})
-        self.strands = StrandSet.from_rest(workload.ghost_rest)
-        self.solver = make_solver(self.strands, scene)
-
-    def output(self, head):
-        return self.strands.x
-
-    def zero_velocities(self):
-        self.strands.v[...] = 0.0
-
-
-class _GuidedMethod(_Solved):
-    """Shared: guides grown at a ratio and simulated by the scene's solver."""
-
-    def __init__(self, name, workload, scene, ratio, knobs):
+    def __init__(self, name, workload, scene, knobs, groom: Groom):
         super().__init__(name, workload, scene, knobs)
-        self.ratio = int(ratio)
-        self.guides = StrandSet.from_rest(workload.guide_rest(self.ratio))
-        self.solver = make_solver(self.guides, scene)
-
-
-class GhostTracking(_GuidedMethod):
-    """Guides simulated, ghosts tracked by :class:`~hair_tracking.ghosts.tracker.GhostTracker`
-    (the package)."""
-
-    family = 'ghost'
-
-    def __init__(self, name, workload, scene, ratio, knobs=None):
-        super().__init__(name, workload, scene, ratio, knobs or {})
-        self.ghosts = StrandSet.from_rest(workload.ghost_rest)
-        table = self.solver.colliders
-        collider = table.head if scene.tracking.collide else None
-        self.tracker = GhostTracker(self.ghosts, self.guides, scene, collider, colliders=table)
-        self._x_old = np.empty_like(self.guides.x)
-        self.every_substep = bool(getattr(scene.tracking, 'every_substep', True))
-        self._pending = 0
-        # the tracker may store the ghosts grouped by guide: row i is the user's ghost perm[i]
-        perm = getattr(self.tracker, 'permutation', None)
+        self.sim = HairSimulator(scene, groom=groom, settled=False)
+        # the paper tracker stores the ghosts grouped by guide: row i is the user's ghost perm[i]
+        perm = getattr(self.sim.ghost_tracker, 'permutation', None)
         self._perm = None
         if perm is not None and np.any(np.asarray(perm) != np.arange(len(perm))):
             self._perm = np.asarray(perm, dtype=np.int64)
             self._out = np.empty_like(workload.ghost_rest)
 
     def reset(self, head):
-        self.solver.reset(head)
-        self.tracker.reset(head)
-        self._pending = 0
-        np.copyto(self._x_old, self.guides.x)
+        self.sim.rest_at(head, settle=False)
 
     def step(self, dt, head_prev, head):
-        if self.every_substep:
-            np.copyto(self._x_old, self.guides.x)
-            self.solver.step(dt, head_prev, head)
-            self.tracker.step(TrackStep(dt, 1, self._x_old, self.guides.x, head))
-        else:           # tracked once per output frame, over all its substeps (simulator's way)
-            self.solver.step(dt, head_prev, head)
-            self._pending += 1
+        self.advance(dt, head_prev, [head])
 
     def advance(self, dt, head_prev, heads):
-        if self.every_substep:          # a step a pose, the ghosts tracked in each
-            Method.advance(self, dt, head_prev, heads)
-        else:
-            self.solver.advance(dt, head_prev, heads)
-            self._pending += len(heads)
+        if dt != self.dt:
+            raise ValueError(f'dt: {self.name} steps the scene\'s solver.dt {self.dt} s, '
+                             f'got {dt}')
+        self.sim.advance_poses(list(heads))
 
     def output(self, head):
-        if self._pending:
-            self.tracker.step(TrackStep(self._pending * self.dt, self._pending, self._x_old,
-                                        self.guides.x, head))
-            self._pending = 0
-            np.copyto(self._x_old, self.guides.x)
+        x = self.sim.strand_positions()
         if self._perm is None:
-            return self.tracker.positions()
-        self._out[self._perm] = self.tracker.positions()
+            return x
+        self._out[self._perm] = x
         return self._out
 
     def zero_velocities(self):
-        self.tracker.zero_velocities()
+        self.sim.zero_velocities()
 
 
-class BlendTracking(_Solved):
+def _no_strands(rest: np.ndarray) -> np.ndarray:
+    """No strands of ``rest``'s node count."""
+    return np.zeros((0,) + rest.shape[1:])
+
+
+class FullSim(_Simulated):
+    """All ghost strands simulated as guides (the reference at high fidelity)."""
+
+    family = 'full'
+
+    def __init__(self, name, workload, scene, knobs=None):
+        rest = workload.ghost_rest
+        super().__init__(name, workload, scene, knobs or {}, Groom(rest, _no_strands(rest)))
+
+
+class GhostTracking(_Simulated):
+    """``S / ratio`` guides grown by the groom generator, the ghosts moved by
+    :class:`~hair_tracking.ghosts.tracker.GhostTracker` (``tracking.mode: paper``; every substep
+    or, with ``tracking.every_substep: false``, once a frame over its substeps)."""
+
+    family = 'ghost'
+
+    def __init__(self, name, workload, scene, ratio, knobs=None):
+        self.ratio = int(ratio)
+        super().__init__(name, workload, scene.with_changes(tracking__mode='paper'),
+                         knobs or {}, Groom(workload.guide_rest(self.ratio),
+                                            workload.ghost_rest))
+
+
+class BlendTracking(_Simulated):
     """Guides chosen among the strands (``S / ratio`` of them, :func:`choose_guides`) simulated
     by the scene's solver; every strand blended from its ``k`` nearest guides once per output
-    frame (:class:`~hair_tracking.ghosts.blend.BlendTracker`).  At 1:1 this is :class:`FullSim`.
+    frame (:class:`~hair_tracking.ghosts.blend.BlendTracker`, ``tracking.mode: blend``).  At
+    1:1 this is :class:`FullSim`.
     """
 
     family = 'blend'
+    mode = 'blend'
 
     def __init__(self, name, workload, scene, ratio, knobs=None, k: int = 3):
-        super().__init__(name, workload, scene, knobs or {})
         self.ratio = int(ratio)
         count = workload.count // self.ratio
         if count < 1:
             raise ValueError(f'ratio: 1:{ratio} leaves no guide for {workload.count} strands')
-        self.guide_index = choose_guides(workload.ghost_rest[:, 0], count)
-        self.guides = StrandSet.from_rest(workload.ghost_rest[self.guide_index])
-        table = ColliderTable(scene)
-        self.solver = make_solver(self.guides, scene, colliders=table)
-        self.ghosts = StrandSet.from_rest(workload.ghost_rest)
-        collider = table.head if scene.tracking.collide else None
-        self.tracker = self._tracker(scene, collider, k, table)
-
-    def _tracker(self, scene, collider, k, table):
-        return BlendTracker(self.ghosts, self.guides, self.guide_index, scene, collider, k=k,
-                            colliders=table)
-
-    def reset(self, head):
-        super().reset(head)
-        self.tracker.reset(head)
-
-    def output(self, head):
-        # the blend and turn trackers place the strands from the guides now and the head
-        self.tracker.step(TrackStep(self.dt, 1, None, self.guides.x, head))
-        return self.tracker.positions()
+        rest = workload.ghost_rest
+        index = choose_guides(rest[:, 0], count)
+        super().__init__(name, workload,
+                         scene.with_changes(tracking__mode=self.mode, tracking__blend_guides=k),
+                         knobs or {}, Groom(rest[index], rest, guide_index=index))
 
 
 class TurnTracking(BlendTracking):
     """As :class:`BlendTracking`, every strand placed by the turn tracker
-    (:class:`~hair_tracking.ghosts.turn.TurnTracker`): its segments turned as the matching
-    segments of the guide with the nearest root.  At 1:1 this is :class:`FullSim`."""
+    (:class:`~hair_tracking.ghosts.turn.TurnTracker`, ``tracking.mode: turn``): its segments
+    turned as the matching segments of the guide with the nearest root.  At 1:1 this is
+    :class:`FullSim`."""
 
     family = 'turn'
-
-    def _tracker(self, scene, collider, k, table):
-        return TurnTracker(self.ghosts, self.guides, self.guide_index, scene, collider,
-                           colliders=table)
+    mode = 'turn'
 
 
-class RigidOffset(_GuidedMethod):
-    """Ghost = guide point at the same arc-length fraction + rest offset rotated with the head."""
+class RigidOffset(_Simulated):
+    """Ghost = guide point at the same arc-length fraction + rest offset rotated with the head
+    (the guides grown as :class:`GhostTracking` grows them, simulated without ghosts)."""
 
     family = 'rigid'
 
     def __init__(self, name, workload, scene, ratio, knobs=None):
-        super().__init__(name, workload, scene, ratio, knobs or {})
-        gr = self.guides.rest
+        self.ratio = int(ratio)
+        gr = workload.guide_rest(self.ratio)
+        super().__init__(name, workload, scene, knobs or {}, Groom(gr, _no_strands(gr)))
         guide_of, _ = assign_guides(workload.ghost_rest, gr, scene.tracking.candidates)
-        seg, t = node_correspondence(workload.rest_length, self.guides.rest_length, guide_of)
+        seg, t = node_correspondence(workload.rest_length, StrandSet.from_rest(gr).rest_length,
+                                     guide_of)
         self._g = np.asarray(guide_of, dtype=np.int64)[:, None]
         self._seg = seg
         self._t = t[..., None]
@@ -312,7 +266,7 @@ class RigidOffset(_GuidedMethod):
         self._out = np.empty_like(workload.ghost_rest)
 
     def output(self, head):
-        gx = self.guides.x
+        gx = self.sim.strand_positions()
         p = (1.0 - self._t) * gx[self._g, self._seg] + self._t * gx[self._g, self._seg + 1]
         np.add(p, self._offset @ head.rotation.T, out=self._out)
         return self._out
