@@ -370,3 +370,83 @@ def test_an_imported_groom_is_built_once_and_again_when_its_file_or_options_chan
     assert len(list((tmp_path / 'cache').iterdir())) == cache.ENTRIES
     monkeypatch.setattr(cache, 'folder', lambda: str(path / 'not a folder'))
     assert np.array_equal(build_groom(spec).ghost_rest, other.ghost_rest)    # no cache: built
+
+
+FACES = [(up, face) for up in fit.UP_AXES for face in fit.UP_AXES if face[-1] != up[-1]]
+
+
+@pytest.mark.parametrize('up, face', FACES)
+def test_a_groom_lands_upright_facing_forward_whatever_its_axes(tmp_path, up, face):
+    """All 24 right-angle orientations of a groom (each file axis up, either way, facing each
+    axis across it), in mm, cm or m: the up axis is guessed from where the tips hang, the face
+    from the side the roots leave open, and the strands land as the z-up, x-facing file's do:
+    roots on the top of the scalp, the fringe in front of the face."""
+    head = gf.synthetic_groom(80, 12, seed=7)
+    unit = (0.001, 0.01, 1.0)[FACES.index((up, face)) % 3]
+    for name, m in (('ref', fit.axes('z', 'x')), ('file', fit.axes(up, face))):
+        gf.write_data(tmp_path / f'{name}.data', [(h + [0.0, 0.0, 1.6]) @ m / unit
+                                                  for h in head])
+    info, _ = survey(str(tmp_path / 'file.data'))
+    assert (info.up, info.face) == (up, face)
+    assert info.face_words.startswith(f'{face} (guessed: the roots leave the scalp open toward '
+                                      f'{face}, clearly')
+    got = import_groom(Scene().with_changes(groom__file=str(tmp_path / 'file.data')).groom)
+    ref = import_groom(Scene().with_changes(groom__file=str(tmp_path / 'ref.data'),
+                                            groom__up_axis='z', groom__face_axis='x').groom)
+    np.testing.assert_allclose(got.strands, ref.strands, atol=1e-6)
+    roots, tips = got.strands[:, 0], got.strands[:, -1]
+    assert np.mean(roots[:, 2] < 0.0) < 0.1         # on the top of the head, but the nape
+    fringe = roots[:, 0] > 0.03                                 # roots at the front ...
+    assert fringe.any() and np.all(tips[fringe, 0] > 0.03)     # ... hang in front of the face
+
+
+def test_the_face_is_the_convention_when_the_roots_cover_the_head_evenly(tmp_path):
+    rng = np.random.default_rng(4)
+    u = rng.normal(size=(500, 3))
+    u[:, 1] = np.abs(u[:, 1])                           # the upper half of a y-up head [cm]
+    u /= np.linalg.norm(u, axis=1, keepdims=True)
+    roots = u * 9.0 + [1.0, 160.0, 2.0]
+    face, words, asym = fit.guess_face(roots, 'y')
+    assert face == '' and asym < fit.MIN_FACE_ASYMMETRY and 'no side' in words
+    gf.write_data(tmp_path / 'g.data', [np.linspace(r, r - [0.0, 30.0, 0.0], 8) for r in roots])
+    info, _ = survey(str(tmp_path / 'g.data'))
+    assert (info.up, info.face) == ('y', 'z')
+    assert info.face_words.startswith('z (the convention of a file with y up: the roots leave '
+                                      'no side')
+
+
+def test_a_face_axis_along_the_up_axis_is_refused(tmp_path):
+    from hair_tracking.core.scene import SceneError
+    with pytest.raises(SceneError, match='groom.face_axis: must lie across groom.up_axis y'):
+        Scene().with_changes(groom__up_axis='y', groom__face_axis='-y').validate()
+    gf.write_data(tmp_path / 'g.data', gf.to_file_frame(gf.synthetic_groom(30, 8, seed=2)))
+    with pytest.raises(GroomFileError, match='the face axis y lies along the up axis y'):
+        survey(str(tmp_path / 'g.data'), face_axis='y')
+
+
+def test_roots_off_the_scalp_cap_are_moved_to_its_edge_and_reported(tmp_path):
+    """A groom whose roots run down over the face and under the chin: those roots go to the
+    cap's edge at their azimuth (never on the face, chin or neck), their strands with them,
+    and the note says how many."""
+    head = gf.synthetic_groom(80, 10, seed=3)
+    rng = np.random.default_rng(0)
+    extra = []
+    for _ in range(20):                                 # roots on the face and under the chin
+        u = np.array([1.0, rng.uniform(-0.3, 0.3), rng.uniform(-0.9, 0.2)])
+        u /= np.linalg.norm(u)
+        root = u * gf.HEAD_RADII
+        extra.append(root + np.linspace(0.0, 0.05, 6)[:, None] * [0.6, 0.0, -0.8])
+    gf.write_data(tmp_path / 'g.data', [(h + [0.0, 0.0, 1.6]) / 0.01 for h in head + extra])
+    spec = Scene().with_changes(groom__file=str(tmp_path / 'g.data'), groom__up_axis='z',
+                                groom__face_axis='x').groom
+    got = import_groom(spec)
+    c, a = np.array(spec.scalp.center), np.array(spec.scalp.radii)
+    u = (got.strands[:, 0] - c) / a
+    u /= np.linalg.norm(u, axis=1, keepdims=True)
+    from hair_tracking.core.groom import in_scalp
+    polar = np.degrees(np.arccos(np.clip(u[:, 2], -1, 1)))
+    assert np.all(in_scalp(u, spec.scalp) | (polar < spec.scalp.max_polar_deg + 1e-6))
+    assert np.all(polar[u[:, 0] > 0.9] <= spec.scalp.front_max_polar_deg + 1e-6)
+    assert 'off the scalp cap' in got.placing and 'moved to its edge' in got.note
+    moved = int(got.placing.split('; ')[-1].split()[0])
+    assert 20 <= moved <= 40

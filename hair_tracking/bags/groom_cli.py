@@ -2,15 +2,15 @@
 
 Sub-commands::
 
-    info     FILE               strands, vertices, lengths, bounding box, units and up axis
+    info     FILE               strands, vertices, lengths, bounding box, units, up and face
     convert  FILE -o OUT        the strands as .hair, .data, .ply, .npz or USD (as read, or as put
                                 on the head)
     preview  FILE -o OUT.png    a picture of the groom on the head, front and side
 
 Every command reads the file as ``groom.file`` does (formats and options: docs/grooms.md); the
-groom options (``--units``, ``--up-axis``, ``--fit``, ``--rotation``, ``--offset``,
-``--max-strands``) are the ``groom.*`` parameters of the same names, and ``--scene`` takes the
-others (the scalp, the node counts) from a scene file.
+groom options (``--units``, ``--up-axis``, ``--face-axis``, ``--fit``, ``--rotation``,
+``--offset``, ``--max-strands``) are the ``groom.*`` parameters of the same names, and
+``--scene`` takes the others (the scalp, the node counts) from a scene file.
 
 Exit codes (those of ``hair_sim_bag``, whose :func:`~hair_tracking.bags.cli.run_command` runs
 the commands): 0 success, or stopped by SIGINT (Ctrl-C) or SIGTERM (nothing written then: an
@@ -52,7 +52,8 @@ def groom_spec(args):
     """The groom section of ``--scene`` (default: the default scene) with the file and the
     command line's groom options (BagError EXIT_USAGE naming a bad one)."""
     changes = {'groom__file': args.file, 'groom__units': args.units,
-               'groom__up_axis': args.up_axis, 'groom__fit': args.fit,
+               'groom__up_axis': args.up_axis, 'groom__face_axis': args.face_axis,
+               'groom__fit': args.fit,
                'groom__max_strands': args.max_strands}
     for name, text in (('file_rotation_deg', args.rotation), ('file_offset', args.offset)):
         if text is not None:
@@ -86,7 +87,7 @@ def _whole(out: Path):
 
 
 def cmd_info(args) -> int:
-    info, _ = survey(args.file, args.units, args.up_axis)
+    info, _ = survey(args.file, args.units, args.up_axis, args.face_axis)
     lo, hi = info.lengths[0], info.lengths[2]
     u = info.unit
     print(f'file:      {args.file} ({info.format})')
@@ -99,8 +100,9 @@ def cmd_info(args) -> int:
           f'(size {_xyz((info.box[1] - info.box[0]) * u)} m)')
     print(f'units:     {info.units_words}')
     print(f'up axis:   {info.up_words}')
+    print(f'face:      {info.face_words}')
     imported = import_groom(groom_spec(args))
-    print(f'on the head: {imported.note.split("; ")[-1]}')
+    print(f'on the head: {imported.placing}')
     return EXIT_OK
 
 
@@ -129,7 +131,7 @@ def cmd_convert(args) -> int:
     if placing:
         raise BagError(f'{", ".join(placing)}: how the strands are put on the head, which a '
                        'conversion as read does not do; add --imported', EXIT_USAGE)
-    info, poly = survey(args.file, args.units, args.up_axis)
+    info, poly = survey(args.file, args.units, args.up_axis, args.face_axis)
     # only what the file stated or the command line said is recorded: a guess stays a guess
     unit = info.unit if args.units != 'auto' or poly.meters_per_unit is not None else None
     up = info.up if args.up_axis != 'auto' or poly.up_axis is not None else None
@@ -174,6 +176,10 @@ def build_parser() -> argparse.ArgumentParser:
         p.add_argument('--up-axis', choices=GROOM_UP_AXES, default='auto',
                        help='the file axis pointing up: x, -x, y (face toward +z), -y, z (face '
                             'toward +x), -z (default auto: stated by the file, else guessed)')
+        p.add_argument('--face-axis', choices=GROOM_UP_AXES, default='auto',
+                       help='the file axis the face looks toward, across the up axis (default '
+                            'auto: the side the roots leave bare, else the up axis\'s '
+                            'convention)')
         p.add_argument('--fit', choices=GROOM_FITS, default='translate',
                        help='how the roots are put on the scalp (default translate)')
         p.add_argument('--rotation', metavar='RX,RY,RZ',

@@ -74,6 +74,7 @@ class GroomSpec:
     max_strands: int
     units: str
     up_axis: str
+    face_axis: str
     fit: str
     file_rotation_deg: Tuple[float, float, float]
     file_offset: Tuple[float, float, float]
@@ -267,6 +268,9 @@ class Scene:
         if g.guides * g.ghosts_per_guide > 2_000_000:
             raise SceneError('groom.ghosts_per_guide',
                              'guides * ghosts_per_guide must be at most 2,000,000')
+        if 'auto' not in (g.up_axis, g.face_axis) and g.up_axis[-1] == g.face_axis[-1]:
+            raise SceneError('groom.face_axis',
+                             f'must lie across groom.up_axis {g.up_axis}, got {g.face_axis}')
         if g.scalp.front_max_polar_deg > g.scalp.max_polar_deg:
             raise SceneError('groom.scalp.front_max_polar_deg',
                              'must not exceed groom.scalp.max_polar_deg')

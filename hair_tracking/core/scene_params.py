@@ -120,6 +120,11 @@ SCENE_PARAMS: Tuple[Param, ...] = (
          'toward +x, the head frame\'s axes; x: face toward +y); auto: the one the file '
          'states, else the axis along which the tips hang below the roots',
          choices=GROOM_UP_AXES, rebuild=True),
+    _row('groom.face_axis', 'string', 'auto',
+         'imported groom: the file axis the face looks toward, either way, across the up axis; '
+         'auto: the side of the head the roots leave bare, when they tell it, else the up '
+         'axis\'s convention (y up: +z; z up: +x; x up: +y)',
+         choices=GROOM_UP_AXES, rebuild=True),
     _row('groom.fit', 'string', 'translate',
          'imported groom: translate (roots fitted onto the scalp ellipsoid), scale (and a '
          'uniform scale) or none (the file, in metres, is already in the head frame); the roots '

@@ -46,6 +46,8 @@ class Survey:
     units_words: str
     up: str
     up_words: str
+    face: str                          # the file axis the face looks toward
+    face_words: str
 
 
 @dataclass
@@ -53,18 +55,23 @@ class Imported:
     """An imported groom: ``strands`` (S, N, 3) resampled, in the head frame [m], along the
     scalp; ``placed`` the same strands at the file's resolution, in the file's order
     (``strands[i]`` is ``placed``'s strand ``order[i]``); ``survey`` the file; ``note`` one
-    line saying what was done."""
+    line saying what was done, ``placing`` its part that says how the strands were put on the
+    scalp."""
 
     strands: np.ndarray
     placed: Polylines
     order: np.ndarray
     survey: Survey
     note: str
+    placing: str = ''
 
 
-def survey(path: str, units: str = 'auto', up_axis: str = 'auto') -> Tuple[Survey, Polylines]:
+def survey(path: str, units: str = 'auto', up_axis: str = 'auto',
+           face_axis: str = 'auto') -> Tuple[Survey, Polylines]:
     """Read ``path`` and describe it; returns the survey and its usable strands (GroomFileError
-    when it cannot be read or has none)."""
+    when it cannot be read or has none, or when a face axis given lies along the up axis).
+    ``face_axis`` '' takes the up axis's convention without a guess (a groom turned by
+    ``groom.file_rotation_deg``)."""
     poly = read_strands(path)
     keep, lengths, empty, degenerate = resample.usable(poly)
     if keep.size == 0:
@@ -94,18 +101,35 @@ def survey(path: str, units: str = 'auto', up_axis: str = 'auto') -> Tuple[Surve
         up_axis, up_words = poly.up_axis, f'{poly.up_axis} (stated by the file)'
     else:
         up_axis, up_words = fit.guess_up(roots, tips, lengths)
+    if not face_axis:
+        face_axis = fit.convention_face(up_axis)
+        face_words = f'{face_axis} (the convention of a file with {up_axis[-1]} up; ' \
+            'groom.file_rotation_deg turns the groom)'
+    elif face_axis != 'auto':
+        if face_axis[-1] == up_axis[-1]:
+            raise GroomFileError(path, '', '', f'the face axis {face_axis} lies along the up '
+                                 f'axis {up_axis}; give one across it (groom.face_axis)')
+        face_words = face_axis
+    else:
+        face_axis, face_words, _ = fit.guess_face(roots, up_axis)
+        if not face_axis:
+            face_axis = fit.convention_face(up_axis)
+            face_words = f'{face_axis} (the convention of a file with {up_axis[-1]} up: ' \
+                f'{face_words})'
     return Survey(format=poly.format, strands=raw_count, vertices=raw_vertices, empty=empty,
                   degenerate=degenerate,
                   lengths=(float(lengths.min()), float(np.median(lengths)),
                            float(lengths.max())),
                   box=(poly.points.min(axis=0), poly.points.max(axis=0)), unit=unit,
-                  units_words=unit_words, up=up_axis, up_words=up_words), poly
+                  units_words=unit_words, up=up_axis, up_words=up_words, face=face_axis,
+                  face_words=face_words), poly
 
 
 def import_groom(spec: GroomSpec) -> Imported:
     """The strands of ``spec.file`` put on the head (see the module docstring)."""
-    info, poly = survey(spec.file, spec.units, spec.up_axis)
-    axes = fit.head_axes(info.unit, info.up, spec.file_rotation_deg)
+    turned = spec.face_axis == 'auto' and any(spec.file_rotation_deg)
+    info, poly = survey(spec.file, spec.units, spec.up_axis, '' if turned else spec.face_axis)
+    axes = fit.head_axes(info.unit, info.up, spec.file_rotation_deg, info.face)
     roots = fit.affine(poly.points[poly.starts], axes, np.zeros(3))
     subset = resample.spread_subset(roots, spec.max_strands)
     if subset.size < poly.count:
@@ -121,33 +145,42 @@ def import_groom(spec: GroomSpec) -> Imported:
                      f'{t[2]:.3f}] m' + (f', scaled by {s:.3f}' if spec.fit == 'scale' else '')
                      + f', roots {100 * rms:.1f} % of the radii off the scalp')
     points = fit.affine(poly.points, s * axes, t + np.asarray(spec.file_offset))
-    placed = _onto_scalp(Polylines(points, poly.counts, poly.format), center, radii)
+    placed, off_cap = _onto_scalp(Polylines(points, poly.counts, poly.format), spec.scalp)
     strands = resample.resample(placed, spec.ghost_nodes)
     fit.push_out(strands[:, 1:], center, radii)
     order = scalp_order(strands[:, 0])
     dropped = info.strands - poly.count
+    placing = fit_words + (f'; {off_cap} roots ({100 * off_cap / poly.count:.0f} %) off the '
+                           'scalp cap (groom.scalp: the face, an ear or the neck) moved to its '
+                           'edge' if off_cap else '')
     note = (f'groom {spec.file} ({info.format}): {poly.count} strands'
             + (f' of {info.strands}' if dropped else '')
             + (f' ({info.empty} empty, {info.degenerate} degenerate skipped)'
                if info.empty or info.degenerate else '')
-            + f'; units {info.units_words}; up {info.up_words}; {fit_words}')
+            + f'; units {info.units_words}; up {info.up_words}; face {info.face_words}; '
+            + placing)
     return Imported(strands=np.ascontiguousarray(strands[order]), placed=placed, order=order,
-                    survey=info, note=note)
+                    survey=info, note=note, placing=placing)
 
 
-def _onto_scalp(poly: Polylines, center, radii) -> Polylines:
-    """Every root moved onto the scalp ellipsoid along its ray from the centre, its strand
-    carried with it, and every other vertex pushed out of the ellipsoid scaled by
-    REST_CLEARANCE (:func:`~hair_tracking.grooms.fit.push_out`); in place."""
+def _onto_scalp(poly: Polylines, scalp) -> Tuple[Polylines, int]:
+    """Every root moved onto the scalp ellipsoid along its ray from the centre, and into the
+    scalp cap (:func:`~hair_tracking.grooms.fit.into_cap`), its strand carried with it, and
+    every other vertex pushed out of the ellipsoid scaled by REST_CLEARANCE
+    (:func:`~hair_tracking.grooms.fit.push_out`); in place.  Returns the strands and how many
+    roots were moved into the cap."""
+    center, radii = scalp.center, scalp.radii
     starts = poly.starts
     roots = poly.points[starts]
-    shift = fit.onto_ellipsoid(roots, center, radii) - roots
+    on = fit.onto_ellipsoid(roots, center, radii)
+    moved = int(np.count_nonzero(fit.into_cap(on, center, radii, scalp)))
+    shift = on - roots
     points = poly.points
     points += np.repeat(shift, poly.counts, axis=0)
     roots = points[starts]
     fit.push_out(points, center, radii)
     points[starts] = roots
-    return poly
+    return poly, moved
 
 
 def build_groom(spec: GroomSpec, cache: bool = True) -> Groom:

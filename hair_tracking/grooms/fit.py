@@ -9,10 +9,16 @@ the head frame, the fit of the roots onto the scalp and the rest shape kept outs
 * **Up axis** (``groom.up_axis: auto``): hair hangs, so the up axis is the one of the six
   (+-x, +-y, +-z) along which the roots lie farthest above the tips, on average over the strands
   in strand lengths; a groom in which none lies above (hair standing up) is taken as z up.  A
-  file that states its up axis is believed.  The axes then become REP-103's (x forward, y left,
-  z up): a y-up file faces +z (Maya, Houdini, Cem Yuksel's and USC-HairSalon's models), a z-up
-  file is taken as already facing +x, an x-up file as facing +y (:data:`FORWARD`: the next
-  axis); ``groom.file_rotation_deg`` turns anything else (Blender faces -y: ``[0, 0, 90]``).
+  file that states its up axis is believed.
+* **Face** (``groom.face_axis: auto``): hair grows on the top, the back and the sides of the
+  head and leaves the face bare, so the face looks toward the side the roots leave open: the
+  roots' directions from the centre of the sphere through them (an algebraic least-squares
+  sphere), across the up axis, averaged, point to the back of the head, and the face is the
+  file axis across the up axis nearest their opposite (:func:`guess_face`).  When that mean is
+  short (roots all round the head, or too few to tell) the up axis's convention is taken: a
+  y-up file faces +z (Maya, Houdini, Cem Yuksel's and USC-HairSalon's models), a z-up file +x,
+  an x-up file +y (:data:`FORWARD`: the next axis).  The axes then become REP-103's (x forward,
+  y left, z up); ``groom.file_rotation_deg`` turns anything else.
 * **Fit** (``groom.fit``): the translation (``translate``), or translation and uniform scale
   (``scale``), that puts the roots on the scalp ellipsoid (``groom.scalp``) in the least-squares
   sense of the normalised radial distance ``|(p - c) / a| - 1`` (Levenberg-Marquardt from the
@@ -20,7 +26,9 @@ the head frame, the fit of the roots onto the scalp and the rest shape kept outs
   "Least-squares fitting of circles and ellipses", with the shape held fixed); ``none`` keeps
   the coordinates.  ``groom.file_offset`` is added after the fit.
 * **Onto the scalp**: every root is moved along its ray from the ellipsoid's centre onto the
-  ellipsoid, its strand carried with it; every other vertex inside the ellipsoid scaled by
+  ellipsoid, and a root outside the scalp cap (``groom.scalp``'s polar limits: on the face, an
+  ear or the neck) to the cap's edge at its azimuth (:func:`into_cap`), its strand carried with
+  it; every other vertex inside the ellipsoid scaled by
   :data:`~hair_tracking.core.groom.REST_CLEARANCE` is pushed out along its ray, the rule of the
   procedural groom, so no strand starts inside the head and the collider keeps its margin.
 """
@@ -29,7 +37,7 @@ from typing import Tuple
 
 import numpy as np
 
-from hair_tracking.core.groom import REST_CLEARANCE
+from hair_tracking.core.groom import in_scalp, REST_CLEARANCE
 from hair_tracking.core.scene_params import GROOM_UNITS
 
 #: The span [m] of a head of hair's roots, the yardstick of the units guess.
@@ -46,18 +54,31 @@ FORWARD = {'x': 1, 'y': 2, 'z': 0}
 UP_AXES = ('x', '-x', 'y', '-y', 'z', '-z')
 
 
-def _axes(up: str) -> np.ndarray:
-    """Head-frame coordinates of a file's x, y, z for up axis ``up`` (rows: head x = the
-    forward axis, :data:`FORWARD`; head z = ``up``; head y = z cross x)."""
+def _unit(axis: str) -> np.ndarray:
+    """The file axis ``axis`` ('x', '-y', ...) as a unit vector."""
     u = np.zeros(3)
-    u['xyz'.index(up[-1])] = -1.0 if up.startswith('-') else 1.0
-    f = np.zeros(3)
-    f[FORWARD[up[-1]]] = 1.0
+    u['xyz'.index(axis[-1])] = -1.0 if axis.startswith('-') else 1.0
+    return u
+
+
+def convention_face(up: str) -> str:
+    """The file axis a groom with up axis ``up`` faces by convention (:data:`FORWARD`)."""
+    return 'xyz'[FORWARD[up[-1]]]
+
+
+def axes(up: str, face: str = '') -> np.ndarray:
+    """Head-frame coordinates of a file's x, y, z for up axis ``up`` and face axis ``face``
+    (default: :func:`convention_face`), rows: head x = ``face``, head z = ``up``, head y = z
+    cross x."""
+    u, f = _unit(up), _unit(face or convention_face(up))
+    if abs(float(u @ f)) > 0.5:
+        raise ValueError(f'face axis {face} lies along the up axis {up}')
     return np.array([f, np.cross(u, f), u])
 
 
-#: Head-frame coordinates of a file's x, y, z per up axis (rows: head x, y, z).
-AXES = {up: _axes(up) for up in UP_AXES}
+#: Head-frame coordinates of a file's x, y, z per up axis, facing its convention (rows: head
+#: x, y, z).
+AXES = {up: axes(up) for up in UP_AXES}
 #: How far [deg] the hair may hang from the up axis chosen before the report says to turn it.
 OFF_AXIS_DEG = 25.0
 #: The up axis is guessed only when the roots lie at least this far (strand lengths, on
@@ -65,6 +86,12 @@ OFF_AXIS_DEG = 25.0
 MIN_DROP = 0.05
 #: The fit onto the scalp uses at most this many roots (evenly picked in the file's order).
 FIT_ROOTS = 2000
+#: The face is taken from the roots when their mean direction across the up axis
+#: (:func:`guess_face`) is at least this long (0: roots evenly all round the head; the default
+#: scalp cap, open on the face, gives 0.23, the tests' synthetic groom 0.27-0.31) ...
+MIN_FACE_ASYMMETRY = 0.1
+#: ... and said to be clear from this length on.
+CLEAR_FACE_ASYMMETRY = 0.2
 
 
 def _span(roots: np.ndarray, points: np.ndarray) -> Tuple[float, float, str]:
@@ -120,6 +147,48 @@ def guess_up(roots: np.ndarray, tips: np.ndarray, lengths: np.ndarray) -> Tuple[
     if off > OFF_AXIS_DEG:
         words += '; turn the rest with groom.file_rotation_deg'
     return best, words + ')'
+
+
+def sphere_centre(points: np.ndarray) -> np.ndarray:
+    """Centre of the sphere through ``points`` (P, 3) in the algebraic least-squares sense
+    (``|p|^2 = 2 c . p + k``, linear in ``c`` and ``k``; Gander, Golub & Strebel 1994); the
+    points' mean when they do not fix one (fewer than four, or all on a plane)."""
+    p = np.asarray(points, dtype=np.float64)
+    mean = p.mean(axis=0)
+    q = p - mean
+    a = np.concatenate([2.0 * q, np.ones((q.shape[0], 1))], axis=1)
+    sol, _, rank, _ = np.linalg.lstsq(a, np.einsum('ij,ij->i', q, q), rcond=None)
+    return mean + sol[:3] if rank == 4 else mean
+
+
+def guess_face(roots: np.ndarray, up: str) -> Tuple[str, str, float]:
+    """``(axis, words, asymmetry)``: of the four file axes across ``up``, the one the face
+    looks toward, from the side of the head the roots leave open (see the module docstring):
+    ``asymmetry`` is the length of the roots' mean unit direction from their sphere's centre
+    (:func:`sphere_centre`) across the up axis, 0..1; below :data:`MIN_FACE_ASYMMETRY` the
+    axis is '' (nothing to tell).  The words say how clear the open side is and, when it is more
+    than :data:`OFF_AXIS_DEG` from the axis chosen, by how much."""
+    p = np.asarray(roots, dtype=np.float64)
+    if p.shape[0] > FIT_ROOTS:
+        p = p[np.linspace(0, p.shape[0] - 1, FIT_ROOTS).round().astype(np.int64)]
+    u = _unit(up)
+    d = p - sphere_centre(p)
+    d /= np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-300)
+    across = d.mean(axis=0)
+    across -= (across @ u) * u
+    asym = float(np.linalg.norm(across))
+    if asym < MIN_FACE_ASYMMETRY:
+        return '', (f'the roots leave no side of the head open (their mean direction across '
+                    f'the up axis is {asym:.2f} long, under {MIN_FACE_ASYMMETRY})'), asym
+    candidates = [a for a in UP_AXES if a[-1] != up[-1]]
+    face = max(candidates, key=lambda a: -float(_unit(a) @ across))
+    off = math.degrees(math.acos(min(1.0, -float(_unit(face) @ across) / asym)))
+    words = (f'{face} (guessed: the roots leave the scalp open toward {face}, '
+             f'{"clearly" if asym >= CLEAR_FACE_ASYMMETRY else "faintly"}: their mean '
+             f'direction across the up axis is {asym:.2f} long, {off:.0f} deg from it')
+    if off > OFF_AXIS_DEG:
+        words += '; turn the rest with groom.file_rotation_deg'
+    return face, words + ')', asym
 
 
 def rotation(degrees) -> np.ndarray:
@@ -209,11 +278,34 @@ def push_out(points: np.ndarray, center, radii, factor: float = REST_CLEARANCE) 
     return points
 
 
-def head_axes(unit: float, up: str, degrees=(0.0, 0.0, 0.0)) -> np.ndarray:
+def into_cap(points: np.ndarray, center, radii, scalp) -> np.ndarray:
+    """Which of ``points`` (P, 3, on the ellipsoid ``center``, ``radii``) lie outside the scalp
+    cap of ``scalp`` (:func:`~hair_tracking.core.groom.in_scalp`); those are moved, in place,
+    to the cap's edge at their azimuth, on the ellipsoid.  Returns the mask of the moved."""
+    c = np.asarray(center, dtype=np.float64)
+    a = np.asarray(radii, dtype=np.float64)
+    u = (points - c) / a
+    u /= np.maximum(np.linalg.norm(u, axis=1, keepdims=True), 1e-300)
+    out = ~in_scalp(u, scalp)
+    if out.any():
+        v = u[out]
+        rho = np.hypot(v[:, 0], v[:, 1])
+        cos_phi = np.where(rho > 1e-12, v[:, 0] / np.maximum(rho, 1e-12), 1.0)
+        sin_phi = np.where(rho > 1e-12, v[:, 1] / np.maximum(rho, 1e-12), 0.0)
+        limit = np.radians(scalp.max_polar_deg - (scalp.max_polar_deg -
+                                                  scalp.front_max_polar_deg) *
+                           np.maximum(0.0, cos_phi))
+        edge = np.stack([np.sin(limit) * cos_phi, np.sin(limit) * sin_phi, np.cos(limit)],
+                        axis=1)
+        points[out] = c + edge * a
+    return out
+
+
+def head_axes(unit: float, up: str, degrees=(0.0, 0.0, 0.0), face: str = '') -> np.ndarray:
     """The matrix (3, 3) taking file coordinates to the head frame's axes and metres: scaled by
-    ``unit`` [m per unit], axes of ``up`` (:data:`AXES`), turned by ``degrees``
+    ``unit`` [m per unit], axes of ``up`` and ``face`` (:func:`axes`), turned by ``degrees``
     (:func:`rotation`)."""
-    return rotation(degrees) @ AXES[up] * unit
+    return rotation(degrees) @ axes(up, face) * unit
 
 
 def affine(points: np.ndarray, m: np.ndarray, b) -> np.ndarray:
