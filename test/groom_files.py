@@ -19,11 +19,19 @@ import numpy as np
 HEAD_RADII = np.array([0.092, 0.078, 0.1])
 
 
-def synthetic_groom(strands=200, vertices=20, seed=0, ragged=True):
+#: The styles of :func:`synthetic_groom`: (share of the strands curled, curl radius [m],
+#: turns along a strand).
+STYLES = {'mixed': (1 / 3, 0.012, 4), 'straight': (0.0, 0.0, 0), 'wavy': (1.0, 0.006, 2),
+          'curly': (1.0, 0.012, 5)}
+
+
+def synthetic_groom(strands=200, vertices=20, seed=0, ragged=True, style='mixed'):
     """A groom a hairdresser might have made, in the head frame [m] (x forward, z up, origin at
     the head centre): roots on the top of :data:`HEAD_RADII`'s ellipsoid, a fringe over the
-    forehead, longer hair down the back and sides, a third of the strands curled.  Returns a
-    list of (n, 3) arrays (``vertices`` each, or 60-140 % of it when ``ragged``)."""
+    forehead, longer hair down the back and sides; ``style`` (:data:`STYLES`) says how many of
+    the strands are curled and how (``mixed``: a third).  Returns a list of (n, 3) arrays
+    (``vertices`` each, or 60-140 % of it when ``ragged``)."""
+    share, radius, turns = STYLES[style]
     rng = np.random.default_rng(seed)
     out = []
     while len(out) < strands:
@@ -40,7 +48,7 @@ def synthetic_groom(strands=200, vertices=20, seed=0, ragged=True):
         n = vertices if not ragged else int(rng.integers(int(0.6 * vertices),
                                                          int(1.4 * vertices) + 1))
         n = max(n, 3)
-        curl = rng.random() < 1 / 3
+        curl = rng.random() < share
         s = np.linspace(0.0, 1.0, n)[:, None]
         down = np.array([0.0, 0.0, -1.0]) if not front else \
             np.array([0.35, 0.0, -0.94])
@@ -52,8 +60,8 @@ def synthetic_groom(strands=200, vertices=20, seed=0, ragged=True):
             side = np.cross(down, normal)
             side /= max(np.linalg.norm(side), 1e-9)
             other = np.cross(side, down)
-            phase = 2 * np.pi * 4 * s + rng.uniform(0, 2 * np.pi)
-            p = p + 0.012 * s * (np.cos(phase) * side + np.sin(phase) * other)
+            phase = 2 * np.pi * turns * s + rng.uniform(0, 2 * np.pi)
+            p = p + radius * s * (np.cos(phase) * side + np.sin(phase) * other)
         rel = (p - 0.0) / (1.06 * HEAD_RADII)
         r = np.linalg.norm(rel, axis=1, keepdims=True)
         p[1:] = np.where(r[1:] < 1.0, rel[1:] / r[1:] * 1.06 * HEAD_RADII, p[1:])

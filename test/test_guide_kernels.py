@@ -47,7 +47,7 @@ def random_case(seed, s=13, n=7, all_free=False):
     return dict(rest=rest, rest_length=rest_length, inv_mass=inv_mass, rot=rot, pos=pos,
                 rot_prev=rot_prev, pos_prev=pos_prev, x=x, v=v,
                 gravity=np.array([0.3, -1.0, -9.81]),
-                damping=2.0, dt=1.0 / 240.0, shock=0.6)
+                damping=2.0, dt=1.0 / 240.0, shock=0.6, shape=300.0)
 
 
 def pbd_lane_data(inv_mass, rest_length, bend_rest):
@@ -64,7 +64,7 @@ def kernel_common(c):
     rot_rel = integrate.relative_rotation(c['rot_prev'], c['rot'])
     return tuple(integrate.StepMotion(c['rot'], c['pos'], rot_rel, c['pos_prev'], c['gravity'],
                                       float(np.exp(-c['damping'] * c['dt'])), c['dt'],
-                                      c['shock']))
+                                      c['shock'], c['shape']))
 
 
 def run_pbd_step(x, v, x_old, rest, inv_mass, rest_length, bend_rest, c, iterations, k, kb,
@@ -105,7 +105,7 @@ def run_ftl_step(x, v, x_old, corr, rest, im, rest_length, bend_rest, c, passes,
 def reference_predict(c):
     return ref_predict(c['x'], c['v'], c['rest'], c['inv_mass'], c['rot'], c['pos'],
                        c['rot_prev'], c['pos_prev'], c['gravity'], c['damping'], c['dt'],
-                       c['shock'])
+                       c['shock'], c['shape'])
 
 
 # --------------------------------------------------------------------------------- tests
@@ -220,7 +220,7 @@ def test_solver_steps_match_the_package_reference_steps(kind):
     c = random_case(6, all_free=(kind == 'ftl'))
     bend_rest = pbd_constraints.second_neighbour_rest(c['rest'])
     motion = {k: c[k] for k in ('rot', 'pos', 'rot_prev', 'pos_prev', 'gravity', 'damping',
-                                'shock')}
+                                'shock', 'shape')}
     im, dt, max_disp = c['inv_mass'], c['dt'], 0.01
     x, v, x_old = c['x'].copy(), c['v'].copy(), np.zeros_like(c['x'])
     lanes = pbd_constraints.lane_major

@@ -410,7 +410,7 @@ def test_ftl_collide_step_then_finalize_is_the_fused_step(friction):
         rot_rel = np.empty((3, 3))
         integrate.head_motion(h_prev.rotation, h_prev.position, rot, pos, rot_rel)
         motion = (rot, pos, rot_rel, h_prev.position, gravity, np.exp(-sc.damping * dt), dt,
-                  shock)
+                  shock, 0.0)
         params = (guides.ftl_inner_steps(dt),
                   guides.ftl_bend_stiffness(sc.solver.bend_stiffness, dt),
                   float(sc.solver.ftl_damping), max_disp, False)
@@ -650,3 +650,26 @@ def test_the_kernel_variant_depends_on_the_size_not_on_the_thread_count():
             assert not kernels.runs_parallel(n - 1)
     finally:
         numba.set_num_threads(before)
+
+
+@pytest.mark.parametrize('kind', ['ftl', 'pbd', 'xpbd'])
+def test_the_shape_spring_holds_the_groomed_shape_against_gravity(kind):
+    """solver.shape_stiffness: strands groomed straight out sideways (no hair rests so) sag by
+    about g / k instead of falling; without it they hang.  FTL keeps its exact lengths."""
+    from hair_tracking.simulator import HairSimulator
+    from hair_tracking.core.groom import Groom
+    n = 12
+    t = np.linspace(0.0, 0.2, n)[:, None]
+    rest = np.stack([np.array([0.0, 0.0, 0.1]) + t * d for d in
+                     ([1.0, 0, 0], [0, 1.0, 0], [-1.0, 0, 0], [0, -1.0, 0])])
+    sag = {}
+    for k in (0.0, 4000.0):
+        sc = scene(kind, collider__shape='none', solver__shape_stiffness=k,
+                   solver__settle_time=1.0)
+        sim = HairSimulator(sc, groom=Groom(rest, np.zeros((0, n, 3))))
+        x = sim.frame(head_frame=True).guides
+        sag[k] = float(np.abs(x[:, -1, 2] - rest[:, -1, 2]).max())
+        if kind == 'ftl':
+            assert sim.max_stretch() < 1e-9
+    assert sag[0.0] > 0.1                      # hanging: the tips fell 10 cm and more
+    assert sag[4000.0] < 3 * 9.81 / 4000.0     # held: a few times g / k (bending adds a share)

@@ -151,6 +151,7 @@ class SolverSpec:
     ftl_damping: float
     max_substeps: int
     shock_propagation: float
+    shape_stiffness: float
     max_displacement: float
     max_strain: float
     settle_time: float

@@ -200,6 +200,11 @@ SCENE_PARAMS: Tuple[Param, ...] = (
          lo=1, hi=10_000),
     _row('solver.shock_propagation', 'double', 0.0,
          'carry strands rigidly with fast head motion, 0 off .. 1', lo=0.0, hi=1.0),
+    _row('solver.shape_stiffness', 'double', 0.0,
+         'pull of every free node toward its groomed place carried by the head (an implicit '
+         'spring, TressFX\'s global shape constraint): holds a style (curls, a fringe) against '
+         'gravity, the settled sag about 9.81 / this [m]; it also stiffens the motion; 0 off',
+         unit='1/s^2', lo=0.0, hi=1e6),
     _row('solver.max_displacement', 'double', 0.05,
          'per-substep displacement clamp (ftl: per inner step); 0 disables', unit='m',
          lo=0.0, hi=10.0),

@@ -445,6 +445,14 @@ def matrix(quick: bool = False, tracking_mode: Optional[str] = None) -> List[Cas
         add(f'{solver} gravity {g:g} g', 'gravity',
             _scene(solver, gravity=(0.0, 0.0, -9.81 * g)), shake,
             f'gravity {g:g} g, 10 rad/s shake')
+    # -- the groomed shape held by a spring (solver.shape_stiffness), up to the table's maximum
+    springs = ((1e6, 1 / 60),) if quick else ((2000.0, BASE.solver.dt), (1e6, 1 / 60))
+    for solver in (('ftl',) if quick else SOLVERS):
+        for k, dt in springs:
+            add(f'{solver} shape stiffness {k:g}, dt 1/{1 / dt:.0f} s', 'shape spring',
+                _scene(solver, solver__shape_stiffness=k, solver__dt=dt), fast[0][1],
+                f'solver.shape_stiffness {k:g} 1/s^2 at dt 1/{1 / dt:.0f} s (k dt^2 = '
+                f'{k * dt * dt:.3g}); ' + fast[0][2])
     # -- invalid poses
     for solver in (('ftl',) if quick else SOLVERS):
         def glitches(solver=solver):

@@ -66,7 +66,8 @@ FtlWork = namedtuple('FtlWork', ['corr', 'x_ref', 'counts', 'steps', 'before'])
 #: ``rels[k] = rots[k + 1] rots[k]^T``, and the constant fields of
 #: :data:`~hair_tracking.guides.integrate.StepMotion` (:func:`ftl_advance` takes the poses
 #: with a head axis).
-RunDrive = namedtuple('RunDrive', ['rots', 'poss', 'rels', 'gravity', 'damp', 'dt', 'shock'])
+RunDrive = namedtuple('RunDrive', ['rots', 'poss', 'rels', 'gravity', 'damp', 'dt', 'shock',
+                                   'shape'])
 
 #: Work items of :func:`ftl_advance`'s parallel loop (each a run of blocks).
 CHUNKS = 64
@@ -365,7 +366,7 @@ def ftl_step_block(model, state, motion, params, corr, blk):
     """Block ``blk`` of :func:`ftl_step`; returns its clamped node count."""
     x, v, x_old = state                                                 # GuideState
     _, inv_mass, _, _, _ = model                                        # FtlModel
-    _, _, _, _, _, _, dt, _ = motion                                    # StepMotion
+    _, _, _, _, _, _, dt, _, _ = motion                                 # StepMotion
     inner_steps, bend_stiffness, s_damp, max_disp, do_finalize = params     # FtlParams
     s0 = blk * BLOCK
     s1 = min(s0 + BLOCK, x.shape[0])
@@ -392,18 +393,18 @@ def ftl_block(model, state, motion, inner_steps, bend_stiffness, s_damp, corr, s
     settles where substeps of ``h`` leave it.  Returns the nodes the collider moved."""
     x, v, x_old = state
     rest, inv_mass, rest_length, bend_rest, bend_w = model              # FtlModel
-    rot, pos, rot_rel, pos_prev, gravity, damp, dt, shock = motion      # StepMotion
+    rot, pos, rot_rel, pos_prev, gravity, damp, dt, shock, shape = motion   # StepMotion
     h = dt / inner_steps
     damp_h = damp ** (1.0 / inner_steps) if inner_steps > 1 else damp
-    predict_block(state, rest, inv_mass, (rot, pos, rot_rel, pos_prev, gravity, damp_h, h, shock),
-                  s0, s1)
+    predict_block(state, rest, inv_mass,
+                  (rot, pos, rot_rel, pos_prev, gravity, damp_h, h, shock, shape), s0, s1)
     pushed = 0
     for r in range(inner_steps):
         if inner_steps > 1:
             place_roots_block(x, x_old, rest, rot, pos, (r + 1) / inner_steps, s0, s1)
         if r > 0:
             inner_predict_block(state, inv_mass, corr, gravity, (damp_h, h, s_damp), r == 1,
-                                s0, s1)
+                                s0, s1, (shape, rest, rot, pos))
         if bend_stiffness > 0.0:
             jacobi_bend_block(x, bend_rest, bend_w, bend_stiffness, s0, s1)
         if collide is not None:
@@ -430,7 +431,7 @@ def place_roots_block(x, x_old, rest, rot, pos, t, s0, s1):
 
 
 @njit(cache=True, fastmath=FASTMATH, error_model='numpy')
-def inner_predict_block(state, inv_mass, corr, gravity, step, first, s0, s1):
+def inner_predict_block(state, inv_mass, corr, gravity, step, first, s0, s1, pull):
     """The prediction of an inner step ``h`` [s] after the first (see :func:`ftl_block`) of the
     free nodes of strands ``s0 <= s < s1``: each node's velocity over the inner step before,
     ``(x - x_start) / h - s_damp corr_{i+1} / h`` with that step's FTL correction (as
@@ -441,9 +442,15 @@ def inner_predict_block(state, inv_mass, corr, gravity, step, first, s0, s1):
     come (``corr`` the sum of the passes so far), so that no start positions are stored;
     ``first``: the step before was the first, whose start is ``x_old`` and whose correction is
     all of ``corr``.  Finalize overwrites ``v``.  ``state``: the fields of
-    :data:`~hair_tracking.guides.integrate.GuideState`; ``step``: ``(damp, h, s_damp)``."""
+    :data:`~hair_tracking.guides.integrate.GuideState`; ``step``: ``(damp, h, s_damp)``;
+    ``pull``: ``(shape, rest, rot, pos)``, the spring toward the rest shape carried by the head
+    pose at the end of the substep (as :func:`~hair_tracking.guides.integrate.predict_block`'s,
+    ``shape`` 0: none)."""
     x, v, x_old = state
     damp, h, s_damp = step
+    shape, rest, rot, pos = pull
+    kdt = shape * h
+    keep = 1.0 / (1.0 + kdt * h)
     n = x.shape[1]
     inv_h = 1.0 / h
     gx, gy, gz = gravity[0] * h, gravity[1] * h, gravity[2] * h
@@ -468,9 +475,20 @@ def inner_predict_block(state, inv_mass, corr, gravity, step, first, s0, s1):
             v[s, i, 0] = cx - px * inv_h
             v[s, i, 1] = cy - py * inv_h
             v[s, i, 2] = cz - pz * inv_h
-            x[s, i, 0] = px + (vx * damp + gx) * h
-            x[s, i, 1] = py + (vy * damp + gy) * h
-            x[s, i, 2] = pz + (vz * damp + gz) * h
+            vx = vx * damp + gx
+            vy = vy * damp + gy
+            vz = vz * damp + gz
+            if shape > 0.0:
+                bx, by, bz = rest[s, i, 0], rest[s, i, 1], rest[s, i, 2]
+                vx = (vx + kdt * (rot[0, 0] * bx + rot[0, 1] * by + rot[0, 2] * bz + pos[0]
+                                  - px)) * keep
+                vy = (vy + kdt * (rot[1, 0] * bx + rot[1, 1] * by + rot[1, 2] * bz + pos[1]
+                                  - py)) * keep
+                vz = (vz + kdt * (rot[2, 0] * bx + rot[2, 1] * by + rot[2, 2] * bz + pos[2]
+                                  - pz)) * keep
+            x[s, i, 0] = px + vx * h
+            x[s, i, 1] = py + vy * h
+            x[s, i, 2] = pz + vz * h
 
 
 def ftl_collide_step(model, state, motion, params, work, collider):
@@ -490,7 +508,7 @@ def ftl_collide_step(model, state, motion, params, work, collider):
     ``do_finalize`` the substep stops before finalize (a body's contact comes next; the
     clamped count is then 0).  Returns ``(clamped, contacts)``.
     """
-    rot, pos, _, _, _, _, _, _ = motion                                 # StepMotion
+    rot, pos, _, _, _, _, _, _, _ = motion                              # StepMotion
     x, _, _ = state                                                     # GuideState
     cx, cy, cz, ax, ay, az, fr, refine = placed_shape(collider, rot, pos)
     n = x.shape[0]
@@ -519,7 +537,7 @@ def ftl_collide_block(model, state, motion, params, work, contact, s0, s1):
     contacts)``."""
     x, v, x_old = state                                                 # GuideState
     rest, inv_mass, rest_length, bend_rest, bend_w = model              # FtlModel
-    rot, pos, rot_rel, pos_prev, gravity, damp, dt, shock = motion      # StepMotion
+    rot, pos, rot_rel, pos_prev, gravity, damp, dt, shock, _ = motion   # StepMotion
     inner_steps, bend_stiffness, s_damp, max_disp, do_finalize = params     # FtlParams
     corr, x_ref = work                                                  # FtlWork[:2]
     _, _, _, _, _, _, _, friction, _ = contact                          # Contact
@@ -593,7 +611,7 @@ def _run_plan(state, drive, work, stop, slots):
     :func:`ftl_advance`: ``limited`` when the stop rule applies (the displacements measured and
     a limit given)."""
     x, _, _ = state                                                     # GuideState
-    _, _, rels, _, _, _, _ = drive                                      # RunDrive
+    _, _, rels, _, _, _, _, _ = drive                                   # RunDrive
     _, _, _, steps, _ = work                                            # FtlWork
     _, limit, _ = stop
     n_sub = rels.shape[1]
@@ -619,8 +637,8 @@ def _head_run(model, state, drive, params, collide, collider, work, slots, item)
 @njit(cache=True, inline='always')
 def _drive_of(drive, h):
     """Head ``h``'s :data:`RunDrive` (its poses without the head axis)."""
-    rots, poss, rels, gravity, damp, dt, shock = drive
-    return (rots[h], poss[h], rels[h], gravity, damp, dt, shock)
+    rots, poss, rels, gravity, damp, dt, shock, shape = drive
+    return (rots[h], poss[h], rels[h], gravity, damp, dt, shock, shape)
 
 
 @njit(cache=True, inline='always')
@@ -648,7 +666,7 @@ def _split_after(drive, work, stop, k, nblk):
     """Whether one head's run stops after substep ``k`` (:func:`ftl_advance`'s stop rule),
     with the substep's largest displacement gathered into ``steps[0, k]`` first (``drive``,
     ``work``, ``stop``: that head's)."""
-    _, _, rels, _, _, dt, _ = drive                                     # RunDrive
+    _, _, rels, _, _, dt, _, _ = drive                                  # RunDrive
     _, _, _, steps, _ = work                                            # FtlWork
     far = _column_max(steps, k, nblk)
     rigid, limit, gdt2 = stop
@@ -706,7 +724,7 @@ def ftl_advance_block(model, state, drive, params, collide, collider, work, blk,
     """:func:`ftl_advance_blocks` for block ``blk``."""
     x, v, x_old = state                                                 # GuideState
     _, inv_mass, _, _, _ = model                                        # FtlModel
-    rots, poss, rels, gravity, damp, dt, shock = drive                  # RunDrive
+    rots, poss, rels, gravity, damp, dt, shock, shape = drive           # RunDrive
     inner_steps, bend_stiffness, s_damp, max_disp, _ = params           # FtlParams
     corr, x_ref, counts, steps, before = work                           # FtlWork
     measure = steps.shape[1] > 0
@@ -715,7 +733,7 @@ def ftl_advance_block(model, state, drive, params, collide, collider, work, blk,
     k0, k1 = substeps
     for k in range(k0, k1):
         rot, pos = rots[k + 1], poss[k + 1]
-        motion = (rot, pos, rels[k], poss[k], gravity, damp, dt, shock)
+        motion = (rot, pos, rels[k], poss[k], gravity, damp, dt, shock, shape)
         if measure:
             for s in range(s0, s1):
                 for i in range(x.shape[1]):

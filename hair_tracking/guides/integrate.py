@@ -47,9 +47,10 @@ from hair_tracking.core.kernels import BLOCK, FASTMATH, parallel_and_serial
 GuideState = namedtuple('GuideState', ['x', 'v', 'x_old'])
 #: What drives one substep (the predict stage, :func:`predict_block`): head pose ``rot`` (3, 3),
 #: ``pos`` (3,) now, ``rot_rel`` = ``rot rot_prev^T`` and ``pos_prev`` of the previous pose,
-#: ``gravity`` (3,) [m/s^2], ``damp`` = exp(-damping dt), ``dt`` [s], ``shock`` 0..1.
+#: ``gravity`` (3,) [m/s^2], ``damp`` = exp(-damping dt), ``dt`` [s], ``shock`` 0..1, ``shape``
+#: the pull toward the groomed shape [1/s^2] (``solver.shape_stiffness``; 0: none).
 StepMotion = namedtuple('StepMotion', ['rot', 'pos', 'rot_rel', 'pos_prev', 'gravity', 'damp',
-                                       'dt', 'shock'])
+                                       'dt', 'shock', 'shape'])
 
 
 def block_count(strands: int) -> int:
@@ -107,11 +108,18 @@ def predict_block(state, rest, inv_mass, motion, s0, s1):
     ``motion``: the fields of :data:`StepMotion`: ``rot``/``pos`` head pose at the end of the
     substep; ``rot_rel``/``pos_prev`` the head motion (see :func:`relative_rotation`);
     ``gravity`` (3,) [m/s^2] world frame; ``damp`` the velocity factor ``exp(-damping dt)``;
-    ``shock`` the shock-propagation fraction 0..1. Nodes with ``inv_mass == 0`` beyond the
-    roots are carried but not integrated (static).
+    ``shock`` the shock-propagation fraction 0..1; ``shape`` [1/s^2] the stiffness of a spring
+    pulling every free node toward its rest place carried by the head, ``rot @ rest + pos``
+    (the global shape constraint of Han & Harada 2012, "Real-time hair simulation with
+    efficient hair style preservation", as a force), integrated implicitly (backward Euler:
+    ``v' = (v damp + g dt + k dt (target - p)) / (1 + k dt^2)``, stable at any stiffness and
+    step).  Nodes with ``inv_mass == 0`` beyond the roots are carried but not integrated
+    (static).
     """
     x, v, x_old = state
-    rot, pos, rot_rel, pos_prev, gravity, damp, dt, shock = motion
+    rot, pos, rot_rel, pos_prev, gravity, damp, dt, shock, shape = motion
+    kdt = shape * dt
+    keep = 1.0 / (1.0 + kdt * dt)
     n = x.shape[1]
     r00, r01, r02 = rot[0, 0], rot[0, 1], rot[0, 2]
     r10, r11, r12 = rot[1, 0], rot[1, 1], rot[1, 2]
@@ -154,6 +162,11 @@ def predict_block(state, rest, inv_mass, motion, s0, s1):
                 vx = vx * damp + gx
                 vy = vy * damp + gy
                 vz = vz * damp + gz
+                if shape > 0.0:
+                    bx, by, bz = rest[s, i, 0], rest[s, i, 1], rest[s, i, 2]
+                    vx = (vx + kdt * (r00 * bx + r01 * by + r02 * bz + tx - px)) * keep
+                    vy = (vy + kdt * (r10 * bx + r11 * by + r12 * bz + ty - py)) * keep
+                    vz = (vz + kdt * (r20 * bx + r21 * by + r22 * bz + tz - pz)) * keep
                 x[s, i, 0] = px + vx * dt
                 x[s, i, 1] = py + vy * dt
                 x[s, i, 2] = pz + vz * dt

@@ -396,7 +396,7 @@ def _pbd_block(blk, model, state, motion, params, work):
     serial kernel run the same code)."""
     rest, inv_mass, rest_length, bend_rest, stretch_w, bend_w = model   # PbdModel
     iterations, stiffness, bend_stiffness, max_disp, do_finalize = params   # PbdParams
-    _, _, _, _, _, _, dt, _ = motion                                    # StepMotion
+    _, _, _, _, _, _, dt, _, _ = motion                                 # StepMotion
     s0, s1 = _lanes_predicted(blk, state, rest, inv_mass, motion, work)
     n = inv_mass.shape[1]
     p = work[blk]
@@ -414,7 +414,7 @@ def _xpbd_block(blk, model, state, motion, params, xwork):
      bend_gain) = model                                                 # XpbdModel
     work, lam_stretch, lam_bend = xwork                                 # XpbdWork
     iterations, alpha_stretch, alpha_bend, max_disp, do_finalize = params   # XpbdParams
-    _, _, _, _, _, _, dt, _ = motion                                    # StepMotion
+    _, _, _, _, _, _, dt, _, _ = motion                                 # StepMotion
     s0, s1 = _lanes_predicted(blk, state, rest, inv_mass, motion, work)
     n = inv_mass.shape[1]
     p = work[blk]

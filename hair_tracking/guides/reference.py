@@ -28,16 +28,19 @@ import numpy as np
 
 # ------------------------------------------------------------------------- guide solvers
 def guide_predict(x, v, rest, inv_mass, rot, pos, rot_prev, pos_prev, gravity, damping, dt,
-                  shock):
+                  shock, shape=0.0):
     """Predict stage of every guide solver.  Returns ``(p, x_carried, v_integrated)``: the
     predicted positions, the start positions after the rigid carry by ``shock`` of the head's
-    motion (the ``x_old`` of the finalize stage) and the integrated velocities."""
+    motion (the ``x_old`` of the finalize stage) and the integrated velocities; ``shape``
+    [1/s^2] a spring toward the rest shape carried by the head, integrated implicitly."""
     rot_rel = rot @ rot_prev.T
     moved = (x - pos_prev) @ rot_rel.T + pos
     xc = x + shock * (moved - x)
     vc = v + shock * (v @ rot_rel.T - v)
     free = (inv_mass > 0)[..., None]
-    vn = np.where(free, vc * np.exp(-damping * dt) + np.asarray(gravity) * dt, 0.0)
+    vn = vc * np.exp(-damping * dt) + np.asarray(gravity) * dt
+    vn = (vn + shape * dt * (_carried_rest(rest, rot, pos) - xc)) / (1.0 + shape * dt * dt)
+    vn = np.where(free, vn, 0.0)
     p = np.where(free, xc + vn * dt, xc)
     p[:, :2] = rest[:, :2] @ rot.T + pos          # roots: nodes 0 and 1 follow the head
     vn[:, :2] = v[:, :2]
@@ -141,6 +144,11 @@ def guide_finalize(p, x_old, inv_mass, corr, dt, max_disp, s_damp):
     return p, disp / dt, int(clamped.sum())
 
 
+def _carried_rest(rest, rot, pos):
+    """The rest shape carried by the head pose ``rot``, ``pos``."""
+    return rest @ rot.T + pos
+
+
 def pbd_step(x, v, rest, inv_mass, rest_length, bend_rest, motion, dt, iterations, stiffness,
              bend_stiffness, max_disp):
     """One PBD substep of all guides: predict, ``iterations`` times a stretch sweep and (if
@@ -195,6 +203,9 @@ def ftl_step(x, v, rest, inv_mass, rest_length, bend_rest, motion, dt, inner_ste
             vel[:, :-1] -= s_damp * step[:, 1:] / h
             start = p.copy()
             vel = vel * np.exp(-motion['damping'] * h) + np.asarray(motion['gravity']) * h
+            k = motion.get('shape', 0.0)
+            vel = (vel + k * h * (_carried_rest(rest, motion['rot'], motion['pos']) - p)) / \
+                (1.0 + k * h * h)
             p = np.where(moving, p + vel * h, p)
         if bend_stiffness > 0.0:
             jacobi_bend(p, bend_rest, inv_mass, bend_stiffness)

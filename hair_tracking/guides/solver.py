@@ -125,6 +125,7 @@ class GuideSolver:
         self._gravity = np.ascontiguousarray(scene.gravity, dtype=np.float64)
         self._damping = float(scene.damping)
         self._shock = float(sv.shock_propagation)
+        self._shape = float(sv.shape_stiffness)
         self._max_disp = float(sv.max_displacement)
         self._iterations = int(sv.iterations)
         self._x_old = np.empty_like(strands.x)
@@ -278,7 +279,8 @@ class GuideSolver:
         # integrate.StepMotion and the solver's Params (built here each substep; the models in
         # _build_model / _xpbd_factors)
         state = (st.x, st.v, self._x_old)
-        motion = (rot, pos, rot_rel, pos_prev, self._gravity, damp, dt, self._shock)
+        motion = (rot, pos, rot_rel, pos_prev, self._gravity, damp, dt, self._shock,
+                  self._shape)
         clamped, contacts, finished = self._project(state, motion, dt, parallel, fused)
         if not finished:
             contacts += self._head_contacts(rot, pos, parallel)
@@ -365,7 +367,7 @@ class FtlSolver(GuideSolver):
         motions ``rels`` (:func:`~hair_tracking.guides.integrate.head_motions`), gravity,
         damping and shock propagation."""
         return (rots, poss, rels, self._gravity, math.exp(-self._damping * dt), dt,
-                self._shock)
+                self._shock, self._shape)
 
     def head_batch(self, places: int) -> Optional['HeadBatch']:
         """Room for ``places`` heads' guides (:class:`HeadBatch`); None with a body, whose
@@ -532,7 +534,7 @@ class _LaneSolver(GuideSolver):
     def _project(self, state, motion, dt, parallel, fused):
         if self._x_ref is not None:
             carry = integrate.carry_rigid if parallel else integrate.carry_rigid_serial
-            _, pos, rot_rel, pos_prev, _, _, _, _ = motion            # StepMotion
+            _, pos, rot_rel, pos_prev, _, _, _, _, _ = motion         # StepMotion
             carry(self.strands.x, rot_rel, pos_prev, pos, self._x_ref)
         return self._constraints(state, motion, dt, parallel, fused), 0, fused
 

@@ -1,0 +1,119 @@
+#!/usr/bin/env python3
+"""Is the groomed style kept?  Settled shape against the groom file's, for straight, wavy and
+curly grooms, on a still head and after the bundled walk, at several
+``solver.shape_stiffness``.
+
+    python scripts/style_kept.py [--strands 64] [--nodes 48] [--stiffness 0 1000 4000]
+                                 [--md docs/results/style.md] [--json F]
+
+Each style is the tests' synthetic groom (test/groom_files.py, :data:`STYLES`) written as a
+USC-HairSalon ``.data`` file and imported with the defaults; every strand a guide of ``--nodes``
+nodes (resampled from the file: the figures are against that rest shape), simulated by the
+default scene's solver (FTL, dt 1/240 s, the head collider).  For each stiffness the hair is
+settled until no node moves faster than 2 mm/s (the simulator's settle), measured, driven
+through the bundled walk (CMU 131_01, 8.3 s), settled again at its last pose and measured
+again: the RMS node distance from the groomed shape carried by the head over the strand
+length [% L], and the mean end-to-end distance over the arc length of the strands (a curl's
+ratio: 1 straight, lower curled) against the groom's.
+"""
+import argparse
+import json
+import os
+import sys
+import tempfile
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(0, ROOT)
+sys.path.insert(0, os.path.join(ROOT, 'test'))          # the tests' groom file writers
+
+from hair_tracking.executable import use_numba_cache  # noqa: E402
+use_numba_cache()      # before numba loads: the cache make install fills
+import numpy as np  # noqa: E402
+
+import groom_files  # noqa: E402
+from hair_tracking.core.scene import Scene  # noqa: E402
+from hair_tracking.evaluation.provenance import command_line  # noqa: E402
+from hair_tracking.evaluation.provenance import markdown_lines, provenance  # noqa: E402
+from hair_tracking.motion.pose_table import load_bundled_walk  # noqa: E402
+from hair_tracking.simulator import HairSimulator  # noqa: E402
+
+STYLES = ('straight', 'wavy', 'curly')
+
+
+def shape_figures(x, rest, lengths):
+    """``(RMS distance [% L], mean end-to-end / arc length of x, of rest)``."""
+    d = np.linalg.norm(x - rest, axis=2) / lengths[:, None]
+    ratio = np.linalg.norm(x[:, -1] - x[:, 0], axis=1) / lengths
+    ratio_rest = np.linalg.norm(rest[:, -1] - rest[:, 0], axis=1) / lengths
+    return 100.0 * float(np.sqrt(np.mean(d * d))), float(ratio.mean()), float(ratio_rest.mean())
+
+
+def measure(sim):
+    """:func:`shape_figures` of the simulator's guides now, in the head frame."""
+    return shape_figures(sim.frame(head_frame=True).guides, sim.guides.rest,
+                         sim.guides.strand_length)
+
+
+def run(path, stiffness, strands, nodes):
+    scene = Scene().with_changes(
+        groom__file=path, groom__guides=strands, groom__ghosts_per_guide=0,
+        groom__guide_nodes=nodes, groom__ghost_nodes=nodes, tracking__mode='paper',
+        solver__shape_stiffness=stiffness, solver__settle_speed=0.002,
+        solver__max_substeps=10_000)
+    sim = HairSimulator(scene)
+    still = measure(sim)
+    walk = load_bundled_walk()
+    for t, p, q in zip(walk.t_ns, walk.position, walk.quaternion):
+        sim.push_pose(int(t), p, q)
+        sim.advance_to(int(t))
+    sim.settle()
+    return still, measure(sim), float(sim.max_stretch())
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split('\n')[0])
+    ap.add_argument('--strands', type=int, default=64)
+    ap.add_argument('--nodes', type=int, default=48)
+    ap.add_argument('--stiffness', type=float, nargs='+', default=[0.0, 1000.0, 4000.0],
+                    help='solver.shape_stiffness values [1/s^2]')
+    ap.add_argument('--md', help='write the table here, with a header')
+    ap.add_argument('--json', help='write the figures here')
+    args = ap.parse_args(argv)
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for style in STYLES:
+            path = os.path.join(tmp, f'{style}.data')
+            groom_files.write_data(path, groom_files.to_file_frame(groom_files.synthetic_groom(
+                args.strands, 60, seed=1, style=style)))
+            for k in args.stiffness:
+                still, walked, stretch = run(path, k, args.strands, args.nodes)
+                rows.append(dict(style=style, stiffness=k, still_rms=still[0],
+                                 still_ratio=still[1], groom_ratio=still[2],
+                                 walk_rms=walked[0], walk_ratio=walked[1], stretch=stretch))
+                print(f'{style:8s} k {k:7g}: still {still[0]:5.2f} % L, ratio {still[1]:.3f} '
+                      f'(groom {still[2]:.3f}); after the walk {walked[0]:5.2f} % L, ratio '
+                      f'{walked[1]:.3f}; stretch {stretch:.1e}', flush=True)
+    record = provenance(command_line('python scripts/style_kept.py', argv or sys.argv[1:]))
+    if args.json:
+        with open(args.json, 'w', encoding='utf-8') as f:
+            json.dump({'provenance': record, 'rows': rows}, f, indent=1)
+    if args.md:
+        lines = ['# Is the groomed style kept?', ''] + markdown_lines(record) + [
+            f'{args.strands} strands of each synthetic style, every one an FTL guide of '
+            f'{args.nodes} nodes; settled until still, then after the bundled walk and settled '
+            'again.  RMS node distance from the groomed shape over the strand length; ratio: '
+            'mean end-to-end distance over arc length.',
+            '',
+            '| style | solver.shape_stiffness [1/s^2] | still: from the groom [% L] | still: '
+            'ratio (groom) | after the walk: from the groom [% L] | after the walk: ratio | '
+            'max stretch |', '|---|---:|---:|---:|---:|---:|---:|']
+        lines += [f'| {r["style"]} | {r["stiffness"]:g} | {r["still_rms"]:.2f} | '
+                  f'{r["still_ratio"]:.3f} ({r["groom_ratio"]:.3f}) | {r["walk_rms"]:.2f} | '
+                  f'{r["walk_ratio"]:.3f} | {r["stretch"]:.1e} |' for r in rows]
+        with open(args.md, 'w', encoding='utf-8') as f:
+            f.write('\n'.join(lines) + '\n')
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
