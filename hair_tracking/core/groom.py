@@ -75,13 +75,19 @@ def _lengths(spec, n, rng):
     return spec.length * (1.0 + spec.length_variation * rng.uniform(-1.0, 1.0, n))
 
 
+def polar_limit_deg(cos_phi, scalp: ScalpSpec):
+    """The scalp cap's edge [deg from the top] at the azimuth whose cosine is ``cos_phi``
+    (1: toward the face): ``front_max_polar_deg`` in front, ``max_polar_deg`` at the sides and
+    the back."""
+    return scalp.max_polar_deg - (scalp.max_polar_deg - scalp.front_max_polar_deg) * \
+        np.maximum(0.0, cos_phi)
+
+
 def in_scalp(u: np.ndarray, scalp: ScalpSpec) -> np.ndarray:
     """Which unit directions ``u`` (..., 3) fall on the scalp cap."""
     polar = np.degrees(np.arccos(np.clip(u[..., 2], -1.0, 1.0)))
     cos_phi = u[..., 0] / np.maximum(np.hypot(u[..., 0], u[..., 1]), 1e-12)
-    limit = scalp.max_polar_deg - (scalp.max_polar_deg - scalp.front_max_polar_deg) * \
-        np.maximum(0.0, cos_phi)
-    return polar <= limit
+    return polar <= polar_limit_deg(cos_phi, scalp)
 
 
 def _fibonacci(m: int) -> np.ndarray:

@@ -37,7 +37,7 @@ from typing import Tuple
 
 import numpy as np
 
-from hair_tracking.core.groom import in_scalp, REST_CLEARANCE
+from hair_tracking.core.groom import in_scalp, polar_limit_deg, REST_CLEARANCE
 from hair_tracking.core.scene_params import GROOM_UNITS
 
 #: The span [m] of a head of hair's roots, the yardstick of the units guess.
@@ -292,9 +292,7 @@ def into_cap(points: np.ndarray, center, radii, scalp) -> np.ndarray:
         rho = np.hypot(v[:, 0], v[:, 1])
         cos_phi = np.where(rho > 1e-12, v[:, 0] / np.maximum(rho, 1e-12), 1.0)
         sin_phi = np.where(rho > 1e-12, v[:, 1] / np.maximum(rho, 1e-12), 0.0)
-        limit = np.radians(scalp.max_polar_deg - (scalp.max_polar_deg -
-                                                  scalp.front_max_polar_deg) *
-                           np.maximum(0.0, cos_phi))
+        limit = np.radians(polar_limit_deg(cos_phi, scalp))
         edge = np.stack([np.sin(limit) * cos_phi, np.sin(limit) * sin_phi, np.cos(limit)],
                         axis=1)
         points[out] = c + edge * a
