@@ -259,6 +259,26 @@ def ellipsoid_pushed_shallow(qx, qy, qz, rx, ry, rz, placed, inv):
 
 
 @njit(cache=True, inline='always')
+def sort_by_depth_class(w, rows, count):
+    """The compaction of a block contact's pushed nodes, branch-free: columns ``0 <= c <
+    count`` of the work array ``w``'s row ``flag`` hold each node's
+    :func:`contact_depth_class`; row ``idx`` receives the columns of the nodes the fast path
+    takes (class 2), then of the deeper ones (class 1), each in order, row ``scratch`` used on
+    the way.  ``rows = (flag, idx, scratch)``.  Returns ``(m_fast, m)``: how many take the
+    fast path, how many are pushed in all (the columns :func:`push_sorted` takes)."""
+    flag, idx, scratch = rows
+    m_fast, m_deep = 0, 0
+    for c in range(count):
+        w[idx, m_fast] = c
+        w[scratch, m_deep] = c
+        m_fast += 1 if w[flag, c] == 2.0 else 0
+        m_deep += 1 if w[flag, c] == 1.0 else 0
+    for c in range(m_deep):
+        w[idx, m_fast + c] = w[scratch, c]
+    return m_fast, m_fast + m_deep
+
+
+@njit(cache=True, inline='always')
 def push_sorted(w, rows, m_fast, m, placed, inv):
     """The contact of a block's pushed nodes, sorted by :func:`contact_depth_class` (the block
     contacts of :func:`~hair_tracking.colliders.head.project_block` and the paper tracker's

@@ -30,7 +30,7 @@ from numba import njit, prange
 
 from hair_tracking.colliders.contact import (ellipsoid_contact, ellipsoid_depth,
                                              ellipsoid_level, local_of, push_sorted,
-                                             SHALLOW_LEVEL)
+                                             SHALLOW_LEVEL, sort_by_depth_class)
 from hair_tracking.colliders.margin import fit_margin
 from hair_tracking.colliders.shapes import HEAD_FRAME, Shape
 from hair_tracking.core.kernels import BLOCK, FASTMATH, parallel_and_serial, runs_parallel
@@ -153,15 +153,7 @@ def project_block(x, x_prev, inv_mass, contact, s0, s1):
             m += 1 if depth_class != 0.0 else 0
     if m == 0:
         return 0
-    m_fast, m_deep = 0, 0
-    for c in range((s1 - s0) * n):
-        w[_IDX, m_fast] = c
-        w[_RX, m_deep] = c                                  # (scratch until the gather)
-        m_fast += 1 if w[_FLAG, c] == 2.0 else 0
-        m_deep += 1 if w[_FLAG, c] == 1.0 else 0
-    for c in range(m_deep):
-        w[_IDX, m_fast + c] = w[_RX, c]
-    m = m_fast + m_deep
+    m_fast, m = sort_by_depth_class(w, (_FLAG, _IDX, _RX), (s1 - s0) * n)   # _RX: scratch
     # 2. gather
     for c in range(m):
         j = int(w[_IDX, c])

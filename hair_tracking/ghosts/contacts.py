@@ -32,7 +32,7 @@ from numba import njit
 
 from hair_tracking.colliders.contact import (contact_depth_class, ellipsoid_contact,
                                              ellipsoid_level, local_of, push_sorted,
-                                             surface_point, world_of)
+                                             sort_by_depth_class, surface_point, world_of)
 from hair_tracking.guides.ftl import ellipsoid_of, FTL_TINY_SQ, restore_f_ok, restore_node
 
 #: Normal-line refinements the vectorised pass unrolls (the ellipsoid default is 2).
@@ -69,15 +69,7 @@ def collide_lanes(X0, P, W, j, lanes, strands, ftl, contact, rot):
         n_in += 1 if depth_class != 0.0 else 0
     if n_in == 0:
         return 0
-    m_fast, m_deep = 0, 0
-    for kk in range(n):
-        W[_IDX, m_fast] = kk
-        W[_MORE, m_deep] = kk                               # (scratch until step 3)
-        m_fast += 1 if W[_FLAG, kk] == 2.0 else 0
-        m_deep += 1 if W[_FLAG, kk] == 1.0 else 0
-    for c in range(m_deep):
-        W[_IDX, m_fast + c] = W[_MORE, c]
-    m = m_fast + m_deep
+    m_fast, m = sort_by_depth_class(W, (_FLAG, _IDX, _MORE), n)   # _MORE: scratch until 3.
     if refine > MAX_VECTOR_REFINE:
         return _collide_scalar(X0, P, W, j, (m, k0), strands, ftl, contact, rot)
     # 2. gather
