@@ -41,7 +41,7 @@ from hair_tracking.colliders.crease import escape
 from hair_tracking.colliders.head import placed, placed_shape, rotation_entries, to_head
 from hair_tracking.core.kernels import BLOCK, FASTMATH, parallel_and_serial
 from hair_tracking.guides.integrate import (carry_rigid_block, finalize_block, max_step_sq_block,
-                                            predict_block)
+                                            predict_block, shape_pulled)
 from hair_tracking.guides.pbd_constraints import jacobi_bend_block
 from hair_tracking.guides.split import split_due
 
@@ -479,13 +479,8 @@ def inner_predict_block(state, inv_mass, corr, gravity, step, first, s0, s1, pul
             vy = vy * damp + gy
             vz = vz * damp + gz
             if shape > 0.0:
-                bx, by, bz = rest[s, i, 0], rest[s, i, 1], rest[s, i, 2]
-                vx = (vx + kdt * (rot[0, 0] * bx + rot[0, 1] * by + rot[0, 2] * bz + pos[0]
-                                  - px)) * keep
-                vy = (vy + kdt * (rot[1, 0] * bx + rot[1, 1] * by + rot[1, 2] * bz + pos[1]
-                                  - py)) * keep
-                vz = (vz + kdt * (rot[2, 0] * bx + rot[2, 1] * by + rot[2, 2] * bz + pos[2]
-                                  - pz)) * keep
+                vx, vy, vz = shape_pulled(vx, vy, vz, px, py, pz, rest[s, i], rot, pos, kdt,
+                                          keep)
             x[s, i, 0] = px + vx * h
             x[s, i, 1] = py + vy * h
             x[s, i, 2] = pz + vz * h

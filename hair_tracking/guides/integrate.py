@@ -163,10 +163,8 @@ def predict_block(state, rest, inv_mass, motion, s0, s1):
                 vy = vy * damp + gy
                 vz = vz * damp + gz
                 if shape > 0.0:
-                    bx, by, bz = rest[s, i, 0], rest[s, i, 1], rest[s, i, 2]
-                    vx = (vx + kdt * (r00 * bx + r01 * by + r02 * bz + tx - px)) * keep
-                    vy = (vy + kdt * (r10 * bx + r11 * by + r12 * bz + ty - py)) * keep
-                    vz = (vz + kdt * (r20 * bx + r21 * by + r22 * bz + tz - pz)) * keep
+                    vx, vy, vz = shape_pulled(vx, vy, vz, px, py, pz, rest[s, i], rot, pos,
+                                              kdt, keep)
                 x[s, i, 0] = px + vx * dt
                 x[s, i, 1] = py + vy * dt
                 x[s, i, 2] = pz + vz * dt
@@ -174,6 +172,18 @@ def predict_block(state, rest, inv_mass, motion, s0, s1):
                 x[s, i, 0] = px
                 x[s, i, 1] = py
                 x[s, i, 2] = pz
+
+
+@njit(cache=True, inline='always', fastmath=FASTMATH, error_model='numpy')
+def shape_pulled(vx, vy, vz, px, py, pz, rest_node, rot, pos, kdt, keep):
+    """The velocity ``v`` of a node at ``p`` after the shape spring's implicit step toward its
+    rest place ``rest_node`` (3,) carried by the head pose ``rot``, ``pos``: ``(v + k dt
+    (target - p)) / (1 + k dt^2)``, with ``kdt = k dt`` and ``keep = 1 / (1 + k dt^2)``
+    (:func:`predict_block`)."""
+    bx, by, bz = rest_node[0], rest_node[1], rest_node[2]
+    return ((vx + kdt * (rot[0, 0] * bx + rot[0, 1] * by + rot[0, 2] * bz + pos[0] - px)) * keep,
+            (vy + kdt * (rot[1, 0] * bx + rot[1, 1] * by + rot[1, 2] * bz + pos[1] - py)) * keep,
+            (vz + kdt * (rot[2, 0] * bx + rot[2, 1] * by + rot[2, 2] * bz + pos[2] - pz)) * keep)
 
 
 @njit(cache=True, inline='always', fastmath=FASTMATH, error_model='numpy')
