@@ -101,21 +101,18 @@ def survey(path: str, units: str = 'auto', up_axis: str = 'auto',
         up_axis, up_words = poly.up_axis, f'{poly.up_axis} (stated by the file)'
     else:
         up_axis, up_words = fit.guess_up(roots, tips, lengths)
-    if not face_axis:
-        face_axis = fit.convention_face(up_axis)
-        face_words = f'{face_axis} (the convention of a file with {up_axis[-1]} up; ' \
-            'groom.file_rotation_deg turns the groom)'
-    elif face_axis != 'auto':
+    if face_axis not in ('', 'auto'):
         if face_axis[-1] == up_axis[-1]:
             raise GroomFileError(path, '', '', f'the face axis {face_axis} lies along the up '
                                  f'axis {up_axis}; give one across it (groom.face_axis)')
         face_words = face_axis
     else:
-        face_axis, face_words, _ = fit.guess_face(roots, up_axis)
+        face_axis, why, _ = fit.guess_face(roots, up_axis) if face_axis else \
+            ('', 'groom.file_rotation_deg turns the groom', 0.0)
+        face_words = why
         if not face_axis:
             face_axis = fit.convention_face(up_axis)
-            face_words = f'{face_axis} (the convention of a file with {up_axis[-1]} up: ' \
-                f'{face_words})'
+            face_words = f'{face_axis} (the convention of a file with {up_axis[-1]} up: {why})'
     return Survey(format=poly.format, strands=raw_count, vertices=raw_vertices, empty=empty,
                   degenerate=degenerate,
                   lengths=(float(lengths.min()), float(np.median(lengths)),
