@@ -450,10 +450,11 @@ class HairSimulator:
         return Frame(t_ns=self.time_ns or 0, head=self.head, guides=g, ghosts=s, curves=smooth)
 
     def strand_positions(self) -> np.ndarray:
-        """The strands a :meth:`frame` shows (``frame.strands``: the ghosts, or the guides
-        without ghosts) as they are now, world frame [m], without making a frame: a view of the
-        state, valid until the next step (read only for the ghosts).  The ghosts come in the
-        tracker's order (``ghost_tracker.permutation`` where the paper tracker grouped them)."""
+        """The simulated strands a :meth:`frame` is made of (the ghosts, or the guides without
+        ghosts; before any output curve) as they are now, world frame [m], without making a
+        frame: a view of the state, valid until the next step (read only for the ghosts).  The
+        ghosts come in the tracker's order (``ghost_tracker.permutation`` where the paper
+        tracker grouped them)."""
         s = self._ghost_positions()
         return self.guides.x if s is None else s
 

@@ -174,8 +174,8 @@ def build_parser() -> argparse.ArgumentParser:
                        help='length unit of the file (default auto: stated by the file, else '
                             'guessed from the span of the roots)')
         p.add_argument('--up-axis', choices=GROOM_UP_AXES, default='auto',
-                       help='the file axis pointing up: x, -x, y (face toward +z), -y, z (face '
-                            'toward +x), -z (default auto: stated by the file, else guessed)')
+                       help='the file axis pointing up: x, -x, y, -y, z, -z (default auto: '
+                            'stated by the file, else guessed)')
         p.add_argument('--face-axis', choices=GROOM_UP_AXES, default='auto',
                        help='the file axis the face looks toward, across the up axis (default '
                             'auto: the side the roots leave bare, else the up axis\'s '

@@ -116,9 +116,9 @@ SCENE_PARAMS: Tuple[Param, ...] = (
          'the file states, else guessed from the span of the roots',
          choices=('auto',) + tuple(GROOM_UNITS), rebuild=True),
     _row('groom.up_axis', 'string', 'auto',
-         'imported groom: the file axis pointing up, either way (y: face toward +z; z: face '
-         'toward +x, the head frame\'s axes; x: face toward +y); auto: the one the file '
-         'states, else the axis along which the tips hang below the roots',
+         'imported groom: the file axis pointing up, either way (the face: groom.face_axis); '
+         'auto: the one the file states, else the axis along which the tips hang below the '
+         'roots',
          choices=GROOM_UP_AXES, rebuild=True),
     _row('groom.face_axis', 'string', 'auto',
          'imported groom: the file axis the face looks toward, either way, across the up axis; '
