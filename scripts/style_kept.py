@@ -36,16 +36,16 @@ from hair_tracking.evaluation.provenance import command_line  # noqa: E402
 from hair_tracking.evaluation.provenance import markdown_lines, provenance  # noqa: E402
 from hair_tracking.motion.pose_table import load_bundled_walk  # noqa: E402
 from hair_tracking.simulator import HairSimulator  # noqa: E402
+from settle_shape import rms_percent  # noqa: E402  (scripts/, the folder of this script)
 
 STYLES = ('straight', 'wavy', 'curly')
 
 
 def shape_figures(x, rest, lengths):
     """``(RMS distance [% L], mean end-to-end / arc length of x, of rest)``."""
-    d = np.linalg.norm(x - rest, axis=2) / lengths[:, None]
     ratio = np.linalg.norm(x[:, -1] - x[:, 0], axis=1) / lengths
     ratio_rest = np.linalg.norm(rest[:, -1] - rest[:, 0], axis=1) / lengths
-    return 100.0 * float(np.sqrt(np.mean(d * d))), float(ratio.mean()), float(ratio_rest.mean())
+    return rms_percent(x, rest, lengths), float(ratio.mean()), float(ratio_rest.mean())
 
 
 def measure(sim):
