@@ -41,7 +41,7 @@ from hair_tracking.colliders.crease import escape
 from hair_tracking.colliders.head import placed, placed_shape, rotation_entries, to_head
 from hair_tracking.core.kernels import BLOCK, FASTMATH, parallel_and_serial
 from hair_tracking.guides.integrate import (carry_rigid_block, finalize_block, max_step_sq_block,
-                                            predict_block, shape_pulled)
+                                            predict_block, shape_pulled, shape_spring)
 from hair_tracking.guides.pbd_constraints import jacobi_bend_block
 from hair_tracking.guides.split import split_due
 
@@ -449,8 +449,7 @@ def inner_predict_block(state, inv_mass, corr, gravity, step, first, s0, s1, pul
     x, v, x_old = state
     damp, h, s_damp = step
     shape, rest, rot, pos = pull
-    kdt = shape * h
-    keep = 1.0 / (1.0 + kdt * h)
+    spring = shape_spring(shape, h)
     n = x.shape[1]
     inv_h = 1.0 / h
     gx, gy, gz = gravity[0] * h, gravity[1] * h, gravity[2] * h
@@ -479,8 +478,8 @@ def inner_predict_block(state, inv_mass, corr, gravity, step, first, s0, s1, pul
             vy = vy * damp + gy
             vz = vz * damp + gz
             if shape > 0.0:
-                vx, vy, vz = shape_pulled(vx, vy, vz, px, py, pz, rest[s, i], rot, pos, kdt,
-                                          keep)
+                vx, vy, vz = shape_pulled(vx, vy, vz, px, py, pz, rest[s, i], rot, pos,
+                                          spring)
             x[s, i, 0] = px + vx * h
             x[s, i, 1] = py + vy * h
             x[s, i, 2] = pz + vz * h

@@ -118,8 +118,7 @@ def predict_block(state, rest, inv_mass, motion, s0, s1):
     """
     x, v, x_old = state
     rot, pos, rot_rel, pos_prev, gravity, damp, dt, shock, shape = motion
-    kdt = shape * dt
-    keep = 1.0 / (1.0 + kdt * dt)
+    spring = shape_spring(shape, dt)
     n = x.shape[1]
     r00, r01, r02 = rot[0, 0], rot[0, 1], rot[0, 2]
     r10, r11, r12 = rot[1, 0], rot[1, 1], rot[1, 2]
@@ -164,7 +163,7 @@ def predict_block(state, rest, inv_mass, motion, s0, s1):
                 vz = vz * damp + gz
                 if shape > 0.0:
                     vx, vy, vz = shape_pulled(vx, vy, vz, px, py, pz, rest[s, i], rot, pos,
-                                              kdt, keep)
+                                              spring)
                 x[s, i, 0] = px + vx * dt
                 x[s, i, 1] = py + vy * dt
                 x[s, i, 2] = pz + vz * dt
@@ -175,11 +174,20 @@ def predict_block(state, rest, inv_mass, motion, s0, s1):
 
 
 @njit(cache=True, inline='always', fastmath=FASTMATH, error_model='numpy')
-def shape_pulled(vx, vy, vz, px, py, pz, rest_node, rot, pos, kdt, keep):
+def shape_spring(shape, dt):
+    """The shape spring of stiffness ``shape`` [1/s^2] over a step ``dt`` [s] as
+    :func:`shape_pulled` takes it: ``(k dt, 1 / (1 + k dt^2))``."""
+    kdt = shape * dt
+    return kdt, 1.0 / (1.0 + kdt * dt)
+
+
+@njit(cache=True, inline='always', fastmath=FASTMATH, error_model='numpy')
+def shape_pulled(vx, vy, vz, px, py, pz, rest_node, rot, pos, spring):
     """The velocity ``v`` of a node at ``p`` after the shape spring's implicit step toward its
     rest place ``rest_node`` (3,) carried by the head pose ``rot``, ``pos``: ``(v + k dt
-    (target - p)) / (1 + k dt^2)``, with ``kdt = k dt`` and ``keep = 1 / (1 + k dt^2)``
+    (target - p)) / (1 + k dt^2)``, with ``spring`` from :func:`shape_spring`
     (:func:`predict_block`)."""
+    kdt, keep = spring
     bx, by, bz = rest_node[0], rest_node[1], rest_node[2]
     return ((vx + kdt * (rot[0, 0] * bx + rot[0, 1] * by + rot[0, 2] * bz + pos[0] - px)) * keep,
             (vy + kdt * (rot[1, 0] * bx + rot[1, 1] * by + rot[1, 2] * bz + pos[1] - py)) * keep,
