@@ -3,7 +3,8 @@
 ``push_pose(t, p, q)`` feeds the head track, ``advance_to(t)`` steps a fixed-dt accumulator up to
 time ``t`` (integer nanoseconds, so the same inputs give bit-identical outputs), ``frame()``
 returns the strands.  The pipeline is assembled from the scene: without a collider no collision
-stage exists, without ghosts no tracker exists, without a curve no curve is evaluated.
+stage exists, without ghosts no tracker exists, without a curve no curve is evaluated, without
+``groom.detail_nodes`` no detail is kept.
 
 Time handling
 * Each substep samples the head at its own time (interpolated by :class:`HeadTrack`), moves the
@@ -59,6 +60,7 @@ from hair_tracking.core.point_records import points_to_records
 from hair_tracking.core.scene import GUIDES_AMONG_STRANDS, Scene
 from hair_tracking.core.settle import settle as settle_until_still
 from hair_tracking.ghosts.blend import BlendTracker
+from hair_tracking.ghosts.detail import Detail
 from hair_tracking.ghosts.interface import GhostTracking, TrackStep
 from hair_tracking.ghosts.stateless import choose_guides
 from hair_tracking.ghosts.turn import TurnTracker
@@ -78,11 +80,12 @@ class Frame:
     head: HeadPose
     guides: np.ndarray                 # (G, Ng, 3)
     ghosts: Optional[np.ndarray]       # (S, Ns, 3) or None when the scene has no ghosts
-    curves: Optional[np.ndarray] = None  # (S, P, 3) smoothed output strands, if asked for
+    curves: Optional[np.ndarray] = None  # (S, P, 3) the groom's detail or smoothed strands
 
     @property
     def strands(self) -> np.ndarray:
-        """What is shown as hair: smoothed curves, else ghosts, else the guides themselves."""
+        """What is shown as hair: the ghosts' detail (``groom.detail_nodes``) or smoothed
+        curves (``output.curve``), else ghosts, else the guides themselves."""
         if self.curves is not None:
             return self.curves
         return self.ghosts if self.ghosts is not None else self.guides
@@ -185,6 +188,12 @@ class HairSimulator:
         if groom.ghost_rest.shape[0] > 0:
             self.ghosts = StrandSet.from_rest(groom.ghost_rest)
             self.ghost_tracker = self._make_tracker(scene)
+        #: the groom's shape between the ghosts' nodes (``groom.detail_nodes``), or None
+        self.detail = None
+        if self.ghosts is not None and scene.groom.detail_nodes:
+            fine = groom.detail_rest
+            self.detail = Detail(self.ghosts.rest, None if fine is None else
+                                 fine[self.ghost_tracker.permutation], scene.groom.detail_nodes)
         self._x_old = np.empty_like(self.guides.x)
         self._ghost_guide_x = np.empty_like(self.guides.x)   # guides at the last ghost step
         # farthest any hair node can be from the head origin [m]: root distance + strand length
@@ -444,7 +453,9 @@ class HairSimulator:
             s = s.astype(np.float64) if s is not None else None
         out = self.scene.output
         smooth = None
-        if out.curve != 'none':
+        if self.detail is not None:
+            smooth = self.detail.carry(s, np.eye(3) if head_frame else self.head.rotation)
+        elif out.curve != 'none':
             src = s if s is not None else g
             smooth = curves.resample(src, out.points_per_strand, out.curve)
         return Frame(t_ns=self.time_ns or 0, head=self.head, guides=g, ghosts=s, curves=smooth)
@@ -479,12 +490,18 @@ class HairSimulator:
         if head_frame:
             rot, origin = self.head.rotation.T, self.head.position
         tracker = self.ghost_tracker
-        if rows is None and not guides and tracker is not None and \
+        if rows is None and not guides and tracker is not None and self.detail is None and \
                 self.scene.output.curve == 'none':
             s, n = self.ghosts.rest.shape[:2]
             return s, n, lambda words, stride: tracker.write_records(words, stride, rot, origin)
         # the guides as a frame holds them, without the frame's write-back of the ghosts
-        x = self.guides.x if guides else self.frame(copy=False).strands
+        if guides:
+            x = self.guides.x
+        elif self.detail is not None:               # the detail of those strands alone
+            x = self.detail.carry(self._ghost_positions(), self.head.rotation, rows)
+            rows = None
+        else:
+            x = self.frame(copy=False).strands
         if rows is not None:
             x = x[rows]
         return x.shape[0], x.shape[1], \
@@ -657,4 +674,5 @@ def warm_up(scene: Scene, parallel: Optional[Parallelism] = None) -> HairSimulat
     sim.advance_to(1 + 4 * dt_ns)
     sim.max_stretch()
     sim.penetration()
+    sim.frame()                     # the output curves and the groom's detail, if asked for
     return sim

@@ -39,6 +39,7 @@ class Groom:
     ghost_rest: np.ndarray    # (S, Ns, 3) head frame [m]
     guide_index: Optional[np.ndarray] = None
     note: str = ''
+    detail_rest: Optional[np.ndarray] = None    # (S, D, 3): ghost_rest at groom.detail_nodes
 
 
 def make_groom(spec: GroomSpec) -> Groom:

@@ -66,6 +66,7 @@ class GroomSpec:
     ghosts_per_guide: int
     guide_nodes: int
     ghost_nodes: int
+    detail_nodes: int
     length: float
     length_variation: float
     droop: float
@@ -272,6 +273,8 @@ class Scene:
         if 'auto' not in (g.up_axis, g.face_axis) and g.up_axis[-1] == g.face_axis[-1]:
             raise SceneError('groom.face_axis',
                              f'must lie across groom.up_axis {g.up_axis}, got {g.face_axis}')
+        if g.detail_nodes == 1:
+            raise SceneError('groom.detail_nodes', 'must be 0 (off) or at least 2, got 1')
         if g.scalp.front_max_polar_deg > g.scalp.max_polar_deg:
             raise SceneError('groom.scalp.front_max_polar_deg',
                              'must not exceed groom.scalp.max_polar_deg')

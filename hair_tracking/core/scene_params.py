@@ -92,6 +92,12 @@ SCENE_PARAMS: Tuple[Param, ...] = (
          'nodes per guide strand, root included', lo=3, hi=256, rebuild=True),
     _row('groom.ghost_nodes', 'int', 16,
          'nodes per ghost strand, root included', lo=3, hi=256, rebuild=True),
+    _row('groom.detail_nodes', 'int', 0,
+         'points per strand of the groom\'s own shape in the output: every strand kept at this '
+         'many points (an imported one resampled from the file) and carried by its ghost '
+         'between the ghost\'s nodes, so curls finer than ghost_nodes are kept (output.curve '
+         'then does not apply); 0: the ghosts\' nodes are the output; see docs/grooms.md',
+         lo=0, hi=1024, rebuild=True),
     _row('groom.length', 'double', 0.25,
          'mean strand length', unit='m', lo=0.001, hi=5.0, rebuild=True),
     _row('groom.length_variation', 'double', 0.1,

@@ -155,9 +155,9 @@ class _Simulated(Method):
         super().__init__(name, workload, scene, knobs)
         self.sim = HairSimulator(scene, groom=groom, settled=False)
         # the paper tracker stores the ghosts grouped by guide: row i is the user's ghost perm[i]
-        perm = getattr(self.sim.ghost_tracker, 'permutation', None)
+        perm = self.sim.ghost_tracker.permutation if self.sim.ghost_tracker else None
         self._perm = None
-        if perm is not None and np.any(np.asarray(perm) != np.arange(len(perm))):
+        if perm is not None and np.any(perm != np.arange(len(perm))):
             self._perm = np.asarray(perm, dtype=np.int64)
             self._out = np.empty_like(workload.ghost_rest)
 

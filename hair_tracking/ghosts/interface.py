@@ -43,6 +43,9 @@ class GhostTracking(Protocol):
     #: counters of the tracker (at least ``steps`` and ``parallel``: 1 when its kernel runs
     #: the parallel variant)
     stats: Dict[str, int]
+    #: (S,) the ghosts' row order: row ``i`` is the groom's strand ``permutation[i]`` (the
+    #: paper tracker groups them by guide; the others keep the groom's order)
+    permutation: np.ndarray
 
     def step(self, motion: TrackStep) -> None:
         """Move the ghosts after the guides (see :class:`TrackStep`)."""

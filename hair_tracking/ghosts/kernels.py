@@ -45,7 +45,7 @@ from hair_tracking.core.kernels import parallel_and_serial
 
 
 @njit(cache=True, inline='always')
-def _frame_into(guide_x, tan_rest, gi, s, R, Q, q0):
+def segment_frame_into(guide_x, tan_rest, gi, s, R, Q, q0):
     """``Q[q0, s]`` (3, 3) = R_min(R t_rest -> t_now) @ R for segment ``s`` of guide ``gi``
     (written through indices, not a view: creating views in the hot loops costs).
 
@@ -119,11 +119,11 @@ def _frame_into(guide_x, tan_rest, gi, s, R, Q, q0):
 @njit(cache=True, nogil=True, parallel=True)
 def guide_frames_kernel(guide_x, tan_rest, R, out):
     """Frames of every guide segment: ``out[g, s]`` (3, 3) = ``R_min(R t_rest[g, s] -> t_now) R``
-    (see :func:`_frame_into`).  ``guide_x`` (G, M, 3) world [m], ``tan_rest`` (G, M-1, 3) unit rest
-    tangents in the head frame (zero rows for degenerate segments)."""
+    (see :func:`segment_frame_into`).  ``guide_x`` (G, M, 3) world [m], ``tan_rest`` (G, M-1,
+    3) unit rest tangents in the head frame (zero rows for degenerate segments)."""
     for g in prange(guide_x.shape[0]):
         for s in range(guide_x.shape[1] - 1):
-            _frame_into(guide_x, tan_rest, g, s, R, out, g)
+            segment_frame_into(guide_x, tan_rest, g, s, R, out, g)
 
 
 #: Fast-math flags of the tracking kernel: fused multiply-add and reassociation (so that LLVM
@@ -297,7 +297,7 @@ def _track_chunk(c, n_chunks, model, state, motion, params, work):
         if need_target:     # frames Q of the segments of the block's guides
             for gg in range(g1 - g0):
                 for sg in range(m_last + 1):
-                    _frame_into(guide_x, tan_rest, group_guide[g0 + gg], sg, R, Qc, gg)
+                    segment_frame_into(guide_x, tan_rest, group_guide[g0 + gg], sg, R, Qc, gg)
         # the block's state, old x and old v, (N, 3, n) [node][axis][ghost] views of the
         # block arrays, and the new positions in the work space; roots pinned (g)
         b0 = r0 * n_nodes * 3
@@ -717,7 +717,7 @@ def group_blocks(a: np.ndarray, block_rows: np.ndarray) -> np.ndarray:
 
 
 def guide_frames(guide_x: np.ndarray, tan_rest: np.ndarray, rotation: np.ndarray) -> np.ndarray:
-    """(G, M-1, 3, 3) frame of every guide segment (see :func:`_frame_into`)."""
+    """(G, M-1, 3, 3) frame of every guide segment (see :func:`segment_frame_into`)."""
     out = np.empty((guide_x.shape[0], guide_x.shape[1] - 1, 3, 3))
     guide_frames_kernel(np.ascontiguousarray(guide_x, dtype=np.float64),
                         np.ascontiguousarray(tan_rest, dtype=np.float64),

@@ -142,6 +142,7 @@ class StatelessTracker:
         self.ghosts = ghosts
         self.guides = guides
         self.guide_index = np.asarray(guide_index, dtype=np.int64)
+        self.permutation = np.arange(ghosts.count, dtype=np.int64)      # the groom's order
         if self.guide_index.shape != (guides.count,) or \
                 not np.allclose(ghosts.rest[self.guide_index], guides.rest):
             raise ValueError(f'{type(self).__name__}: the guides must be some of the ghost '

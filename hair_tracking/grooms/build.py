@@ -8,7 +8,8 @@ evenly spread over the scalp; fit the roots onto the scalp, add ``groom.file_off
 roots on the scalp and the rest outside it (:mod:`~hair_tracking.grooms.fit`); resample every
 strand by arc length to ``groom.ghost_nodes`` (:mod:`~hair_tracking.grooms.resample`); order
 the strands along the scalp (:func:`~hair_tracking.core.groom.scalp_order`), as the procedural
-ghosts are.
+ghosts are; with ``groom.detail_nodes`` every strand resampled to that many points as well
+(``Groom.detail_rest``, :mod:`hair_tracking.ghosts.detail`).
 
 Groom (:func:`build_groom`): the imported strands are the ghosts; ``groom.guides`` of them
 (at most all) are chosen for coverage of the scalp and the shapes
@@ -212,4 +213,9 @@ def _imported_groom(spec: GroomSpec) -> Groom:
     if spec.ghosts_per_guide == 0:
         empty = np.zeros((0, spec.ghost_nodes, 3))
         return Groom(guide_rest=guide_rest, ghost_rest=empty, note=note)
-    return Groom(guide_rest=guide_rest, ghost_rest=strands, guide_index=index, note=note)
+    detail = None
+    if spec.detail_nodes:
+        detail = resample.resample(imported.placed.select(imported.order), spec.detail_nodes)
+        fit.push_out(detail[:, 1:], spec.scalp.center, spec.scalp.radii)
+    return Groom(guide_rest=guide_rest, ghost_rest=strands, guide_index=index, note=note,
+                 detail_rest=detail)

@@ -57,7 +57,8 @@ def load(name: Optional[str]) -> Optional[Groom]:
             ghosts = z['ghost_rest']
             groom = Groom(guide_rest=z['guide_rest'], ghost_rest=ghosts,
                           guide_index=z['guide_index'] if ghosts.shape[0] else None,
-                          note=str(z['note']))
+                          note=str(z['note']),
+                          detail_rest=z['detail_rest'] if 'detail_rest' in z.files else None)
         os.utime(path)                            # used now: the last to be removed
     except (OSError, ValueError, KeyError):
         return None
@@ -74,8 +75,9 @@ def store(name: Optional[str], groom: Groom) -> None:
     try:
         os.makedirs(where, exist_ok=True)
         index = groom.guide_index if groom.guide_index is not None else np.zeros(0, np.int64)
+        detail = {} if groom.detail_rest is None else {'detail_rest': groom.detail_rest}
         np.savez(tmp, guide_rest=groom.guide_rest, ghost_rest=groom.ghost_rest,
-                 guide_index=index, note=np.str_(groom.note))
+                 guide_index=index, note=np.str_(groom.note), **detail)
         os.replace(tmp, os.path.join(where, f'{name}.npz'))
         entries = sorted((e for e in os.scandir(where) if e.name.endswith('.npz') and
                           not e.name.startswith('.')), key=lambda e: e.stat().st_mtime_ns)
