@@ -29,7 +29,7 @@ from hair_tracking.core.scene_params import GROOM_UNITS
 from hair_tracking.grooms import fit, resample
 from hair_tracking.grooms.formats import read_strands
 from hair_tracking.grooms.guides import choose_guides_by_shape
-from hair_tracking.grooms.polylines import GroomFileError, Polylines
+from hair_tracking.grooms.polylines import bounding_box, GroomFileError, Polylines
 
 
 @dataclass
@@ -118,7 +118,7 @@ def survey(path: str, units: str = 'auto', up_axis: str = 'auto',
                   degenerate=degenerate,
                   lengths=(float(lengths.min()), float(np.median(lengths)),
                            float(lengths.max())),
-                  box=(poly.points.min(axis=0), poly.points.max(axis=0)), unit=unit,
+                  box=bounding_box(poly.points), unit=unit,
                   units_words=unit_words, up=up_axis, up_words=up_words, face=face_axis,
                   face_words=face_words), poly
 
@@ -142,7 +142,8 @@ def import_groom(spec: GroomSpec) -> Imported:
         fit_words = (f'fitted onto the scalp: translated by [{t[0]:.3f}, {t[1]:.3f}, '
                      f'{t[2]:.3f}] m' + (f', scaled by {s:.3f}' if spec.fit == 'scale' else '')
                      + f', roots {100 * rms:.1f} % of the radii off the scalp')
-    points = fit.affine(poly.points, s * axes, t + np.asarray(spec.file_offset))
+    points = fit.affine(poly.points, s * axes, t + np.asarray(spec.file_offset),
+                        in_place=True)                     # the file's points are not kept
     placed, off_cap = _onto_scalp(Polylines(points, poly.counts, poly.format), spec.scalp)
     strands = resample.resample(placed, spec.ghost_nodes)
     fit.push_out(strands[:, 1:], center, radii)
@@ -172,9 +173,8 @@ def _onto_scalp(poly: Polylines, scalp) -> Tuple[Polylines, int]:
     roots = poly.points[starts]
     on = fit.onto_ellipsoid(roots, center, radii)
     moved = int(np.count_nonzero(fit.into_cap(on, center, radii, scalp)))
-    shift = on - roots
     points = poly.points
-    points += np.repeat(shift, poly.counts, axis=0)
+    fit.shift_strands(points, poly.counts, on - roots)
     roots = points[starts]
     fit.push_out(points, center, radii)
     points[starts] = roots

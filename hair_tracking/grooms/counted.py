@@ -7,12 +7,13 @@ tangent x y z and a label for ``.bin`` (``k`` = 7; only x y z are used).
 
 Where each strand starts depends on every count before it, so the counts are found by one walk
 over the strands (a step per strand, not per vertex); the points are then taken out of the file
-in one vectorised gather.
+in one compiled gather.
 """
+from numba import njit
 import numpy as np
 
 from hair_tracking.grooms.polylines import (check_finite, GroomFileError, need, Polylines,
-                                            read_bytes)
+                                            read_bytes, strand_of)
 
 DATA = 'USC-HairSalon .data'
 CT2HAIR = 'CT2Hair .bin'
@@ -64,13 +65,23 @@ def read_counted(path: str, k: int, fmt: str) -> Polylines:
         raise GroomFileError(path, f'byte {end}', f'the end of the file after {strands} '
                              'strands', f'{size - end} more bytes')
     floats = np.frombuffer(data, '<f4', count=pos)
-    keep = np.ones(pos, dtype=bool)
-    keep[0] = False
-    keep[heads] = False
-    cols = floats[keep].reshape(-1, k)
-    with np.errstate(invalid='ignore'):        # a signalling NaN in the file: checked below
-        xyz = cols[:, :3].astype(np.float64)
+    xyz = np.empty((int(counts.sum()), 3))
+    _gather(floats, heads, counts, k, xyz)     # a signalling NaN in the file: checked below
     # vertex i sits after the counts of its strand and those before it
-    strand_of_vertex = np.repeat(np.arange(strands), counts)
-    check_finite(path, xyz, lambda i: 4 * (1 + int(strand_of_vertex[i]) + 1 + k * i))
+    check_finite(path, xyz, lambda i: 4 * (1 + strand_of(counts, i) + 1 + k * i))
     return Polylines(xyz, counts, fmt)
+
+
+@njit(cache=True)
+def _gather(floats, heads, counts, k, out):
+    """x y z (float64) of every vertex into ``out`` (P, 3): strand ``s``'s ``counts[s]``
+    points of ``k`` floats follow its count at word ``heads[s]``."""
+    v = 0
+    for s in range(heads.shape[0]):
+        w = heads[s] + 1
+        for _ in range(counts[s]):
+            out[v, 0] = floats[w]
+            out[v, 1] = floats[w + 1]
+            out[v, 2] = floats[w + 2]
+            v += 1
+            w += k

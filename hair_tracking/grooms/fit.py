@@ -35,6 +35,7 @@ the head frame, the fit of the roots onto the scalp and the rest shape kept outs
 import math
 from typing import Tuple
 
+from numba import njit
 import numpy as np
 
 from hair_tracking.core.groom import in_scalp, polar_limit_deg, REST_CLEARANCE
@@ -260,22 +261,47 @@ def onto_ellipsoid(points: np.ndarray, center, radii) -> np.ndarray:
     return c + rel * a
 
 
+def shift_strands(points: np.ndarray, counts: np.ndarray, shift: np.ndarray) -> None:
+    """Every strand of ``points`` (P, 3; strands of ``counts`` vertices one after another)
+    moved by its row of ``shift`` (S, 3), in place."""
+    _shift_kernel(points, np.ascontiguousarray(counts, dtype=np.int64),
+                  np.ascontiguousarray(shift, dtype=np.float64))
+
+
+@njit(cache=True)
+def _shift_kernel(p, counts, shift):
+    v = 0
+    for s in range(counts.shape[0]):
+        for _ in range(counts[s]):
+            for k in range(3):
+                p[v, k] += shift[s, k]
+            v += 1
+
+
 def push_out(points: np.ndarray, center, radii, factor: float = REST_CLEARANCE) -> np.ndarray:
     """``points`` (..., 3, float64; a view is fine) inside the ellipsoid scaled by ``factor``
     moved along their rays from ``center`` onto it, in place; the others as they are.
     Returns ``points``."""
     c = np.asarray(center, dtype=np.float64)
     a = np.asarray(radii, dtype=np.float64) * factor
-    flat = points.reshape(-1, 3)                  # a copy when ``points`` is a strided view
-    rel = (flat - c) / a
-    inside = np.flatnonzero(np.einsum('ij,ij->i', rel, rel) < 1.0)
-    if inside.size:
-        q = rel[inside]
-        r = np.sqrt(np.einsum('ij,ij->i', q, q))[:, None]
-        flat[inside] = c + q / np.maximum(r, 1e-12) * a
-        if not np.shares_memory(flat, points):
-            points[...] = flat.reshape(points.shape)
+    _push_out_kernel(points.reshape((1,) * (3 - points.ndim) + points.shape), c, a)
     return points
+
+
+@njit(cache=True)
+def _push_out_kernel(p, c, a):
+    """:func:`push_out` of ``p`` (S, N, 3), in place; ``a`` the scaled radii."""
+    for s in range(p.shape[0]):
+        for i in range(p.shape[1]):
+            qx = (p[s, i, 0] - c[0]) / a[0]
+            qy = (p[s, i, 1] - c[1]) / a[1]
+            qz = (p[s, i, 2] - c[2]) / a[2]
+            r2 = qx * qx + qy * qy + qz * qz
+            if r2 < 1.0:
+                r = max(math.sqrt(r2), 1e-12)
+                p[s, i, 0] = c[0] + qx / r * a[0]
+                p[s, i, 1] = c[1] + qy / r * a[1]
+                p[s, i, 2] = c[2] + qz / r * a[2]
 
 
 def into_cap(points: np.ndarray, center, radii, scalp) -> np.ndarray:
@@ -306,13 +332,21 @@ def head_axes(unit: float, up: str, degrees=(0.0, 0.0, 0.0), face: str = '') -> 
     return rotation(degrees) @ axes(up, face) * unit
 
 
-def affine(points: np.ndarray, m: np.ndarray, b) -> np.ndarray:
-    """``points`` (P, 3) mapped to ``m @ p + b`` (a new array; one pass, no BLAS call)."""
-    p = np.asarray(points, dtype=np.float64)
-    out = np.empty_like(p)
-    for i in range(3):
-        out[:, i] = p[:, 0] * m[i, 0]
-        out[:, i] += p[:, 1] * m[i, 1]
-        out[:, i] += p[:, 2] * m[i, 2]
-        out[:, i] += b[i]
+def affine(points: np.ndarray, m: np.ndarray, b, in_place: bool = False) -> np.ndarray:
+    """``points`` (P, 3) mapped to ``m @ p + b``: a new float64 array, or with ``in_place``
+    ``points`` itself where it is a writable contiguous float64 array (one pass, no BLAS
+    call)."""
+    p = np.ascontiguousarray(points)
+    own = in_place and p is points and p.dtype == np.float64 and p.flags.writeable
+    out = p if own else np.empty(p.shape)
+    _affine_kernel(p, np.ascontiguousarray(m, dtype=np.float64),
+                   np.ascontiguousarray(b, dtype=np.float64), out)
     return out
+
+
+@njit(cache=True)
+def _affine_kernel(p, m, b, out):
+    for k in range(p.shape[0]):
+        x, y, z = float(p[k, 0]), float(p[k, 1]), float(p[k, 2])
+        for i in range(3):
+            out[k, i] = x * m[i, 0] + y * m[i, 1] + z * m[i, 2] + b[i]

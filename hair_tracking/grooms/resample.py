@@ -1,8 +1,10 @@
 """Strands of a file made simulation-ready: empty and degenerate strands skipped, a subset kept,
-every strand resampled by arc length to a fixed node count.  All vectorised over the vertices
-(no loop per strand or per vertex)."""
+every strand resampled by arc length to a fixed node count (one compiled pass over the
+vertices)."""
+import math
 from typing import Tuple
 
+from numba import njit
 import numpy as np
 
 from hair_tracking.core.groom import scalp_order
@@ -13,24 +15,21 @@ from hair_tracking.grooms.polylines import Polylines
 DEGENERATE_FRACTION = 1e-6
 
 
-def segment_lengths(poly: Polylines) -> np.ndarray:
-    """Length of each segment (P - 1,) between consecutive vertices of ``poly.points``, 0 where
-    the two vertices belong to different strands."""
-    d = np.diff(poly.points, axis=0)
-    seg = np.sqrt(np.einsum('ij,ij->i', d, d))
-    ends = np.cumsum(poly.counts)[:-1] - 1          # last vertex of every strand but the last
-    seg[ends[(ends >= 0) & (ends < seg.shape[0])]] = 0.0
-    return seg
-
-
-def strand_lengths(poly: Polylines, seg=None) -> np.ndarray:
-    """Arc length of each strand (S,), in the file's units (``seg``: its
-    :func:`segment_lengths`, if known)."""
-    seg = np.concatenate([segment_lengths(poly) if seg is None else seg, [0.0]])
-    out = np.zeros(poly.count)
-    has = poly.counts > 0
-    out[has] = np.add.reduceat(seg, poly.starts[has])
+def strand_lengths(poly: Polylines) -> np.ndarray:
+    """Arc length of each strand (S,), in the file's units."""
+    out = np.empty(poly.count)
+    _lengths_kernel(np.ascontiguousarray(poly.points), np.ascontiguousarray(poly.starts),
+                    np.ascontiguousarray(poly.counts), out)
     return out
+
+
+@njit(cache=True)
+def _lengths_kernel(p, starts, counts, out):
+    for s in range(starts.shape[0]):
+        total = 0.0
+        for i in range(starts[s], starts[s] + counts[s] - 1):
+            total += _length(p, i)
+        out[s] = total
 
 
 def usable(poly: Polylines) -> Tuple[np.ndarray, np.ndarray, int, int]:
@@ -58,32 +57,46 @@ def spread_subset(roots: np.ndarray, count: int) -> np.ndarray:
     return np.sort(order[pick])
 
 
-def resample(poly: Polylines, nodes: int, seg=None) -> np.ndarray:
+def resample(poly: Polylines, nodes: int) -> np.ndarray:
     """Every strand of ``poly`` (none empty) resampled to ``nodes`` points evenly spaced along
-    its arc length, root and tip kept: (S, nodes, 3).  A strand of zero length gives ``nodes``
-    copies of its root.  ``seg``: its :func:`segment_lengths`, if known.
+    its arc length, root and tip kept: (S, nodes, 3) float64.  A strand of zero length gives
+    ``nodes`` copies of its root."""
+    out = np.empty((poly.count, nodes, 3))
+    _resample_kernel(np.ascontiguousarray(poly.points, dtype=np.float64),
+                     np.ascontiguousarray(poly.starts, dtype=np.int64),
+                     np.ascontiguousarray(poly.counts, dtype=np.int64), out)
+    return out
 
-    Each target arc length is found among the strand's cumulative vertex arc lengths by one
-    sorted search over all strands at once (key: strand index + fraction of its length)."""
-    s = poly.count
-    starts, counts = poly.starts, poly.counts
-    seg = np.concatenate([[0.0], segment_lengths(poly) if seg is None else seg])
-    cum = np.cumsum(seg)
-    cum -= np.repeat(cum[starts], counts)                 # arc length from the strand's root
-    total = cum[starts + counts - 1]
-    strand = np.repeat(np.arange(s), counts)
-    frac = cum / np.maximum(np.repeat(total, counts), 1e-300)
-    key = 2.0 * strand + frac
-    u = np.arange(nodes) / (nodes - 1)
-    target = (2.0 * np.arange(s)[:, None] + u[None, :]).ravel()
-    i = np.searchsorted(key, target, side='right') - 1
-    first = np.repeat(starts, nodes)
-    last = np.repeat(starts + counts - 2, nodes)          # last segment's first vertex
-    i = np.clip(i, first, last)
-    want = (np.repeat(total, nodes) * np.tile(u, s))
-    span = cum[i + 1] - cum[i]
-    t = np.where(span > 0.0, (want - cum[i]) / np.where(span > 0.0, span, 1.0), 0.0)
-    t = np.clip(t, 0.0, 1.0)[:, None]
-    p = poly.points
-    out = p[i] + t * (p[i + 1] - p[i])
-    return out.reshape(s, nodes, 3)
+
+@njit(cache=True)
+def _resample_kernel(p, starts, counts, out):
+    """:func:`resample` of the strands ``starts``, ``counts`` of ``p`` (P, 3) into ``out``
+    (S, nodes, 3): each strand's arc length, then one walk along its segments, point ``j`` at
+    ``j / (nodes - 1)`` of it (on the first segment that reaches that far; ties go to the
+    later segment)."""
+    nodes = out.shape[1]
+    for s in range(starts.shape[0]):
+        a, last = starts[s], starts[s] + counts[s] - 2          # the last segment's start
+        total = 0.0
+        for i in range(a, last + 1):
+            total += _length(p, i)
+        i, done, span = a, 0.0, _length(p, a)
+        for j in range(nodes):
+            want = total * (j / (nodes - 1))
+            while i < last and done + span <= want:
+                done += span
+                i += 1
+                span = _length(p, i)
+            t = min(max((want - done) / span, 0.0), 1.0) if span > 0.0 else 0.0
+            for k in range(3):
+                out[s, j, k] = p[i, k] + t * (p[i + 1, k] - p[i, k])
+
+
+@njit(cache=True, inline='always')
+def _length(p, i):
+    """Length of the segment from vertex ``i`` to ``i + 1`` of ``p`` (float64 whatever
+    ``p``'s type)."""
+    dx = float(p[i + 1, 0]) - float(p[i, 0])
+    dy = float(p[i + 1, 1]) - float(p[i, 1])
+    dz = float(p[i + 1, 2]) - float(p[i, 2])
+    return math.sqrt(dx * dx + dy * dy + dz * dz)
