@@ -279,3 +279,19 @@ def test_warmup_needs_no_rclpy_and_leaves_the_node_nothing_to_compile():
     text = until_ready_then_ctrl_c(node, timeout=240.0)
     assert node.returncode == 0 and 'ready:' in text, text
     assert _cache_files(cache) == before
+    # nor does the import of a groom file, or its detail (groom.detail_nodes)
+    code = ('import os, sys, tempfile; import numpy as np; '
+            'from hair_tracking.core.scene import Scene; '
+            'from hair_tracking.ghosts.detail import Detail; '
+            'from hair_tracking.grooms.build import build_groom; '
+            'from hair_tracking.grooms.writers import write_data; '
+            'd = tempfile.mkdtemp(); path = os.path.join(d, "g.data"); '
+            's = np.linspace(0.0, 0.3, 25)[:, None] * np.array([0.2, 0.1, -1.0]); '
+            'roots = np.array([[0.0, 0.0, 0.1], [0.03, 0.0, 0.099], [-0.03, 0.02, 0.098]]); '
+            'pts = (roots[:, None] + s[None]).reshape(-1, 3); '
+            'write_data(path, pts, np.full(3, 25)); '
+            'spec = Scene().with_changes(groom__file=path, groom__guides=2, '
+            'groom__detail_nodes=40).groom; g = build_groom(spec, cache=False); '
+            'Detail(g.ghost_rest, g.detail_rest).carry(g.ghost_rest, np.eye(3)); print("built")')
+    assert run_python(code) == 'built'
+    assert _cache_files(cache) == before
