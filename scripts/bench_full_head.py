@@ -3,7 +3,7 @@
 and 100 k strands.
 
     python scripts/bench_full_head.py [--strands 10000 100000] [--vertices 100] [--frames 60]
-                                      [--threads 2] [--json F]
+                                      [--detail-nodes D] [--threads 2] [--json F]
 
 For each strand count a synthetic groom of ``--vertices`` vertices a strand is written as a
 USC-HairSalon ``.data`` file (``scripts/make_groom_file.py``, into a temporary folder) and the
@@ -14,6 +14,8 @@ cache.  The second simulator then follows the bundled walk at 60 Hz as
 the setup times, the median frame and its parts, the cloud's bytes a frame and the bytes a
 second at 30 Hz, the same of the cloud as the node sends it with the default settings
 (``cloud_max_strands``) and the time to write it, and the process's peak resident memory.
+``--detail-nodes`` sets ``groom.detail_nodes``: the output strands are then the file's shape at
+that many points, carried by the ghosts (:mod:`hair_tracking.ghosts.detail`).
 (``scripts/bench_groom.py`` compares the default frame on an imported groom with the frame on a
 procedural groom of the same counts.)
 """
@@ -49,11 +51,12 @@ CLOUD_HZ = 30.0
 NODE_CLOUDS = 10
 
 
-def one(strands: int, vertices: int, frames: int, folder: str) -> dict:
+def one(strands: int, vertices: int, frames: int, folder: str, detail: int = 0) -> dict:
     """The figures of one strand count (module docstring)."""
     path = os.path.join(folder, f'groom_{strands}.data')
-    make_groom_file.main([path, '--strands', str(strands), '--vertices', str(vertices)])
-    scene = Scene().with_changes(groom__file=path)
+    if not os.path.exists(path):
+        make_groom_file.main([path, '--strands', str(strands), '--vertices', str(vertices)])
+    scene = Scene().with_changes(groom__file=path, groom__detail_nodes=detail)
     t0 = time.perf_counter()
     first = HairSimulator(scene)
     t1 = time.perf_counter()
@@ -71,7 +74,8 @@ def one(strands: int, vertices: int, frames: int, folder: str) -> dict:
         node_bytes = int(encoder.frame(sim, ['points'], 'world', 1)['points'].data.nbytes)
         node_ms.append((time.perf_counter() - c0) * 1e3)
     return {'strands': strands, 'vertices': vertices, 'ghosts': int(sim.ghosts.count),
-            'ghost_nodes': int(sim.ghosts.nodes), 'guides': int(sim.guides.count),
+            'ghost_nodes': int(sim.ghosts.nodes), 'detail_nodes': detail,
+            'guides': int(sim.guides.count),
             'guide_nodes': int(sim.guides.nodes), 'file_bytes': os.path.getsize(path),
             'setup_first_s': t1 - t0, 'setup_cached_s': t3 - t2, 'frames': len(f),
             'frame_median_ms': float(np.median(f)), 'frame_p95_ms': float(np.percentile(f, 95)),
@@ -90,6 +94,8 @@ def main(argv=None):
     ap.add_argument('--strands', type=int, nargs='+', default=[10000, 100000])
     ap.add_argument('--vertices', type=int, default=100)
     ap.add_argument('--frames', type=int, default=60)
+    ap.add_argument('--detail-nodes', type=int, default=0,
+                    help='groom.detail_nodes (0: the ghosts are the output)')
     ap.add_argument('--threads', type=int, default=numba.config.NUMBA_NUM_THREADS)
     ap.add_argument('--json')
     args = ap.parse_args(argv)
@@ -97,12 +103,14 @@ def main(argv=None):
     rows = []
     with tempfile.TemporaryDirectory() as folder:
         for n in args.strands:
-            row = one(n, args.vertices, args.frames, folder)
+            row = one(n, args.vertices, args.frames, folder, args.detail_nodes)
             rows.append(row)
             print(f"{n} strands x {args.vertices} vertices ({row['file_bytes'] / 1e6:.0f} MB): "
                   f"setup {row['setup_first_s']:.1f} s, from the cache "
                   f"{row['setup_cached_s']:.2f} s; simulated {row['guides']} guides x "
-                  f"{row['guide_nodes']}, {row['ghosts']} ghosts x {row['ghost_nodes']}; "
+                  f"{row['guide_nodes']}, {row['ghosts']} ghosts x {row['ghost_nodes']}"
+                  + (f" shown at {args.detail_nodes} points" if args.detail_nodes else '') +
+                  f"; "
                   f"frame median {row['frame_median_ms']:.1f} ms (guides "
                   f"{row['guides_median_ms']:.1f}, ghosts + cloud "
                   f"{row['ghosts_cloud_median_ms']:.1f}); cloud {row['cloud_bytes'] / 1e6:.1f} "

@@ -15,6 +15,11 @@ through the bundled walk (CMU 131_01, 8.3 s), settled again at its last pose and
 again: the RMS node distance from the groomed shape carried by the head over the strand
 length [% L], and the mean end-to-end distance over the arc length of the strands (a curl's
 ratio: 1 straight, lower curled) against the groom's.
+
+Then the output strands as the default scene shows them: ``--guides`` of the strands simulated,
+every strand a ghost of ``groom.ghost_nodes`` (16) nodes, shown at ``--detail`` points
+(``groom.detail_nodes``: the file's shape carried by the ghosts), measured the same way against
+the file's strands at those points, beside the ghosts' own ratio.
 """
 import argparse
 import json
@@ -54,6 +59,38 @@ def measure(sim):
                          sim.guides.strand_length)
 
 
+def run_output(path, stiffness, guides, detail):
+    """The output strands (``groom.detail_nodes`` ``detail``) of the default scene still and
+    after the walk: ``((RMS [% L], ratio, groom's ratio, the ghosts' ratio), (...), stretch)``
+    in the head frame, against the strands at rest."""
+    scene = Scene().with_changes(
+        groom__file=path, groom__guides=guides, groom__detail_nodes=detail,
+        solver__shape_stiffness=stiffness, solver__settle_speed=0.002,
+        solver__max_substeps=10_000)
+    sim = HairSimulator(scene)
+    rest = sim.detail.carry(sim.ghosts.rest, np.eye(3))
+    lengths = np.linalg.norm(np.diff(rest, axis=1), axis=2).sum(axis=1)
+
+    def measured():
+        frame = sim.frame(head_frame=True)
+        g = frame.ghosts
+        ghost_ratio = np.linalg.norm(g[:, -1] - g[:, 0], axis=1) / sim.ghosts.strand_length
+        return shape_figures(frame.curves, rest, lengths) + (float(ghost_ratio.mean()),)
+
+    still = measured()
+    walk_bundled(sim)
+    return still, measured(), float(sim.max_stretch())
+
+
+def walk_bundled(sim):
+    """The bundled walk, then a settle at its last pose."""
+    walk = load_bundled_walk()
+    for t, p, q in zip(walk.t_ns, walk.position, walk.quaternion):
+        sim.push_pose(int(t), p, q)
+        sim.advance_to(int(t))
+    sim.settle()
+
+
 def run(path, stiffness, strands, nodes):
     scene = Scene().with_changes(
         groom__file=path, groom__guides=strands, groom__ghosts_per_guide=0,
@@ -62,11 +99,7 @@ def run(path, stiffness, strands, nodes):
         solver__max_substeps=10_000)
     sim = HairSimulator(scene)
     still = measure(sim)
-    walk = load_bundled_walk()
-    for t, p, q in zip(walk.t_ns, walk.position, walk.quaternion):
-        sim.push_pose(int(t), p, q)
-        sim.advance_to(int(t))
-    sim.settle()
+    walk_bundled(sim)
     return still, measure(sim), float(sim.max_stretch())
 
 
@@ -76,10 +109,13 @@ def main(argv=None):
     ap.add_argument('--nodes', type=int, default=48)
     ap.add_argument('--stiffness', type=float, nargs='+', default=[0.0, 1000.0, 4000.0],
                     help='solver.shape_stiffness values [1/s^2]')
+    ap.add_argument('--guides', type=int, default=16,
+                    help='guides of the output strands\' scene')
+    ap.add_argument('--detail', type=int, default=60, help='groom.detail_nodes of the output')
     ap.add_argument('--md', help='write the table here, with a header')
     ap.add_argument('--json', help='write the figures here')
     args = ap.parse_args(argv)
-    rows = []
+    rows, out_rows = [], []
     with tempfile.TemporaryDirectory() as tmp:
         for style in STYLES:
             path = os.path.join(tmp, f'{style}.data')
@@ -93,10 +129,21 @@ def main(argv=None):
                 print(f'{style:8s} k {k:7g}: still {still[0]:5.2f} % L, ratio {still[1]:.3f} '
                       f'(groom {still[2]:.3f}); after the walk {walked[0]:5.2f} % L, ratio '
                       f'{walked[1]:.3f}; stretch {stretch:.1e}', flush=True)
+            for k in args.stiffness:
+                still, walked, stretch = run_output(path, k, args.guides, args.detail)
+                out_rows.append(dict(style=style, stiffness=k, still_rms=still[0],
+                                     still_ratio=still[1], groom_ratio=still[2],
+                                     ghost_ratio=still[3], walk_rms=walked[0],
+                                     walk_ratio=walked[1], walk_ghost_ratio=walked[3],
+                                     stretch=stretch))
+                print(f'{style:8s} k {k:7g} output at {args.detail} points: still '
+                      f'{still[0]:5.2f} % L, ratio {still[1]:.3f} (groom {still[2]:.3f}, '
+                      f'ghosts {still[3]:.3f}); after the walk {walked[0]:5.2f} % L, ratio '
+                      f'{walked[1]:.3f} (ghosts {walked[3]:.3f})', flush=True)
     record = provenance(command_line('python scripts/style_kept.py', argv or sys.argv[1:]))
     if args.json:
         with open(args.json, 'w', encoding='utf-8') as f:
-            json.dump({'provenance': record, 'rows': rows}, f, indent=1)
+            json.dump({'provenance': record, 'rows': rows, 'output': out_rows}, f, indent=1)
     if args.md:
         lines = ['# Is the groomed style kept?', ''] + markdown_lines(record) + [
             f'{args.strands} strands of each synthetic style, every one an FTL guide of '
@@ -110,6 +157,19 @@ def main(argv=None):
         lines += [f'| {r["style"]} | {r["stiffness"]:g} | {r["still_rms"]:.2f} | '
                   f'{r["still_ratio"]:.3f} ({r["groom_ratio"]:.3f}) | {r["walk_rms"]:.2f} | '
                   f'{r["walk_ratio"]:.3f} | {r["stretch"]:.1e} |' for r in rows]
+        lines += [
+            '', '## The output strands', '',
+            f'The default scene ({args.guides} of the strands simulated, every strand a ghost '
+            f'of 16 nodes) showing groom.detail_nodes {args.detail} points a strand (the '
+            'file\'s shape carried by the ghosts), against the strands at rest at those '
+            'points; the ghosts\' ratio is that of their 16 nodes.', '',
+            '| style | solver.shape_stiffness [1/s^2] | still: from the groom [% L] | still: '
+            'ratio (groom; ghosts) | after the walk: from the groom [% L] | after the walk: '
+            'ratio (ghosts) |', '|---|---:|---:|---:|---:|---:|']
+        lines += [f'| {r["style"]} | {r["stiffness"]:g} | {r["still_rms"]:.2f} | '
+                  f'{r["still_ratio"]:.3f} ({r["groom_ratio"]:.3f}; {r["ghost_ratio"]:.3f}) | '
+                  f'{r["walk_rms"]:.2f} | {r["walk_ratio"]:.3f} ({r["walk_ghost_ratio"]:.3f}) |'
+                  for r in out_rows]
         with open(args.md, 'w', encoding='utf-8') as f:
             f.write('\n'.join(lines) + '\n')
     return 0
