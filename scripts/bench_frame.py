@@ -3,7 +3,7 @@
 for one head pose, the ghosts, and the PointCloud2 bytes of every ghost node.
 
     python scripts/bench_frame.py [--ghosts 100000] [--threads 2] [--frames 240] [--mode turn]
-                                  [--json F]
+                                  [--volume] [--json F]
 
 The default scene (blend tracker, or the tracker ``--mode``; FTL guides at its dt) with
 ``--ghosts`` strands of 16 nodes, one guide per 16 strands, follows the bundled walk recording
@@ -12,7 +12,7 @@ at 60 Hz (every second pose of the 120 Hz recording); each frame is ``push_pose`
 node does (``record_writer``). Kernels are compiled (or loaded) and the first 30 frames run
 before timing. Prints the median, p95 and worst frame and the median of each part: the guide
 substeps (``advance_to``) and the ghosts with the cloud's bytes (the blend or turn runs when
-the cloud reads the ghosts).
+the cloud reads the ghosts).  ``--volume`` turns the hair-hair stage on (``volume.enabled``).
 """
 import argparse
 import json
@@ -101,16 +101,19 @@ def main(argv=None):
     ap.add_argument('--frames', type=int, default=240)
     ap.add_argument('--mode', choices=['blend', 'turn', 'paper'], default=Scene().tracking.mode,
                     help='tracking.mode (default: the default scene\'s)')
+    ap.add_argument('--volume', action='store_true', help='volume.enabled (the hair-hair stage)')
     ap.add_argument('--json')
     args = ap.parse_args(argv)
     numba.set_num_threads(args.threads)
     scene = Scene().with_changes(groom__guides=max(1, args.ghosts // 16),
-                                 groom__ghosts_per_guide=16, tracking__mode=args.mode)
+                                 groom__ghosts_per_guide=16, tracking__mode=args.mode,
+                                 volume__enabled=args.volume)
     warm_up(scene)
     sim = HairSimulator(scene)
     parts = frame_times(sim, args.frames)
     f = np.asarray(parts['frame'])
-    row = {'mode': args.mode, 'ghosts': int(sim.ghosts.count), 'guides': int(sim.guides.count),
+    row = {'mode': args.mode, 'volume': args.volume, 'ghosts': int(sim.ghosts.count),
+           'guides': int(sim.guides.count),
            'threads': args.threads, 'frames': len(f), 'median_ms': float(np.median(f)),
            'p95_ms': float(np.percentile(f, 95)), 'max_ms': float(f.max()),
            'guides_median_ms': statistics.median(parts['guides']),

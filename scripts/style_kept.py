@@ -22,7 +22,6 @@ every strand a ghost of ``groom.ghost_nodes`` (16) nodes, shown at ``--detail`` 
 the file's strands at those points, beside the ghosts' own ratio.
 """
 import argparse
-import json
 import os
 import sys
 import tempfile
@@ -38,7 +37,7 @@ import numpy as np  # noqa: E402
 import groom_files  # noqa: E402
 from hair_tracking.core.scene import Scene  # noqa: E402
 from hair_tracking.evaluation.provenance import command_line  # noqa: E402
-from hair_tracking.evaluation.provenance import markdown_lines, provenance  # noqa: E402
+from hair_tracking.evaluation.provenance import provenance, write_reports  # noqa: E402
 from hair_tracking.motion.pose_table import load_bundled_walk  # noqa: E402
 from hair_tracking.simulator import HairSimulator  # noqa: E402
 from settle_shape import rms_percent  # noqa: E402  (scripts/, the folder of this script)
@@ -141,37 +140,33 @@ def main(argv=None):
                       f'ghosts {still[3]:.3f}); after the walk {walked[0]:5.2f} % L, ratio '
                       f'{walked[1]:.3f} (ghosts {walked[3]:.3f})', flush=True)
     record = provenance(command_line('python scripts/style_kept.py', argv or sys.argv[1:]))
-    if args.json:
-        with open(args.json, 'w', encoding='utf-8') as f:
-            json.dump({'provenance': record, 'rows': rows, 'output': out_rows}, f, indent=1)
-    if args.md:
-        lines = ['# Is the groomed style kept?', ''] + markdown_lines(record) + [
-            f'{args.strands} strands of each synthetic style, every one an FTL guide of '
-            f'{args.nodes} nodes; settled until still, then after the bundled walk and settled '
-            'again.  RMS node distance from the groomed shape over the strand length; ratio: '
-            'mean end-to-end distance over arc length.',
-            '',
-            '| style | solver.shape_stiffness [1/s^2] | still: from the groom [% L] | still: '
-            'ratio (groom) | after the walk: from the groom [% L] | after the walk: ratio | '
-            'max stretch |', '|---|---:|---:|---:|---:|---:|---:|']
-        lines += [f'| {r["style"]} | {r["stiffness"]:g} | {r["still_rms"]:.2f} | '
-                  f'{r["still_ratio"]:.3f} ({r["groom_ratio"]:.3f}) | {r["walk_rms"]:.2f} | '
-                  f'{r["walk_ratio"]:.3f} | {r["stretch"]:.1e} |' for r in rows]
-        lines += [
-            '', '## The output strands', '',
-            f'The default scene ({args.guides} of the strands simulated, every strand a ghost '
-            f'of 16 nodes) showing groom.detail_nodes {args.detail} points a strand (the '
-            'file\'s shape carried by the ghosts), against the strands at rest at those '
-            'points; the ghosts\' ratio is that of their 16 nodes.', '',
-            '| style | solver.shape_stiffness [1/s^2] | still: from the groom [% L] | still: '
-            'ratio (groom; ghosts) | after the walk: from the groom [% L] | after the walk: '
-            'ratio (ghosts) |', '|---|---:|---:|---:|---:|---:|']
-        lines += [f'| {r["style"]} | {r["stiffness"]:g} | {r["still_rms"]:.2f} | '
-                  f'{r["still_ratio"]:.3f} ({r["groom_ratio"]:.3f}; {r["ghost_ratio"]:.3f}) | '
-                  f'{r["walk_rms"]:.2f} | {r["walk_ratio"]:.3f} ({r["walk_ghost_ratio"]:.3f}) |'
-                  for r in out_rows]
-        with open(args.md, 'w', encoding='utf-8') as f:
-            f.write('\n'.join(lines) + '\n')
+    lines = [
+        f'{args.strands} strands of each synthetic style, every one an FTL guide of '
+        f'{args.nodes} nodes; settled until still, then after the bundled walk and settled '
+        'again.  RMS node distance from the groomed shape over the strand length; ratio: '
+        'mean end-to-end distance over arc length.',
+        '',
+        '| style | solver.shape_stiffness [1/s^2] | still: from the groom [% L] | still: '
+        'ratio (groom) | after the walk: from the groom [% L] | after the walk: ratio | '
+        'max stretch |', '|---|---:|---:|---:|---:|---:|---:|']
+    lines += [f'| {r["style"]} | {r["stiffness"]:g} | {r["still_rms"]:.2f} | '
+              f'{r["still_ratio"]:.3f} ({r["groom_ratio"]:.3f}) | {r["walk_rms"]:.2f} | '
+              f'{r["walk_ratio"]:.3f} | {r["stretch"]:.1e} |' for r in rows]
+    lines += [
+        '', '## The output strands', '',
+        f'The default scene ({args.guides} of the strands simulated, every strand a ghost '
+        f'of 16 nodes) showing groom.detail_nodes {args.detail} points a strand (the '
+        'file\'s shape carried by the ghosts), against the strands at rest at those '
+        'points; the ghosts\' ratio is that of their 16 nodes.', '',
+        '| style | solver.shape_stiffness [1/s^2] | still: from the groom [% L] | still: '
+        'ratio (groom; ghosts) | after the walk: from the groom [% L] | after the walk: '
+        'ratio (ghosts) |', '|---|---:|---:|---:|---:|---:|']
+    lines += [f'| {r["style"]} | {r["stiffness"]:g} | {r["still_rms"]:.2f} | '
+              f'{r["still_ratio"]:.3f} ({r["groom_ratio"]:.3f}; {r["ghost_ratio"]:.3f}) | '
+              f'{r["walk_rms"]:.2f} | {r["walk_ratio"]:.3f} ({r["walk_ghost_ratio"]:.3f}) |'
+              for r in out_rows]
+    write_reports(record, args.json, {'rows': rows, 'output': out_rows}, args.md,
+                  'Is the groomed style kept?', lines)
     return 0
 
 

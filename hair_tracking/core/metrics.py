@@ -54,3 +54,18 @@ def position_error(x: np.ndarray, ref: np.ndarray, strand_length: np.ndarray):
 def tip_error(x: np.ndarray, ref: np.ndarray, strand_length: np.ndarray) -> float:
     """Mean tip distance to the reference divided by strand length."""
     return float(np.mean(np.linalg.norm(x[:, -1] - ref[:, -1], axis=1) / strand_length))
+
+
+def hair_layer(x: np.ndarray, center, radii, cap_deg: float = 60.0):
+    """How thick the hair lies on the head: the 10-90 % spread of the distances [m] of the
+    nodes ``x`` (..., 3, head frame) within ``cap_deg`` of the top from the ellipsoid
+    ``center``, ``radii`` (along each node's ray from the centre), and their median.  Returns
+    ``(spread, median, nodes counted)``."""
+    q = np.asarray(x, dtype=np.float64).reshape(-1, 3) - np.asarray(center, dtype=np.float64)
+    dist = np.linalg.norm(q, axis=1)
+    rel = np.linalg.norm(q / np.asarray(radii, dtype=np.float64), axis=1)
+    top = (dist > 0.0) & (q[:, 2] > np.cos(np.radians(cap_deg)) * dist)
+    d = ((rel - 1.0) * dist / np.maximum(rel, 1e-300))[top]
+    if d.size == 0:
+        return 0.0, 0.0, 0
+    return float(np.percentile(d, 90) - np.percentile(d, 10)), float(np.median(d)), int(d.size)

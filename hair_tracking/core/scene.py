@@ -159,6 +159,16 @@ class SolverSpec:
     settle_speed: float
 
 
+@_section('volume.')
+class VolumeSpec:
+    """Hair-hair interaction through a grid on the head (:mod:`hair_tracking.guides.volume`)."""
+
+    enabled: bool
+    cell_size: float
+    pressure: float
+    friction: float
+
+
 @_section('tracking.')
 class TrackingSpec:
     """How the ghosts follow the guides."""
@@ -216,6 +226,7 @@ class Scene:
     body: BodySpec
     colliders: CollidersSpec
     solver: SolverSpec
+    volume: VolumeSpec
     tracking: TrackingSpec
     head_track: HeadTrackSpec
     people: PeopleSpec

@@ -224,6 +224,19 @@ SCENE_PARAMS: Tuple[Param, ...] = (
          'after solver.settle_time, keep settling (0.1 s at a time, at most 30 s in all) until '
          'no hair node moved faster than this over the last 0.1 s, so the hair starts near its '
          'settled shape; 0 settles exactly solver.settle_time', unit='m/s', lo=0.0, hi=10.0),
+    _row('volume.enabled', 'bool', False,
+         'hair-hair interaction through a grid on the head: the guides push apart where they '
+         'are denser than the groom at rest, and move together (docs/volume.md); off: the '
+         'stage is not built'),
+    _row('volume.cell_size', 'double', 0.025,
+         'edge of the grid\'s cells, about the spacing of the guides\' roots', unit='m',
+         lo=0.002, hi=0.5),
+    _row('volume.pressure', 'double', 30.0,
+         'push out of cells denser than at rest: the acceleration per unit of excess density '
+         '(over the mean rest density) per cell; 0 none', unit='m/s^2', lo=0.0, hi=10_000.0),
+    _row('volume.friction', 'double', 20.0,
+         'rate at which a node\'s velocity turns into the grid\'s there (hair-hair friction); '
+         '0 none', unit='1/s', lo=0.0, hi=1000.0),
     _row('tracking.mode', 'string', 'blend',
          'ghost tracker: paper (Park & Kim: velocity transfer, weights (4)-(5), centre-of-mass '
          'tracking, every substep) or blend (each ghost the blended points of its '

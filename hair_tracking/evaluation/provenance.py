@@ -62,3 +62,18 @@ def markdown_lines(record: dict) -> List[str]:
     """The header lines of a Markdown report (a list, a blank line after it)."""
     return [f"- Date: {record['date']}", f'- Machine: {machine_text(record)}',
             f"- Command: `{record['command']}`", '']
+
+
+def write_reports(record: dict, json_path: Optional[str] = None, figures: Optional[dict] = None,
+                  md_path: Optional[str] = None, title: str = '',
+                  body: Sequence[str] = ()) -> None:
+    """A script's reports: ``figures`` as JSON beside its ``provenance`` record at
+    ``json_path``, and a Markdown page at ``md_path``: ``# title``, the record's header lines
+    (:func:`markdown_lines`), then ``body`` (lines); each only when its path is given."""
+    import json
+    if json_path:
+        with open(json_path, 'w', encoding='utf-8') as f:
+            json.dump({'provenance': record, **(figures or {})}, f, indent=1)
+    if md_path:
+        with open(md_path, 'w', encoding='utf-8') as f:
+            f.write('\n'.join([f'# {title}', ''] + markdown_lines(record) + list(body)) + '\n')

@@ -453,6 +453,24 @@ def matrix(quick: bool = False, tracking_mode: Optional[str] = None) -> List[Cas
                 _scene(solver, solver__shape_stiffness=k, solver__dt=dt), fast[0][1],
                 f'solver.shape_stiffness {k:g} 1/s^2 at dt 1/{1 / dt:.0f} s (k dt^2 = '
                 f'{k * dt * dt:.3g}); ' + fast[0][2])
+    # -- hair-hair interaction through the grid (volume.enabled)
+    vol = dict(volume__enabled=True)
+    for solver in (('ftl',) if quick else SOLVERS):
+        add(f'{solver} volume, shake 50 rad/s', 'volume', _scene(solver, **vol), fast[0][1],
+            fast[0][2] + '; volume.enabled')
+    add('ftl volume, spin 50 rad/s', 'volume', _scene('ftl', **vol), fast[1][1],
+        fast[1][2] + '; volume.enabled')
+    add('ftl volume, teleport 1 m', 'volume', _scene('ftl', **vol), lambda: sm.teleport(1.0),
+        'still head jumps 1 m between two samples; volume.enabled', expect={'min_resets': 1})
+    add('pbd volume, stiff 200 it', 'volume',
+        _scene('pbd', solver__iterations=200, solver__stiffness=1.0, **vol), shake,
+        'stiffness 1, 200 iterations, 10 rad/s shake; volume.enabled')
+    add('ftl volume, segment 1 mm', 'volume', _scene('ftl', groom__length=0.015, **vol), shake,
+        'segments of 1 mm (strands 1.5 cm), 10 rad/s shake; volume.enabled')
+    if not quick:
+        add('ftl volume, long hair on the bust, shake 50 rad/s', 'volume',
+            long_hair.with_changes(**vol), fast[0][1],
+            fast[0][2] + '; 55 cm hair on the shoulders (body.bust); volume.enabled')
     # -- invalid poses
     for solver in (('ftl',) if quick else SOLVERS):
         def glitches(solver=solver):

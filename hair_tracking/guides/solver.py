@@ -61,6 +61,7 @@ from hair_tracking.core.metrics import max_stretch
 from hair_tracking.core.model import HeadPose, StrandSet
 from hair_tracking.guides import pbd_constraints
 from hair_tracking.guides.split import split_due
+from hair_tracking.guides.volume import VolumeGrid
 
 #: Substep [s] at which ``solver.bend_stiffness`` applies as given to FTL (the default dt), and
 #: the longest inner step of an FTL substep; see :func:`ftl_bend_stiffness` and
@@ -135,6 +136,10 @@ class GuideSolver:
         need_ref = self.collider is not None and self.collider.friction > 0.0
         self._x_ref = np.empty_like(strands.x) if need_ref else None
         self._x_before = np.empty_like(strands.x)      # advance(measure=True)'s work space
+        #: the hair-hair stage after every substep (``volume.enabled``), or None
+        self.volume = VolumeGrid(strands.rest, strands.inv_mass, scene.volume) \
+            if scene.volume.enabled else None
+        self._since, self._since_s = 0, 0.0     # substeps and seconds since the stage ran
         self._counters = {'substeps': 0, 'clamped': 0, 'clamped_total': 0,
                           'contacts': 0, 'contacts_total': 0}
 
@@ -144,6 +149,10 @@ class GuideSolver:
         self.strands.place_at(head)
         for key in self._counters:
             self._counters[key] = 0
+
+    def zero_velocities(self) -> None:
+        """The strands at rest where they are."""
+        self.strands.v[...] = 0.0
 
     def set_gravity(self, gravity) -> None:
         """Gravity [m/s^2] (3,) in the fixed frame of the head poses from the next substep on
@@ -173,6 +182,7 @@ class GuideSolver:
     def step(self, dt: float, head_prev: HeadPose, head: HeadPose) -> None:
         """Advance one substep ``dt`` [s] while the head moves from ``head_prev`` to ``head``."""
         self._step(dt, head_prev, head, self.parallel)
+        self._volume(dt, 1, head)
 
     def advance(self, dt: float, head_prev: HeadPose, heads: Sequence[HeadPose],
                 measure: bool = False, stop=None) -> Optional[np.ndarray]:
@@ -189,8 +199,27 @@ class GuideSolver:
         heads = list(heads)
         if not heads:
             return np.zeros(0) if measure else None
+        if self.volume is None:
+            return self._advance(dt, head_prev, heads, measure, stop)
+        # the volume stage every volume_period(dt) substeps, counted across calls
+        out, k, prev = [], 0, head_prev
+        while k < len(heads):
+            n = min(max(1, self.volume.period(dt) - self._since), len(heads) - k)
+            part = None if stop is None else (stop[0][k:k + n], stop[1], stop[2])
+            steps = self._advance(dt, prev, heads[k:k + n], measure, part)
+            taken = n if steps is None else len(steps)
+            if measure:
+                out.append(steps)
+            self._volume(dt, taken, heads[k + taken - 1])
+            if taken < n:
+                break                               # the split rule stopped the run
+            k, prev = k + n, heads[k + n - 1]
+        return np.concatenate(out) if measure else None
+
+    def _advance(self, dt: float, head_prev: HeadPose, heads: list, measure: bool, stop):
+        """:meth:`advance` without the volume stage."""
         if len(heads) == 1 and not measure:
-            self.step(dt, head_prev, heads[0])      # one substep: the one-substep kernels
+            self._step(dt, head_prev, heads[0], self.parallel)    # the one-substep kernels
             return None
         rule = stop is not None and measure and stop[1] > 0.0
         return self._run(dt, head_prev, heads, measure, stop if rule else None)
@@ -199,6 +228,20 @@ class GuideSolver:
         """Room for the guides of ``places`` heads advanced together in one compiled call
         (:class:`HeadBatch`), or None where this solver takes one call a head."""
         return None
+
+    def _volume(self, dt: float, taken: int, head: HeadPose) -> None:
+        """Count ``taken`` substeps ``dt`` (the last at the head pose ``head``) toward the
+        volume stage (``volume.enabled``), and run it when its period is full
+        (:meth:`~hair_tracking.guides.volume.VolumeGrid.period`), over the time since it last
+        ran."""
+        if self.volume is None:
+            return
+        self._since += taken
+        self._since_s += taken * dt
+        if self._since >= self.volume.period(dt):
+            rot, pos = _pose('head', head)
+            self.volume.apply(self.strands.x, self.strands.v, rot, pos, self._since_s)
+            self._since, self._since_s = 0, 0.0
 
     @property
     def stats(self) -> Dict[str, Any]:
@@ -371,8 +414,9 @@ class FtlSolver(GuideSolver):
 
     def head_batch(self, places: int) -> Optional['HeadBatch']:
         """Room for ``places`` heads' guides (:class:`HeadBatch`); None with a body, whose
-        contact stage takes one call a substep."""
-        return HeadBatch(self, places) if self.body is None else None
+        contact stage takes one call a substep, and with the volume stage, which couples the
+        strands after every call."""
+        return HeadBatch(self, places) if self.body is None and self.volume is None else None
 
     def _project(self, state, motion, dt, parallel, fused):
         if self.collider is not None:

@@ -1,0 +1,146 @@
+"""volume.enabled: the guides push apart where they are denser than at rest and move together,
+through a grid fixed to the head (hair_tracking.guides.volume)."""
+import os
+
+import numpy as np
+import pytest
+
+from hair_tracking.core.metrics import hair_layer
+from hair_tracking.core.model import StrandSet
+from hair_tracking.core.scene import Scene
+from hair_tracking.guides.volume import MAX_CELLS, VolumeGrid
+from hair_tracking.people.crowd import Crowd
+from hair_tracking.simulator import HairSimulator
+
+pytestmark = pytest.mark.usefixtures('one_numba_thread')
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+LONG_HAIR = Scene.from_yaml(os.path.join(ROOT, 'config', 'scene_long_hair.yaml')).with_changes(
+    groom__ghosts_per_guide=4)
+
+
+def layer(sim):
+    """The hair layer on the top of the head (:func:`~hair_tracking.core.metrics.hair_layer`
+    of the output strands): ``(spread, median)`` [m]."""
+    c = sim.scene.collider
+    return hair_layer(sim.frame(head_frame=True).strands, c.center, c.radii)[:2]
+
+
+def test_off_builds_no_stage_and_on_the_grid_keeps_its_size_whatever_the_motion():
+    sim = HairSimulator(Scene())
+    assert sim.guide_solver.volume is None
+    sim = HairSimulator(Scene().with_changes(volume__enabled=True))
+    grid = sim.guide_solver.volume
+    cells, shape = grid.cells, grid.grid.shape
+    for k, (p, turn) in enumerate([([0.0, 0.0, 0.0], 0.0), ([0.3, 0.0, 0.0], 2.0),
+                                   ([5.0, -3.0, 1.0], 3.0)]):        # moves, turns, a teleport
+        t = 10**9 + k * 50_000_000
+        sim.push_pose(t, p, [0.0, 0.0, np.sin(turn / 2), np.cos(turn / 2)])
+        sim.advance_to(t)
+    assert grid.cells == cells and grid.grid.shape == shape and cells <= MAX_CELLS
+    assert not grid.grid.any()                       # the touched cells were cleared
+
+
+def test_long_hair_on_a_still_head_has_volume_and_comes_to_rest():
+    """The done-when of the volume stage: with it, the layer of long hair on the top of a still
+    head is at least 1.5 times as thick as without; lengths, the collider's margin and rest
+    are kept."""
+    still = dict(solver__settle_speed=0.002, solver__max_substeps=10_000)
+    flat = HairSimulator(LONG_HAIR.with_changes(**still))
+    full = HairSimulator(LONG_HAIR.with_changes(volume__enabled=True, **still))
+    (thin, _), (thick, median) = layer(flat), layer(full)
+    assert thick >= 1.5 * thin, (thick, thin)
+    assert full.settled_s < 29.0                     # came to rest before the settle's cap
+    assert full.guide_solver.stats['max_stretch'] < 1e-9       # FTL's lengths, exact
+    assert full.max_stretch() <= 0.01
+    assert full.penetration() <= LONG_HAIR.collider.margin
+    assert median > layer(flat)[1]
+
+
+def strands_around(count=9, nodes=6, spread=0.03):
+    """``count`` straight strands hanging from a row of roots ``spread`` apart (head frame)."""
+    rest = np.zeros((count, nodes, 3))
+    rest[:, :, 0] = (np.arange(count) - count // 2)[:, None] * spread
+    rest[:, :, 1] = 0.2
+    rest[:, :, 2] = 0.1 - np.linspace(0.0, 0.1, nodes)[None, :]
+    return StrandSet.from_rest(rest)
+
+
+def test_the_stage_changes_velocities_only_and_pushes_dense_hair_apart():
+    st = strands_around()
+    grid = VolumeGrid(st.rest, st.inv_mass,
+                      Scene().with_changes(volume__pressure=50.0, volume__friction=0.0).volume)
+    x = st.rest.copy()
+    x[:, :, 0] *= 0.1                               # squeezed together: ten times the density
+    v = np.zeros_like(x)
+    x0 = x.copy()
+    grid.apply(x, v, np.eye(3), np.zeros(3), 1 / 240)
+    assert np.array_equal(x, x0)
+    free = st.inv_mass > 0
+    assert np.all(v[~free] == 0.0)
+    side = np.sign(x[:, :, 0])[free]
+    outward = (v[:, :, 0][free] * side)[side != 0]
+    assert outward.min() > 0.0                     # every side node pushed away from the middle
+    # turned with the head: the same push, turned
+    c, s = np.cos(0.7), np.sin(0.7)
+    rot = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    pos = np.array([1.0, 2.0, 0.5])
+    w = np.zeros_like(x)
+    grid.apply(x0 @ rot.T + pos, w, rot, pos, 1 / 240)
+    np.testing.assert_allclose(w, v @ rot.T, atol=1e-12)
+
+
+def test_friction_moves_velocities_together_and_keeps_their_sum():
+    st = strands_around(spread=0.004)
+    grid = VolumeGrid(st.rest, st.inv_mass,
+                      Scene().with_changes(volume__pressure=0.0, volume__friction=200.0).volume)
+    rng = np.random.default_rng(3)
+    v = rng.normal(size=st.rest.shape) * (st.inv_mass > 0)[..., None]
+    before = v.copy()
+    grid.apply(st.rest.copy(), v, np.eye(3), np.zeros(3), 1 / 240)
+    np.testing.assert_allclose(v.sum(axis=(0, 1)), before.sum(axis=(0, 1)), atol=1e-9)
+    assert v[st.inv_mass > 0].var(axis=0).sum() < 0.7 * before[st.inv_mass > 0].var(axis=0).sum()
+
+
+def test_a_grid_finer_than_the_bound_takes_a_larger_cell():
+    long = HairSimulator(LONG_HAIR.with_changes(volume__enabled=True, volume__cell_size=0.002,
+                                                solver__settle_time=0.0))
+    grid = long.guide_solver.volume
+    assert grid.cells <= MAX_CELLS and grid.h > 0.002
+
+
+def test_people_each_have_their_own_volume():
+    """Several heads: the guide solver takes one call a person with the stage on (it couples
+    a person's strands after every substep), and each person's hair keeps its lengths."""
+    scene = Scene().with_changes(volume__enabled=True, groom__guides=16,
+                                 groom__ghosts_per_guide=2, solver__settle_time=0.0)
+    crowd = Crowd(scene, places=3)
+    assert not crowd.batched
+    for k in range(12):
+        t = 10**9 + k * 16_666_667
+        for i, name in enumerate(('a', 'b', 'c')):
+            pose = (t, [0.5 * i, 0.02 * np.sin(k), 0.0], [0.0, 0.0, 0.0, 1.0])
+            (crowd.add if k == 0 else crowd.push_pose)(name, *pose)
+        crowd.advance_to(t)
+    for name in ('a', 'b', 'c'):
+        sim = crowd.people[name]
+        assert sim.guide_solver.volume is not None
+        assert sim.guide_solver.stats['max_stretch'] < 1e-9
+
+
+def test_the_stage_runs_on_a_fixed_period_however_the_solver_is_called():
+    """Eight substeps in one call or one at a time: the same hair (the stage runs every
+    PERIOD_S of substeps, counted across calls)."""
+    from hair_tracking.core.head_track import head_pose
+    scene = Scene().with_changes(volume__enabled=True, groom__guides=12,
+                                 groom__ghosts_per_guide=0, solver__settle_time=0.0)
+    a, b = HairSimulator(scene), HairSimulator(scene)
+    dt = scene.solver.dt
+    poses = [head_pose([0.01 * k, 0.0, 0.0], [0.0, 0.0, np.sin(0.05 * k), np.cos(0.05 * k)])
+             for k in range(9)]
+    a.guide_solver.advance(dt, poses[0], poses[1:])
+    for k in range(8):
+        b.guide_solver.step(dt, poses[k], poses[k + 1])
+    assert a.guide_solver.volume.period(dt) == 4
+    np.testing.assert_allclose(a.guides.x, b.guides.x, atol=1e-12)
+    np.testing.assert_allclose(a.guides.v, b.guides.v, atol=1e-9)
