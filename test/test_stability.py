@@ -44,7 +44,8 @@ def test_reduced_matrix_case_passes(case):
 def test_reduced_matrix_covers_the_issue():
     groups = {c.group for c in QUICK}
     assert groups == {'iterations', 'segment length', 'time step', 'head speed', 'teleport',
-                      'gravity', 'invalid poses', 'pose rate', 'long run', 'shape spring'}
+                      'gravity', 'invalid poses', 'pose rate', 'long run', 'shape spring',
+                      'volume'}
     names = ' '.join(c.name for c in QUICK)
     for needle in ('1 it', '200 it', '1 mm', '100 mm', '1/1000', '1/10 s', '50 rad/s',
                    '20 m/s', 'teleport 1 m', '10 g', 'NaN', '1 kHz', 'shape stiffness 1e+06'):
