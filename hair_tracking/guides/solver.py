@@ -195,7 +195,8 @@ class GuideSolver:
         (:meth:`~hair_tracking.guides.split.SplitRule.stop`, ``rigid`` one value a substep): the
         run stops before the first substep after the first that the rule would split
         (:func:`~hair_tracking.guides.split.split_due`), and the displacements returned are
-        those of the substeps taken."""
+        those of the substeps taken.  With the volume stage (``volume.enabled``) the substeps
+        run in parts that end where the stage is due (:meth:`_volume`)."""
         heads = list(heads)
         if not heads:
             return np.zeros(0) if measure else None

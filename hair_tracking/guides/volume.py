@@ -24,7 +24,7 @@ solver's pass puts the lengths back (exactly, under FTL); running every few subs
 the solver's compiled runs of those substeps as they are. The grid is a cube around the head
 (side twice the hair's reach: root distance plus strand length, and cells of padding), so its
 memory is set by the groom and ``volume.cell_size`` and does not grow with any motion; a node
-outside it is left alone. Only the cells the nodes touch are cleared after a call.
+outside it is left alone. Only the cells the nodes touch are cleared after a run.
 """
 import math
 
@@ -33,7 +33,8 @@ from numba import njit
 
 from hair_tracking.core.kernels import FASTMATH
 
-#: Most cells a grid may have (16 M float64 fields of this size would be 0.5 GB).
+#: Most cells a grid may have (its density and velocity then take 128 MB, the rest density
+#: 32 MB).
 MAX_CELLS = 4_000_000
 #: [s] how often the stage runs: every substep when they are at least this long, else every
 #: ``round(PERIOD_S / dt)`` substeps, whichever way the solver is called (a pose's substeps at
