@@ -394,7 +394,7 @@ class HairSimulator:
 
     def zero_velocities(self) -> None:
         """The hair at rest where it is: the guides' and the ghosts' velocities zero."""
-        self.guide_solver.zero_velocities()
+        self.guides.v[...] = 0.0
         if self.ghost_tracker is not None:
             self.ghost_tracker.zero_velocities()
         self.speed = 0.0
@@ -627,7 +627,7 @@ class HairSimulator:
         the body's bust, which does not move with the head."""
         self.guides.x[...] = carry_rigidly(self.guides.x, old, new)
         self.guide_solver.leave_body(new)
-        self.guide_solver.zero_velocities()
+        self.guides.v[...] = 0.0
         if self.ghost_tracker is not None:
             self.ghost_tracker.carry(old, new)
         self.speed = 0.0

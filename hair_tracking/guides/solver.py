@@ -136,7 +136,7 @@ class GuideSolver:
         need_ref = self.collider is not None and self.collider.friction > 0.0
         self._x_ref = np.empty_like(strands.x) if need_ref else None
         self._x_before = np.empty_like(strands.x)      # advance(measure=True)'s work space
-        #: the hair-hair stage after every substep (``volume.enabled``), or None
+        #: the hair-hair stage (``volume.enabled``, every VolumeGrid.period substeps), or None
         self.volume = VolumeGrid(strands.rest, strands.inv_mass, scene.volume) \
             if scene.volume.enabled else None
         self._since, self._since_s = 0, 0.0     # substeps and seconds since the stage ran
@@ -149,10 +149,6 @@ class GuideSolver:
         self.strands.place_at(head)
         for key in self._counters:
             self._counters[key] = 0
-
-    def zero_velocities(self) -> None:
-        """The strands at rest where they are."""
-        self.strands.v[...] = 0.0
 
     def set_gravity(self, gravity) -> None:
         """Gravity [m/s^2] (3,) in the fixed frame of the head poses from the next substep on
