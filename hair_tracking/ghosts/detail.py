@@ -30,7 +30,7 @@ import numpy as np
 from numba import njit, prange
 
 from hair_tracking.core.kernels import FASTMATH
-from hair_tracking.ghosts.kernels import segment_frame_into
+from hair_tracking.ghosts.kernels import rest_tangents, segment_frame_into
 
 #: Work items of :func:`carry_kernel`'s parallel loop (each with its own turn scratch).
 CHUNKS = 64
@@ -68,9 +68,7 @@ class Detail:
         else:
             self.offsets = (np.asarray(fine_rest, dtype=np.float64)
                             - on_segments(rest, self.seg, self.frac)).astype(np.float32)
-        d = np.diff(rest, axis=1)
-        length = np.linalg.norm(d, axis=2, keepdims=True)
-        self.tan_rest = np.where(length > 1e-12, d / np.maximum(length, 1e-300), 0.0)
+        self.tan_rest = rest_tangents(rest)
 
     @property
     def points(self) -> int:

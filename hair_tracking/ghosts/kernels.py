@@ -716,6 +716,16 @@ def group_blocks(a: np.ndarray, block_rows: np.ndarray) -> np.ndarray:
     return out
 
 
+def rest_tangents(rest: np.ndarray) -> np.ndarray:
+    """Unit directions (S, N - 1, 3) of the segments of ``rest`` (S, N, 3), zero rows for
+    degenerate segments (shorter than 1e-12 m): the ``tan_rest`` of
+    :func:`segment_frame_into`."""
+    tan = np.diff(np.asarray(rest, dtype=np.float64), axis=1)
+    norm = np.linalg.norm(tan, axis=2, keepdims=True)
+    return np.ascontiguousarray(np.where(norm > 1e-12, tan / np.where(norm > 1e-12, norm, 1.0),
+                                         0.0))
+
+
 def guide_frames(guide_x: np.ndarray, tan_rest: np.ndarray, rotation: np.ndarray) -> np.ndarray:
     """(G, M-1, 3, 3) frame of every guide segment (see :func:`segment_frame_into`)."""
     out = np.empty((guide_x.shape[0], guide_x.shape[1] - 1, 3, 3))

@@ -51,8 +51,8 @@ from hair_tracking.core.scene import Scene
 from hair_tracking.ghosts.correspondence import assign_guides, node_correspondence
 from hair_tracking.ghosts.interface import TrackStep
 from hair_tracking.ghosts.kernels import (block_groups, chunk_count, copy_blocks, GhostModel,
-                                          group_blocks, guide_frames, TMP_ROWS, track_groups,
-                                          track_groups_serial, TrackWork)
+                                          group_blocks, guide_frames, rest_tangents, TMP_ROWS,
+                                          track_groups, track_groups_serial, TrackWork)
 from hair_tracking.ghosts.weights import elastic_code, tip_weights
 from hair_tracking.guides.ftl import ftl_restore_shapes
 
@@ -177,10 +177,7 @@ class GhostTracker:
                 self._group_row[g] = r[0]
         length = ghosts.strand_length[o]
         self._inv_len = np.where(length > 0.0, 1.0 / np.where(length > 0.0, length, 1.0), 0.0)
-        tan = np.diff(gr, axis=1)
-        norm = np.linalg.norm(tan, axis=2, keepdims=True)
-        self._tan_rest = np.ascontiguousarray(
-            np.where(norm > 1e-12, tan / np.where(norm > 1e-12, norm, 1.0), 0.0))
+        self._tan_rest = rest_tangents(gr)
         self._elastic = elastic_code(tr)
 
         # -- scratch
