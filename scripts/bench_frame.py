@@ -12,7 +12,9 @@ at 60 Hz (every second pose of the 120 Hz recording); each frame is ``push_pose`
 node does (``record_writer``). Kernels are compiled (or loaded) and the first 30 frames run
 before timing. Prints the median, p95 and worst frame and the median of each part: the guide
 substeps (``advance_to``) and the ghosts with the cloud's bytes (the blend or turn runs when
-the cloud reads the ghosts).  ``--volume`` turns the hair-hair stage on (``volume.enabled``).
+the cloud reads the ghosts).  ``--volume`` turns the hair-hair stage on (``volume.enabled``)
+and also prints the stage's own time a frame (within the guide substeps) and its share of
+each frame (median).
 """
 import argparse
 import json
@@ -51,6 +53,16 @@ class FrameClock:
         self.idx = np.arange(0, len(poses), 2)
         self.cloud = CloudBuffer()
         self.rgb = pack_rgb_u32(np.ones((sim.ghosts.count, 4)))
+        self.volume_ms = 0.0
+        grid = sim.guide_solver.volume
+        if grid is not None:                # the stage's own time, wherever in a frame it runs
+            apply = grid.apply
+
+            def timed(*args):
+                t0 = time.perf_counter()
+                apply(*args)
+                self.volume_ms += (time.perf_counter() - t0) * 1e3
+            grid.apply = timed
 
     def __len__(self):
         return len(self.idx)
@@ -58,6 +70,7 @@ class FrameClock:
     def frame(self, k):
         sim, poses, i = self.sim, self.poses, self.idx[k]
         t = int(poses.t_ns[i])
+        self.volume_ms = 0.0
         c0 = time.process_time()
         t0 = time.perf_counter()
         sim.push_pose(t, poses.position[i], poses.quaternion[i])
@@ -72,7 +85,8 @@ class FrameClock:
         c2 = time.process_time()
         return {'frame_cpu': (c2 - c0) * 1e3, 'guides_cpu': (c1 - c0) * 1e3,
                 'ghosts_cloud_cpu': (c2 - c1) * 1e3, 'guides': (t1 - t0) * 1e3,
-                'ghosts_cloud': (t2 - t1) * 1e3, 'frame': (t2 - t0) * 1e3}
+                'ghosts_cloud': (t2 - t1) * 1e3, 'frame': (t2 - t0) * 1e3,
+                'volume': self.volume_ms}
 
 
 def frame_times(sim, frames, warm=WARM_FRAMES):
@@ -82,7 +96,7 @@ def frame_times(sim, frames, warm=WARM_FRAMES):
     clock = FrameClock(sim)
     n_frames = min(frames + warm, len(clock))
     parts = {'guides': [], 'ghosts_cloud': [], 'frame': [], 'frame_cpu': [], 'guides_cpu': [],
-             'ghosts_cloud_cpu': []}
+             'ghosts_cloud_cpu': [], 'volume': []}
     for k in range(n_frames):
         times = clock.frame(k)
         if k >= warm:
@@ -120,6 +134,10 @@ def main(argv=None):
            'ghosts_cloud_median_ms': statistics.median(parts['ghosts_cloud']),
            'frame_cpu_median_ms': statistics.median(parts['frame_cpu']),
            'substeps_per_frame': parts['substeps_per_frame']}
+    if args.volume:
+        share = np.asarray(parts['volume']) / f
+        row.update(volume_median_ms=statistics.median(parts['volume']),
+                   volume_share_median=float(np.median(share)))
     print(f"{args.mode}: {row['ghosts']} ghosts x 16 ({row['guides']} guides), "
           f"{args.threads} thread(s), "
           f"{row['frames']} frames at 60 Hz: median {row['median_ms']:.2f} ms, p95 "
@@ -127,6 +145,9 @@ def main(argv=None):
           f"{row['frame_cpu_median_ms']:.2f} (guide substeps "
           f"{row['guides_median_ms']:.2f}, ghosts + cloud bytes "
           f"{row['ghosts_cloud_median_ms']:.2f})")
+    if args.volume:
+        print(f"volume stage: median {row['volume_median_ms']:.2f} ms a frame, median share "
+              f"of a frame {row['volume_share_median']:.1%}")
     if args.json:
         record = provenance(command_line('python scripts/bench_frame.py', argv), args.threads)
         with open(args.json, 'w', encoding='utf-8') as fh:

@@ -2,6 +2,7 @@
 through a grid fixed to the head (hair_tracking.guides.volume)."""
 import os
 
+import numba
 import numpy as np
 import pytest
 
@@ -144,3 +145,28 @@ def test_the_stage_runs_on_a_fixed_period_however_the_solver_is_called():
     assert a.guide_solver.volume.period(dt) == 4
     np.testing.assert_allclose(a.guides.x, b.guides.x, atol=1e-12)
     np.testing.assert_allclose(a.guides.v, b.guides.v, atol=1e-9)
+
+
+def test_the_threaded_stage_gives_the_same_sums_on_any_thread_count_and_leaves_the_grid_empty():
+    st = strands_around(count=40, nodes=12, spread=0.004)
+    spec = Scene().with_changes(volume__pressure=50.0, volume__friction=20.0).volume
+    rng = np.random.default_rng(5)
+    x = st.rest + rng.normal(scale=0.003, size=st.rest.shape) * (st.inv_mass > 0)[..., None]
+    v0 = rng.normal(size=x.shape) * (st.inv_mass > 0)[..., None]
+    out = {}
+    threads = numba.get_num_threads()
+    try:
+        for parallel, count in ((False, 1), (True, 1), (True, numba.config.NUMBA_NUM_THREADS)):
+            numba.set_num_threads(count)
+            grid = VolumeGrid(st.rest, st.inv_mass, spec, parallel)
+            v = v0.copy()
+            grid.apply(x, v, np.eye(3), np.zeros(3), 1 / 60)
+            assert not grid.grids.any()                 # cleared for the next run
+            out[parallel, count] = v
+    finally:
+        numba.set_num_threads(threads)
+    assert not np.array_equal(out[False, 1], v0)
+    # the slabs' sums are in node order whatever the threads; the two compiled variants
+    # agree to rounding
+    np.testing.assert_array_equal(out[True, 1], out[True, numba.config.NUMBA_NUM_THREADS])
+    np.testing.assert_allclose(out[False, 1], out[True, 1], rtol=0, atol=1e-12)

@@ -137,8 +137,8 @@ class GuideSolver:
         self._x_ref = np.empty_like(strands.x) if need_ref else None
         self._x_before = np.empty_like(strands.x)      # advance(measure=True)'s work space
         #: the hair-hair stage (``volume.enabled``, every VolumeGrid.period substeps), or None
-        self.volume = VolumeGrid(strands.rest, strands.inv_mass, scene.volume) \
-            if scene.volume.enabled else None
+        self.volume = VolumeGrid(strands.rest, strands.inv_mass, scene.volume,
+                                 self.parallel) if scene.volume.enabled else None
         self._since, self._since_s = 0, 0.0     # substeps and seconds since the stage ran
         self._counters = {'substeps': 0, 'clamped': 0, 'clamped_total': 0,
                           'contacts': 0, 'contacts_total': 0}

@@ -29,13 +29,17 @@ outside it is left alone. Only the cells the nodes touch are cleared after a run
 import math
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
-from hair_tracking.core.kernels import FASTMATH
+from hair_tracking.core.kernels import FASTMATH, parallel_and_serial
 
-#: Most cells a grid may have (its density and velocity then take 128 MB, the rest density
-#: 32 MB).
+#: Most cells a grid may have (its density and velocity then take 128 MB, one more such grid
+#: for each further lane of the splat (:data:`LANES`), the rest density and each lane's list of
+#: the cells a run touches at most 32 MB each).
 MAX_CELLS = 4_000_000
+#: Parts the strands are split into for the splat, each added into its own grid on its own
+#: thread (:func:`splat`): the sums are the same on any thread count.
+LANES = 2
 #: [s] how often the stage runs: every substep when they are at least this long, else every
 #: ``round(PERIOD_S / dt)`` substeps, whichever way the solver is called (a pose's substeps at
 #: 60 Hz poses and dt 1/240 s: once a pose).
@@ -46,9 +50,10 @@ class VolumeGrid:
     """The volume stage of strands with rest shape ``rest`` (S, N, 3, head frame [m]) and
     inverse masses ``inv_mass`` (S, N), for a :class:`~hair_tracking.core.scene.VolumeSpec`
     ``spec``.  The cell is ``spec.cell_size``, or larger where the grid would have more than
-    :data:`MAX_CELLS` cells (:attr:`h`: the cell in use)."""
+    :data:`MAX_CELLS` cells (:attr:`h`: the cell in use).  ``parallel``: the nodes read the
+    grid on every thread (the guide solver's choice of kernel variants)."""
 
-    def __init__(self, rest: np.ndarray, inv_mass: np.ndarray, spec):
+    def __init__(self, rest: np.ndarray, inv_mass: np.ndarray, spec, parallel: bool = False):
         rest = np.ascontiguousarray(rest, dtype=np.float64)
         seg = np.linalg.norm(np.diff(rest, axis=1), axis=2).sum(axis=1)
         reach = float((np.linalg.norm(rest[:, 0], axis=1) + seg).max())
@@ -64,14 +69,24 @@ class VolumeGrid:
         #: each node's first cell and B-spline weights (:func:`splat`)
         self.cell = np.empty(rest.shape[:2], dtype=np.int64)
         self.wts = np.empty(rest.shape[:2] + (18,))
-        scratch = np.zeros((n, n, n, 4))
-        splat(rest, np.zeros_like(rest), self.inv_mass, np.eye(3), np.zeros(3), self.origin,
-              h, scratch, self.cell, self.wts)
-        self.rest_density[...] = scratch[..., 0]
+        #: the cells a run gave weight to (:func:`splat`, each lane's; at most 27 a node),
+        #: and their counts
+        self.touched = np.empty((LANES, min(n ** 3, 27 * rest.shape[0] * rest.shape[1])),
+                                dtype=np.int64)
+        self.counts = np.zeros(LANES, dtype=np.int64)
+        #: density and weighted velocity of the present run (cleared where touched), and a
+        #: grid for each further lane of the splat
+        self.grids = np.zeros((LANES, n, n, n, 4))
+        self.grid = self.grids[0]
+        self._splat, self._interact = (splat, interact) if parallel else \
+            (splat_serial, interact_serial)
+        self._splat(rest, np.zeros_like(rest), self.inv_mass,
+                    self._to_grid(np.eye(3), np.zeros(3)), self.grids, self.cell, self.wts,
+                    self.touched, self.counts)
+        self.rest_density[...] = self.grid[..., 0]
+        self.grid[...] = 0.0
         occupied = self.rest_density[self.rest_density > 0.0]
         self.rest_ref = float(occupied.mean()) if occupied.size else 1.0
-        #: density and weighted velocity of the present run (cleared where touched)
-        self.grid = np.zeros((n, n, n, 4))
 
     @staticmethod
     def period(dt: float) -> int:
@@ -87,11 +102,22 @@ class VolumeGrid:
               dt: float) -> None:
         """The stage over the time ``dt`` [s] since it last ran, for the strands at ``x`` with
         velocities ``v`` (world frame, changed in place), the head at ``rot``, ``pos``."""
-        splat(x, v, self.inv_mass, rot, pos, self.origin, self.h, self.grid, self.cell,
-              self.wts)
+        self._splat(x, v, self.inv_mass, self._to_grid(rot, pos), self.grids, self.cell,
+                    self.wts, self.touched, self.counts)
+        touched = self.touched[0, :self.counts[0]]
+        settle(self.grid, self.rest_density, touched)
         push = self.pressure * dt / self.rest_ref
         smooth = 1.0 - math.exp(-self.friction * dt)
-        interact(v, rot, self.grid, self.rest_density, self.cell, self.wts, (push, smooth))
+        self._interact(v, rot, self.grid, self.cell, self.wts, (push, smooth))
+        clear(self.grid, touched)
+
+    def _to_grid(self, rot: np.ndarray, pos: np.ndarray) -> np.ndarray:
+        """(3, 4): a world point's grid coordinates [cells] for the head at ``rot``, ``pos``
+        (``[R^T / h | -(R^T pos + origin) / h]``)."""
+        out = np.empty((3, 4))
+        out[:, :3] = rot.T / self.h
+        out[:, 3] = -(rot.T @ pos + self.origin) / self.h
+        return out
 
 
 @njit(cache=True, inline='always', fastmath=FASTMATH, error_model='numpy')
@@ -110,83 +136,124 @@ def _weights(u, out, at):
     return c
 
 
+def _splat(x, v, inv_mass, to_grid, grids, cell, wts, touched, counts):
+    """Add every free node's weights (``grids[0, ..., 0]``, quadratic B-splines over the
+    3 x 3 x 3 cells around ``to_grid`` (3, 4) times its position) and weighted velocity
+    (``grids[0, ..., 1:]``, world frame) to the grid ``grids[0]`` (n, n, n, 4); a node's first
+    cell (flat index; -1: not splatted) into ``cell`` (S, N) and its weights and their
+    derivatives (x, y, z; then the same derivatives) into ``wts`` (S, N, 18), for
+    :func:`interact`; the cells given weight, each once, into ``touched[0]``, their count
+    into ``counts[0]``.
+
+    The strands are split into :data:`LANES` halves, each added on its own thread into its
+    own grid (``grids[l]``, ``touched[l]``), the second then into the first (and cleared):
+    every cell's sum is the same on any thread count."""
+    n = grids.shape[1]
+    strands = x.shape[0]
+    for lane in prange(LANES):
+        flat = grids[lane].reshape(-1)
+        count = 0
+        for s in range(lane * strands // LANES, (lane + 1) * strands // LANES):
+            for i in range(x.shape[1]):
+                cell[s, i] = -1
+                if not inv_mass[s, i] > 0.0:
+                    continue
+                px, py, pz = x[s, i, 0], x[s, i, 1], x[s, i, 2]
+                ux = to_grid[0, 0] * px + to_grid[0, 1] * py + to_grid[0, 2] * pz + \
+                    to_grid[0, 3]
+                uy = to_grid[1, 0] * px + to_grid[1, 1] * py + to_grid[1, 2] * pz + \
+                    to_grid[1, 3]
+                uz = to_grid[2, 0] * px + to_grid[2, 1] * py + to_grid[2, 2] * pz + \
+                    to_grid[2, 3]
+                if not (1.0 <= ux < n - 2 and 1.0 <= uy < n - 2 and 1.0 <= uz < n - 2):
+                    continue
+                w = wts[s, i]
+                first = (_weights(ux, w, 0) * n + _weights(uy, w, 3)) * n + _weights(uz, w, 6)
+                cell[s, i] = first
+                vx, vy, vz = v[s, i, 0], v[s, i, 1], v[s, i, 2]
+                for a in range(3):
+                    for b in range(3):
+                        wab = w[a] * w[3 + b]
+                        row = first + (a * n + b) * n
+                        for d in range(3):
+                            m = wab * w[6 + d]
+                            at = 4 * (row + d)
+                            if flat[at] == 0.0 and m > 0.0:
+                                touched[lane, count] = row + d
+                                count += 1
+                            flat[at] += m
+                            flat[at + 1] += m * vx
+                            flat[at + 2] += m * vy
+                            flat[at + 3] += m * vz
+        counts[lane] = count
+    into = grids[0].reshape(-1)
+    for lane in range(1, LANES):
+        flat = grids[lane].reshape(-1)
+        for j in range(counts[lane]):
+            at = 4 * touched[lane, j]
+            if into[at] == 0.0:
+                touched[0, counts[0]] = touched[lane, j]
+                counts[0] += 1
+            for k in range(4):
+                into[at + k] += flat[at + k]
+                flat[at + k] = 0.0
+
+
+splat, splat_serial = parallel_and_serial(_splat, fastmath=FASTMATH, error_model='numpy')
+
+
 @njit(cache=True, fastmath=FASTMATH, error_model='numpy')
-def splat(x, v, inv_mass, rot, pos, origin, h, grid, cell, wts):
-    """Add every free node's weights (``grid[..., 0]``, quadratic B-splines over its 3 x 3 x 3
-    cells) and weighted velocity (``grid[..., 1:]``, world frame) to ``grid`` (n, n, n, 4); a
-    node's first cell (flat index; -1: not splatted) into ``cell`` (S, N) and its weights and
-    their derivatives (x, y, z; then the same derivatives) into ``wts`` (S, N, 18), for
-    :func:`interact`."""
-    n = grid.shape[0]
+def settle(grid, rest, touched):
+    """Each touched cell's sums into what :func:`interact` reads: ``grid[..., 0]`` the density
+    above the rest density ``rest`` (n, n, n), ``max(rho - rho0, 0)``, and
+    ``grid[..., 1:]`` the cell's velocity (its weighted velocity over its weight)."""
     flat = grid.reshape(-1)
-    for s in range(x.shape[0]):
-        for i in range(x.shape[1]):
-            cell[s, i] = -1
-            if not inv_mass[s, i] > 0.0:
-                continue
-            dx, dy, dz = x[s, i, 0] - pos[0], x[s, i, 1] - pos[1], x[s, i, 2] - pos[2]
-            ux = ((rot[0, 0] * dx + rot[1, 0] * dy + rot[2, 0] * dz) - origin[0]) / h
-            uy = ((rot[0, 1] * dx + rot[1, 1] * dy + rot[2, 1] * dz) - origin[1]) / h
-            uz = ((rot[0, 2] * dx + rot[1, 2] * dy + rot[2, 2] * dz) - origin[2]) / h
-            if not (1.0 <= ux < n - 2 and 1.0 <= uy < n - 2 and 1.0 <= uz < n - 2):
-                continue
-            w = wts[s, i]
-            i0 = _weights(ux, w, 0)
-            j0 = _weights(uy, w, 3)
-            k0 = _weights(uz, w, 6)
-            first = (i0 * n + j0) * n + k0
-            cell[s, i] = first
-            vx, vy, vz = v[s, i, 0], v[s, i, 1], v[s, i, 2]
-            for a in range(3):
-                for b in range(3):
-                    wab = w[a] * w[3 + b]
-                    row = 4 * (first + (a * n + b) * n)
-                    for d in range(3):
-                        m = wab * w[6 + d]
-                        at = row + 4 * d
-                        flat[at] += m
-                        flat[at + 1] += m * vx
-                        flat[at + 2] += m * vy
-                        flat[at + 3] += m * vz
+    dens = rest.reshape(-1)
+    for j in range(touched.shape[0]):
+        c = touched[j]
+        m = flat[4 * c]
+        flat[4 * c] = max(m - dens[c], 0.0)
+        for k in range(1, 4):
+            flat[4 * c + k] /= m
 
 
-@njit(cache=True, fastmath=FASTMATH, error_model='numpy')
-def interact(v, rot, grid, rest, cell, wts, gains):
-    """Steps 2 and 3 of the module docstring for every node :func:`splat` splatted, then the
-    cells it touched cleared; ``gains = (pressure dt / rho_ref, 1 - exp(-friction dt))``."""
+def _interact(v, rot, grid, cell, wts, gains):
+    """Steps 2 and 3 of the module docstring for every node :func:`splat` splatted, from the
+    grid :func:`settle` made; ``gains = (pressure dt / rho_ref, 1 - exp(-friction dt))``.  A
+    node reads only cells it gave weight to itself, and its 27 weights sum to 1 (the
+    B-splines' partition of unity), so the grid's velocity at it is the weighted sum."""
     push, smooth = gains
     n = grid.shape[0]
     flat = grid.reshape(-1)
-    dens = rest.reshape(-1)
-    for s in range(cell.shape[0]):
+    for s in prange(cell.shape[0]):
         for i in range(cell.shape[1]):
             first = cell[s, i]
             if first < 0:
                 continue
             w = wts[s, i]
             gx = gy = gz = 0.0                     # grad e per cell, head frame
-            vx = vy = vz = wsum = 0.0              # the grid's velocity at the node
+            vx = vy = vz = 0.0                     # the grid's velocity at the node
             for a in range(3):
                 for b in range(3):
-                    row = first + (a * n + b) * n
+                    at = 4 * (first + (a * n + b) * n)
+                    # the row of three cells along z, summed with the z weights
+                    e, ez = 0.0, 0.0
+                    rx = ry = rz = 0.0
                     for d in range(3):
-                        at = row + d
-                        m = flat[4 * at]
-                        e = max(m - dens[at], 0.0)
-                        gx += w[9 + a] * w[3 + b] * w[6 + d] * e
-                        gy += w[a] * w[12 + b] * w[6 + d] * e
-                        gz += w[a] * w[3 + b] * w[15 + d] * e
-                        if m > 0.0:
-                            c = w[a] * w[3 + b] * w[6 + d]
-                            wsum += c
-                            c /= m
-                            vx += c * flat[4 * at + 1]
-                            vy += c * flat[4 * at + 2]
-                            vz += c * flat[4 * at + 3]
-            if wsum > 0.0:
-                vx, vy, vz = vx / wsum, vy / wsum, vz / wsum
-            else:
-                vx, vy, vz = v[s, i, 0], v[s, i, 1], v[s, i, 2]
+                        c, dc = w[6 + d], w[15 + d]
+                        e += c * flat[at]
+                        ez += dc * flat[at]
+                        rx += c * flat[at + 1]
+                        ry += c * flat[at + 2]
+                        rz += c * flat[at + 3]
+                        at += 4
+                    wab = w[a] * w[3 + b]
+                    gx += w[9 + a] * w[3 + b] * e
+                    gy += w[a] * w[12 + b] * e
+                    gz += wab * ez
+                    vx += wab * rx
+                    vy += wab * ry
+                    vz += wab * rz
             # the pull toward the grid's velocity, and the push turned into the world frame
             v[s, i, 0] += smooth * (vx - v[s, i, 0]) - push * (
                 rot[0, 0] * gx + rot[0, 1] * gy + rot[0, 2] * gz)
@@ -194,13 +261,16 @@ def interact(v, rot, grid, rest, cell, wts, gains):
                 rot[1, 0] * gx + rot[1, 1] * gy + rot[1, 2] * gz)
             v[s, i, 2] += smooth * (vz - v[s, i, 2]) - push * (
                 rot[2, 0] * gx + rot[2, 1] * gy + rot[2, 2] * gz)
-    for s in range(cell.shape[0]):
-        for i in range(cell.shape[1]):
-            first = cell[s, i]
-            if first < 0:
-                continue
-            for a in range(3):
-                for b in range(3):
-                    row = 4 * (first + (a * n + b) * n)
-                    for k in range(12):
-                        flat[row + k] = 0.0
+
+
+interact, interact_serial = parallel_and_serial(_interact, fastmath=FASTMATH,
+                                                error_model='numpy')
+
+
+@njit(cache=True, fastmath=FASTMATH, error_model='numpy')
+def clear(grid, touched):
+    """Zero the cells ``touched`` of ``grid`` (n, n, n, 4), for the next run."""
+    flat = grid.reshape(-1)
+    for j in range(touched.shape[0]):
+        for k in range(4):
+            flat[4 * touched[j] + k] = 0.0
