@@ -10,7 +10,9 @@ the stage off and on (the ``volume.*`` options given), each settled on a still h
 node moves faster than 2 mm/s (the simulator's settle, at most 30 s).  For each it prints the
 hair layer on the top of the head (:func:`hair_tracking.core.metrics.hair_layer` of the output
 strands: the 10-90 % spread of the nodes' distances from the head collider within 60 degrees
-of the top, and their median), the largest stretch of the guides and of the output, the
+of the top, and their median), the share of the output nodes with a node of another strand
+within 2 mm (:func:`hair_tracking.ghosts.correspondence.near_other_strands`), the largest
+stretch of the guides and of the output, the
 deepest node in the head collider, and the simulated time the settle took.
 """
 import argparse
@@ -25,9 +27,14 @@ use_numba_cache()      # before numba loads: the cache make install fills
 
 from hair_tracking.bags.offline import load_settings  # noqa: E402
 from hair_tracking.core.metrics import hair_layer  # noqa: E402
+from hair_tracking.ghosts.correspondence import near_other_strands  # noqa: E402
 from hair_tracking.evaluation.provenance import command_line  # noqa: E402
 from hair_tracking.evaluation.provenance import provenance, write_reports  # noqa: E402
 from hair_tracking.simulator import HairSimulator  # noqa: E402
+
+
+#: [m] two strands closer than this run through each other (:func:`near_other_strands`)
+NEAR_M = 0.002
 
 
 def measure(scene) -> dict:
@@ -35,9 +42,11 @@ def measure(scene) -> dict:
     sim = HairSimulator(scene.with_changes(solver__settle_speed=0.002,
                                            solver__max_substeps=10_000))
     c = scene.collider
-    spread, median, nodes = hair_layer(sim.frame(head_frame=True).strands, c.center, c.radii)
+    strands = sim.frame(head_frame=True).strands
+    spread, median, nodes = hair_layer(strands, c.center, c.radii)
     return dict(volume=scene.volume.enabled, spread_mm=1e3 * spread, median_mm=1e3 * median,
-                nodes=nodes, stretch_guides=float(sim.guide_solver.stats['max_stretch']),
+                nodes=nodes, near_2mm=near_other_strands(strands, NEAR_M),
+                stretch_guides=float(sim.guide_solver.stats['max_stretch']),
                 stretch=float(sim.max_stretch()), depth_mm=1e3 * float(sim.penetration()),
                 margin_mm=1e3 * c.margin, settled_s=float(sim.settled_s))
 
@@ -61,7 +70,8 @@ def main(argv=None):
         row = measure(base.with_changes(volume__enabled=on, **given))
         rows.append(row)
         print(f"volume {'on ' if on else 'off'}: layer {row['spread_mm']:.1f} mm (10-90 %), "
-              f"median {row['median_mm']:.1f} mm over {row['nodes']} nodes; stretch guides "
+              f"median {row['median_mm']:.1f} mm over {row['nodes']} nodes; "
+              f"{row['near_2mm']:.1%} of the nodes within 2 mm of another strand; stretch guides "
               f"{row['stretch_guides']:.1e}, output {row['stretch']:.1e}; deepest "
               f"{row['depth_mm']:.3f} mm (margin {row['margin_mm']:g}); settled in "
               f"{row['settled_s']:.1f} s", flush=True)
@@ -73,12 +83,15 @@ def main(argv=None):
         f'Scene {args.scene}; volume.pressure {v.pressure:g} m/s^2, volume.friction '
         f'{v.friction:g} 1/s, volume.cell_size {v.cell_size:g} m; settled until no node moves '
         'faster than 2 mm/s.  Layer: the 10-90 % spread of the output nodes\' distances from '
-        'the head collider within 60 degrees of the top.', '',
-        '| volume | layer [mm] | median distance [mm] | nodes | stretch: guides / output '
-        '| deepest in the collider [mm] | settled in [s] |',
-        '|---|---:|---:|---:|---:|---:|---:|']
+        'the head collider within 60 degrees of the top.  Near another strand: the share of '
+        'the output nodes with a node of another strand within 2 mm (strands running through '
+        'each other).', '',
+        '| volume | layer [mm] | median distance [mm] | nodes | near another strand '
+        '| stretch: guides / output | deepest in the collider [mm] | settled in [s] |',
+        '|---|---:|---:|---:|---:|---:|---:|---:|']
     body += [f"| {'on' if r['volume'] else 'off'} | {r['spread_mm']:.1f} | "
-             f"{r['median_mm']:.1f} | {r['nodes']} | {r['stretch_guides']:.1e} / "
+             f"{r['median_mm']:.1f} | {r['nodes']} | {r['near_2mm']:.1%} | "
+             f"{r['stretch_guides']:.1e} / "
              f"{r['stretch']:.1e} | {r['depth_mm']:.3f} (margin {r['margin_mm']:g}) | "
              f"{r['settled_s']:.1f} |" for r in rows]
     body += ['', f'Layer with the stage / without: {ratio:.2f}.']

@@ -150,6 +150,30 @@ def nearest_roots(ghost_roots: np.ndarray, guide_roots: np.ndarray, k: int) -> n
     return out_i
 
 
+def near_other_strands(x: np.ndarray, radius: float) -> float:
+    """The share of the nodes of strands ``x`` (S, N, 3) [m] that have a node of another strand
+    within ``radius`` [m]: how much the strands run through one another (with no hair-hair
+    interaction many lie in one shell).  Each node's nearest neighbours are taken until they
+    include every node of its own strand within ``radius`` (exact, :func:`knn_grid_kernel`)."""
+    x = np.asarray(x, dtype=np.float64)
+    if not radius > 0.0:
+        raise ValueError(f'radius must be > 0 m, got {radius!r}')
+    points = _check_points('nodes', x.reshape(-1, 3))
+    if x.shape[0] < 2 or x.shape[1] < 1:
+        return 0.0
+    seg = np.linalg.norm(np.diff(x, axis=1), axis=2)
+    shortest = float(seg.min()) if seg.size else math.inf
+    own = 1 if shortest == math.inf else 2 * int(math.ceil(radius / max(shortest, 1e-12))) + 1
+    k = min(points.shape[0], own + 1)
+    lo, h, dims, cell_start, cell_items = build_grid(points, per_cell=max(4.0, k / 2.0))
+    out_i = np.empty((points.shape[0], k), dtype=np.int64)
+    out_d = np.empty((points.shape[0], k))
+    knn_grid_kernel(points, points, lo, h, dims, cell_start, cell_items, out_i, out_d)
+    strand = np.arange(points.shape[0]) // x.shape[1]
+    near = (out_i // x.shape[1] != strand[:, None]) & (out_d <= radius * radius)
+    return float(np.mean(near.any(axis=1)))
+
+
 # ------------------------------------------------------------------ equation (1)
 @njit(cache=True, inline='always')
 def correspondence_distance(ghost_rest, s, guide_rest, g, bound):
