@@ -181,7 +181,11 @@ def test_the_stage_runs_on_a_fixed_period_however_the_solver_is_called():
     np.testing.assert_allclose(a.guides.v, b.guides.v, atol=1e-9)
 
 
+@pytest.mark.skipif(numba.config.NUMBA_NUM_THREADS < 2, reason='needs two numba threads')
 def test_the_threaded_stage_gives_the_same_sums_on_any_thread_count_and_leaves_the_grid_empty():
+    """The splat's lanes sum in a fixed order: the parallel kernels give the same velocities on
+    one thread and on every thread, the serial variants the same to rounding; every grid is
+    empty after a run."""
     st = strands_around(count=40, nodes=12, spread=0.004)
     spec = Scene().with_changes(volume__pressure=50.0, volume__friction=20.0).volume
     rng = np.random.default_rng(5)
@@ -200,8 +204,6 @@ def test_the_threaded_stage_gives_the_same_sums_on_any_thread_count_and_leaves_t
     finally:
         numba.set_num_threads(threads)
     assert not np.array_equal(out[False, 1], v0)
-    # the slabs' sums are in node order whatever the threads; the two compiled variants
-    # agree to rounding
     np.testing.assert_array_equal(out[True, 1], out[True, numba.config.NUMBA_NUM_THREADS])
     np.testing.assert_allclose(out[False, 1], out[True, 1], rtol=0, atol=1e-12)
 
@@ -219,5 +221,15 @@ def test_near_other_strands_counts_the_nodes_with_another_strand_close_by():
     x[1, :, 2] = np.arange(5) * 0.0005 + 0.0012              # 0.5 mm segments above node 0
     x[1, :, 0] = 0.0                                          # of strand 0: two within 2 mm
     assert near_other_strands(x, 0.002) == pytest.approx(3 / 15)
+    # a strand folded on itself puts many of its own nodes nearer than the other strand's
+    z = np.zeros((2, 8, 3))
+    z[0, :, 1] = 0.0005 * (np.arange(8) // 2)                # folds 0.5 mm apart
+    z[0, :, 2] = 0.02 * (np.arange(8) % 2)
+    z[1, :, 0], z[1, :, 2] = 0.05, np.arange(8) * 0.02
+    z[1, 0] = (0.0018, 0.0, 0.0)                             # 1.8 mm from node 0 of strand 0
+    d = np.linalg.norm(z[0][:, None] - z[1][None], axis=2) <= 0.002
+    assert near_other_strands(z, 0.002) == pytest.approx(
+        (d.any(axis=1).sum() + d.any(axis=0).sum()) / 16)
+    assert near_other_strands(z, 0.002) > 1 / 16
     with pytest.raises(ValueError, match='radius'):
         near_other_strands(x, 0.0)

@@ -153,25 +153,32 @@ def nearest_roots(ghost_roots: np.ndarray, guide_roots: np.ndarray, k: int) -> n
 def near_other_strands(x: np.ndarray, radius: float) -> float:
     """The share of the nodes of strands ``x`` (S, N, 3) [m] that have a node of another strand
     within ``radius`` [m]: how much the strands run through one another (with no hair-hair
-    interaction many lie in one shell).  Each node's nearest neighbours are taken until they
-    include every node of its own strand within ``radius`` (exact, :func:`knn_grid_kernel`)."""
+    interaction many lie in one shell).  Exact: a node's nearest neighbours
+    (:func:`knn_grid_kernel`) are taken, twice as many each round, until one of another strand
+    lies within ``radius`` or the farthest taken lies beyond it (a folded or curled strand
+    may put many of its own nodes within ``radius``)."""
     x = np.asarray(x, dtype=np.float64)
     if not radius > 0.0:
         raise ValueError(f'radius must be > 0 m, got {radius!r}')
     points = _check_points('nodes', x.reshape(-1, 3))
     if x.shape[0] < 2 or x.shape[1] < 1:
         return 0.0
-    seg = np.linalg.norm(np.diff(x, axis=1), axis=2)
-    shortest = float(seg.min()) if seg.size else math.inf
-    own = 1 if shortest == math.inf else 2 * int(math.ceil(radius / max(shortest, 1e-12))) + 1
-    k = min(points.shape[0], own + 1)
-    lo, h, dims, cell_start, cell_items = build_grid(points, per_cell=max(4.0, k / 2.0))
-    out_i = np.empty((points.shape[0], k), dtype=np.int64)
-    out_d = np.empty((points.shape[0], k))
-    knn_grid_kernel(points, points, lo, h, dims, cell_start, cell_items, out_i, out_d)
-    strand = np.arange(points.shape[0]) // x.shape[1]
-    near = (out_i // x.shape[1] != strand[:, None]) & (out_d <= radius * radius)
-    return float(np.mean(near.any(axis=1)))
+    per_strand = x.shape[1]
+    strand = np.arange(points.shape[0]) // per_strand
+    lo, h, dims, cell_start, cell_items = build_grid(points, per_cell=4.0)
+    near = np.zeros(points.shape[0], dtype=bool)
+    rows = np.arange(points.shape[0])
+    k, r2 = 4, radius * radius
+    while rows.size:
+        k = min(k, points.shape[0])
+        out_i = np.empty((rows.size, k), dtype=np.int64)
+        out_d = np.empty((rows.size, k))
+        knn_grid_kernel(points[rows], points, lo, h, dims, cell_start, cell_items, out_i, out_d)
+        found = ((out_i // per_strand != strand[rows, None]) & (out_d <= r2)).any(axis=1)
+        near[rows] = found
+        rows = rows[~found & (out_d[:, -1] <= r2) & (k < points.shape[0])]
+        k *= 2
+    return float(near.mean())
 
 
 # ------------------------------------------------------------------ equation (1)

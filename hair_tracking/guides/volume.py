@@ -37,8 +37,8 @@ from hair_tracking.core.kernels import FASTMATH, parallel_and_serial
 #: for each further lane of the splat (:data:`LANES`), the rest density and each lane's list of
 #: the cells a run touches at most 32 MB each).
 MAX_CELLS = 4_000_000
-#: Parts the strands are split into for the splat, each added into its own grid on its own
-#: thread (:func:`splat`): the sums are the same on any thread count.
+#: Parts the strands are split into for the splat, each added into its own grid (on its own
+#: thread in the parallel variant, :func:`splat`): the sums are the same on any thread count.
 LANES = 2
 #: [s] how often the stage runs: every substep when they are at least this long, else every
 #: ``round(PERIOD_S / dt)`` substeps, whichever way the solver is called (a pose's substeps at
@@ -50,8 +50,8 @@ class VolumeGrid:
     """The volume stage of strands with rest shape ``rest`` (S, N, 3, head frame [m]) and
     inverse masses ``inv_mass`` (S, N), for a :class:`~hair_tracking.core.scene.VolumeSpec`
     ``spec``.  The cell is ``spec.cell_size``, or larger where the grid would have more than
-    :data:`MAX_CELLS` cells (:attr:`h`: the cell in use).  ``parallel``: the nodes read the
-    grid on every thread (the guide solver's choice of kernel variants)."""
+    :data:`MAX_CELLS` cells (:attr:`h`: the cell in use).  ``parallel``: the splat's lanes and
+    the nodes' reads run on every thread (the guide solver's choice of kernel variants)."""
 
     def __init__(self, rest: np.ndarray, inv_mass: np.ndarray, spec, parallel: bool = False):
         rest = np.ascontiguousarray(rest, dtype=np.float64)
@@ -145,9 +145,9 @@ def _splat(x, v, inv_mass, to_grid, grids, cell, wts, touched, counts):
     :func:`interact`; the cells given weight, each once, into ``touched[0]``, their count
     into ``counts[0]``.
 
-    The strands are split into :data:`LANES` halves, each added on its own thread into its
-    own grid (``grids[l]``, ``touched[l]``), the second then into the first (and cleared):
-    every cell's sum is the same on any thread count."""
+    The strands are split into :data:`LANES` parts, each added into its own grid
+    (``grids[l]``, ``touched[l]``; on its own thread in the parallel variant), each later part
+    then into the first (and cleared): every cell's sum is the same on any thread count."""
     n = grids.shape[1]
     strands = x.shape[0]
     for lane in prange(LANES):
@@ -219,9 +219,10 @@ def settle(grid, rest, touched):
 
 def _interact(v, rot, grid, cell, wts, gains):
     """Steps 2 and 3 of the module docstring for every node :func:`splat` splatted, from the
-    grid :func:`settle` made; ``gains = (pressure dt / rho_ref, 1 - exp(-friction dt))``.  A
-    node reads only cells it gave weight to itself, and its 27 weights sum to 1 (the
-    B-splines' partition of unity), so the grid's velocity at it is the weighted sum."""
+    grid :func:`settle` made; ``gains = (pressure dt / rho_ref, 1 - exp(-friction dt))``.  Every
+    cell a node weights above zero it gave weight to itself (so the cell was settled), and its
+    27 weights sum to 1 (the B-splines' partition of unity), so the grid's velocity at it is
+    the weighted sum."""
     push, smooth = gains
     n = grid.shape[0]
     flat = grid.reshape(-1)
