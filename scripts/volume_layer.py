@@ -12,8 +12,8 @@ hair layer on the top of the head (:func:`hair_tracking.core.metrics.hair_layer`
 strands: the 10-90 % spread of the nodes' distances from the head collider within 60 degrees
 of the top, and their median), the share of the output nodes with a node of another strand
 within 2 mm (:func:`hair_tracking.ghosts.correspondence.near_other_strands`), the largest
-stretch of the guides and of the output, the
-deepest node in the head collider, and the simulated time the settle took.
+stretch of the guides and of the output, the deepest node in the head collider, and the
+simulated time the settle took.
 """
 import argparse
 import os
